@@ -1,0 +1,1 @@
+//! Fixtures for end-to-end tests: pseudo-terminals, a daemon under test, and clean-up in `Drop`.

@@ -1,0 +1,284 @@
+//! Configuration: TOML text in, checked settings out.
+//!
+//! Every config file goes through two stages (see `STYLE.md` §7, modelled on helix):
+//!
+//! 1. **Raw**: the text is parsed into a `Raw*` struct with `#[serde(deny_unknown_fields)]`,
+//!    so a misspelt key is an error, not a silently ignored setting.
+//! 2. **Resolved**: the raw struct is checked (units, ranges, cross-field rules) and turned
+//!    into the typed settings the rest of the crate uses.
+//!
+//! Loaders take text, never paths: a [`ConfigSource`] supplies the text of a named file, either
+//! from the copies embedded at build time ([`Embedded`]) or from a directory ([`Directory`]).
+//! Errors name the file, the line and the key ([`ConfigError`]).
+
+use std::borrow::Cow;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+
+mod embedded {
+    include!(concat!(env!("OUT_DIR"), "/embedded_configs.rs"));
+}
+pub use embedded::EMBEDDED_CONFIGS;
+
+/// The name, inside any [`ConfigSource`], of the daemon's default configuration.
+pub const DEFAULT_CONFIG: &str = "default.toml";
+
+/// A configuration problem. Every variant names the input it came from.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The text is not valid TOML, has an unknown key, or a value of the wrong type.
+    #[error("{origin}:{line}:{column}: {message}")]
+    Syntax {
+        origin: String,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    /// The TOML is well formed but a value is out of range or inconsistent.
+    #[error("{origin}:{}: `{key}`: {message}", line.map_or_else(|| "?".to_string(), |l| l.to_string()))]
+    Invalid {
+        origin: String,
+        key: String,
+        line: Option<usize>,
+        message: String,
+    },
+    /// A file named by the user, or referenced from another config file, cannot be read.
+    #[error("{origin}: cannot read config `{name}`: {reason}")]
+    Unreadable {
+        origin: String,
+        name: String,
+        reason: String,
+    },
+}
+
+/// Supplies the text of configuration files by name (a path relative to the source's root,
+/// with `/` separators, e.g. `vehicles/mako.toml`).
+pub trait ConfigSource {
+    /// The text of `name`.
+    fn read(&self, name: &str) -> Result<Cow<'static, str>, ConfigError>;
+    /// A human-readable origin for `name`, used in error messages.
+    fn describe(&self, name: &str) -> String;
+}
+
+/// The files under `configs/` as they were at build time.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Embedded;
+
+impl ConfigSource for Embedded {
+    fn read(&self, name: &str) -> Result<Cow<'static, str>, ConfigError> {
+        EMBEDDED_CONFIGS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, text)| Cow::Borrowed(*text))
+            .ok_or_else(|| ConfigError::Unreadable {
+                origin: "<embedded>".to_string(),
+                name: name.to_string(),
+                reason: format!(
+                    "no such embedded file; embedded are: {}",
+                    EMBEDDED_CONFIGS.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                ),
+            })
+    }
+
+    fn describe(&self, name: &str) -> String {
+        format!("<embedded>/{name}")
+    }
+}
+
+/// Files in a directory on disk (references inside them resolve against the same directory).
+#[derive(Debug, Clone)]
+pub struct Directory {
+    root: PathBuf,
+}
+
+impl Directory {
+    pub fn new(root: impl Into<PathBuf>) -> Self {
+        Self { root: root.into() }
+    }
+
+    /// The directory holding `file` and the file's name inside it, so a user's
+    /// `--config some/dir/run.toml` resolves its references beside it.
+    pub fn for_file(file: &Path) -> (Self, String) {
+        let root = file.parent().map(Path::to_path_buf).unwrap_or_default();
+        let name = file
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        (Self::new(root), name)
+    }
+
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+}
+
+impl ConfigSource for Directory {
+    fn read(&self, name: &str) -> Result<Cow<'static, str>, ConfigError> {
+        let path = self.root.join(name);
+        std::fs::read_to_string(&path)
+            .map(Cow::Owned)
+            .map_err(|e| ConfigError::Unreadable {
+                origin: self.root.display().to_string(),
+                name: name.to_string(),
+                reason: e.to_string(),
+            })
+    }
+
+    fn describe(&self, name: &str) -> String {
+        self.root.join(name).display().to_string()
+    }
+}
+
+/// One TOML document with its origin, able to map keys and byte offsets to line numbers.
+#[derive(Debug)]
+pub struct Document<'a> {
+    origin: String,
+    text: &'a str,
+}
+
+impl<'a> Document<'a> {
+    /// `origin` names the input in error messages (a path, or `<embedded>/default.toml`).
+    pub fn new(origin: impl Into<String>, text: &'a str) -> Self {
+        Self {
+            origin: origin.into(),
+            text,
+        }
+    }
+
+    pub fn origin(&self) -> &str {
+        &self.origin
+    }
+
+    /// Parses the whole document into a raw struct.
+    pub fn parse<T: DeserializeOwned>(&self) -> Result<T, ConfigError> {
+        toml::from_str(self.text).map_err(|e| {
+            let (line, column) = e
+                .span()
+                .map_or((0, 0), |span| line_column(self.text, span.start));
+            ConfigError::Syntax {
+                origin: self.origin.clone(),
+                line,
+                column,
+                message: e.message().trim().to_string(),
+            }
+        })
+    }
+
+    /// The 1-based line on which the value of the dotted `key` (`"hull.mass_kg"`,
+    /// `"thrusters.0.gain"`) starts, if the document has it.
+    pub fn line_of(&self, key: &str) -> Option<usize> {
+        let table = toml::de::DeTable::parse(self.text).ok()?;
+        let mut span: Range<usize> = table.span();
+        let mut value: Option<&toml::de::DeValue<'_>> = None;
+        let mut current = table.get_ref();
+        for part in key.split('.') {
+            let next = match value {
+                None => current.get(part),
+                Some(toml::de::DeValue::Table(t)) => {
+                    current = t;
+                    current.get(part)
+                }
+                Some(toml::de::DeValue::Array(a)) => part.parse::<usize>().ok().and_then(|i| a.get(i)),
+                Some(_) => None,
+            }?;
+            span = next.span();
+            value = Some(next.get_ref());
+        }
+        Some(line_column(self.text, span.start).0)
+    }
+
+    /// An [`ConfigError::Invalid`] for `key`, pointing at its line.
+    pub fn invalid(&self, key: &str, message: impl Into<String>) -> ConfigError {
+        ConfigError::Invalid {
+            origin: self.origin.clone(),
+            key: key.to_string(),
+            line: self.line_of(key),
+            message: message.into(),
+        }
+    }
+
+    /// Checks that a finite `value` lies in `[min, max]`; the error states the unit.
+    pub fn check_range(&self, key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<f64, ConfigError> {
+        if value.is_finite() && (min..=max).contains(&value) {
+            Ok(value)
+        } else {
+            Err(self.invalid(key, format!("{value} {unit} is outside the allowed range {min}..={max} {unit}")))
+        }
+    }
+}
+
+/// 1-based line and column of byte `offset` in `text`.
+fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.bytes().filter(|&b| b == b'\n').count() + 1;
+    let column = before.rfind('\n').map_or(before.len(), |nl| before.len() - nl - 1) + 1;
+    (line, column)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Raw {
+        hull: RawHull,
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct RawHull {
+        mass_kg: f64,
+    }
+
+    #[test]
+    fn unknown_key_names_file_line_and_key() {
+        let doc = Document::new("v.toml", "[hull]\nmass_kg = 35.0\nmas_kg = 1\n");
+        let err = doc.parse::<Raw>().unwrap_err().to_string();
+        assert!(err.starts_with("v.toml:3:"), "{err}");
+        assert!(err.contains("mas_kg"), "{err}");
+    }
+
+    #[test]
+    fn wrong_type_is_a_syntax_error_with_position() {
+        let doc = Document::new("v.toml", "[hull]\nmass_kg = \"heavy\"\n");
+        let err = doc.parse::<Raw>().unwrap_err();
+        assert!(matches!(err, ConfigError::Syntax { line: 2, .. }), "{err}");
+    }
+
+    #[test]
+    fn range_error_points_at_the_key_line() {
+        let doc = Document::new("v.toml", "# comment\n[hull]\n\nmass_kg = -3.0\n");
+        let err = doc.check_range("hull.mass_kg", -3.0, 1.0, 500.0, "kg").unwrap_err();
+        assert!(matches!(&err, ConfigError::Invalid { line: Some(4), .. }), "{err}");
+        assert!(err.to_string().contains("kg"));
+        assert!(doc.check_range("hull.mass_kg", f64::NAN, 1.0, 500.0, "kg").is_err());
+    }
+
+    #[test]
+    fn line_of_follows_arrays_of_tables() {
+        let doc = Document::new("v.toml", "[[thruster]]\ngain = 1\n[[thruster]]\ngain = 2\n");
+        assert_eq!(doc.line_of("thruster.1.gain"), Some(4));
+        assert_eq!(doc.line_of("thruster.2.gain"), None);
+    }
+
+    /// The embedded copies are exactly the files in `configs/`, so `run` without `--config`
+    /// behaves like `run --config configs/default.toml`.
+    #[test]
+    fn embedded_configs_equal_the_files_on_disk() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+        let disk = Directory::new(&root);
+        assert!(
+            EMBEDDED_CONFIGS.iter().any(|(n, _)| *n == DEFAULT_CONFIG),
+            "configs/{DEFAULT_CONFIG} is not embedded"
+        );
+        for (name, text) in EMBEDDED_CONFIGS {
+            let on_disk = disk.read(name).expect("embedded file exists on disk");
+            assert_eq!(on_disk.as_ref(), *text, "embedded {name} differs from configs/{name}");
+        }
+    }
+}

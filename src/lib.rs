@@ -1,0 +1,20 @@
+//! eyebot-hil: a hardware-in-the-loop bridge between an EyeBot MK4 controller and a simulated
+//! Mako AUV.
+//!
+//! What flows where (see `docs/ARCHITECTURE.md` for the full picture):
+//!
+//! ```text
+//!  serial port / pty ──bytes──▶ firmware-protocol (frames) ──▶ devices (emulators)
+//!                                                               │  thruster commands
+//!                                                               ▼
+//!                                       physics (fixed-step 6-DOF model + rapier3d pool)
+//!                                                               │  vehicle state
+//!                                                               ▼
+//!  serial port / pty ◀──bytes── firmware-protocol ◀── devices ◀── sensors (error models)
+//! ```
+//!
+//! `main.rs` only parses arguments, installs the tracing subscriber and calls [`cli::main`].
+
+pub mod cli;
+pub mod config;
+pub mod physics;
