@@ -77,7 +77,11 @@ impl ConfigSource for Embedded {
                 name: name.to_string(),
                 reason: format!(
                     "no such embedded file; embedded are: {}",
-                    EMBEDDED_CONFIGS.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                    EMBEDDED_CONFIGS
+                        .iter()
+                        .map(|(n, _)| *n)
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ),
             })
     }
@@ -180,7 +184,9 @@ impl<'a> Document<'a> {
                     current = t;
                     current.get(part)
                 }
-                Some(toml::de::DeValue::Array(a)) => part.parse::<usize>().ok().and_then(|i| a.get(i)),
+                Some(toml::de::DeValue::Array(a)) => {
+                    part.parse::<usize>().ok().and_then(|i| a.get(i))
+                }
                 Some(_) => None,
             }?;
             span = next.span();
@@ -200,11 +206,21 @@ impl<'a> Document<'a> {
     }
 
     /// Checks that a finite `value` lies in `[min, max]`; the error states the unit.
-    pub fn check_range(&self, key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<f64, ConfigError> {
+    pub fn check_range(
+        &self,
+        key: &str,
+        value: f64,
+        min: f64,
+        max: f64,
+        unit: &str,
+    ) -> Result<f64, ConfigError> {
         if value.is_finite() && (min..=max).contains(&value) {
             Ok(value)
         } else {
-            Err(self.invalid(key, format!("{value} {unit} is outside the allowed range {min}..={max} {unit}")))
+            Err(self.invalid(
+                key,
+                format!("{value} {unit} is outside the allowed range {min}..={max} {unit}"),
+            ))
         }
     }
 }
@@ -213,7 +229,10 @@ impl<'a> Document<'a> {
 fn line_column(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];
     let line = before.bytes().filter(|&b| b == b'\n').count() + 1;
-    let column = before.rfind('\n').map_or(before.len(), |nl| before.len() - nl - 1) + 1;
+    let column = before
+        .rfind('\n')
+        .map_or(before.len(), |nl| before.len() - nl - 1)
+        + 1;
     (line, column)
 }
 
@@ -253,10 +272,18 @@ mod tests {
     #[test]
     fn range_error_points_at_the_key_line() {
         let doc = Document::new("v.toml", "# comment\n[hull]\n\nmass_kg = -3.0\n");
-        let err = doc.check_range("hull.mass_kg", -3.0, 1.0, 500.0, "kg").unwrap_err();
-        assert!(matches!(&err, ConfigError::Invalid { line: Some(4), .. }), "{err}");
+        let err = doc
+            .check_range("hull.mass_kg", -3.0, 1.0, 500.0, "kg")
+            .unwrap_err();
+        assert!(
+            matches!(&err, ConfigError::Invalid { line: Some(4), .. }),
+            "{err}"
+        );
         assert!(err.to_string().contains("kg"));
-        assert!(doc.check_range("hull.mass_kg", f64::NAN, 1.0, 500.0, "kg").is_err());
+        assert!(
+            doc.check_range("hull.mass_kg", f64::NAN, 1.0, 500.0, "kg")
+                .is_err()
+        );
     }
 
     #[test]
@@ -278,7 +305,11 @@ mod tests {
         );
         for (name, text) in EMBEDDED_CONFIGS {
             let on_disk = disk.read(name).expect("embedded file exists on disk");
-            assert_eq!(on_disk.as_ref(), *text, "embedded {name} differs from configs/{name}");
+            assert_eq!(
+                on_disk.as_ref(),
+                *text,
+                "embedded {name} differs from configs/{name}"
+            );
         }
     }
 }

@@ -67,5 +67,10 @@ pub struct RayHit {
 /// world implements it with rapier3d's query pipeline; sensor tests may use simpler scenes.
 pub trait RayCaster {
     /// The nearest hit along `direction` from `origin_m` within `max_range_m`, if any.
-    fn cast_ray(&self, origin_m: &Point3<f64>, direction: &Unit<Vector3<f64>>, max_range_m: f64) -> Option<RayHit>;
+    fn cast_ray(
+        &self,
+        origin_m: &Point3<f64>,
+        direction: &Unit<Vector3<f64>>,
+        max_range_m: f64,
+    ) -> Option<RayHit>;
 }
