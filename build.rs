@@ -4,11 +4,11 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-fn collect(dir: &Path, root: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
+fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
     for entry in std::fs::read_dir(dir)? {
         let path = entry?.path();
         if path.is_dir() {
-            collect(&path, root, out)?;
+            collect(&path, out)?;
         } else if path.extension().is_some_and(|e| e == "toml") {
             out.push(path);
         }
@@ -23,7 +23,7 @@ fn main() -> std::io::Result<()> {
     let root = manifest.join("configs");
     println!("cargo:rerun-if-changed=configs");
     let mut files = Vec::new();
-    collect(&root, &root, &mut files)?;
+    collect(&root, &mut files)?;
     files.sort();
     let mut code =
         String::from("/// Every `configs/**/*.toml`, as (path relative to `configs/`, text).\n");
