@@ -18,4 +18,6 @@
 pub mod cli;
 pub mod config;
 pub mod physics;
+pub mod record;
+pub mod transport;
 pub mod validate;

@@ -1,0 +1,384 @@
+//! `--record DIR`: every byte on every link, and the ground-truth vehicle state.
+//!
+//! The formats are specified in `docs/recording.md`; `replay` and `gap` read them. In short:
+//!
+//! - `bytes.tsv`: one line per chunk of bytes that crossed a link, in the order they crossed:
+//!   `sim_s <TAB> wall_unix_s <TAB> link <TAB> dir <TAB> hex`, where `dir` is `rx` (EyeBot to
+//!   bridge) or `tx` (bridge to EyeBot) and `hex` is the bytes in lower-case hex.
+//! - `state.csv`: the vehicle's true state at a set rate (same columns as `simulate`).
+//! - `meta.toml`: what produced the recording (version, seed, time mode, links).
+//!
+//! Writes go to a dedicated thread through an unbounded channel, so the simulation never
+//! waits on the disk and nothing handed to the recorder is dropped. The thread flushes at
+//! least every [`FLUSH_INTERVAL`], so `kill -9` loses at most that much; a clean shutdown
+//! (SIGINT/SIGTERM, [`Recorder::finish`]) flushes and syncs everything.
+
+use std::fmt::Write as _;
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// The longest a recorded chunk may wait in memory before it reaches the file.
+pub const FLUSH_INTERVAL: Duration = Duration::from_millis(50);
+
+/// Header line of `bytes.tsv`.
+pub const BYTES_HEADER: &str = "sim_s\twall_unix_s\tlink\tdir\thex";
+
+/// Which way bytes crossed a link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Direction {
+    /// From the EyeBot side into the bridge.
+    Rx,
+    /// From the bridge out to the EyeBot side.
+    Tx,
+}
+
+impl Direction {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Direction::Rx => "rx",
+            Direction::Tx => "tx",
+        }
+    }
+}
+
+/// Why a recording could not be started or completed.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("recording {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+    #[error("recorder thread stopped unexpectedly")]
+    ThreadGone,
+}
+
+enum Message {
+    Bytes {
+        sim_s: f64,
+        wall_unix_s: f64,
+        link: &'static str,
+        dir: Direction,
+        data: Vec<u8>,
+    },
+    State(String),
+    Finish,
+}
+
+/// Handle to the recorder thread. Cheap to call from the simulation loop.
+#[derive(Debug)]
+pub struct Recorder {
+    tx: mpsc::Sender<Message>,
+    thread: Option<JoinHandle<Result<Stats, RecordError>>>,
+    dir: PathBuf,
+}
+
+/// What a finished recording holds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    pub chunks: u64,
+    pub bytes: u64,
+    pub states: u64,
+}
+
+struct Files {
+    bytes: BufWriter<File>,
+    state: BufWriter<File>,
+    bytes_path: PathBuf,
+    state_path: PathBuf,
+}
+
+impl Files {
+    fn flush(&mut self) -> Result<(), RecordError> {
+        self.bytes.flush().map_err(|source| RecordError::Io {
+            path: self.bytes_path.clone(),
+            source,
+        })?;
+        self.state.flush().map_err(|source| RecordError::Io {
+            path: self.state_path.clone(),
+            source,
+        })
+    }
+}
+
+impl Recorder {
+    /// Creates `dir` and its files, writes `meta.toml` and the headers, starts the thread.
+    /// `state_header` is the CSV header of the ground-truth rows passed to [`Recorder::state`].
+    pub fn start(dir: &Path, meta_toml: &str, state_header: &str) -> Result<Self, RecordError> {
+        let io_err = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| RecordError::Io { path, source }
+        };
+        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let meta_path = dir.join("meta.toml");
+        std::fs::write(&meta_path, meta_toml).map_err(io_err(&meta_path))?;
+        let bytes_path = dir.join("bytes.tsv");
+        let state_path = dir.join("state.csv");
+        let mut files = Files {
+            bytes: BufWriter::new(File::create(&bytes_path).map_err(io_err(&bytes_path))?),
+            state: BufWriter::new(File::create(&state_path).map_err(io_err(&state_path))?),
+            bytes_path,
+            state_path,
+        };
+        writeln!(files.bytes, "{BYTES_HEADER}").map_err(io_err(&files.bytes_path))?;
+        writeln!(files.state, "{state_header}").map_err(io_err(&files.state_path))?;
+        files.flush()?;
+        let (tx, rx) = mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || write_loop(rx, files))
+            .map_err(io_err(dir))?;
+        Ok(Self {
+            tx,
+            thread: Some(thread),
+            dir: dir.to_path_buf(),
+        })
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Records bytes that crossed `link` at simulated time `sim_s`.
+    pub fn bytes(&self, sim_s: f64, link: &'static str, dir: Direction, data: &[u8]) {
+        if data.is_empty() {
+            return;
+        }
+        let wall_unix_s = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64());
+        let sent = self.tx.send(Message::Bytes {
+            sim_s,
+            wall_unix_s,
+            link,
+            dir,
+            data: data.to_vec(),
+        });
+        if sent.is_err() {
+            tracing::error!("recorder thread is gone; bytes not recorded");
+        }
+    }
+
+    /// Records one ground-truth CSV row (without the newline).
+    pub fn state(&self, csv_row: String) {
+        if self.tx.send(Message::State(csv_row)).is_err() {
+            tracing::error!("recorder thread is gone; state not recorded");
+        }
+    }
+
+    /// Flushes and syncs everything, stops the thread and returns what was written.
+    pub fn finish(mut self) -> Result<Stats, RecordError> {
+        self.finish_inner()
+    }
+
+    fn finish_inner(&mut self) -> Result<Stats, RecordError> {
+        let Some(thread) = self.thread.take() else {
+            return Ok(Stats::default());
+        };
+        let _ = self.tx.send(Message::Finish);
+        thread.join().map_err(|_| RecordError::ThreadGone)?
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        if let Err(e) = self.finish_inner() {
+            tracing::error!(error = %e, "recording did not finish cleanly");
+        }
+    }
+}
+
+fn write_loop(rx: mpsc::Receiver<Message>, mut files: Files) -> Result<Stats, RecordError> {
+    let mut stats = Stats::default();
+    let mut last_flush = Instant::now();
+    let mut line = String::new();
+    loop {
+        let message = match rx.recv_timeout(FLUSH_INTERVAL) {
+            Ok(m) => Some(m),
+            Err(mpsc::RecvTimeoutError::Timeout) => None,
+            // Every sender dropped without `finish`: flush what we have and stop.
+            Err(mpsc::RecvTimeoutError::Disconnected) => Some(Message::Finish),
+        };
+        match message {
+            Some(Message::Bytes {
+                sim_s,
+                wall_unix_s,
+                link,
+                dir,
+                data,
+            }) => {
+                line.clear();
+                let _ = writeln!(
+                    line,
+                    "{sim_s:.9}\t{wall_unix_s:.6}\t{link}\t{}\t{}",
+                    dir.as_str(),
+                    hex::encode(&data)
+                );
+                files
+                    .bytes
+                    .write_all(line.as_bytes())
+                    .map_err(|source| RecordError::Io {
+                        path: files.bytes_path.clone(),
+                        source,
+                    })?;
+                stats.chunks += 1;
+                stats.bytes += data.len() as u64;
+            }
+            Some(Message::State(row)) => {
+                writeln!(files.state, "{row}").map_err(|source| RecordError::Io {
+                    path: files.state_path.clone(),
+                    source,
+                })?;
+                stats.states += 1;
+            }
+            Some(Message::Finish) => {
+                files.flush()?;
+                for (file, path) in [
+                    (files.bytes.get_ref(), &files.bytes_path),
+                    (files.state.get_ref(), &files.state_path),
+                ] {
+                    file.sync_all().map_err(|source| RecordError::Io {
+                        path: path.clone(),
+                        source,
+                    })?;
+                }
+                return Ok(stats);
+            }
+            None => {}
+        }
+        if last_flush.elapsed() >= FLUSH_INTERVAL {
+            files.flush()?;
+            last_flush = Instant::now();
+        }
+    }
+}
+
+/// One parsed line of `bytes.tsv`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ByteChunk {
+    pub sim_s: f64,
+    pub wall_unix_s: f64,
+    pub link: String,
+    pub dir: Direction,
+    pub data: Vec<u8>,
+}
+
+/// Why a `bytes.tsv` line was rejected.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("bytes.tsv line {line}: {reason}")]
+pub struct ParseChunkError {
+    pub line: usize,
+    pub reason: String,
+}
+
+/// Parses one non-header line of `bytes.tsv` (`line` is 1-based, for the error).
+pub fn parse_chunk(text: &str, line: usize) -> Result<ByteChunk, ParseChunkError> {
+    let fail = |reason: &str| ParseChunkError {
+        line,
+        reason: reason.to_string(),
+    };
+    let mut fields = text.trim_end_matches(['\r', '\n']).split('\t');
+    let mut next = |name: &str| {
+        fields
+            .next()
+            .ok_or_else(|| fail(&format!("missing field `{name}`")))
+    };
+    let sim_s = next("sim_s")?
+        .parse()
+        .map_err(|_| fail("sim_s is not a number"))?;
+    let wall_unix_s = next("wall_unix_s")?
+        .parse()
+        .map_err(|_| fail("wall_unix_s is not a number"))?;
+    let link = next("link")?.to_string();
+    let dir = match next("dir")? {
+        "rx" => Direction::Rx,
+        "tx" => Direction::Tx,
+        _ => return Err(fail("dir must be rx or tx")),
+    };
+    let data = hex::decode(next("hex")?).map_err(|e| fail(&format!("bad hex: {e}")))?;
+    Ok(ByteChunk {
+        sim_s,
+        wall_unix_s,
+        link,
+        dir,
+        data,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recorded_bytes_parse_back_exactly() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-rec-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let rec = Recorder::start(&dir, "seed = 1\n", "t_s,x_m").unwrap();
+        let all: Vec<u8> = (0..=255u8).collect();
+        rec.bytes(0.25, "sensor", Direction::Rx, &all);
+        rec.bytes(1.5, "sonar", Direction::Tx, b"$SDDBT,,f,2.0,M,,F*00\r\n");
+        rec.state("0.0,1.0".into());
+        let stats = rec.finish().unwrap();
+        assert_eq!(
+            stats,
+            Stats {
+                chunks: 2,
+                bytes: 256 + 23,
+                states: 1
+            }
+        );
+
+        let text = std::fs::read_to_string(dir.join("bytes.tsv")).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(lines.next(), Some(BYTES_HEADER));
+        let first = parse_chunk(lines.next().unwrap(), 2).unwrap();
+        assert_eq!(first.data, all);
+        assert_eq!(first.dir, Direction::Rx);
+        assert_eq!(first.sim_s, 0.25);
+        let second = parse_chunk(lines.next().unwrap(), 3).unwrap();
+        assert_eq!(second.link, "sonar");
+        assert_eq!(second.data, b"$SDDBT,,f,2.0,M,,F*00\r\n");
+        assert_eq!(
+            std::fs::read_to_string(dir.join("state.csv")).unwrap(),
+            "t_s,x_m\n0.0,1.0\n"
+        );
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn malformed_lines_name_the_line_and_the_problem() {
+        assert_eq!(
+            parse_chunk("1.0\t2.0\tsonar\tup\t00", 7).unwrap_err().line,
+            7
+        );
+        assert!(
+            parse_chunk("1.0\t2.0\tsonar\ttx\t0", 1)
+                .unwrap_err()
+                .reason
+                .contains("bad hex")
+        );
+        assert!(
+            parse_chunk("1.0\t2.0\tsonar\ttx\tzz", 1)
+                .unwrap_err()
+                .reason
+                .contains("bad hex")
+        );
+        assert!(
+            parse_chunk("x\t2.0\tsonar\ttx\t00", 1)
+                .unwrap_err()
+                .reason
+                .contains("sim_s")
+        );
+        assert!(
+            parse_chunk("1.0", 1)
+                .unwrap_err()
+                .reason
+                .contains("missing")
+        );
+    }
+}

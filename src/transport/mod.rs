@@ -1,0 +1,8 @@
+//! Byte transports for the links: pseudo-terminals created in-process, real serial devices,
+//! and loopback TCP; plus the line settings that pace every byte at the configured baud.
+
+pub mod line;
+pub mod pty;
+pub mod symlink;
+
+pub use line::{FlowControl, LineSettings, Parity};

@@ -1,0 +1,212 @@
+//! Stable names for pseudo-terminals: `run/sonar -> /dev/pts/7`.
+//!
+//! A pty's device number changes every run, so each link gets a symlink at a fixed path. The
+//! bridge never replaces anything it did not create: beside each link it writes an owner
+//! file (`.sonar.owner`, holding the daemon's PID), and an existing symlink is replaced only
+//! when its owner file names a process that no longer runs. Anything else at that path (a
+//! regular file, a directory, someone else's symlink, a live daemon's link) is an error that
+//! names the path and what holds it.
+
+use std::fs;
+use std::io;
+use std::path::{Path, PathBuf};
+
+/// Why a link could not be created.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    #[error("link path {path}: {what} is there and is not ours; remove it or choose another path")]
+    Occupied { path: PathBuf, what: &'static str },
+    #[error("link path {path}: in use by running eyebot-hil process {pid}")]
+    InUse { path: PathBuf, pid: u32 },
+    #[error("link path {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+}
+
+/// A symlink this process created; removed on drop if it still points where we set it.
+#[derive(Debug)]
+pub struct OwnedLink {
+    path: PathBuf,
+    target: PathBuf,
+    owner_file: PathBuf,
+}
+
+fn owner_file_for(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.owner"))
+}
+
+fn process_alive(pid: u32) -> bool {
+    let Ok(pid) = i32::try_from(pid) else {
+        return false;
+    };
+    // Signal 0 checks existence; EPERM means it exists but belongs to someone else.
+    match nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), None) {
+        Ok(()) => true,
+        Err(e) => e == nix::errno::Errno::EPERM,
+    }
+}
+
+impl OwnedLink {
+    /// Points `path` at `target`, creating parent directories, replacing only our own stale
+    /// link.
+    pub fn create(path: &Path, target: &Path) -> Result<Self, LinkError> {
+        let io_err = |source| LinkError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            fs::create_dir_all(parent).map_err(io_err)?;
+        }
+        let owner_file = owner_file_for(path);
+        match fs::symlink_metadata(path) {
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+            Err(e) => return Err(io_err(e)),
+            Ok(meta) if !meta.file_type().is_symlink() => {
+                return Err(LinkError::Occupied {
+                    path: path.to_path_buf(),
+                    what: if meta.is_dir() {
+                        "a directory"
+                    } else {
+                        "a file"
+                    },
+                });
+            }
+            Ok(_) => {
+                let owner = fs::read_to_string(&owner_file)
+                    .ok()
+                    .and_then(|s| s.trim().parse::<u32>().ok());
+                match owner {
+                    None => {
+                        return Err(LinkError::Occupied {
+                            path: path.to_path_buf(),
+                            what: "a symlink without an eyebot-hil owner file",
+                        });
+                    }
+                    Some(pid) if pid != std::process::id() && process_alive(pid) => {
+                        return Err(LinkError::InUse {
+                            path: path.to_path_buf(),
+                            pid,
+                        });
+                    }
+                    Some(pid) => {
+                        tracing::info!(path = %path.display(), stale_owner = pid, "replacing stale link");
+                    }
+                }
+            }
+        }
+        // Write the owner file first, then swap the link in atomically with a rename.
+        fs::write(&owner_file, format!("{}\n", std::process::id())).map_err(io_err)?;
+        let tmp = path.with_file_name(format!(
+            ".{}.tmp{}",
+            path.file_name()
+                .map(|n| n.to_string_lossy())
+                .unwrap_or_default(),
+            std::process::id()
+        ));
+        let _ = fs::remove_file(&tmp);
+        std::os::unix::fs::symlink(target, &tmp).map_err(io_err)?;
+        fs::rename(&tmp, path).map_err(io_err)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            target: target.to_path_buf(),
+            owner_file,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+}
+
+impl Drop for OwnedLink {
+    fn drop(&mut self) {
+        // Remove only what is still ours: another daemon may have taken the path over.
+        if fs::read_link(&self.path).is_ok_and(|t| t == self.target) {
+            let _ = fs::remove_file(&self.path);
+        }
+        let ours = fs::read_to_string(&self.owner_file)
+            .ok()
+            .and_then(|s| s.trim().parse::<u32>().ok())
+            == Some(std::process::id());
+        if ours {
+            let _ = fs::remove_file(&self.owner_file);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("eyebot-hil-link-{}-{name}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn creates_and_removes_its_link() {
+        let dir = scratch("create");
+        let link = dir.join("run/sonar");
+        {
+            let owned = OwnedLink::create(&link, Path::new("/dev/null")).unwrap();
+            assert_eq!(fs::read_link(owned.path()).unwrap(), Path::new("/dev/null"));
+        }
+        assert!(fs::symlink_metadata(&link).is_err(), "link removed on drop");
+        assert!(!owner_file_for(&link).exists());
+        fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn never_replaces_a_file_or_a_foreign_symlink() {
+        let dir = scratch("foreign");
+        let file = dir.join("sonar");
+        fs::write(&file, "user data").unwrap();
+        assert!(matches!(
+            OwnedLink::create(&file, Path::new("/dev/null")),
+            Err(LinkError::Occupied { .. })
+        ));
+        assert_eq!(fs::read_to_string(&file).unwrap(), "user data");
+
+        let foreign = dir.join("sensor");
+        std::os::unix::fs::symlink("/etc/hostname", &foreign).unwrap();
+        assert!(matches!(
+            OwnedLink::create(&foreign, Path::new("/dev/null")),
+            Err(LinkError::Occupied { .. })
+        ));
+        assert_eq!(fs::read_link(&foreign).unwrap(), Path::new("/etc/hostname"));
+        fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn replaces_a_stale_link_of_a_dead_daemon_but_not_a_live_one() {
+        let dir = scratch("stale");
+        let link = dir.join("sonar");
+        std::os::unix::fs::symlink("/dev/pts/999", &link).unwrap();
+        // PID 1 is alive (init); a link it owns is in use.
+        fs::write(owner_file_for(&link), "1\n").unwrap();
+        assert!(matches!(
+            OwnedLink::create(&link, Path::new("/dev/null")),
+            Err(LinkError::InUse { pid: 1, .. })
+        ));
+        // A PID above pid_max never runs: that owner is dead, so the link is stale.
+        fs::write(owner_file_for(&link), "4194305\n").unwrap();
+        let owned = OwnedLink::create(&link, Path::new("/dev/null")).unwrap();
+        assert_eq!(fs::read_link(&link).unwrap(), Path::new("/dev/null"));
+        drop(owned);
+        fs::remove_dir_all(dir).unwrap();
+    }
+}
