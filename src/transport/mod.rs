@@ -2,6 +2,7 @@
 //! and loopback TCP; plus the line settings that pace every byte at the configured baud.
 
 pub mod line;
+pub mod pacer;
 pub mod pty;
 pub mod symlink;
 
