@@ -4,6 +4,7 @@
 pub mod line;
 pub mod pacer;
 pub mod pty;
+pub mod serial;
 pub mod symlink;
 
 pub use line::{FlowControl, LineSettings, Parity};
