@@ -17,7 +17,12 @@
 
 pub mod cli;
 pub mod config;
+pub mod daemon;
 pub mod physics;
 pub mod record;
 pub mod transport;
 pub mod validate;
+
+/// Simulated time in nanoseconds since the start of a run. Integer, so the same inputs give
+/// the same times bit for bit at any speed.
+pub type SimNanos = u64;

@@ -12,8 +12,7 @@ use bytes::{Buf, Bytes};
 
 use super::LineSettings;
 
-/// Simulated time in nanoseconds since the start of the run.
-pub type SimNanos = u64;
+use crate::SimNanos;
 
 #[derive(Debug)]
 struct Chunk {

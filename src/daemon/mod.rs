@@ -1,0 +1,4 @@
+//! The bridge daemon (`eyebot-hil run`): links, device emulators, the time model, recording
+//! and the process life cycle around the simulation.
+
+pub mod clock;
