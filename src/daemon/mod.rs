@@ -2,3 +2,4 @@
 //! and the process life cycle around the simulation.
 
 pub mod clock;
+pub mod status;
