@@ -2,4 +2,5 @@
 //! and the process life cycle around the simulation.
 
 pub mod clock;
+pub mod config;
 pub mod status;

@@ -1,0 +1,325 @@
+//! The daemon's own settings (`configs/default.toml`): run, links and devices.
+//!
+//! Model files (vehicle, world, sensors) are referenced by name and loaded by their layers.
+//! Raw structs mirror the TOML with `deny_unknown_fields`; [`DaemonConfig::resolve`] checks
+//! them and points at the offending key's line.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use serde::Deserialize;
+
+use super::clock::TimeMode;
+use crate::config::{ConfigError, Document};
+use crate::transport::{FlowControl, LineSettings};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDaemon {
+    vehicle: String,
+    world: String,
+    sensors: String,
+    run: RawRun,
+    links: RawLinks,
+    devices: RawDevices,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRun {
+    seed: u64,
+    time_mode: String,
+    speed: f64,
+    max_lag_ms: f64,
+    run_dir: String,
+    state_record_hz: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLinks {
+    sonar: RawLink,
+    sensor: RawLink,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLink {
+    endpoint: String,
+    #[serde(default)]
+    path: Option<String>,
+    #[serde(default)]
+    line: Option<String>,
+    #[serde(default)]
+    flow_control: FlowControl,
+    #[serde(default = "default_tx_queue")]
+    tx_queue_bytes: usize,
+}
+
+fn default_tx_queue() -> usize {
+    4096
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDevices {
+    motor_driver: RawMotorDriver,
+    lockstep: RawLockstep,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMotorDriver {
+    watchdog_s: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLockstep {
+    tick_s: f64,
+}
+
+/// Where a link's bytes go.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Endpoint {
+    /// A pty pair created in-process; the symlink at `link` (relative paths inside the run
+    /// directory) points at the slave.
+    Pty { link: PathBuf },
+    /// A real serial device.
+    Serial { device: PathBuf },
+    /// A TCP listener on loopback, one client at a time.
+    Tcp { addr: std::net::SocketAddr },
+    /// This link rides on the sonar link's line; a receiver tells the two apart by the first
+    /// byte (see PROTOCOL.md).
+    SharedWithSonar,
+}
+
+/// One link's resolved settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkConfig {
+    pub endpoint: Endpoint,
+    pub line: LineSettings,
+    pub tx_queue_bytes: usize,
+}
+
+/// The daemon's resolved settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DaemonConfig {
+    /// Model files, by name inside the same config source.
+    pub vehicle: String,
+    pub world: String,
+    pub sensors: String,
+    pub seed: u64,
+    pub time_mode: TimeMode,
+    pub max_lag: Duration,
+    pub run_dir: PathBuf,
+    pub state_record_hz: f64,
+    pub sonar: LinkConfig,
+    pub sensor: LinkConfig,
+    /// Zero the thrusters after this long without a thruster frame; `None` = off.
+    pub watchdog: Option<Duration>,
+    /// Length of one lockstep tick (MK4 `OSGetCount` tick: 1/100 s).
+    pub tick: Duration,
+}
+
+impl DaemonConfig {
+    /// Parses and checks a daemon config document.
+    pub fn resolve(doc: &Document<'_>) -> Result<Self, ConfigError> {
+        let raw: RawDaemon = doc.parse()?;
+        let speed = doc.check_range("run.speed", raw.run.speed, 0.1, 1000.0, "x real time")?;
+        let time_mode = match raw.run.time_mode.as_str() {
+            "realtime" => TimeMode::Realtime { speed },
+            "lockstep" => TimeMode::Lockstep,
+            other => {
+                return Err(doc.invalid(
+                    "run.time_mode",
+                    format!("`{other}` is not a time mode; expected `realtime` or `lockstep`"),
+                ));
+            }
+        };
+        let max_lag_ms =
+            doc.check_range("run.max_lag_ms", raw.run.max_lag_ms, 1.0, 10_000.0, "ms")?;
+        let state_record_hz = doc.check_range(
+            "run.state_record_hz",
+            raw.run.state_record_hz,
+            0.1,
+            1000.0,
+            "Hz",
+        )?;
+        let watchdog_s = doc.check_range(
+            "devices.motor_driver.watchdog_s",
+            raw.devices.motor_driver.watchdog_s,
+            0.0,
+            3600.0,
+            "s",
+        )?;
+        let tick_s = doc.check_range(
+            "devices.lockstep.tick_s",
+            raw.devices.lockstep.tick_s,
+            1e-4,
+            1.0,
+            "s",
+        )?;
+        if raw.run.run_dir.is_empty() {
+            return Err(doc.invalid("run.run_dir", "must not be empty"));
+        }
+        let sonar = resolve_link(doc, "sonar", raw.links.sonar, false)?;
+        let sensor = resolve_link(doc, "sensor", raw.links.sensor, true)?;
+        Ok(Self {
+            vehicle: raw.vehicle,
+            world: raw.world,
+            sensors: raw.sensors,
+            seed: raw.run.seed,
+            time_mode,
+            max_lag: Duration::from_secs_f64(max_lag_ms / 1000.0),
+            run_dir: PathBuf::from(raw.run.run_dir),
+            state_record_hz,
+            sonar,
+            sensor,
+            watchdog: (watchdog_s > 0.0).then(|| Duration::from_secs_f64(watchdog_s)),
+            tick: Duration::from_secs_f64(tick_s),
+        })
+    }
+}
+
+fn resolve_link(
+    doc: &Document<'_>,
+    name: &str,
+    raw: RawLink,
+    may_share: bool,
+) -> Result<LinkConfig, ConfigError> {
+    let key = |k: &str| format!("links.{name}.{k}");
+    let path = |what: &str| {
+        raw.path.clone().filter(|p| !p.is_empty()).ok_or_else(|| {
+            doc.invalid(
+                &key("path"),
+                format!("a `{}` endpoint needs `path` ({what})", raw.endpoint),
+            )
+        })
+    };
+    let endpoint = match raw.endpoint.as_str() {
+        "pty" => Endpoint::Pty {
+            link: PathBuf::from(path("the symlink to create, relative to run.run_dir")?),
+        },
+        "serial" => Endpoint::Serial {
+            device: PathBuf::from(path("the device, e.g. /dev/ttyUSB0")?),
+        },
+        "tcp" => {
+            let text = path("a loopback address, e.g. 127.0.0.1:7001")?;
+            let addr: std::net::SocketAddr = text.parse().map_err(|_| {
+                doc.invalid(
+                    &key("path"),
+                    format!("`{text}` is not an address like 127.0.0.1:7001"),
+                )
+            })?;
+            if !addr.ip().is_loopback() {
+                return Err(doc.invalid(
+                    &key("path"),
+                    format!(
+                        "{addr} is not a loopback address; the bridge only listens on loopback"
+                    ),
+                ));
+            }
+            Endpoint::Tcp { addr }
+        }
+        "shared" if may_share => Endpoint::SharedWithSonar,
+        other => {
+            let allowed = if may_share {
+                "`pty`, `serial`, `tcp` or `shared`"
+            } else {
+                "`pty`, `serial` or `tcp`"
+            };
+            return Err(doc.invalid(
+                &key("endpoint"),
+                format!("`{other}` is not an endpoint; expected {allowed}"),
+            ));
+        }
+    };
+    let line = match (&endpoint, raw.line) {
+        (Endpoint::SharedWithSonar, Some(_)) => {
+            return Err(doc.invalid(
+                &key("line"),
+                "a shared link uses the sonar link's line settings; remove `line`",
+            ));
+        }
+        (Endpoint::SharedWithSonar, None) => LineSettings::n81(4800),
+        (_, Some(text)) => {
+            let mut line: LineSettings =
+                text.parse()
+                    .map_err(|e: crate::transport::line::LineSettingsError| {
+                        doc.invalid(&key("line"), e.to_string())
+                    })?;
+            line.flow_control = raw.flow_control;
+            line
+        }
+        (_, None) => {
+            return Err(doc.invalid(
+                &key("line"),
+                "missing: give the line settings, e.g. \"4800 8N1\"",
+            ));
+        }
+    };
+    if !(64..=1 << 20).contains(&raw.tx_queue_bytes) {
+        return Err(doc.invalid(
+            &key("tx_queue_bytes"),
+            format!("{} is outside 64..=1048576 bytes", raw.tx_queue_bytes),
+        ));
+    }
+    Ok(LinkConfig {
+        endpoint,
+        line,
+        tx_queue_bytes: raw.tx_queue_bytes,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{ConfigSource, DEFAULT_CONFIG, Embedded};
+
+    #[test]
+    fn the_embedded_default_resolves() {
+        let text = Embedded.read(DEFAULT_CONFIG).unwrap();
+        let doc = Document::new(Embedded.describe(DEFAULT_CONFIG), &text);
+        let config = DaemonConfig::resolve(&doc).unwrap();
+        assert_eq!(config.sonar.line, LineSettings::n81(4800));
+        assert_eq!(config.sensor.line, LineSettings::n81(115_200));
+        assert_eq!(config.tick, Duration::from_millis(10));
+    }
+
+    fn with(replacements: &[(&str, &str)]) -> Result<DaemonConfig, ConfigError> {
+        let mut text = Embedded.read(DEFAULT_CONFIG).unwrap().into_owned();
+        for (replace, by) in replacements {
+            assert!(text.contains(replace), "default.toml lost `{replace}`");
+            text = text.replacen(replace, by, 1);
+        }
+        DaemonConfig::resolve(&Document::new("test.toml", &text))
+    }
+
+    #[test]
+    fn bad_values_are_named_with_their_line() {
+        let err = with(&[("time_mode = \"realtime\"", "time_mode = \"fast\"")]).unwrap_err();
+        assert!(
+            matches!(&err, ConfigError::Invalid { key, line: Some(_), .. } if key == "run.time_mode"),
+            "{err}"
+        );
+        let err = with(&[("speed = 1.0", "speed = 0.01")]).unwrap_err();
+        assert!(err.to_string().contains("run.speed"), "{err}");
+        let err = with(&[("line = \"4800 8N1\"", "line = \"4800 8Q1\"")]).unwrap_err();
+        assert!(err.to_string().contains("links.sonar.line"), "{err}");
+    }
+
+    #[test]
+    fn tcp_endpoints_must_be_loopback() {
+        let tcp = |addr: &'static str| {
+            [
+                ("endpoint = \"pty\"", "endpoint = \"tcp\""),
+                ("path = \"sonar\"", addr),
+            ]
+        };
+        let err = with(&tcp("path = \"10.0.0.1:7001\"")).unwrap_err();
+        assert!(err.to_string().contains("loopback"), "{err}");
+        let ok = with(&tcp("path = \"127.0.0.1:7001\"")).unwrap();
+        assert!(matches!(ok.sonar.endpoint, Endpoint::Tcp { .. }));
+    }
+}
