@@ -1,3 +1,38 @@
-//! Sans-IO codecs for the wire protocols between an EyeBot MK4 and the Mako devices.
+//! Sans-IO codecs for the wire protocols between an EyeBot MK4 and the Mako bridge.
 //!
-//! The wire specification is `PROTOCOL.md` beside this crate; it is the single source of truth.
+//! `PROTOCOL.md` in this crate is the specification; this crate implements it. Bytes flow:
+//!
+//! ```text
+//! bytes from a port ──► LineDecoder ──► LineItem::{Nmea, Sonar, Frame, Error}
+//!                        │ first byte:  '$' nmea::scan_line  → nmea::parse_line
+//!                        │              '@' sonar_link::scan_command → parse_command
+//!                        │             0xEB frame::candidate → frame::parse → sensor_link::Frame::decode
+//!                        └ anything else: skipped, reported as LinkError::Skipped
+//! typed message ──► Sentence::encode / SonarCommand::encode / Frame::encode ──► BytesMut
+//! ```
+//!
+//! The crate opens no port, reads no clock and uses no `std::io`; the daemon moves the bytes.
+//! Wire errors come back as [`LineItem::Error`] items and decoding continues; misuse of the
+//! API (a value the protocol cannot carry) is an [`EncodeError`]. With the `tokio-codec`
+//! feature, [`codec::LineCodec`] adapts the decoder to tokio-util.
+
+#[cfg(feature = "tokio-codec")]
+pub mod codec;
+pub mod compass_word;
+pub mod crc;
+pub mod error;
+pub mod frame;
+pub mod line;
+pub mod nmea;
+pub mod sensor_link;
+pub mod sonar_link;
+
+pub use compass_word::{HeadingFormat, HeadingWord};
+pub use error::{
+    CompassWordError, EncodeError, FrameError, LinkError, MessageError, NmeaError, SentenceError,
+    SonarCommandError,
+};
+pub use line::{Decoded, LineDecoder, LineItem};
+pub use nmea::{Dbt, Dpt, EchoReport, Sentence, Talker, Tenths, Transducer};
+pub use sensor_link::{Frame, Message};
+pub use sonar_link::SonarCommand;
