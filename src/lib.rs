@@ -18,6 +18,7 @@
 pub mod cli;
 pub mod config;
 pub mod daemon;
+pub mod devices;
 pub mod physics;
 pub mod record;
 pub mod transport;

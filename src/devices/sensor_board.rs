@@ -1,0 +1,770 @@
+//! The sensor-link board: what sits behind the EyeBot's binary sensor link.
+//!
+//! It answers every request frame with exactly one reply carrying the request's sequence
+//! number (or a NAK saying what was wrong), and pushes unsolicited frames (ADC streams,
+//! continuous compass headings) from its own push sequence. It holds four small devices:
+//!
+//! - the **ADC board**: polled reads and a stream of chosen channels at a set period;
+//! - the **Vector 2X compass**: poll mode (the reply waits for the conversion delay),
+//!   continuous mode (a push at the compass's own rate), binary/BCD/raw output, the two-point
+//!   calibration, reset;
+//! - the **motor driver**: PWM duty and direction per thruster, with an optional watchdog that
+//!   zeroes the thrusters when the link goes silent;
+//! - **time**: simulated time in ticks, and lockstep advances, which the bridge core carries
+//!   out (the board only asks for them, see [`Output::Advance`]).
+
+use firmware_protocol::error::{FrameError, LinkError, MessageError};
+use firmware_protocol::sensor_link::{
+    self, AdcChannel, AdcSamples, AdcValue, CalibrationAction, CompassMode, CompassOutput,
+    Counters, ErrorCode, Message, ThrusterCommand, TimeMode, capability, msg_type,
+};
+use firmware_protocol::{Frame, HeadingFormat, HeadingWord};
+
+use super::Plant;
+use crate::SimNanos;
+
+/// Fixed settings of the board.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoardSettings {
+    /// One lockstep tick (MK4's `OSGetCount` tick, 10 ms by default).
+    pub tick_ns: u64,
+    /// Whether the daemon runs in lockstep (TIME_ADVANCE allowed) or realtime.
+    pub lockstep: bool,
+    /// Period of the compass's continuous mode (about 400 ms: 2.5 Hz).
+    pub compass_period_ns: u64,
+    /// Conversion delay of a poll-mode compass reading.
+    pub compass_conversion_ns: u64,
+    /// Zero the thrusters after this long without a thruster frame.
+    pub watchdog_ns: Option<u64>,
+    /// Whether the sonar link shares this line (reported in HELLO_REPLY).
+    pub sonar_on_this_line: bool,
+}
+
+/// What the board wants done after handling an input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// Send this frame now.
+    Send(Frame),
+    /// Lockstep: advance simulated time to `to`, then call [`SensorBoard::finish_advance`]
+    /// to get the TIME reply for `seq`.
+    Advance { to: SimNanos, seq: u8 },
+}
+
+#[derive(Debug, Clone, Copy)]
+struct AdcStream {
+    mask: u8,
+    period_ns: u64,
+    next_ns: SimNanos,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct PendingCompassRead {
+    due_ns: SimNanos,
+    seq: u8,
+}
+
+/// The board's state.
+#[derive(Debug)]
+pub struct SensorBoard {
+    settings: BoardSettings,
+    counters: Counters,
+    push_seq: u8,
+    stream: Option<AdcStream>,
+    compass_mode: CompassMode,
+    compass_output: CompassOutput,
+    next_compass_push_ns: Option<SimNanos>,
+    pending_compass: Option<PendingCompassRead>,
+    thrusters: [ThrusterCommand; 4],
+    last_thruster_ns: Option<SimNanos>,
+    watchdog_trips: u64,
+}
+
+impl SensorBoard {
+    pub fn new(settings: BoardSettings) -> Self {
+        Self {
+            settings,
+            counters: Counters::default(),
+            push_seq: 0,
+            stream: None,
+            compass_mode: CompassMode::Poll,
+            compass_output: CompassOutput::Binary,
+            next_compass_push_ns: None,
+            pending_compass: None,
+            thrusters: [ThrusterCommand::OFF; 4],
+            last_thruster_ns: None,
+            watchdog_trips: 0,
+        }
+    }
+
+    /// The protocol counters (also what COUNTERS_GET returns).
+    pub fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// How often the watchdog zeroed the thrusters.
+    pub fn watchdog_trips(&self) -> u64 {
+        self.watchdog_trips
+    }
+
+    /// The motor driver's current outputs.
+    pub fn thrusters(&self) -> [ThrusterCommand; 4] {
+        self.thrusters
+    }
+
+    fn ticks(&self, now: SimNanos) -> u32 {
+        // The tick counter wraps like a 32-bit hardware counter.
+        (now / self.settings.tick_ns) as u32
+    }
+
+    fn reply(&mut self, seq: u8, message: Message) -> Output {
+        self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
+        if matches!(message, Message::Nak { .. }) {
+            self.counters.tx_naks = self.counters.tx_naks.wrapping_add(1);
+        }
+        Output::Send(Frame::new(seq, message))
+    }
+
+    fn push(&mut self, message: Message) -> Frame {
+        self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
+        let seq = self.push_seq;
+        self.push_seq = self.push_seq.wrapping_add(1);
+        Frame::new(seq, message)
+    }
+
+    fn nak(&mut self, seq: u8, rejected_type: u8, code: ErrorCode, detail: u8) -> Output {
+        self.reply(
+            seq,
+            Message::Nak {
+                rejected_type,
+                code,
+                detail,
+            },
+        )
+    }
+
+    /// A wire error on this link: counted, and answered with a NAK where the frame's type
+    /// and sequence number can be trusted (a CRC mismatch cannot: no reply, the EyeBot side's
+    /// timeout and retry take over, as PROTOCOL.md says).
+    pub fn handle_error(&mut self, error: &LinkError) -> Option<Output> {
+        match error {
+            LinkError::Skipped { count } => {
+                self.counters.rx_skipped_bytes =
+                    self.counters.rx_skipped_bytes.wrapping_add(*count as u32);
+                None
+            }
+            LinkError::Frame(FrameError::ChecksumMismatch { .. }) => {
+                self.counters.rx_crc_errors = self.counters.rx_crc_errors.wrapping_add(1);
+                None
+            }
+            LinkError::Frame(_) => {
+                self.counters.rx_framing_errors = self.counters.rx_framing_errors.wrapping_add(1);
+                None
+            }
+            LinkError::Message(e) => {
+                self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
+                let (code, detail) = match e {
+                    MessageError::UnknownType { .. } => (ErrorCode::UnknownType, 0),
+                    MessageError::BadLength { found, .. } => (ErrorCode::BadLength, *found),
+                    MessageError::BadValue { offset, .. } => (ErrorCode::BadValue, *offset),
+                };
+                Some(self.nak(e.seq(), e.msg_type(), code, detail))
+            }
+            // NMEA or sonar-command errors belong to the multiplexer's side of a shared line.
+            LinkError::Nmea(_) | LinkError::Sentence(_) | LinkError::SonarCommand(_) => None,
+        }
+    }
+
+    /// Handles one decoded frame from the EyeBot side at simulated time `now`.
+    pub fn handle(&mut self, frame: Frame, now: SimNanos, plant: &mut dyn Plant) -> Option<Output> {
+        self.counters.rx_frames = self.counters.rx_frames.wrapping_add(1);
+        let seq = frame.seq;
+        let kind = frame.message.msg_type();
+        let out = match frame.message {
+            Message::Hello { client_version } => {
+                if client_version != sensor_link::PROTOCOL_VERSION {
+                    return Some(self.nak(
+                        seq,
+                        kind,
+                        ErrorCode::VersionMismatch,
+                        sensor_link::PROTOCOL_VERSION,
+                    ));
+                }
+                let mut capabilities = capability::ADC
+                    | capability::ADC_STREAM
+                    | capability::COMPASS
+                    | capability::COMPASS_RAW
+                    | capability::COMPASS_CALIBRATION
+                    | capability::THRUSTERS;
+                if self.settings.lockstep {
+                    capabilities |= capability::LOCKSTEP;
+                }
+                if self.settings.sonar_on_this_line {
+                    capabilities |= capability::SONAR_ON_THIS_LINE;
+                }
+                Message::HelloReply {
+                    protocol_version: sensor_link::PROTOCOL_VERSION,
+                    capabilities,
+                    tick_us: (self.settings.tick_ns / 1000) as u32,
+                    max_payload: firmware_protocol::frame::MAX_PAYLOAD as u8,
+                }
+            }
+            Message::CountersGet => Message::Counters(self.counters),
+            Message::AdcRead { channel } => Message::AdcValue {
+                channel,
+                value: adc_value(plant, channel, now),
+            },
+            Message::AdcStream {
+                channels,
+                period_ms,
+            } => {
+                if channels == 0 {
+                    self.stream = None;
+                } else if period_ms == 0 {
+                    return Some(self.nak(seq, kind, ErrorCode::BadValue, 1));
+                } else {
+                    let period_ns = u64::from(period_ms) * 1_000_000;
+                    self.stream = Some(AdcStream {
+                        mask: channels,
+                        period_ns,
+                        next_ns: now + period_ns,
+                    });
+                }
+                Message::Ack { acked_type: kind }
+            }
+            Message::CompassMode { mode, output } => {
+                self.compass_mode = mode;
+                self.compass_output = output;
+                self.next_compass_push_ns = match mode {
+                    CompassMode::Continuous => Some(now + self.settings.compass_period_ns),
+                    CompassMode::Poll => None,
+                };
+                Message::Ack { acked_type: kind }
+            }
+            Message::CompassRead => match self.compass_mode {
+                CompassMode::Poll => {
+                    if self.pending_compass.is_some() {
+                        // The Vector 2X converts one reading at a time.
+                        return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
+                    }
+                    self.pending_compass = Some(PendingCompassRead {
+                        due_ns: now + self.settings.compass_conversion_ns,
+                        seq,
+                    });
+                    return None;
+                }
+                CompassMode::Continuous => self.compass_message(plant, now, false),
+            },
+            Message::CompassCalibrate { action } => match plant.compass_calibrate(action, now) {
+                Ok(progress) => Message::CalibrationStatus {
+                    state: progress.state,
+                    points: progress.points,
+                },
+                Err(refused) => {
+                    tracing::debug!(%refused, "calibration step refused");
+                    return Some(self.nak(seq, kind, ErrorCode::BadState, action as u8));
+                }
+            },
+            Message::CompassReset => {
+                plant.compass_reset(now);
+                self.compass_mode = CompassMode::Poll;
+                self.compass_output = CompassOutput::Binary;
+                self.next_compass_push_ns = None;
+                self.pending_compass = None;
+                Message::Ack { acked_type: kind }
+            }
+            Message::ThrusterSet { thruster, command } => {
+                self.thrusters[thruster as usize] = command;
+                self.last_thruster_ns = Some(now);
+                plant.set_thrusters(self.thrusters, now);
+                Message::Ack { acked_type: kind }
+            }
+            Message::ThrusterSetAll { commands } => {
+                self.thrusters = commands;
+                self.last_thruster_ns = Some(now);
+                plant.set_thrusters(self.thrusters, now);
+                Message::Ack { acked_type: kind }
+            }
+            Message::TimeGet => Message::Time {
+                ticks: self.ticks(now),
+                tick_us: (self.settings.tick_ns / 1000) as u32,
+            },
+            Message::TimeAdvance { ticks } => {
+                if !self.settings.lockstep {
+                    return Some(self.nak(
+                        seq,
+                        kind,
+                        ErrorCode::BadState,
+                        TimeMode::RealTime as u8,
+                    ));
+                }
+                return Some(Output::Advance {
+                    to: now + u64::from(ticks) * self.settings.tick_ns,
+                    seq,
+                });
+            }
+            Message::TimeMode { mode } => {
+                let ours = if self.settings.lockstep {
+                    TimeMode::Lockstep
+                } else {
+                    TimeMode::RealTime
+                };
+                if mode != ours {
+                    // The daemon's time mode is chosen when it starts (--time-mode).
+                    return Some(self.nak(seq, kind, ErrorCode::BadState, ours as u8));
+                }
+                Message::Ack { acked_type: kind }
+            }
+            // Replies and pushes travel bridge -> EyeBot only.
+            Message::Ack { .. }
+            | Message::HelloReply { .. }
+            | Message::Counters(_)
+            | Message::AdcValue { .. }
+            | Message::CompassHeading { .. }
+            | Message::CompassRaw { .. }
+            | Message::CalibrationStatus { .. }
+            | Message::Time { .. }
+            | Message::Nak { .. }
+            | Message::AdcSamples { .. }
+            | Message::CompassHeadingPush { .. }
+            | Message::CompassRawPush { .. } => {
+                self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
+                return Some(self.nak(seq, kind, ErrorCode::Unsupported, 0));
+            }
+        };
+        Some(self.reply(seq, out))
+    }
+
+    /// The TIME reply that ends a lockstep advance; call once simulated time reached `now`.
+    pub fn finish_advance(&mut self, seq: u8, now: SimNanos) -> Frame {
+        let message = Message::Time {
+            ticks: self.ticks(now),
+            tick_us: (self.settings.tick_ns / 1000) as u32,
+        };
+        match self.reply(seq, message) {
+            Output::Send(frame) => frame,
+            Output::Advance { .. } => unreachable!("reply() only builds Send"),
+        }
+    }
+
+    fn compass_message(&mut self, plant: &mut dyn Plant, now: SimNanos, push: bool) -> Message {
+        let sample = plant.compass(now);
+        let heading = sample.heading_deg.min(359);
+        let word = |format| HeadingWord::encode(heading, format).unwrap_or(HeadingWord(0));
+        match (self.compass_output, push) {
+            (CompassOutput::Binary, false) => Message::CompassHeading {
+                word: word(HeadingFormat::Binary),
+            },
+            (CompassOutput::Bcd, false) => Message::CompassHeading {
+                word: word(HeadingFormat::Bcd),
+            },
+            (CompassOutput::Raw, false) => Message::CompassRaw {
+                x: sample.raw_x,
+                y: sample.raw_y,
+            },
+            (CompassOutput::Binary, true) => Message::CompassHeadingPush {
+                word: word(HeadingFormat::Binary),
+            },
+            (CompassOutput::Bcd, true) => Message::CompassHeadingPush {
+                word: word(HeadingFormat::Bcd),
+            },
+            (CompassOutput::Raw, true) => Message::CompassRawPush {
+                x: sample.raw_x,
+                y: sample.raw_y,
+            },
+        }
+    }
+
+    /// When [`SensorBoard::poll`] next has something to do.
+    pub fn poll_timeout(&self) -> Option<SimNanos> {
+        let watchdog = match (self.settings.watchdog_ns, self.last_thruster_ns) {
+            (Some(limit), Some(last)) => Some(last + limit),
+            _ => None,
+        };
+        [
+            self.stream.map(|s| s.next_ns),
+            self.next_compass_push_ns,
+            self.pending_compass.map(|p| p.due_ns),
+            watchdog,
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    /// Emits what is due by `now` (stream samples, compass pushes, delayed poll replies) in
+    /// time order, and runs the watchdog.
+    pub fn poll(&mut self, now: SimNanos, plant: &mut dyn Plant, out: &mut Vec<(SimNanos, Frame)>) {
+        while let Some(due) = self.poll_timeout().filter(|&t| t <= now) {
+            if let Some(p) = self.pending_compass.filter(|p| p.due_ns == due) {
+                self.pending_compass = None;
+                let message = self.compass_message(plant, due, false);
+                self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
+                out.push((due, Frame::new(p.seq, message)));
+            } else if self.next_compass_push_ns == Some(due) {
+                self.next_compass_push_ns = Some(due + self.settings.compass_period_ns);
+                let message = self.compass_message(plant, due, true);
+                out.push((due, self.push(message)));
+            } else if let Some(stream) = self.stream.filter(|s| s.next_ns == due) {
+                self.stream = Some(AdcStream {
+                    next_ns: due + stream.period_ns,
+                    ..stream
+                });
+                let samples =
+                    AdcSamples::new((0..8u8).filter(|c| stream.mask & (1 << c) != 0).filter_map(
+                        |c| {
+                            let channel = AdcChannel::new(c).ok()?;
+                            Some((channel, adc_value(plant, channel, due)))
+                        },
+                    ));
+                let message = Message::AdcSamples {
+                    ticks: self.ticks(due),
+                    samples,
+                };
+                out.push((due, self.push(message)));
+            } else {
+                // The watchdog: silence on the thruster commands for too long.
+                self.last_thruster_ns = None;
+                if self.thrusters != [ThrusterCommand::OFF; 4] {
+                    self.thrusters = [ThrusterCommand::OFF; 4];
+                    self.watchdog_trips += 1;
+                    tracing::warn!(
+                        at_s = due as f64 * 1e-9,
+                        "motor watchdog: no thruster frame, thrusters zeroed"
+                    );
+                    plant.set_thrusters(self.thrusters, due);
+                }
+            }
+        }
+    }
+}
+
+fn adc_value(plant: &mut dyn Plant, channel: AdcChannel, now: SimNanos) -> AdcValue {
+    let raw = plant.adc(channel.get(), now).min(1023);
+    AdcValue::new(raw).unwrap_or_else(|_| unreachable!("clamped to 10 bits"))
+}
+
+/// Message types a sensor board answers, for documentation and tests.
+pub const REQUEST_TYPES: &[u8] = &[
+    msg_type::HELLO,
+    msg_type::COUNTERS_GET,
+    msg_type::ADC_READ,
+    msg_type::ADC_STREAM,
+    msg_type::COMPASS_MODE,
+    msg_type::COMPASS_READ,
+    msg_type::COMPASS_CALIBRATE,
+    msg_type::COMPASS_RESET,
+    msg_type::THRUSTER_SET,
+    msg_type::THRUSTER_SET_ALL,
+    msg_type::TIME_GET,
+    msg_type::TIME_ADVANCE,
+    msg_type::TIME_MODE,
+];
+
+#[cfg(test)]
+mod tests {
+    use firmware_protocol::sensor_link::{CalibrationState, Direction, Thruster};
+
+    use super::*;
+    use crate::devices::fake::FakePlant;
+
+    const MS: u64 = 1_000_000;
+
+    fn board(lockstep: bool, watchdog_ms: Option<u64>) -> SensorBoard {
+        SensorBoard::new(BoardSettings {
+            tick_ns: 10 * MS,
+            lockstep,
+            compass_period_ns: 400 * MS,
+            compass_conversion_ns: 40 * MS,
+            watchdog_ns: watchdog_ms.map(|m| m * MS),
+            sonar_on_this_line: false,
+        })
+    }
+
+    fn sent(out: Option<Output>) -> Frame {
+        match out {
+            Some(Output::Send(frame)) => frame,
+            other => panic!("expected a frame, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn adc_read_answers_with_the_plant_code_and_the_request_seq() {
+        let mut plant = FakePlant::default();
+        plant.adc[3] = 0x2AB;
+        let mut b = board(false, None);
+        let channel = AdcChannel::new(3).unwrap();
+        let reply = sent(b.handle(Frame::new(7, Message::AdcRead { channel }), 0, &mut plant));
+        assert_eq!(reply.seq, 7);
+        assert_eq!(
+            reply.message,
+            Message::AdcValue {
+                channel,
+                value: AdcValue::new(0x2AB).unwrap()
+            }
+        );
+    }
+
+    #[test]
+    fn adc_stream_pushes_chosen_channels_every_period_until_stopped() {
+        let mut plant = FakePlant::default();
+        plant.adc = [1, 2, 3, 4, 5, 6, 7, 8];
+        let mut b = board(false, None);
+        let ack = sent(b.handle(
+            Frame::new(
+                1,
+                Message::AdcStream {
+                    channels: 0b0000_0101,
+                    period_ms: 10,
+                },
+            ),
+            0,
+            &mut plant,
+        ));
+        assert_eq!(
+            ack.message,
+            Message::Ack {
+                acked_type: msg_type::ADC_STREAM
+            }
+        );
+        let mut out = Vec::new();
+        b.poll(35 * MS, &mut plant, &mut out);
+        let times: Vec<_> = out.iter().map(|(t, _)| *t).collect();
+        assert_eq!(times, vec![10 * MS, 20 * MS, 30 * MS]);
+        let Message::AdcSamples { ticks, samples } = out[0].1.message else {
+            panic!("not samples")
+        };
+        assert_eq!(ticks, 1);
+        assert_eq!(samples.mask(), 0b101);
+        assert_eq!(
+            samples.get(AdcChannel::new(2).unwrap()),
+            Some(AdcValue::new(3).unwrap())
+        );
+        assert_ne!(
+            out[0].1.seq, out[1].1.seq,
+            "pushes carry their own sequence"
+        );
+        b.handle(
+            Frame::new(
+                2,
+                Message::AdcStream {
+                    channels: 0,
+                    period_ms: 0,
+                },
+            ),
+            35 * MS,
+            &mut plant,
+        );
+        assert_eq!(b.poll_timeout(), None);
+    }
+
+    #[test]
+    fn poll_mode_compass_replies_after_the_conversion_delay() {
+        let mut plant = FakePlant {
+            heading_deg: 271,
+            ..FakePlant::default()
+        };
+        let mut b = board(false, None);
+        assert_eq!(
+            b.handle(Frame::new(9, Message::CompassRead), 100 * MS, &mut plant),
+            None
+        );
+        // A second read while converting is refused, not queued.
+        let busy = sent(b.handle(Frame::new(10, Message::CompassRead), 110 * MS, &mut plant));
+        assert!(matches!(
+            busy.message,
+            Message::Nak {
+                code: ErrorCode::BadState,
+                ..
+            }
+        ));
+        let mut out = Vec::new();
+        b.poll(139 * MS, &mut plant, &mut out);
+        assert!(out.is_empty());
+        b.poll(140 * MS, &mut plant, &mut out);
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].0, 140 * MS);
+        assert_eq!(out[0].1.seq, 9);
+        assert_eq!(
+            out[0].1.message,
+            Message::CompassHeading {
+                word: HeadingWord::encode(271, HeadingFormat::Binary).unwrap()
+            }
+        );
+        assert_eq!(
+            plant.compass_reads,
+            vec![140 * MS],
+            "sampled when the conversion completes"
+        );
+    }
+
+    #[test]
+    fn continuous_bcd_compass_pushes_at_its_rate() {
+        let mut plant = FakePlant {
+            heading_deg: 123,
+            ..FakePlant::default()
+        };
+        let mut b = board(false, None);
+        b.handle(
+            Frame::new(
+                1,
+                Message::CompassMode {
+                    mode: CompassMode::Continuous,
+                    output: CompassOutput::Bcd,
+                },
+            ),
+            0,
+            &mut plant,
+        );
+        let mut out = Vec::new();
+        b.poll(1000 * MS, &mut plant, &mut out);
+        assert_eq!(out.len(), 2, "2.5 Hz: pushes at 400 and 800 ms");
+        assert_eq!(
+            out[0].1.message,
+            Message::CompassHeadingPush {
+                word: HeadingWord(0x0123)
+            }
+        );
+    }
+
+    #[test]
+    fn calibration_steps_follow_the_plant_and_bad_steps_are_naked() {
+        let mut plant = FakePlant::default();
+        let mut b = board(false, None);
+        let cal = |action| Frame::new(4, Message::CompassCalibrate { action });
+        let finish_early = sent(b.handle(cal(CalibrationAction::Finish), 0, &mut plant));
+        assert!(matches!(
+            finish_early.message,
+            Message::Nak {
+                code: ErrorCode::BadState,
+                ..
+            }
+        ));
+        sent(b.handle(cal(CalibrationAction::Start), 0, &mut plant));
+        sent(b.handle(cal(CalibrationAction::TakePoint), 0, &mut plant));
+        let ready = sent(b.handle(cal(CalibrationAction::TakePoint), 0, &mut plant));
+        assert_eq!(
+            ready.message,
+            Message::CalibrationStatus {
+                state: CalibrationState::ReadyToFinish,
+                points: 2
+            }
+        );
+        let done = sent(b.handle(cal(CalibrationAction::Finish), 0, &mut plant));
+        assert_eq!(
+            done.message,
+            Message::CalibrationStatus {
+                state: CalibrationState::Idle,
+                points: 0
+            }
+        );
+    }
+
+    #[test]
+    fn thruster_frames_reach_the_plant_and_the_watchdog_zeroes_them() {
+        let mut plant = FakePlant::default();
+        let mut b = board(false, Some(500));
+        let full = ThrusterCommand {
+            duty: 0,
+            direction: Direction::Forward,
+        };
+        sent(b.handle(
+            Frame::new(
+                1,
+                Message::ThrusterSet {
+                    thruster: Thruster::Stern,
+                    command: full,
+                },
+            ),
+            100 * MS,
+            &mut plant,
+        ));
+        assert_eq!(plant.thrusters.last().unwrap().1[3], full);
+        assert_eq!(b.poll_timeout(), Some(600 * MS));
+        let mut out = Vec::new();
+        b.poll(599 * MS, &mut plant, &mut out);
+        assert_eq!(b.watchdog_trips(), 0);
+        b.poll(600 * MS, &mut plant, &mut out);
+        assert_eq!(b.watchdog_trips(), 1);
+        assert_eq!(
+            plant.thrusters.last().unwrap(),
+            &(600 * MS, [ThrusterCommand::OFF; 4])
+        );
+        assert!(out.is_empty(), "the watchdog sends nothing on the wire");
+    }
+
+    #[test]
+    fn lockstep_advance_is_carried_out_by_the_core_and_answered_with_time() {
+        let mut plant = FakePlant::default();
+        let mut realtime = board(false, None);
+        let refused = sent(realtime.handle(
+            Frame::new(3, Message::TimeAdvance { ticks: 5 }),
+            0,
+            &mut plant,
+        ));
+        assert!(matches!(
+            refused.message,
+            Message::Nak {
+                code: ErrorCode::BadState,
+                ..
+            }
+        ));
+
+        let mut b = board(true, None);
+        let out = b.handle(
+            Frame::new(3, Message::TimeAdvance { ticks: 5 }),
+            20 * MS,
+            &mut plant,
+        );
+        assert_eq!(
+            out,
+            Some(Output::Advance {
+                to: 70 * MS,
+                seq: 3
+            })
+        );
+        let time = b.finish_advance(3, 70 * MS);
+        assert_eq!(time.seq, 3);
+        assert_eq!(
+            time.message,
+            Message::Time {
+                ticks: 7,
+                tick_us: 10_000
+            }
+        );
+    }
+
+    #[test]
+    fn wire_errors_are_counted_and_naked_when_the_header_is_trustworthy() {
+        let mut b = board(false, None);
+        let bad_len = LinkError::Message(MessageError::BadLength {
+            msg_type: msg_type::ADC_READ,
+            seq: 12,
+            expected: 1,
+            found: 3,
+        });
+        let nak = sent(b.handle_error(&bad_len));
+        assert_eq!(nak.seq, 12);
+        assert_eq!(
+            nak.message,
+            Message::Nak {
+                rejected_type: msg_type::ADC_READ,
+                code: ErrorCode::BadLength,
+                detail: 3
+            }
+        );
+        let crc = LinkError::Frame(FrameError::ChecksumMismatch {
+            calculated: 1,
+            found: 2,
+            msg_type: 0x10,
+            seq: 1,
+        });
+        assert_eq!(
+            b.handle_error(&crc),
+            None,
+            "a bad CRC gets no reply: its header is untrusted"
+        );
+        assert_eq!(b.counters().rx_crc_errors, 1);
+        assert_eq!(b.counters().rx_rejected, 1);
+        assert_eq!(b.counters().tx_naks, 1);
+    }
+}
