@@ -15,8 +15,8 @@
 
 use firmware_protocol::error::{FrameError, LinkError, MessageError};
 use firmware_protocol::sensor_link::{
-    self, AdcChannel, AdcSamples, AdcValue, CalibrationAction, CompassMode, CompassOutput,
-    Counters, ErrorCode, Message, ThrusterCommand, TimeMode, capability, msg_type,
+    self, AdcChannel, AdcSamples, AdcValue, CompassMode, CompassOutput, Counters, ErrorCode,
+    Message, ThrusterCommand, TimeMode, capability, msg_type,
 };
 use firmware_protocol::{Frame, HeadingFormat, HeadingWord};
 
@@ -489,8 +489,10 @@ mod tests {
 
     #[test]
     fn adc_read_answers_with_the_plant_code_and_the_request_seq() {
-        let mut plant = FakePlant::default();
-        plant.adc[3] = 0x2AB;
+        let mut plant = FakePlant {
+            adc: [0, 0, 0, 0x2AB, 0, 0, 0, 0],
+            ..FakePlant::default()
+        };
         let mut b = board(false, None);
         let channel = AdcChannel::new(3).unwrap();
         let reply = sent(b.handle(Frame::new(7, Message::AdcRead { channel }), 0, &mut plant));
@@ -506,8 +508,10 @@ mod tests {
 
     #[test]
     fn adc_stream_pushes_chosen_channels_every_period_until_stopped() {
-        let mut plant = FakePlant::default();
-        plant.adc = [1, 2, 3, 4, 5, 6, 7, 8];
+        let mut plant = FakePlant {
+            adc: [1, 2, 3, 4, 5, 6, 7, 8],
+            ..FakePlant::default()
+        };
         let mut b = board(false, None);
         let ack = sent(b.handle(
             Frame::new(
