@@ -462,7 +462,9 @@ pub const REQUEST_TYPES: &[u8] = &[
 
 #[cfg(test)]
 mod tests {
-    use firmware_protocol::sensor_link::{CalibrationState, Direction, Thruster};
+    use firmware_protocol::sensor_link::{
+        CalibrationAction, CalibrationState, Direction, Thruster,
+    };
 
     use super::*;
     use crate::devices::fake::FakePlant;
