@@ -3,5 +3,6 @@
 
 pub mod clock;
 pub mod config;
+pub mod core;
 pub mod link;
 pub mod status;

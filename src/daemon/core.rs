@@ -1,0 +1,630 @@
+//! The bridge core: the model, the device emulators and the wire, in simulated time.
+//!
+//! Sans-IO like the devices it holds. The daemon hands it bytes that arrived on a line
+//! ([`Core::receive`]), tells it how far simulated time may run ([`Core::advance_to`]), and
+//! takes the bytes due on each line ([`Core::take_output`]). The same calls serve both time
+//! modes; only who chooses the target differs (the wall clock, or the client's time frames).
+//!
+//! Ordering within one call is fixed: inputs are decoded in arrival order, the model steps
+//! up to each device deadline before the device is polled, and device outputs are queued on
+//! their line in deadline order. So a run is a pure function of the seed, the configuration
+//! and the client's bytes with their arrival times: in lockstep, where arrival times are
+//! themselves simulated, of the bytes alone.
+
+use bytes::{Bytes, BytesMut};
+use firmware_protocol::error::LinkError;
+use firmware_protocol::{LineDecoder, LineItem};
+
+use crate::SimNanos;
+use crate::devices::Plant;
+use crate::devices::multiplexer::{Multiplexer, MultiplexerCounters};
+use crate::devices::sensor_board::{Output, SensorBoard};
+use crate::physics::state::VehicleState;
+use crate::record::{Direction, Recorder};
+use crate::transport::LineSettings;
+use crate::transport::pacer::WirePacer;
+
+/// The simulated vehicle with its sensors, as the core drives it.
+pub trait Model: Plant {
+    type Error: std::error::Error + Send + Sync + 'static;
+    /// Steps the model in fixed steps up to simulated time `t` (the last whole step at or
+    /// before `t`). Fails only when the model diverges.
+    fn advance_to(&mut self, t: SimNanos) -> Result<(), Self::Error>;
+    /// The vehicle after the last step.
+    fn state(&self) -> VehicleState;
+    /// How many wall/floor contacts began so far.
+    fn contacts(&self) -> u64;
+}
+
+/// Which link a line carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Carries {
+    pub sonar: bool,
+    pub sensor: bool,
+}
+
+/// Per-line counters for the status snapshot.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LineCounters {
+    pub frames_rx: u64,
+    pub frames_tx: u64,
+    pub errors: u64,
+    pub dropped_tx: u64,
+}
+
+struct Line {
+    name: &'static str,
+    carries: Carries,
+    decoder: LineDecoder,
+    inbox: BytesMut,
+    pacer: WirePacer,
+    outbox: Vec<u8>,
+    counters: LineCounters,
+}
+
+/// One line's construction parameters.
+#[derive(Debug, Clone)]
+pub struct LineSpec {
+    pub name: &'static str,
+    pub carries: Carries,
+    pub settings: LineSettings,
+    pub tx_queue_bytes: usize,
+}
+
+/// The core.
+pub struct Core<M: Model> {
+    model: M,
+    board: SensorBoard,
+    mux: Multiplexer,
+    lines: Vec<Line>,
+    now: SimNanos,
+    lockstep: bool,
+    recorder: Option<Recorder>,
+    state_period_ns: u64,
+    next_state_ns: SimNanos,
+    device_out: Vec<(SimNanos, firmware_protocol::Frame)>,
+    mux_out: Vec<(SimNanos, Bytes)>,
+}
+
+impl<M: Model> Core<M> {
+    /// `lines` must carry the sonar link exactly once and the sensor link exactly once.
+    pub fn new(
+        model: M,
+        board: SensorBoard,
+        mux: Multiplexer,
+        lines: &[LineSpec],
+        lockstep: bool,
+    ) -> Self {
+        let lines = lines
+            .iter()
+            .map(|spec| Line {
+                name: spec.name,
+                carries: spec.carries,
+                decoder: LineDecoder::new(),
+                inbox: BytesMut::new(),
+                pacer: WirePacer::new(&spec.settings, spec.tx_queue_bytes),
+                outbox: Vec::new(),
+                counters: LineCounters::default(),
+            })
+            .collect();
+        Self {
+            model,
+            board,
+            mux,
+            lines,
+            now: 0,
+            lockstep,
+            recorder: None,
+            state_period_ns: 20_000_000,
+            next_state_ns: 0,
+            device_out: Vec::new(),
+            mux_out: Vec::new(),
+        }
+    }
+
+    /// Records every byte and the ground truth every `state_period_ns`.
+    pub fn set_recorder(&mut self, recorder: Recorder, state_period_ns: u64) {
+        self.recorder = Some(recorder);
+        self.state_period_ns = state_period_ns.max(1);
+        self.next_state_ns = self.now;
+    }
+
+    /// Stops recording and returns the recorder (to finish it).
+    pub fn take_recorder(&mut self) -> Option<Recorder> {
+        self.recorder.take()
+    }
+
+    pub fn now(&self) -> SimNanos {
+        self.now
+    }
+
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    pub fn board(&self) -> &SensorBoard {
+        &self.board
+    }
+
+    pub fn mux_counters(&self) -> MultiplexerCounters {
+        self.mux.counters()
+    }
+
+    pub fn line_counters(&self, line: usize) -> LineCounters {
+        self.lines.get(line).map(|l| l.counters).unwrap_or_default()
+    }
+
+    pub fn line_name(&self, line: usize) -> &'static str {
+        self.lines.get(line).map_or("?", |l| l.name)
+    }
+
+    fn sonar_line(&self) -> usize {
+        self.lines.iter().position(|l| l.carries.sonar).unwrap_or(0)
+    }
+
+    fn sensor_line(&self) -> usize {
+        self.lines
+            .iter()
+            .position(|l| l.carries.sensor)
+            .unwrap_or(0)
+    }
+
+    /// Bytes from the EyeBot side arrived on `line` at the current simulated time.
+    pub fn receive(&mut self, line: usize, data: &[u8]) -> Result<(), M::Error> {
+        let Some(l) = self.lines.get_mut(line) else {
+            return Ok(());
+        };
+        if let Some(rec) = &self.recorder {
+            rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Rx, data);
+        }
+        l.inbox.extend_from_slice(data);
+        loop {
+            let l = &mut self.lines[line];
+            let Some(item) = l.decoder.decode(&mut l.inbox) else {
+                break;
+            };
+            self.route(line, item)?;
+        }
+        Ok(())
+    }
+
+    fn route(&mut self, line: usize, item: LineItem) -> Result<(), M::Error> {
+        let carries = self.lines[line].carries;
+        let now = self.now;
+        match item {
+            LineItem::Frame(frame) if carries.sensor => {
+                self.lines[line].counters.frames_rx += 1;
+                match self.board.handle(frame, now, &mut self.model) {
+                    Some(Output::Send(reply)) => self.queue_reply(line, reply),
+                    Some(Output::Advance { to, seq }) => {
+                        self.advance_to(to)?;
+                        let reply = self.board.finish_advance(seq, self.now);
+                        self.queue_reply(line, reply);
+                    }
+                    None => {}
+                }
+            }
+            LineItem::Sonar(command) if carries.sonar => {
+                self.lines[line].counters.frames_rx += 1;
+                if let Some(reply) = self.mux.handle(command, now, &mut self.model) {
+                    self.queue(line, now, reply, true);
+                }
+            }
+            LineItem::Error(error) => {
+                self.lines[line].counters.errors += 1;
+                tracing::debug!(line = self.lines[line].name, %error, "bad input");
+                let to_sonar =
+                    carries.sonar && !matches!(error, LinkError::Frame(_) | LinkError::Message(_));
+                if carries.sensor
+                    && let Some(Output::Send(nak)) = self.board.handle_error(&error)
+                {
+                    self.queue_reply(line, nak);
+                }
+                if to_sonar && let Some(nak) = self.mux.handle_error(&error) {
+                    self.queue(line, now, nak, true);
+                }
+            }
+            // A frame on a sonar-only line, a command on a sensor-only line, or NMEA sent by
+            // the EyeBot: nothing on Mako would answer it.
+            other => {
+                self.lines[line].counters.errors += 1;
+                tracing::debug!(line = self.lines[line].name, item = ?other, "message not expected on this line");
+            }
+        }
+        Ok(())
+    }
+
+    fn queue_reply(&mut self, line: usize, frame: firmware_protocol::Frame) {
+        let mut buf = BytesMut::new();
+        frame.encode(&mut buf);
+        self.queue(line, self.now, buf.freeze(), true);
+    }
+
+    /// Puts bytes on the wire at `at`. In lockstep a reply is released at once: the client
+    /// is waiting for it and simulated time will not move until it gets it (the reply's wire
+    /// time is still charged to the line, so later bytes queue behind it).
+    fn queue(&mut self, line: usize, at: SimNanos, data: Bytes, is_reply: bool) {
+        let l = &mut self.lines[line];
+        l.counters.frames_tx += 1;
+        match l.pacer.push(at, data) {
+            Ok(end) => {
+                if is_reply && self.lockstep {
+                    l.pacer.release(end, &mut l.outbox);
+                }
+            }
+            Err(full) => {
+                l.counters.dropped_tx += full.dropped as u64;
+                tracing::warn!(line = l.name, %full, "transmit queue full");
+            }
+        }
+    }
+
+    /// Runs simulated time forward to `target`, stepping the model to each device deadline
+    /// and queueing what the devices emit.
+    pub fn advance_to(&mut self, target: SimNanos) -> Result<(), M::Error> {
+        while self.now < target {
+            let next = [
+                self.board.poll_timeout(),
+                self.mux.poll_timeout(&self.model),
+                self.recorder.as_ref().map(|_| self.next_state_ns),
+            ]
+            .into_iter()
+            .flatten()
+            .filter(|&t| t > self.now)
+            .fold(target, SimNanos::min);
+            self.model.advance_to(next)?;
+            self.now = next;
+            self.poll_devices();
+            self.record_state();
+        }
+        self.poll_devices();
+        self.release_due();
+        Ok(())
+    }
+
+    fn poll_devices(&mut self) {
+        let now = self.now;
+        self.device_out.clear();
+        self.board.poll(now, &mut self.model, &mut self.device_out);
+        let sensor_line = self.sensor_line();
+        for i in 0..self.device_out.len() {
+            let (at, frame) = self.device_out[i];
+            let mut buf = BytesMut::new();
+            frame.encode(&mut buf);
+            self.queue(sensor_line, at, buf.freeze(), false);
+        }
+        self.mux_out.clear();
+        self.mux.poll(now, &mut self.model, &mut self.mux_out);
+        let sonar_line = self.sonar_line();
+        for (at, bytes) in std::mem::take(&mut self.mux_out) {
+            self.queue(sonar_line, at, bytes, false);
+        }
+    }
+
+    fn record_state(&mut self) {
+        let Some(rec) = &self.recorder else {
+            return;
+        };
+        if self.now >= self.next_state_ns {
+            rec.state(crate::record::state_row(&self.model.state()));
+            self.next_state_ns += self.state_period_ns;
+        }
+    }
+
+    fn release_due(&mut self) {
+        for l in &mut self.lines {
+            l.pacer.release(self.now, &mut l.outbox);
+        }
+    }
+
+    /// When something next becomes due: a device deadline or a byte completing on a line.
+    pub fn next_deadline(&self) -> Option<SimNanos> {
+        let lines = self.lines.iter().filter_map(|l| l.pacer.next_release_ns());
+        [
+            self.board.poll_timeout(),
+            self.mux.poll_timeout(&self.model),
+        ]
+        .into_iter()
+        .flatten()
+        .chain(lines)
+        .min()
+    }
+
+    /// The bytes due on `line`, in order; recorded as they leave.
+    pub fn take_output(&mut self, line: usize) -> Option<Bytes> {
+        let l = self.lines.get_mut(line)?;
+        if l.outbox.is_empty() {
+            return None;
+        }
+        let data = Bytes::from(std::mem::take(&mut l.outbox));
+        if let Some(rec) = &self.recorder {
+            rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Tx, &data);
+        }
+        Some(data)
+    }
+
+    /// Counts bytes the endpoint could not take (the client is not reading).
+    pub fn note_dropped(&mut self, line: usize, bytes: usize) {
+        if let Some(l) = self.lines.get_mut(line) {
+            l.counters.dropped_tx += bytes as u64;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use firmware_protocol::sensor_link::{AdcChannel, Message};
+    use firmware_protocol::sonar_link::SonarCommand;
+    use firmware_protocol::{Frame, Transducer};
+    use nalgebra::{UnitQuaternion, Vector3};
+
+    use super::*;
+    use crate::devices::fake::FakePlant;
+    use crate::devices::multiplexer::{DepthSentence, InvalidEcho, MultiplexerSettings};
+    use crate::devices::sensor_board::BoardSettings;
+    use crate::devices::{CalibrationProgress, CalibrationRefused, CompassSample, SonarEvent};
+
+    const MS: u64 = 1_000_000;
+
+    /// A plant whose "physics" only counts steps of 1 ms.
+    #[derive(Default)]
+    struct FakeModel {
+        plant: FakePlant,
+        t: SimNanos,
+    }
+
+    impl Plant for FakeModel {
+        fn adc(&mut self, channel: u8, now: SimNanos) -> u16 {
+            // A value that changes with time, so ordering mistakes show.
+            (self.plant.adc(channel, now) + (now / MS) as u16) & 0x3FF
+        }
+        fn compass(&mut self, now: SimNanos) -> CompassSample {
+            self.plant.compass(now)
+        }
+        fn compass_calibrate(
+            &mut self,
+            action: firmware_protocol::sensor_link::CalibrationAction,
+            now: SimNanos,
+        ) -> Result<CalibrationProgress, CalibrationRefused> {
+            self.plant.compass_calibrate(action, now)
+        }
+        fn compass_reset(&mut self, now: SimNanos) {
+            self.plant.compass_reset(now)
+        }
+        fn set_thrusters(
+            &mut self,
+            commands: [firmware_protocol::sensor_link::ThrusterCommand; 4],
+            now: SimNanos,
+        ) {
+            self.plant.set_thrusters(commands, now)
+        }
+        fn sonar_select(&mut self, transducer: u8, now: SimNanos) {
+            self.plant.sonar_select(transducer, now);
+            self.plant
+                .sonar
+                .push((now + 50 * MS, SonarEvent::Switched { transducer }));
+            self.plant.sonar.push((
+                now + 1_000 * MS,
+                SonarEvent::Reading {
+                    transducer,
+                    range_m: Some(2.5),
+                    quality_pct: 90,
+                },
+            ));
+        }
+        fn sonar_poll(&mut self, now: SimNanos, out: &mut Vec<(SimNanos, SonarEvent)>) {
+            self.plant.sonar_poll(now, out)
+        }
+        fn sonar_timeout(&self) -> Option<SimNanos> {
+            self.plant.sonar_timeout()
+        }
+    }
+
+    impl Model for FakeModel {
+        type Error = std::convert::Infallible;
+        fn advance_to(&mut self, t: SimNanos) -> Result<(), Self::Error> {
+            self.t = t - t % MS;
+            Ok(())
+        }
+        fn state(&self) -> VehicleState {
+            VehicleState {
+                t_s: self.t as f64 * 1e-9,
+                position_m: Vector3::zeros(),
+                attitude: UnitQuaternion::identity(),
+                velocity_body_mps: Vector3::zeros(),
+                angular_velocity_body_radps: Vector3::zeros(),
+                velocity_water_body_mps: Vector3::zeros(),
+                specific_force_body_mps2: Vector3::new(0.0, 0.0, -9.81),
+                thruster_force_n: [0.0; 4],
+                thruster_effort: [0.0; 4],
+                in_contact: false,
+            }
+        }
+        fn contacts(&self) -> u64 {
+            0
+        }
+    }
+
+    fn core(lockstep: bool, shared: bool) -> Core<FakeModel> {
+        let board = SensorBoard::new(BoardSettings {
+            tick_ns: 10 * MS,
+            lockstep,
+            compass_period_ns: 400 * MS,
+            compass_conversion_ns: 40 * MS,
+            watchdog_ns: None,
+            sonar_on_this_line: shared,
+        });
+        let mux = Multiplexer::new(MultiplexerSettings {
+            sentence: DepthSentence::Dbt,
+            talker: firmware_protocol::Talker::SOUNDER,
+            invalid_echo: InvalidEcho::Omit,
+            proprietary: false,
+        });
+        let lines = if shared {
+            vec![LineSpec {
+                name: "shared",
+                carries: Carries {
+                    sonar: true,
+                    sensor: true,
+                },
+                settings: LineSettings::n81(115_200),
+                tx_queue_bytes: 4096,
+            }]
+        } else {
+            vec![
+                LineSpec {
+                    name: "sonar",
+                    carries: Carries {
+                        sonar: true,
+                        sensor: false,
+                    },
+                    settings: LineSettings::n81(4800),
+                    tx_queue_bytes: 4096,
+                },
+                LineSpec {
+                    name: "sensor",
+                    carries: Carries {
+                        sonar: false,
+                        sensor: true,
+                    },
+                    settings: LineSettings::n81(115_200),
+                    tx_queue_bytes: 4096,
+                },
+            ]
+        };
+        Core::new(FakeModel::default(), board, mux, &lines, lockstep)
+    }
+
+    fn frame_bytes(seq: u8, message: Message) -> Vec<u8> {
+        let mut buf = BytesMut::new();
+        Frame::new(seq, message).encode(&mut buf);
+        buf.to_vec()
+    }
+
+    fn decode(bytes: &[u8]) -> Vec<LineItem> {
+        LineDecoder::decode_all(bytes)
+    }
+
+    #[test]
+    fn realtime_replies_wait_for_their_wire_time() {
+        let mut c = core(false, false);
+        let read = frame_bytes(
+            5,
+            Message::AdcRead {
+                channel: AdcChannel::new(1).unwrap(),
+            },
+        );
+        c.receive(1, &read).unwrap();
+        assert_eq!(c.take_output(1), None, "no byte before one character time");
+        // The reply (9 bytes) takes 9 x 86.8 us at 115200 baud.
+        c.advance_to(c.next_deadline().unwrap()).unwrap();
+        c.advance_to(1 * MS).unwrap();
+        let out = c.take_output(1).unwrap();
+        let items = decode(&out);
+        assert!(
+            matches!(&items[..], [LineItem::Frame(f)] if f.seq == 5),
+            "{items:?}"
+        );
+    }
+
+    #[test]
+    fn lockstep_advance_releases_stream_samples_before_the_time_reply() {
+        let mut c = core(true, false);
+        c.receive(
+            1,
+            &frame_bytes(
+                1,
+                Message::AdcStream {
+                    channels: 0b1,
+                    period_ms: 10,
+                },
+            ),
+        )
+        .unwrap();
+        let ack = c
+            .take_output(1)
+            .expect("a lockstep reply is released at once");
+        assert_eq!(decode(&ack).len(), 1);
+        c.receive(1, &frame_bytes(2, Message::TimeAdvance { ticks: 5 }))
+            .unwrap();
+        let out = c.take_output(1).unwrap();
+        let items = decode(&out);
+        // Samples at 10..=40 ms are complete by 50 ms; the one due at 50 ms is still on the
+        // wire, and the TIME reply follows it.
+        let kinds: Vec<u8> = items
+            .iter()
+            .map(|i| match i {
+                LineItem::Frame(f) => f.message.msg_type(),
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        use firmware_protocol::sensor_link::msg_type::{ADC_SAMPLES, TIME};
+        assert_eq!(
+            kinds,
+            vec![
+                ADC_SAMPLES,
+                ADC_SAMPLES,
+                ADC_SAMPLES,
+                ADC_SAMPLES,
+                ADC_SAMPLES,
+                TIME
+            ]
+        );
+        assert_eq!(c.now(), 50 * MS);
+    }
+
+    /// The same client bytes give the same output bytes, however the input is chunked.
+    #[test]
+    fn lockstep_output_does_not_depend_on_input_chunking() {
+        let mut script = Vec::new();
+        script.extend(frame_bytes(
+            1,
+            Message::AdcStream {
+                channels: 0b11,
+                period_ms: 10,
+            },
+        ));
+        script.extend(frame_bytes(2, Message::TimeAdvance { ticks: 7 }));
+        script.extend(b"junk\x00");
+        script.extend(frame_bytes(
+            3,
+            Message::AdcRead {
+                channel: AdcChannel::new(0).unwrap(),
+            },
+        ));
+        script.extend(frame_bytes(4, Message::TimeAdvance { ticks: 3 }));
+        let run = |chunk: usize| {
+            let mut c = core(true, false);
+            let mut out = Vec::new();
+            for piece in script.chunks(chunk) {
+                c.receive(1, piece).unwrap();
+                if let Some(b) = c.take_output(1) {
+                    out.extend_from_slice(&b);
+                }
+            }
+            (out, c.line_counters(1))
+        };
+        let (whole, counters) = run(script.len());
+        assert_eq!(counters.errors, 1, "the junk is one error item");
+        for chunk in 1..script.len() {
+            assert_eq!(run(chunk).0, whole, "chunk size {chunk}");
+        }
+    }
+
+    #[test]
+    fn a_shared_line_serves_the_multiplexer_and_the_board() {
+        let mut c = core(true, true);
+        let mut select = BytesMut::new();
+        SonarCommand::Select(Transducer::new(3).unwrap()).encode(&mut select);
+        c.receive(0, &select).unwrap();
+        c.receive(0, &frame_bytes(9, Message::TimeAdvance { ticks: 110 }))
+            .unwrap();
+        let items = decode(&c.take_output(0).unwrap());
+        assert!(
+            matches!(items[0], LineItem::Sonar(SonarCommand::Ack(t)) if t.get() == 3),
+            "{items:?}"
+        );
+        assert!(matches!(items[1], LineItem::Nmea(_)), "{items:?}");
+        assert!(matches!(&items[2], LineItem::Frame(f) if f.seq == 9));
+    }
+}
