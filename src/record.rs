@@ -310,6 +310,40 @@ pub fn parse_chunk(text: &str, line: usize) -> Result<ByteChunk, ParseChunkError
     })
 }
 
+/// Header of `state.csv` (and of `simulate`'s trace): SI units, NED world, FRD body.
+pub const STATE_HEADER: &str = "t_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,u_mps,v_mps,w_mps,p_radps,q_radps,r_radps,\
+force_port_n,force_starboard_n,force_bow_n,force_stern_n,contact";
+
+/// One `state.csv` row for `state` (full precision, so a trace round-trips exactly).
+pub fn state_row(state: &crate::physics::state::VehicleState) -> String {
+    let (roll, pitch, yaw) = state.euler_rad();
+    let p = &state.position_m;
+    let v = &state.velocity_body_mps;
+    let w = &state.angular_velocity_body_radps;
+    let f = &state.thruster_force_n;
+    format!(
+        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+        state.t_s,
+        p.x,
+        p.y,
+        p.z,
+        roll,
+        pitch,
+        yaw,
+        v.x,
+        v.y,
+        v.z,
+        w.x,
+        w.y,
+        w.z,
+        f[0],
+        f[1],
+        f[2],
+        f[3],
+        u8::from(state.in_contact)
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -381,38 +415,4 @@ mod tests {
                 .contains("missing")
         );
     }
-}
-
-/// Header of `state.csv` (and of `simulate`'s trace): SI units, NED world, FRD body.
-pub const STATE_HEADER: &str = "t_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,u_mps,v_mps,w_mps,p_radps,q_radps,r_radps,\
-force_port_n,force_starboard_n,force_bow_n,force_stern_n,contact";
-
-/// One `state.csv` row for `state` (full precision, so a trace round-trips exactly).
-pub fn state_row(state: &crate::physics::state::VehicleState) -> String {
-    let (roll, pitch, yaw) = state.euler_rad();
-    let p = &state.position_m;
-    let v = &state.velocity_body_mps;
-    let w = &state.angular_velocity_body_radps;
-    let f = &state.thruster_force_n;
-    format!(
-        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-        state.t_s,
-        p.x,
-        p.y,
-        p.z,
-        roll,
-        pitch,
-        yaw,
-        v.x,
-        v.y,
-        v.z,
-        w.x,
-        w.y,
-        w.z,
-        f[0],
-        f[1],
-        f[2],
-        f[3],
-        u8::from(state.in_contact)
-    )
 }

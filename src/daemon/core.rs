@@ -518,7 +518,7 @@ mod tests {
         assert_eq!(c.take_output(1), None, "no byte before one character time");
         // The reply (9 bytes) takes 9 x 86.8 us at 115200 baud.
         c.advance_to(c.next_deadline().unwrap()).unwrap();
-        c.advance_to(1 * MS).unwrap();
+        c.advance_to(MS).unwrap();
         let out = c.take_output(1).unwrap();
         let items = decode(&out);
         assert!(
