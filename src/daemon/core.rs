@@ -60,7 +60,15 @@ struct Line {
     pacer: WirePacer,
     outbox: Vec<u8>,
     counters: LineCounters,
+    last_rx_ns: SimNanos,
+    idle_flush_ns: u64,
 }
+
+/// A partial message is dropped after this much silence on a line that carries the sensor
+/// link (a whole frame takes at most 6.2 ms at 115200 baud; PROTOCOL.md section 3).
+pub const SENSOR_IDLE_FLUSH_NS: u64 = 50_000_000;
+/// The same for a sonar-only line (a whole sentence takes at most 171 ms at 4800 baud).
+pub const SONAR_IDLE_FLUSH_NS: u64 = 200_000_000;
 
 /// One line's construction parameters.
 #[derive(Debug, Clone)]
@@ -84,6 +92,7 @@ pub struct Core<M: Model> {
     next_state_ns: SimNanos,
     device_out: Vec<(SimNanos, firmware_protocol::Frame)>,
     mux_out: Vec<(SimNanos, Bytes)>,
+    receiving: Option<usize>,
 }
 
 impl<M: Model> Core<M> {
@@ -105,6 +114,12 @@ impl<M: Model> Core<M> {
                 pacer: WirePacer::new(&spec.settings, spec.tx_queue_bytes),
                 outbox: Vec::new(),
                 counters: LineCounters::default(),
+                last_rx_ns: 0,
+                idle_flush_ns: if spec.carries.sensor {
+                    SENSOR_IDLE_FLUSH_NS
+                } else {
+                    SONAR_IDLE_FLUSH_NS
+                },
             })
             .collect();
         Self {
@@ -119,6 +134,7 @@ impl<M: Model> Core<M> {
             next_state_ns: 0,
             device_out: Vec::new(),
             mux_out: Vec::new(),
+            receiving: None,
         }
     }
 
@@ -178,14 +194,23 @@ impl<M: Model> Core<M> {
             rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Rx, data);
         }
         l.inbox.extend_from_slice(data);
+        // Bytes behind a TIME_ADVANCE in this chunk are handled after the advance, in order;
+        // the idle flush must not take them early.
+        self.receiving = Some(line);
+        let result = self.drain_inbox(line);
+        self.receiving = None;
+        self.lines[line].last_rx_ns = self.now;
+        result
+    }
+
+    fn drain_inbox(&mut self, line: usize) -> Result<(), M::Error> {
         loop {
             let l = &mut self.lines[line];
             let Some(item) = l.decoder.decode(&mut l.inbox) else {
-                break;
+                return Ok(());
             };
             self.route(line, item)?;
         }
-        Ok(())
     }
 
     fn route(&mut self, line: usize, item: LineItem) -> Result<(), M::Error> {
@@ -263,6 +288,13 @@ impl<M: Model> Core<M> {
     /// and queueing what the devices emit.
     pub fn advance_to(&mut self, target: SimNanos) -> Result<(), M::Error> {
         while self.now < target {
+            let idle = self
+                .lines
+                .iter()
+                .enumerate()
+                .filter(|(i, l)| !l.inbox.is_empty() && self.receiving != Some(*i))
+                .map(|(_, l)| l)
+                .map(|l| l.last_rx_ns + l.idle_flush_ns);
             let next = [
                 self.board.poll_timeout(),
                 self.mux.poll_timeout(&self.model),
@@ -270,15 +302,38 @@ impl<M: Model> Core<M> {
             ]
             .into_iter()
             .flatten()
+            .chain(idle)
             .filter(|&t| t > self.now)
             .fold(target, SimNanos::min);
             self.model.advance_to(next)?;
             self.now = next;
+            self.flush_idle_lines()?;
             self.poll_devices();
             self.record_state();
         }
         self.poll_devices();
         self.release_due();
+        Ok(())
+    }
+
+    /// Drops partial messages that have waited longer than their line's idle limit.
+    fn flush_idle_lines(&mut self) -> Result<(), M::Error> {
+        for line in 0..self.lines.len() {
+            let l = &self.lines[line];
+            if self.receiving == Some(line)
+                || l.inbox.is_empty()
+                || self.now < l.last_rx_ns + l.idle_flush_ns
+            {
+                continue;
+            }
+            loop {
+                let l = &mut self.lines[line];
+                let Some(item) = l.decoder.decode_eof(&mut l.inbox) else {
+                    break;
+                };
+                self.route(line, item)?;
+            }
+        }
         Ok(())
     }
 
@@ -450,7 +505,7 @@ mod tests {
             tick_ns: 10 * MS,
             lockstep,
             compass_period_ns: 400 * MS,
-            compass_conversion_ns: 40 * MS,
+            line_chars_per_s: 11_520.0,
             watchdog_ns: None,
             sonar_on_this_line: shared,
         });
@@ -609,6 +664,37 @@ mod tests {
         for chunk in 1..script.len() {
             assert_eq!(run(chunk).0, whole, "chunk size {chunk}");
         }
+    }
+
+    /// An EyeBot that vanished mid-frame leaves a partial frame behind; after the idle limit
+    /// it is dropped and reported, and the next request is answered normally.
+    #[test]
+    fn a_partial_frame_is_dropped_after_the_idle_limit() {
+        let mut c = core(true, false);
+        let read = frame_bytes(
+            1,
+            Message::AdcRead {
+                channel: AdcChannel::new(0).unwrap(),
+            },
+        );
+        c.receive(1, &read[..4]).unwrap();
+        let advance = frame_bytes(2, Message::TimeAdvance { ticks: 10 });
+        // The advance arrives glued to the partial frame: the CRC fails, the rescan finds it.
+        c.receive(1, &advance).unwrap();
+        let items = decode(&c.take_output(1).unwrap());
+        assert!(
+            items
+                .iter()
+                .any(|i| matches!(i, LineItem::Frame(f) if f.seq == 2)),
+            "{items:?}"
+        );
+        // Another half frame, then silence: dropped once 50 ms have passed.
+        c.receive(1, &read[..5]).unwrap();
+        let before = c.line_counters(1).errors;
+        c.receive(1, &frame_bytes(3, Message::TimeAdvance { ticks: 0 }))
+            .unwrap();
+        let _ = c.take_output(1);
+        assert!(c.line_counters(1).errors > before);
     }
 
     #[test]

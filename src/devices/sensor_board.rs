@@ -5,13 +5,17 @@
 //! continuous compass headings) from its own push sequence. It holds four small devices:
 //!
 //! - the **ADC board**: polled reads and a stream of chosen channels at a set period;
-//! - the **Vector 2X compass**: poll mode (the reply waits for the conversion delay),
-//!   continuous mode (a push at the compass's own rate), binary/BCD/raw output, the two-point
-//!   calibration, reset;
+//! - the **Vector 2X compass**: poll mode (the reply carries the latest completed
+//!   measurement; the conversion delay is the sensor model's latency), continuous mode (a
+//!   push at the compass's own rate), binary/BCD/raw output, the two-point calibration, reset;
 //! - the **motor driver**: PWM duty and direction per thruster, with an optional watchdog that
 //!   zeroes the thrusters when the link goes silent;
 //! - **time**: simulated time in ticks, and lockstep advances, which the bridge core carries
 //!   out (the board only asks for them, see [`Output::Advance`]).
+//!
+//! Retries are idempotent (PROTOCOL.md 2.2): the board remembers the last request it executed
+//! and its reply, and answers an identical request with the stored reply without executing
+//! it again, so a retried TIME_ADVANCE or TAKE_POINT is never applied twice.
 
 use firmware_protocol::error::{FrameError, LinkError, MessageError};
 use firmware_protocol::sensor_link::{
@@ -32,8 +36,8 @@ pub struct BoardSettings {
     pub lockstep: bool,
     /// Period of the compass's continuous mode (about 400 ms: 2.5 Hz).
     pub compass_period_ns: u64,
-    /// Conversion delay of a poll-mode compass reading.
-    pub compass_conversion_ns: u64,
+    /// Characters per second the line carries (for the ADC stream capacity check).
+    pub line_chars_per_s: f64,
     /// Zero the thrusters after this long without a thruster frame.
     pub watchdog_ns: Option<u64>,
     /// Whether the sonar link shares this line (reported in HELLO_REPLY).
@@ -57,10 +61,11 @@ struct AdcStream {
     next_ns: SimNanos,
 }
 
+/// The last executed request and the reply it got.
 #[derive(Debug, Clone, Copy)]
-struct PendingCompassRead {
-    due_ns: SimNanos,
-    seq: u8,
+struct LastRequest {
+    request: Frame,
+    reply: Frame,
 }
 
 /// The board's state.
@@ -73,7 +78,9 @@ pub struct SensorBoard {
     compass_mode: CompassMode,
     compass_output: CompassOutput,
     next_compass_push_ns: Option<SimNanos>,
-    pending_compass: Option<PendingCompassRead>,
+    last_request: Option<LastRequest>,
+    pending_advance: Option<Frame>,
+    duplicates: u64,
     thrusters: [ThrusterCommand; 4],
     last_thruster_ns: Option<SimNanos>,
     watchdog_trips: u64,
@@ -89,7 +96,9 @@ impl SensorBoard {
             compass_mode: CompassMode::Poll,
             compass_output: CompassOutput::Binary,
             next_compass_push_ns: None,
-            pending_compass: None,
+            last_request: None,
+            pending_advance: None,
+            duplicates: 0,
             thrusters: [ThrusterCommand::OFF; 4],
             last_thruster_ns: None,
             watchdog_trips: 0,
@@ -99,6 +108,11 @@ impl SensorBoard {
     /// The protocol counters (also what COUNTERS_GET returns).
     pub fn counters(&self) -> &Counters {
         &self.counters
+    }
+
+    /// Retried requests answered from the stored reply.
+    pub fn duplicates(&self) -> u64 {
+        self.duplicates
     }
 
     /// How often the watchdog zeroed the thrusters.
@@ -142,9 +156,8 @@ impl SensorBoard {
         )
     }
 
-    /// A wire error on this link: counted, and answered with a NAK where the frame's type
-    /// and sequence number can be trusted (a CRC mismatch cannot: no reply, the EyeBot side's
-    /// timeout and retry take over, as PROTOCOL.md says).
+    /// A wire error on this link: counted, and answered with a NAK as PROTOCOL.md section 3
+    /// says (a CRC mismatch gets an advisory BAD_CRC NAK with the type and seq as received).
     pub fn handle_error(&mut self, error: &LinkError) -> Option<Output> {
         match error {
             LinkError::Skipped { count } => {
@@ -152,9 +165,9 @@ impl SensorBoard {
                     self.counters.rx_skipped_bytes.wrapping_add(*count as u32);
                 None
             }
-            LinkError::Frame(FrameError::ChecksumMismatch { .. }) => {
+            LinkError::Frame(FrameError::ChecksumMismatch { msg_type, seq, .. }) => {
                 self.counters.rx_crc_errors = self.counters.rx_crc_errors.wrapping_add(1);
-                None
+                Some(self.nak(*seq, *msg_type, ErrorCode::BadCrc, 0))
             }
             LinkError::Frame(_) => {
                 self.counters.rx_framing_errors = self.counters.rx_framing_errors.wrapping_add(1);
@@ -164,7 +177,7 @@ impl SensorBoard {
                 self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
                 let (code, detail) = match e {
                     MessageError::UnknownType { .. } => (ErrorCode::UnknownType, 0),
-                    MessageError::BadLength { found, .. } => (ErrorCode::BadLength, *found),
+                    MessageError::BadLength { expected, .. } => (ErrorCode::BadLength, *expected),
                     MessageError::BadValue { offset, .. } => (ErrorCode::BadValue, *offset),
                 };
                 Some(self.nak(e.seq(), e.msg_type(), code, detail))
@@ -177,6 +190,27 @@ impl SensorBoard {
     /// Handles one decoded frame from the EyeBot side at simulated time `now`.
     pub fn handle(&mut self, frame: Frame, now: SimNanos, plant: &mut dyn Plant) -> Option<Output> {
         self.counters.rx_frames = self.counters.rx_frames.wrapping_add(1);
+        if let Some(last) = self.last_request.filter(|l| l.request == frame) {
+            self.duplicates += 1;
+            tracing::debug!(
+                seq = frame.seq,
+                "retried request answered from the stored reply"
+            );
+            self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
+            return Some(Output::Send(last.reply));
+        }
+        let out = self.execute(frame, now, plant);
+        if let Some(Output::Send(reply)) = out {
+            self.remember(frame, reply);
+        }
+        out
+    }
+
+    fn remember(&mut self, request: Frame, reply: Frame) {
+        self.last_request = Some(LastRequest { request, reply });
+    }
+
+    fn execute(&mut self, frame: Frame, now: SimNanos, plant: &mut dyn Plant) -> Option<Output> {
         let seq = frame.seq;
         let kind = frame.message.msg_type();
         let out = match frame.message {
@@ -189,6 +223,17 @@ impl SensorBoard {
                         sensor_link::PROTOCOL_VERSION,
                     ));
                 }
+                // A new session: streams stop, compass back to poll/binary, thrusters off.
+                self.stream = None;
+                self.compass_mode = CompassMode::Poll;
+                self.compass_output = CompassOutput::Binary;
+                self.next_compass_push_ns = None;
+                self.last_request = None;
+                if self.thrusters != [ThrusterCommand::OFF; 4] {
+                    self.thrusters = [ThrusterCommand::OFF; 4];
+                    plant.set_thrusters(self.thrusters, now);
+                }
+                self.last_thruster_ns = None;
                 let mut capabilities = capability::ADC
                     | capability::ADC_STREAM
                     | capability::COMPASS
@@ -219,7 +264,7 @@ impl SensorBoard {
             } => {
                 if channels == 0 {
                     self.stream = None;
-                } else if period_ms == 0 {
+                } else if period_ms == 0 || self.stream_overloads_line(channels, period_ms) {
                     return Some(self.nak(seq, kind, ErrorCode::BadValue, 1));
                 } else {
                     let period_ns = u64::from(period_ms) * 1_000_000;
@@ -240,20 +285,7 @@ impl SensorBoard {
                 };
                 Message::Ack { acked_type: kind }
             }
-            Message::CompassRead => match self.compass_mode {
-                CompassMode::Poll => {
-                    if self.pending_compass.is_some() {
-                        // The Vector 2X converts one reading at a time.
-                        return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
-                    }
-                    self.pending_compass = Some(PendingCompassRead {
-                        due_ns: now + self.settings.compass_conversion_ns,
-                        seq,
-                    });
-                    return None;
-                }
-                CompassMode::Continuous => self.compass_message(plant, now, false),
-            },
+            Message::CompassRead => self.compass_message(plant, now, false),
             Message::CompassCalibrate { action } => match plant.compass_calibrate(action, now) {
                 Ok(progress) => Message::CalibrationStatus {
                     state: progress.state,
@@ -261,7 +293,7 @@ impl SensorBoard {
                 },
                 Err(refused) => {
                     tracing::debug!(%refused, "calibration step refused");
-                    return Some(self.nak(seq, kind, ErrorCode::BadState, action as u8));
+                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
                 }
             },
             Message::CompassReset => {
@@ -269,7 +301,6 @@ impl SensorBoard {
                 self.compass_mode = CompassMode::Poll;
                 self.compass_output = CompassOutput::Binary;
                 self.next_compass_push_ns = None;
-                self.pending_compass = None;
                 Message::Ack { acked_type: kind }
             }
             Message::ThrusterSet { thruster, command } => {
@@ -290,13 +321,9 @@ impl SensorBoard {
             },
             Message::TimeAdvance { ticks } => {
                 if !self.settings.lockstep {
-                    return Some(self.nak(
-                        seq,
-                        kind,
-                        ErrorCode::BadState,
-                        TimeMode::RealTime as u8,
-                    ));
+                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
                 }
+                self.pending_advance = Some(frame);
                 return Some(Output::Advance {
                     to: now + u64::from(ticks) * self.settings.tick_ns,
                     seq,
@@ -310,7 +337,7 @@ impl SensorBoard {
                 };
                 if mode != ours {
                     // The daemon's time mode is chosen when it starts (--time-mode).
-                    return Some(self.nak(seq, kind, ErrorCode::BadState, ours as u8));
+                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
                 }
                 Message::Ack { acked_type: kind }
             }
@@ -328,7 +355,7 @@ impl SensorBoard {
             | Message::CompassHeadingPush { .. }
             | Message::CompassRawPush { .. } => {
                 self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
-                return Some(self.nak(seq, kind, ErrorCode::Unsupported, 0));
+                return Some(self.nak(seq, kind, ErrorCode::UnknownType, 0));
             }
         };
         Some(self.reply(seq, out))
@@ -340,10 +367,22 @@ impl SensorBoard {
             ticks: self.ticks(now),
             tick_us: (self.settings.tick_ns / 1000) as u32,
         };
-        match self.reply(seq, message) {
-            Output::Send(frame) => frame,
-            Output::Advance { .. } => unreachable!("reply() only builds Send"),
+        let reply = Frame::new(seq, message);
+        self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
+        if let Some(request) = self.pending_advance.take() {
+            self.remember(request, reply);
         }
+        reply
+    }
+
+    /// Whether streaming `channels` every `period_ms` would take more than half the line.
+    fn stream_overloads_line(&self, channels: u8, period_ms: u16) -> bool {
+        let frame_chars = (firmware_protocol::frame::HEADER_LEN
+            + 5
+            + 2 * channels.count_ones() as usize
+            + firmware_protocol::frame::CRC_LEN) as f64;
+        let chars_per_s = frame_chars * 1000.0 / f64::from(period_ms);
+        chars_per_s > 0.5 * self.settings.line_chars_per_s
     }
 
     fn compass_message(&mut self, plant: &mut dyn Plant, now: SimNanos, push: bool) -> Message {
@@ -383,7 +422,6 @@ impl SensorBoard {
         [
             self.stream.map(|s| s.next_ns),
             self.next_compass_push_ns,
-            self.pending_compass.map(|p| p.due_ns),
             watchdog,
         ]
         .into_iter()
@@ -391,16 +429,11 @@ impl SensorBoard {
         .min()
     }
 
-    /// Emits what is due by `now` (stream samples, compass pushes, delayed poll replies) in
-    /// time order, and runs the watchdog.
+    /// Emits what is due by `now` (stream samples, compass pushes) in time order, and runs
+    /// the watchdog.
     pub fn poll(&mut self, now: SimNanos, plant: &mut dyn Plant, out: &mut Vec<(SimNanos, Frame)>) {
         while let Some(due) = self.poll_timeout().filter(|&t| t <= now) {
-            if let Some(p) = self.pending_compass.filter(|p| p.due_ns == due) {
-                self.pending_compass = None;
-                let message = self.compass_message(plant, due, false);
-                self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
-                out.push((due, Frame::new(p.seq, message)));
-            } else if self.next_compass_push_ns == Some(due) {
+            if self.next_compass_push_ns == Some(due) {
                 self.next_compass_push_ns = Some(due + self.settings.compass_period_ns);
                 let message = self.compass_message(plant, due, true);
                 out.push((due, self.push(message)));
@@ -476,7 +509,7 @@ mod tests {
             tick_ns: 10 * MS,
             lockstep,
             compass_period_ns: 400 * MS,
-            compass_conversion_ns: 40 * MS,
+            line_chars_per_s: 11_520.0,
             watchdog_ns: watchdog_ms.map(|m| m * MS),
             sonar_on_this_line: false,
         })
@@ -564,43 +597,141 @@ mod tests {
     }
 
     #[test]
-    fn poll_mode_compass_replies_after_the_conversion_delay() {
+    fn compass_read_answers_at_once_with_the_latest_measurement() {
         let mut plant = FakePlant {
             heading_deg: 271,
             ..FakePlant::default()
         };
         let mut b = board(false, None);
+        let reply = sent(b.handle(Frame::new(9, Message::CompassRead), 100 * MS, &mut plant));
+        assert_eq!(reply.seq, 9);
         assert_eq!(
-            b.handle(Frame::new(9, Message::CompassRead), 100 * MS, &mut plant),
-            None
-        );
-        // A second read while converting is refused, not queued.
-        let busy = sent(b.handle(Frame::new(10, Message::CompassRead), 110 * MS, &mut plant));
-        assert!(matches!(
-            busy.message,
-            Message::Nak {
-                code: ErrorCode::BadState,
-                ..
-            }
-        ));
-        let mut out = Vec::new();
-        b.poll(139 * MS, &mut plant, &mut out);
-        assert!(out.is_empty());
-        b.poll(140 * MS, &mut plant, &mut out);
-        assert_eq!(out.len(), 1);
-        assert_eq!(out[0].0, 140 * MS);
-        assert_eq!(out[0].1.seq, 9);
-        assert_eq!(
-            out[0].1.message,
+            reply.message,
             Message::CompassHeading {
                 word: HeadingWord::encode(271, HeadingFormat::Binary).unwrap()
             }
         );
+        assert_eq!(plant.compass_reads, vec![100 * MS]);
+    }
+
+    /// A retried request (same seq, type and payload) is answered again but not executed
+    /// again: a lost TIME reply must not make the client's OSWait advance time twice.
+    #[test]
+    fn retried_requests_are_not_executed_twice() {
+        let mut plant = FakePlant::default();
+        let mut b = board(true, None);
+        let cal = |seq, action| Frame::new(seq, Message::CompassCalibrate { action });
+        sent(b.handle(cal(1, CalibrationAction::Start), 0, &mut plant));
+        let first = sent(b.handle(cal(2, CalibrationAction::TakePoint), 0, &mut plant));
+        let retry = sent(b.handle(cal(2, CalibrationAction::TakePoint), 0, &mut plant));
+        assert_eq!(first, retry);
         assert_eq!(
-            plant.compass_reads,
-            vec![140 * MS],
-            "sampled when the conversion completes"
+            plant.calibration_points, 1,
+            "the retry took no second point"
         );
+        assert_eq!(b.duplicates(), 1);
+        // A new seq is a new request, even with the same payload.
+        sent(b.handle(cal(3, CalibrationAction::TakePoint), 0, &mut plant));
+        assert_eq!(plant.calibration_points, 2);
+
+        let advance = Frame::new(4, Message::TimeAdvance { ticks: 5 });
+        assert!(matches!(
+            b.handle(advance, 0, &mut plant),
+            Some(Output::Advance { .. })
+        ));
+        let time = b.finish_advance(4, 50 * MS);
+        assert_eq!(
+            b.handle(advance, 50 * MS, &mut plant),
+            Some(Output::Send(time)),
+            "no second advance"
+        );
+    }
+
+    #[test]
+    fn hello_starts_a_clean_session() {
+        let mut plant = FakePlant::default();
+        let mut b = board(false, None);
+        let full = ThrusterCommand {
+            duty: 0,
+            direction: Direction::Forward,
+        };
+        sent(b.handle(
+            Frame::new(
+                1,
+                Message::ThrusterSetAll {
+                    commands: [full; 4],
+                },
+            ),
+            0,
+            &mut plant,
+        ));
+        sent(b.handle(
+            Frame::new(
+                2,
+                Message::AdcStream {
+                    channels: 1,
+                    period_ms: 10,
+                },
+            ),
+            0,
+            &mut plant,
+        ));
+        let reply = sent(b.handle(
+            Frame::new(3, Message::Hello { client_version: 1 }),
+            5 * MS,
+            &mut plant,
+        ));
+        assert!(matches!(
+            reply.message,
+            Message::HelloReply {
+                protocol_version: 1,
+                ..
+            }
+        ));
+        assert_eq!(b.thrusters(), [ThrusterCommand::OFF; 4]);
+        assert_eq!(plant.thrusters.last().unwrap().1, [ThrusterCommand::OFF; 4]);
+        assert_eq!(b.poll_timeout(), None, "the stream stopped");
+        let old = sent(b.handle(
+            Frame::new(3, Message::Hello { client_version: 9 }),
+            5 * MS,
+            &mut plant,
+        ));
+        assert!(matches!(
+            old.message,
+            Message::Nak {
+                code: ErrorCode::VersionMismatch,
+                detail: 1,
+                ..
+            }
+        ));
+    }
+
+    #[test]
+    fn a_stream_that_would_fill_the_line_is_refused() {
+        let mut plant = FakePlant::default();
+        let mut slow = SensorBoard::new(BoardSettings {
+            line_chars_per_s: 480.0,
+            ..board(false, None).settings
+        });
+        let nak = sent(slow.handle(
+            Frame::new(
+                1,
+                Message::AdcStream {
+                    channels: 0xFF,
+                    period_ms: 10,
+                },
+            ),
+            0,
+            &mut plant,
+        ));
+        assert!(matches!(
+            nak.message,
+            Message::Nak {
+                code: ErrorCode::BadValue,
+                detail: 1,
+                ..
+            }
+        ));
     }
 
     #[test]
@@ -636,7 +767,11 @@ mod tests {
     fn calibration_steps_follow_the_plant_and_bad_steps_are_naked() {
         let mut plant = FakePlant::default();
         let mut b = board(false, None);
-        let cal = |action| Frame::new(4, Message::CompassCalibrate { action });
+        let mut seq = 0u8;
+        let mut cal = |action| {
+            seq += 1;
+            Frame::new(seq, Message::CompassCalibrate { action })
+        };
         let finish_early = sent(b.handle(cal(CalibrationAction::Finish), 0, &mut plant));
         assert!(matches!(
             finish_early.message,
@@ -755,7 +890,7 @@ mod tests {
             Message::Nak {
                 rejected_type: msg_type::ADC_READ,
                 code: ErrorCode::BadLength,
-                detail: 3
+                detail: 1
             }
         );
         let crc = LinkError::Frame(FrameError::ChecksumMismatch {
@@ -764,13 +899,18 @@ mod tests {
             msg_type: 0x10,
             seq: 1,
         });
-        assert_eq!(
-            b.handle_error(&crc),
-            None,
-            "a bad CRC gets no reply: its header is untrusted"
-        );
+        let advisory = sent(b.handle_error(&crc));
+        assert!(matches!(
+            advisory.message,
+            Message::Nak {
+                code: ErrorCode::BadCrc,
+                rejected_type: 0x10,
+                ..
+            }
+        ));
+        assert_eq!(advisory.seq, 1);
         assert_eq!(b.counters().rx_crc_errors, 1);
         assert_eq!(b.counters().rx_rejected, 1);
-        assert_eq!(b.counters().tx_naks, 1);
+        assert_eq!(b.counters().tx_naks, 2);
     }
 }
