@@ -406,26 +406,22 @@ impl<M: Model> Core<M> {
     }
 }
 
+/// A scripted model for core and daemon tests.
 #[cfg(test)]
-mod tests {
-    use firmware_protocol::sensor_link::{AdcChannel, Message};
-    use firmware_protocol::sonar_link::SonarCommand;
-    use firmware_protocol::{Frame, Transducer};
+pub(crate) mod fake {
     use nalgebra::{UnitQuaternion, Vector3};
 
     use super::*;
     use crate::devices::fake::FakePlant;
-    use crate::devices::multiplexer::{DepthSentence, InvalidEcho, MultiplexerSettings};
-    use crate::devices::sensor_board::BoardSettings;
     use crate::devices::{CalibrationProgress, CalibrationRefused, CompassSample, SonarEvent};
 
     const MS: u64 = 1_000_000;
 
     /// A plant whose "physics" only counts steps of 1 ms.
     #[derive(Default)]
-    struct FakeModel {
-        plant: FakePlant,
-        t: SimNanos,
+    pub struct FakeModel {
+        pub plant: FakePlant,
+        pub t: SimNanos,
     }
 
     impl Plant for FakeModel {
@@ -499,6 +495,20 @@ mod tests {
             0
         }
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use firmware_protocol::sensor_link::{AdcChannel, Message};
+    use firmware_protocol::sonar_link::SonarCommand;
+    use firmware_protocol::{Frame, Transducer};
+
+    use super::fake::FakeModel;
+    use super::*;
+    use crate::devices::multiplexer::{DepthSentence, InvalidEcho, MultiplexerSettings};
+    use crate::devices::sensor_board::BoardSettings;
+
+    const MS: u64 = 1_000_000;
 
     fn core(lockstep: bool, shared: bool) -> Core<FakeModel> {
         let board = SensorBoard::new(BoardSettings {

@@ -1,8 +1,569 @@
 //! The bridge daemon (`eyebot-hil run`): links, device emulators, the time model, recording
 //! and the process life cycle around the simulation.
+//!
+//! [`run`] is a library function: it takes the resolved configuration, a model, the options
+//! and a shutdown signal, and reports readiness through a callback. `main.rs` (through
+//! `cli::run`) only parses arguments, installs tracing and signal handlers and calls it, so
+//! tests run the daemon in-process. Time comes from tokio's clock, which tests can pause and
+//! advance; the model itself never reads a clock.
 
 pub mod clock;
 pub mod config;
 pub mod core;
 pub mod link;
 pub mod status;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use bytes::Bytes;
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+
+use self::clock::{RealtimeMap, TimeMode};
+use self::config::{DaemonConfig, Endpoint};
+use self::core::{Core, LineSpec, Model};
+use self::link::{EndpointError, Inbound, LinkCounters, OpenEndpoint};
+use self::status::{LinkStatus, Pose, StatusServer, StatusSnapshot};
+use crate::record::{RecordError, Recorder};
+
+/// How often the realtime loop wakes when nothing is due (bounds the physics lag).
+pub const IDLE_WAKE: Duration = Duration::from_millis(20);
+/// How often the status snapshot is refreshed.
+pub const STATUS_PERIOD: Duration = Duration::from_millis(100);
+
+/// Why the daemon could not start or had to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    #[error(transparent)]
+    Endpoint(#[from] EndpointError),
+    #[error(transparent)]
+    Status(#[from] status::StatusError),
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    #[error("run directory {path}: {source}")]
+    RunDir {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("pid file {path}: {source}")]
+    PidFile {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("the simulation stopped: {0}")]
+    Model(#[source] Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// Per-run options that are not part of the configuration file.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Record every byte and the ground truth here.
+    pub record: Option<PathBuf>,
+    /// Write the daemon's PID here (removed at exit).
+    pub pid_file: Option<PathBuf>,
+    /// Text of `meta.toml` in the recording.
+    pub record_meta: String,
+}
+
+/// What the daemon reports as it comes up.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Readiness {
+    /// A link is open; the EyeBot side connects at `path`.
+    Link { name: &'static str, path: String },
+    /// Everything is up.
+    Ready { status_socket: PathBuf },
+}
+
+/// What a finished run did.
+#[derive(Debug, Clone, Default)]
+pub struct RunSummary {
+    pub sim_time_s: f64,
+    pub records: Option<crate::record::Stats>,
+    pub overruns: u64,
+}
+
+struct LineRuntime {
+    name: &'static str,
+    describe: String,
+    to_link: mpsc::Sender<Bytes>,
+    counters: Arc<LinkCounters>,
+}
+
+/// Runs the bridge until `shutdown` turns true.
+pub async fn run<M>(
+    config: &DaemonConfig,
+    model: M,
+    board: crate::devices::sensor_board::SensorBoard,
+    mux: crate::devices::multiplexer::Multiplexer,
+    options: RunOptions,
+    mut shutdown: watch::Receiver<bool>,
+    mut on_ready: impl FnMut(Readiness),
+) -> Result<RunSummary, DaemonError>
+where
+    M: Model,
+{
+    let run_dir = config.run_dir.clone();
+    create_run_dir(&run_dir)?;
+    let lockstep = config.time_mode == TimeMode::Lockstep;
+
+    // Endpoints first, so the readiness lines can name them.
+    let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;
+    let mut specs = vec![LineSpec {
+        name: if shared { "shared" } else { "sonar" },
+        carries: core::Carries {
+            sonar: true,
+            sensor: shared,
+        },
+        settings: config.sonar.line,
+        tx_queue_bytes: config.sonar.tx_queue_bytes,
+    }];
+    let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, &run_dir).await?];
+    if !shared {
+        specs.push(LineSpec {
+            name: "sensor",
+            carries: core::Carries {
+                sonar: false,
+                sensor: true,
+            },
+            settings: config.sensor.line,
+            tx_queue_bytes: config.sensor.tx_queue_bytes,
+        });
+        endpoints.push(OpenEndpoint::open("sensor", &config.sensor, &run_dir).await?);
+    }
+
+    let status_path = run_dir.join("status.sock");
+    let status_server = StatusServer::bind(&status_path)?;
+    let pid_guard = options
+        .pid_file
+        .as_deref()
+        .map(PidFile::create)
+        .transpose()?;
+
+    let mut core = Core::new(model, board, mux, &specs, lockstep);
+    if let Some(dir) = &options.record {
+        let recorder = Recorder::start(dir, &options.record_meta, crate::record::STATE_HEADER)?;
+        core.set_recorder(recorder, (1e9 / config.state_record_hz) as u64);
+    }
+
+    let (in_tx, mut in_rx) = mpsc::channel::<Inbound>(256);
+    let mut lines = Vec::new();
+    let mut tasks = Vec::new();
+    for (index, endpoint) in endpoints.into_iter().enumerate() {
+        let name = specs[index].name;
+        let describe = endpoint.describe();
+        on_ready(Readiness::Link {
+            name,
+            path: describe.clone(),
+        });
+        let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
+        let counters = Arc::new(LinkCounters::default());
+        tasks.push(tokio::spawn(link::run_line(
+            index,
+            name,
+            endpoint,
+            in_tx.clone(),
+            out_rx,
+            counters.clone(),
+            shutdown.clone(),
+        )));
+        lines.push(LineRuntime {
+            name,
+            describe,
+            to_link: out_tx,
+            counters,
+        });
+    }
+    drop(in_tx);
+
+    let (status_tx, status_rx) = watch::channel(StatusSnapshot::default());
+    let status_task = {
+        let shutdown = shutdown.clone();
+        tokio::spawn(async move { status_server.serve(status_rx, shutdown).await })
+    };
+    on_ready(Readiness::Ready {
+        status_socket: status_path.clone(),
+    });
+
+    let started = Instant::now();
+    let mut map = match config.time_mode {
+        TimeMode::Realtime { speed } => Some(RealtimeMap::new(speed, config.max_lag)),
+        TimeMode::Lockstep => None,
+    };
+    let mut next_status = started;
+    let result: Result<(), DaemonError> = async {
+        loop {
+            if let Some(map) = map.as_mut() {
+                let wall = started.elapsed();
+                if let Some(slip) = map.settle(core.now(), wall) {
+                    tracing::warn!(
+                        slip_ms = slip as f64 * 1e-6,
+                        "overrun: simulated time slipped behind the wall clock"
+                    );
+                }
+                core.advance_to(map.target(wall)).map_err(model_error)?;
+            }
+            flush_outputs(&mut core, &lines);
+            let now = Instant::now();
+            if now >= next_status {
+                status_tx.send_replace(snapshot(
+                    &core,
+                    &lines,
+                    started,
+                    config,
+                    map.as_ref(),
+                    options.record.as_deref(),
+                ));
+                next_status = now + STATUS_PERIOD;
+            }
+            let wake = match map.as_ref() {
+                Some(map) => {
+                    let due = core
+                        .next_deadline()
+                        .map_or(Duration::MAX, |t| map.wall_at(t));
+                    started + due.min(started.elapsed() + IDLE_WAKE)
+                }
+                None => now + STATUS_PERIOD,
+            };
+            tokio::select! {
+                inbound = in_rx.recv() => match inbound {
+                    Some(inbound) => {
+                        if let Some(map) = map.as_ref() {
+                            core.advance_to(map.target(started.elapsed())).map_err(model_error)?;
+                        }
+                        core.receive(inbound.line, &inbound.data).map_err(model_error)?;
+                    }
+                    None => return Ok(()),
+                },
+                _ = tokio::time::sleep_until(wake) => {}
+                changed = shutdown.changed() => {
+                    if changed.is_err() || *shutdown.borrow() {
+                        return Ok(());
+                    }
+                }
+            }
+        }
+    }
+    .await;
+
+    // Shut down: flush what is due, stop the link tasks (they remove their symlinks), finish
+    // the recording, remove the pid file.
+    flush_outputs(&mut core, &lines);
+    let sim_time_s = core.now() as f64 * 1e-9;
+    let overruns = map.as_ref().map_or(0, RealtimeMap::overruns);
+    drop(lines);
+    for task in tasks {
+        let _ = tokio::time::timeout(Duration::from_millis(500), task).await;
+    }
+    status_task.abort();
+    let records = match core.take_recorder() {
+        Some(recorder) => Some(recorder.finish()?),
+        None => None,
+    };
+    drop(pid_guard);
+    result?;
+    Ok(RunSummary {
+        sim_time_s,
+        records,
+        overruns,
+    })
+}
+
+fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonError {
+    DaemonError::Model(Box::new(e))
+}
+
+fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &[LineRuntime]) {
+    for (index, line) in lines.iter().enumerate() {
+        while let Some(data) = core.take_output(index) {
+            let len = data.len();
+            if line.to_link.try_send(data).is_err() {
+                // The EyeBot side is not reading (or is gone): drop and count, never block.
+                core.note_dropped(index, len);
+            }
+        }
+    }
+}
+
+fn snapshot<M: Model>(
+    core: &Core<M>,
+    lines: &[LineRuntime],
+    started: Instant,
+    config: &DaemonConfig,
+    map: Option<&RealtimeMap>,
+    record: Option<&Path>,
+) -> StatusSnapshot {
+    let state = core.model().state();
+    let (roll, pitch, yaw) = state.euler_rad();
+    StatusSnapshot {
+        pid: std::process::id(),
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        uptime_s: started.elapsed().as_secs_f64(),
+        sim_time_s: core.now() as f64 * 1e-9,
+        time_mode: config.time_mode.name().to_string(),
+        speed: map.map_or(0.0, RealtimeMap::speed),
+        overruns: map.map_or(0, RealtimeMap::overruns),
+        links: lines
+            .iter()
+            .enumerate()
+            .map(|(i, l)| {
+                let c = core.line_counters(i);
+                LinkStatus {
+                    name: l.name.to_string(),
+                    path: l.describe.clone(),
+                    bytes_rx: l.counters.bytes_rx.load(Ordering::Relaxed),
+                    bytes_tx: l.counters.bytes_tx.load(Ordering::Relaxed),
+                    frames_rx: c.frames_rx,
+                    frames_tx: c.frames_tx,
+                    errors: c.errors + l.counters.io_errors.load(Ordering::Relaxed),
+                    dropped_tx: c.dropped_tx,
+                    reconnects: l.counters.reconnects.load(Ordering::Relaxed),
+                }
+            })
+            .collect(),
+        pose: Pose {
+            x_m: state.position_m.x,
+            y_m: state.position_m.y,
+            depth_m: state.position_m.z,
+            roll_deg: roll.to_degrees(),
+            pitch_deg: pitch.to_degrees(),
+            heading_deg: yaw.to_degrees().rem_euclid(360.0),
+            surge_mps: state.velocity_body_mps.x,
+        },
+        contacts: core.model().contacts(),
+        recording: record.map(|p| p.display().to_string()),
+    }
+}
+
+fn create_run_dir(dir: &Path) -> Result<(), DaemonError> {
+    use std::os::unix::fs::DirBuilderExt;
+    if dir.is_dir() {
+        return Ok(());
+    }
+    std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(dir)
+        .map_err(|source| DaemonError::RunDir {
+            path: dir.to_path_buf(),
+            source,
+        })
+}
+
+/// `--pid-file`: written at start, removed at exit.
+#[derive(Debug)]
+struct PidFile(PathBuf);
+
+impl PidFile {
+    fn create(path: &Path) -> Result<Self, DaemonError> {
+        std::fs::write(path, format!("{}\n", std::process::id())).map_err(|source| {
+            DaemonError::PidFile {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
+        Ok(Self(path.to_path_buf()))
+    }
+}
+
+impl Drop for PidFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use bytes::BytesMut;
+    use firmware_protocol::sensor_link::Message;
+    use firmware_protocol::sonar_link::SonarCommand;
+    use firmware_protocol::{Frame, LineDecoder, LineItem, Talker, Transducer};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    use super::*;
+    use crate::config::{ConfigSource, DEFAULT_CONFIG, Document, Embedded};
+    use crate::daemon::core::fake::FakeModel;
+    use crate::devices::multiplexer::{
+        DepthSentence, InvalidEcho, Multiplexer, MultiplexerSettings,
+    };
+    use crate::devices::sensor_board::{BoardSettings, SensorBoard};
+    use crate::transport::serial;
+
+    fn config(run_dir: &Path) -> DaemonConfig {
+        let text = Embedded.read(DEFAULT_CONFIG).unwrap();
+        let mut config = DaemonConfig::resolve(&Document::new("default", &text)).unwrap();
+        config.time_mode = TimeMode::Lockstep;
+        config.run_dir = run_dir.to_path_buf();
+        config
+    }
+
+    fn devices() -> (SensorBoard, Multiplexer) {
+        let board = SensorBoard::new(BoardSettings {
+            tick_ns: 10_000_000,
+            lockstep: true,
+            compass_period_ns: 400_000_000,
+            line_chars_per_s: 11_520.0,
+            watchdog_ns: None,
+            sonar_on_this_line: false,
+        });
+        let mux = Multiplexer::new(MultiplexerSettings {
+            sentence: DepthSentence::Dbt,
+            talker: Talker::SOUNDER,
+            invalid_echo: InvalidEcho::Omit,
+            proprietary: false,
+        });
+        (board, mux)
+    }
+
+    async fn read_item(
+        port: &mut tokio_serial::SerialStream,
+        buf: &mut BytesMut,
+        decoder: &mut LineDecoder,
+    ) -> LineItem {
+        loop {
+            if let Some(item) = decoder.decode(buf) {
+                return item;
+            }
+            let mut chunk = [0u8; 256];
+            let n = tokio::time::timeout(Duration::from_secs(5), port.read(&mut chunk))
+                .await
+                .expect("reply within 5 s")
+                .unwrap();
+            buf.extend_from_slice(&chunk[..n]);
+        }
+    }
+
+    /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
+    /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
+    /// the time; shutdown removes the links and finishes the recording.
+    #[tokio::test]
+    async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-daemon-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let run_dir = dir.join("run");
+        let record = dir.join("rec");
+        let config = config(&run_dir);
+        let (board, mux) = devices();
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let (ready_tx, mut ready_rx) = mpsc::unbounded_channel();
+        let options = RunOptions {
+            record: Some(record.clone()),
+            pid_file: Some(dir.join("pid")),
+            record_meta: "seed = 1\n".into(),
+        };
+        std::fs::create_dir_all(&dir).unwrap();
+        let daemon = tokio::spawn(async move {
+            run(
+                &config,
+                FakeModel::default(),
+                board,
+                mux,
+                options,
+                stop_rx,
+                move |r| {
+                    let _ = ready_tx.send(r);
+                },
+            )
+            .await
+        });
+        let mut links = Vec::new();
+        loop {
+            match ready_rx.recv().await.expect("daemon reports readiness") {
+                Readiness::Link { name, path } => links.push((name, path)),
+                Readiness::Ready { .. } => break,
+            }
+        }
+        assert_eq!(
+            links.iter().map(|l| l.0).collect::<Vec<_>>(),
+            vec!["sonar", "sensor"]
+        );
+        assert!(dir.join("pid").exists());
+
+        let mut sensor = serial::open(
+            &run_dir.join("sensor"),
+            &crate::transport::LineSettings::n81(115_200),
+        )
+        .unwrap();
+        let mut sonar = serial::open(
+            &run_dir.join("sonar"),
+            &crate::transport::LineSettings::n81(4800),
+        )
+        .unwrap();
+        let (mut sbuf, mut sdec) = (BytesMut::new(), LineDecoder::new());
+        let send = |seq, message| {
+            let mut b = BytesMut::new();
+            Frame::new(seq, message).encode(&mut b);
+            b
+        };
+        sensor
+            .write_all(&send(1, Message::Hello { client_version: 1 }))
+            .await
+            .unwrap();
+        assert!(matches!(
+            read_item(&mut sensor, &mut sbuf, &mut sdec).await,
+            LineItem::Frame(Frame {
+                seq: 1,
+                message: Message::HelloReply { .. }
+            })
+        ));
+        let mut select = BytesMut::new();
+        SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
+        sonar.write_all(&select).await.unwrap();
+        // Give the select time to cross its pty before time moves on.
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        sensor
+            .write_all(&send(2, Message::TimeAdvance { ticks: 150 }))
+            .await
+            .unwrap();
+        let time = read_item(&mut sensor, &mut sbuf, &mut sdec).await;
+        assert!(
+            matches!(
+                time,
+                LineItem::Frame(Frame {
+                    seq: 2,
+                    message: Message::Time { ticks: 150, .. }
+                })
+            ),
+            "{time:?}"
+        );
+        let (mut nbuf, mut ndec) = (BytesMut::new(), LineDecoder::new());
+        assert!(matches!(
+            read_item(&mut sonar, &mut nbuf, &mut ndec).await,
+            LineItem::Sonar(SonarCommand::Ack(_))
+        ));
+        assert!(matches!(
+            read_item(&mut sonar, &mut nbuf, &mut ndec).await,
+            LineItem::Nmea(_)
+        ));
+
+        tokio::time::sleep(STATUS_PERIOD * 2).await;
+        let status = status::query(&run_dir.join("status.sock"), Duration::from_secs(2))
+            .await
+            .unwrap();
+        assert_eq!(status.sim_time_s, 1.5);
+        assert_eq!(status.time_mode, "lockstep");
+
+        stop_tx.send(true).unwrap();
+        let summary = tokio::time::timeout(Duration::from_secs(1), daemon)
+            .await
+            .expect("shutdown within 1 s")
+            .unwrap()
+            .unwrap();
+        assert_eq!(summary.sim_time_s, 1.5);
+        let records = summary.records.unwrap();
+        assert!(records.chunks >= 6, "{records:?}");
+        assert!(records.states > 0);
+        for name in ["sonar", "sensor", "status.sock"] {
+            assert!(
+                std::fs::symlink_metadata(run_dir.join(name)).is_err(),
+                "{name} removed"
+            );
+        }
+        assert!(!dir.join("pid").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
