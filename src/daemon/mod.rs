@@ -471,11 +471,10 @@ mod tests {
             .await
         });
         let mut links = Vec::new();
-        loop {
-            match ready_rx.recv().await.expect("daemon reports readiness") {
-                Readiness::Link { name, path } => links.push((name, path)),
-                Readiness::Ready { .. } => break,
-            }
+        while let Readiness::Link { name, path } =
+            ready_rx.recv().await.expect("daemon reports readiness")
+        {
+            links.push((name, path));
         }
         assert_eq!(
             links.iter().map(|l| l.0).collect::<Vec<_>>(),
