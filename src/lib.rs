@@ -20,6 +20,7 @@ pub mod config;
 pub mod daemon;
 pub mod devices;
 pub mod physics;
+pub mod probe;
 pub mod record;
 pub mod transport;
 pub mod validate;

@@ -9,8 +9,11 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
+use firmware_protocol::Talker;
+
 use super::clock::TimeMode;
 use crate::config::{ConfigError, Document};
+use crate::devices::multiplexer::{DepthSentence, InvalidEcho, MultiplexerSettings};
 use crate::transport::{FlowControl, LineSettings};
 
 #[derive(Debug, Deserialize)]
@@ -63,8 +66,26 @@ fn default_tx_queue() -> usize {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawDevices {
+    multiplexer: RawMultiplexer,
+    compass: RawCompassDevice,
     motor_driver: RawMotorDriver,
     lockstep: RawLockstep,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMultiplexer {
+    sentence: String,
+    talker: String,
+    dpt_offset_m: f64,
+    invalid_echo: String,
+    proprietary: bool,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCompassDevice {
+    continuous_period_s: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -120,6 +141,10 @@ pub struct DaemonConfig {
     pub watchdog: Option<Duration>,
     /// Length of one lockstep tick (MK4 `OSGetCount` tick: 1/100 s).
     pub tick: Duration,
+    /// The PICAXE master's sentence settings.
+    pub multiplexer: MultiplexerSettings,
+    /// Period of the compass's continuous mode.
+    pub compass_period: Duration,
 }
 
 impl DaemonConfig {
@@ -163,6 +188,44 @@ impl DaemonConfig {
         if raw.run.run_dir.is_empty() {
             return Err(doc.invalid("run.run_dir", "must not be empty"));
         }
+        let m = &raw.devices.multiplexer;
+        let sentence = match m.sentence.as_str() {
+            "DBT" => DepthSentence::Dbt,
+            "DPT" => DepthSentence::Dpt {
+                offset_m: doc.check_range(
+                    "devices.multiplexer.dpt_offset_m",
+                    m.dpt_offset_m,
+                    -99.0,
+                    99.0,
+                    "m",
+                )?,
+            },
+            other => {
+                return Err(doc.invalid(
+                    "devices.multiplexer.sentence",
+                    format!("`{other}` is not a depth sentence; expected `DBT` or `DPT`"),
+                ));
+            }
+        };
+        let talker = Talker::new(&m.talker)
+            .map_err(|e| doc.invalid("devices.multiplexer.talker", e.to_string()))?;
+        let invalid_echo = match m.invalid_echo.as_str() {
+            "omit" => InvalidEcho::Omit,
+            "empty" => InvalidEcho::EmptyFields,
+            other => {
+                return Err(doc.invalid(
+                    "devices.multiplexer.invalid_echo",
+                    format!("`{other}` is not a policy; expected `omit` or `empty`"),
+                ));
+            }
+        };
+        let compass_period_s = doc.check_range(
+            "devices.compass.continuous_period_s",
+            raw.devices.compass.continuous_period_s,
+            0.01,
+            10.0,
+            "s",
+        )?;
         let sonar = resolve_link(doc, "sonar", raw.links.sonar, false)?;
         let sensor = resolve_link(doc, "sensor", raw.links.sensor, true)?;
         Ok(Self {
@@ -178,6 +241,13 @@ impl DaemonConfig {
             sensor,
             watchdog: (watchdog_s > 0.0).then(|| Duration::from_secs_f64(watchdog_s)),
             tick: Duration::from_secs_f64(tick_s),
+            multiplexer: MultiplexerSettings {
+                sentence,
+                talker,
+                invalid_echo,
+                proprietary: m.proprietary,
+            },
+            compass_period: Duration::from_secs_f64(compass_period_s),
         })
     }
 }
