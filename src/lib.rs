@@ -22,6 +22,7 @@ pub mod devices;
 pub mod physics;
 pub mod probe;
 pub mod record;
+pub mod sensors;
 pub mod transport;
 pub mod validate;
 
