@@ -1,20 +1,24 @@
 use std::process::ExitCode;
 
 use clap::Parser;
+use eyebot_hil::cli::{Cli, LogFormat};
+use tracing_subscriber::EnvFilter;
 
 fn main() -> ExitCode {
-    let cli = eyebot_hil::cli::Cli::parse();
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("EYEBOT_HIL_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    let cli = Cli::parse();
+    let filter =
+        EnvFilter::try_from_env("EYEBOT_HIL_LOG").unwrap_or_else(|_| EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    match cli.log_format {
+        LogFormat::Text => builder.init(),
+        LogFormat::Json => builder.json().init(),
+    }
     match eyebot_hil::cli::main(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("eyebot-hil: {err:#}");
+            eprintln!("eyebot-hil: {err}");
             ExitCode::FAILURE
         }
     }

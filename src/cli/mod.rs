@@ -1,37 +1,75 @@
 //! The command-line interface: argument definitions and dispatch. Each subcommand lives in
 //! its own module; `main.rs` only parses, installs tracing and calls [`main`].
 
-use clap::{Parser, Subcommand};
+pub mod probe;
+pub mod status;
+
+use clap::{Parser, Subcommand, ValueEnum};
 
 /// Hardware-in-the-loop bridge for the EyeBot MK4 controller of the Mako AUV.
 #[derive(Debug, Parser)]
 #[command(name = "eyebot-hil", version, about, long_about = None)]
 pub struct Cli {
+    /// Log format on stderr. The level comes from EYEBOT_HIL_LOG (tracing env-filter
+    /// syntax, default `info`).
+    #[arg(long, value_enum, global = true, default_value_t = LogFormat::Text)]
+    pub log_format: LogFormat,
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// How log events are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LogFormat {
+    Text,
+    Json,
 }
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run the bridge daemon on the embedded default configuration (or --config FILE).
     Run,
+    /// Ask a running daemon for its status.
+    Status(status::StatusArgs),
+    /// Talk to a running bridge as an EyeBot would (ADC, compass, sonar, thrusters, time).
+    Probe(probe::ProbeArgs),
 }
 
 /// Errors that end a CLI command.
 #[derive(Debug, thiserror::Error)]
 pub enum CliError {
-    #[error("`{command}` is not implemented yet: {what}")]
-    NotYet {
-        command: &'static str,
-        what: &'static str,
-    },
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    #[error(transparent)]
+    Daemon(#[from] crate::daemon::DaemonError),
+    #[error(transparent)]
+    Status(#[from] crate::daemon::status::StatusError),
+    #[error(transparent)]
+    Probe(#[from] crate::probe::ProbeError),
+    #[error("{0}")]
+    Usage(String),
+    #[error("cannot write output: {0}")]
+    Output(String),
+    #[error("cannot start the async runtime: {0}")]
+    Runtime(#[source] std::io::Error),
+}
+
+/// A single-threaded tokio runtime: the daemon's work is I/O bound and its core is one
+/// state machine; the recorder has its own thread.
+pub fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(CliError::Runtime)
 }
 
 pub fn main(cli: Cli) -> Result<(), CliError> {
     match cli.command {
-        Command::Run => Err(CliError::NotYet {
-            command: "run",
-            what: "the daemon (issue 5) is not built yet; the wire protocols live in firmware-protocol",
-        }),
+        Command::Run => Err(CliError::Usage(
+            "`run` is being wired to the physics model (issue 5); not available in this build yet"
+                .into(),
+        )),
+        Command::Status(args) => status::main(args),
+        Command::Probe(args) => probe::main(args),
     }
 }

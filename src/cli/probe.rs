@@ -1,0 +1,215 @@
+//! `eyebot-hil probe`: a small EyeBot-side client for people and scripts.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use clap::{Args, Subcommand, ValueEnum};
+use firmware_protocol::sensor_link::{
+    AdcChannel, CompassMode, CompassOutput, Direction, Message, ThrusterCommand,
+};
+use firmware_protocol::{HeadingFormat, Transducer};
+
+use super::CliError;
+use crate::probe::{SensorClient, SonarClient, SonarItem};
+use crate::transport::LineSettings;
+
+/// Talk to a running bridge as an EyeBot would.
+#[derive(Debug, Args)]
+pub struct ProbeArgs {
+    /// The link to open: the sensor link for adc/compass/thrusters/advance/time/hello/counters,
+    /// the sonar link for `sonar`.
+    #[arg(long)]
+    pub link: PathBuf,
+    /// Line settings, e.g. "115200 8N1" (default: 115200 8N1, or 4800 8N1 for `sonar`).
+    #[arg(long)]
+    pub line: Option<LineSettings>,
+    #[command(subcommand)]
+    pub action: ProbeAction,
+}
+
+/// Compass output format.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum CompassFormat {
+    Binary,
+    Bcd,
+    Raw,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ProbeAction {
+    /// Say hello: print the bridge's protocol version, capabilities and tick.
+    Hello,
+    /// Print the bridge's link counters.
+    Counters,
+    /// Read ADC channel 0-7 (prints the 10-bit code and its voltage).
+    Adc {
+        channel: u8,
+        /// Read this many times, one line each.
+        #[arg(long, default_value_t = 1)]
+        count: u32,
+    },
+    /// Read the compass heading.
+    Compass {
+        #[arg(long, value_enum, default_value_t = CompassFormat::Binary)]
+        format: CompassFormat,
+    },
+    /// Select a sonar transducer (1-4) and print what the multiplexer sends.
+    Sonar {
+        transducer: u8,
+        /// Stop after this many sentences.
+        #[arg(long, default_value_t = 3)]
+        count: u32,
+        /// Give up after this many seconds.
+        #[arg(long, default_value_t = 10.0)]
+        timeout_s: f64,
+    },
+    /// Set the thrusters in signed percent (-100..100), port starboard bow stern.
+    Thrusters {
+        #[arg(allow_negative_numbers = true)]
+        port: i32,
+        #[arg(allow_negative_numbers = true)]
+        starboard: i32,
+        #[arg(allow_negative_numbers = true)]
+        bow: i32,
+        #[arg(allow_negative_numbers = true)]
+        stern: i32,
+    },
+    /// Lockstep: advance simulated time by N ticks and print the new time.
+    Advance { ticks: u32 },
+    /// Print the simulated time.
+    Time,
+}
+
+/// Signed percent to the motor driver's inverted PWM duty and direction, linearly (the
+/// vehicle's HDT table, applied by the bridge's physics, balances the motors).
+pub fn percent_to_command(percent: i32) -> Result<ThrusterCommand, CliError> {
+    if !(-100..=100).contains(&percent) {
+        return Err(CliError::Usage(format!(
+            "thrust {percent} % is outside -100..100"
+        )));
+    }
+    let on = f64::from(percent.unsigned_abs()) / 100.0;
+    Ok(ThrusterCommand {
+        duty: (255.0 * (1.0 - on)).round() as u8,
+        direction: if percent < 0 {
+            Direction::Reverse
+        } else {
+            Direction::Forward
+        },
+    })
+}
+
+pub fn main(args: ProbeArgs) -> Result<(), CliError> {
+    let runtime = super::runtime()?;
+    runtime.block_on(async move {
+        if let ProbeAction::Sonar {
+            transducer,
+            count,
+            timeout_s,
+        } = args.action
+        {
+            let line = args.line.unwrap_or(LineSettings::n81(4800));
+            let mut sonar = SonarClient::open(&args.link, &line)?;
+            let t = Transducer::new(transducer).map_err(|e| CliError::Usage(e.to_string()))?;
+            sonar.select(t).await?;
+            let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
+            let mut sentences = 0;
+            while sentences < count {
+                let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+                match sonar.next(left).await? {
+                    None => return Err(CliError::Usage(format!("timed out after {timeout_s} s"))),
+                    Some(SonarItem::Ack(t)) => println!("ack transducer {t}"),
+                    Some(SonarItem::Nak) => println!("nak"),
+                    Some(SonarItem::Sentence { raw, .. }) => {
+                        println!("{raw}");
+                        sentences += 1;
+                    }
+                    Some(SonarItem::Error(e)) => println!("error: {e}"),
+                }
+            }
+            return Ok(());
+        }
+        let line = args.line.unwrap_or(LineSettings::n81(115_200));
+        let mut client = SensorClient::open(&args.link, &line)?;
+        match args.action {
+            ProbeAction::Hello => {
+                let reply = client.request("HELLO", Message::Hello { client_version: 1 }, Duration::ZERO).await?;
+                if let Message::HelloReply {
+                    protocol_version,
+                    capabilities,
+                    tick_us,
+                    max_payload,
+                } = reply
+                {
+                    println!("protocol {protocol_version} capabilities {capabilities:#06x} tick {tick_us} us max payload {max_payload}");
+                }
+            }
+            ProbeAction::Counters => {
+                if let Message::Counters(c) = client.request("COUNTERS_GET", Message::CountersGet, Duration::ZERO).await? {
+                    println!(
+                        "rx_frames {} rx_crc_errors {} rx_framing_errors {} rx_skipped_bytes {} rx_rejected {} tx_frames {} tx_naks {}",
+                        c.rx_frames, c.rx_crc_errors, c.rx_framing_errors, c.rx_skipped_bytes, c.rx_rejected, c.tx_frames, c.tx_naks
+                    );
+                }
+            }
+            ProbeAction::Adc { channel, count } => {
+                let channel = AdcChannel::new(channel).map_err(|e| CliError::Usage(e.to_string()))?;
+                for _ in 0..count {
+                    if let Message::AdcValue { value, .. } = client.request("ADC_READ", Message::AdcRead { channel }, Duration::ZERO).await? {
+                        println!("adc {} = {} ({:.3} V)", channel.get(), value.get(), f64::from(value.get()) * 5.0 / 1024.0);
+                    }
+                }
+            }
+            ProbeAction::Compass { format } => {
+                let output = match format {
+                    CompassFormat::Binary => CompassOutput::Binary,
+                    CompassFormat::Bcd => CompassOutput::Bcd,
+                    CompassFormat::Raw => CompassOutput::Raw,
+                };
+                client
+                    .request("COMPASS_MODE", Message::CompassMode { mode: CompassMode::Poll, output }, Duration::ZERO)
+                    .await?;
+                match client.request("COMPASS_READ", Message::CompassRead, Duration::ZERO).await? {
+                    Message::CompassHeading { word } => {
+                        let fmt = if matches!(format, CompassFormat::Bcd) { HeadingFormat::Bcd } else { HeadingFormat::Binary };
+                        match word.decode(fmt) {
+                            Ok(deg) => println!("heading {deg} deg (word {:#06x})", word.0),
+                            Err(e) => println!("bad heading word: {e}"),
+                        }
+                    }
+                    Message::CompassRaw { x, y } => println!("raw x {x} y {y}"),
+                    other => println!("unexpected reply {other:?}"),
+                }
+            }
+            ProbeAction::Thrusters {
+                port,
+                starboard,
+                bow,
+                stern,
+            } => {
+                let commands = [
+                    percent_to_command(port)?,
+                    percent_to_command(starboard)?,
+                    percent_to_command(bow)?,
+                    percent_to_command(stern)?,
+                ];
+                client.request("THRUSTER_SET_ALL", Message::ThrusterSetAll { commands }, Duration::ZERO).await?;
+                println!("thrusters set");
+            }
+            ProbeAction::Advance { ticks } => {
+                // Allow the bridge time to simulate: generously 1 ms per tick.
+                let extra = Duration::from_millis(u64::from(ticks));
+                if let Message::Time { ticks, tick_us } = client.request("TIME_ADVANCE", Message::TimeAdvance { ticks }, extra).await? {
+                    println!("time {ticks} ticks ({:.3} s)", f64::from(ticks) * f64::from(tick_us) * 1e-6);
+                }
+            }
+            ProbeAction::Time => {
+                if let Message::Time { ticks, tick_us } = client.request("TIME_GET", Message::TimeGet, Duration::ZERO).await? {
+                    println!("time {ticks} ticks ({:.3} s)", f64::from(ticks) * f64::from(tick_us) * 1e-6);
+                }
+            }
+            ProbeAction::Sonar { .. } => unreachable!("handled above"),
+        }
+        Ok(())
+    })
+}
