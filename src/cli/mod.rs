@@ -1,10 +1,15 @@
 //! The command-line interface: argument definitions and dispatch. Each subcommand lives in
 //! its own module; `main.rs` only parses, installs tracing and calls [`main`].
 
-pub mod probe;
-pub mod status;
+use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
+
+pub mod probe;
+pub mod run;
+pub mod simulate;
+pub mod status;
+pub mod validate;
 
 /// Hardware-in-the-loop bridge for the EyeBot MK4 controller of the Mako AUV.
 #[derive(Debug, Parser)]
@@ -28,11 +33,15 @@ pub enum LogFormat {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run the bridge daemon on the embedded default configuration (or --config FILE).
-    Run,
+    Run(run::RunArgs),
     /// Ask a running daemon for its status.
     Status(status::StatusArgs),
     /// Talk to a running bridge as an EyeBot would (ADC, compass, sonar, thrusters, time).
     Probe(probe::ProbeArgs),
+    /// Run one experiment offline as fast as possible and write the state trace as CSV.
+    Simulate(simulate::SimulateArgs),
+    /// Run the thesis experiments and compare with Mako's measurements and SubSim's.
+    Validate(validate::ValidateArgs),
 }
 
 /// Errors that end a CLI command.
@@ -46,9 +55,23 @@ pub enum CliError {
     Status(#[from] crate::daemon::status::StatusError),
     #[error(transparent)]
     Probe(#[from] crate::probe::ProbeError),
+    #[error("experiment `{experiment}`: {source}")]
+    Physics {
+        experiment: String,
+        source: crate::physics::PhysicsError,
+    },
+    #[error(transparent)]
+    Validate(#[from] crate::validate::ValidateError),
+    #[error("{failed} of {total} validation rows failed")]
+    ValidationFailed { failed: usize, total: usize },
+    #[error("cannot write `{}`: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{0}")]
     Usage(String),
-    #[error("cannot write output: {0}")]
+    #[error("cannot format output: {0}")]
     Output(String),
     #[error("cannot start the async runtime: {0}")]
     Runtime(#[source] std::io::Error),
@@ -65,11 +88,10 @@ pub fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
 
 pub fn main(cli: Cli) -> Result<(), CliError> {
     match cli.command {
-        Command::Run => Err(CliError::Usage(
-            "`run` is being wired to the physics model (issue 5); not available in this build yet"
-                .into(),
-        )),
+        Command::Run(args) => run::main(args),
         Command::Status(args) => status::main(args),
         Command::Probe(args) => probe::main(args),
+        Command::Simulate(args) => simulate::run(&args),
+        Command::Validate(args) => validate::run(&args),
     }
 }

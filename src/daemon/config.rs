@@ -23,6 +23,7 @@ struct RawDaemon {
     world: String,
     sensors: String,
     run: RawRun,
+    start: RawStart,
     links: RawLinks,
     devices: RawDevices,
 }
@@ -36,6 +37,13 @@ struct RawRun {
     max_lag_ms: f64,
     run_dir: String,
     state_record_hz: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStart {
+    position_m: [f64; 3],
+    heading_deg: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -123,6 +131,15 @@ pub struct LinkConfig {
     pub tx_queue_bytes: usize,
 }
 
+/// Where the vehicle starts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Start {
+    /// Centre of mass, NED (m).
+    pub position_m: nalgebra::Vector3<f64>,
+    /// Compass heading (deg, clockwise from north).
+    pub heading_deg: f64,
+}
+
 /// The daemon's resolved settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DaemonConfig {
@@ -135,6 +152,7 @@ pub struct DaemonConfig {
     pub max_lag: Duration,
     pub run_dir: PathBuf,
     pub state_record_hz: f64,
+    pub start: Start,
     pub sonar: LinkConfig,
     pub sensor: LinkConfig,
     /// Zero the thrusters after this long without a thruster frame; `None` = off.
@@ -226,6 +244,22 @@ impl DaemonConfig {
             10.0,
             "s",
         )?;
+        for (i, axis) in ["x", "y", "z"].iter().enumerate() {
+            doc.check_range(
+                "start.position_m",
+                raw.start.position_m[i],
+                -1000.0,
+                1000.0,
+                &format!("m ({axis})"),
+            )?;
+        }
+        let heading_deg = doc.check_range(
+            "start.heading_deg",
+            raw.start.heading_deg,
+            -360.0,
+            360.0,
+            "deg",
+        )?;
         let sonar = resolve_link(doc, "sonar", raw.links.sonar, false)?;
         let sensor = resolve_link(doc, "sensor", raw.links.sensor, true)?;
         Ok(Self {
@@ -237,6 +271,10 @@ impl DaemonConfig {
             max_lag: Duration::from_secs_f64(max_lag_ms / 1000.0),
             run_dir: PathBuf::from(raw.run.run_dir),
             state_record_hz,
+            start: Start {
+                position_m: nalgebra::Vector3::from(raw.start.position_m),
+                heading_deg,
+            },
             sonar,
             sensor,
             watchdog: (watchdog_s > 0.0).then(|| Duration::from_secs_f64(watchdog_s)),

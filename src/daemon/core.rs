@@ -143,6 +143,7 @@ impl<M: Model> Core<M> {
         self.recorder = Some(recorder);
         self.state_period_ns = state_period_ns.max(1);
         self.next_state_ns = self.now;
+        self.record_state();
     }
 
     /// Stops recording and returns the recorder (to finish it).
@@ -362,7 +363,9 @@ impl<M: Model> Core<M> {
         };
         if self.now >= self.next_state_ns {
             rec.state(crate::record::state_row(&self.model.state()));
-            self.next_state_ns += self.state_period_ns;
+            // Rows fall on the period's grid; a gap (none in normal stepping) is skipped.
+            let periods = (self.now - self.next_state_ns) / self.state_period_ns + 1;
+            self.next_state_ns += periods * self.state_period_ns;
         }
     }
 

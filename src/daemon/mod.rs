@@ -11,6 +11,7 @@ pub mod clock;
 pub mod config;
 pub mod core;
 pub mod link;
+pub mod plant;
 pub mod status;
 
 use std::path::{Path, PathBuf};

@@ -153,3 +153,32 @@ mod tests {
         assert!(table.contains("0.440 m/s"));
     }
 }
+
+pub mod physics;
+
+/// What every row source gets: where the configuration files come from and the seed.
+/// `eyebot-hil validate` calls each source in [`crate::cli::validate`]'s list with it.
+pub struct Context<'a> {
+    /// The configs: the embedded copies, or a directory given by the user.
+    pub configs: &'a dyn crate::config::ConfigSource,
+    /// Seed of every RNG stream used by the runs.
+    pub seed: u64,
+}
+
+/// Why a row source could not produce its rows (a failed check is a row with `pass: false`,
+/// not an error).
+#[derive(Debug, thiserror::Error)]
+pub enum ValidateError {
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    #[error("experiment `{experiment}`: {source}")]
+    Physics {
+        experiment: String,
+        source: crate::physics::PhysicsError,
+    },
+    #[error("experiment `{experiment}`: cannot measure {what}")]
+    Measurement {
+        experiment: String,
+        what: &'static str,
+    },
+}

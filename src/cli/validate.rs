@@ -1,0 +1,68 @@
+//! `eyebot-hil validate [--json] [--configs DIR] [--seed N]`: the thesis's measurements next to
+//! SubSim's and ours. Rows come from the sources in [`ROW_SOURCES`]; each computes its rows by
+//! running the simulator now.
+
+use std::path::PathBuf;
+
+use crate::cli::CliError;
+use crate::config::{ConfigSource, Directory, Embedded};
+use crate::validate::{Context, Row, ValidateError, render_table};
+
+/// A producer of validation rows.
+pub type RowSource = fn(&Context<'_>) -> Result<Vec<Row>, ValidateError>;
+
+/// Every row source, in table order. Add sensor rows here.
+pub const ROW_SOURCES: &[RowSource] = &[crate::validate::physics::rows];
+
+/// Arguments of `validate`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ValidateArgs {
+    /// Print one JSON array of rows instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Read configs from this directory instead of the embedded copies of configs/.
+    #[arg(long)]
+    pub configs: Option<PathBuf>,
+    /// Seed of every RNG stream.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// All rows from all sources.
+pub fn collect(ctx: &Context<'_>) -> Result<Vec<Row>, ValidateError> {
+    let mut rows = Vec::new();
+    for source in ROW_SOURCES {
+        rows.extend(source(ctx)?);
+    }
+    Ok(rows)
+}
+
+pub fn run(args: &ValidateArgs) -> Result<(), CliError> {
+    let dir;
+    let configs: &dyn ConfigSource = match &args.configs {
+        Some(path) => {
+            dir = Directory::new(path);
+            &dir
+        }
+        None => &Embedded,
+    };
+    let rows = collect(&Context {
+        configs,
+        seed: args.seed,
+    })?;
+    if args.json {
+        let json =
+            serde_json::to_string_pretty(&rows).map_err(|e| CliError::Output(e.to_string()))?;
+        println!("{json}");
+    } else {
+        print!("{}", render_table(&rows));
+    }
+    let failed = rows.iter().filter(|r| !r.pass).count();
+    if failed > 0 {
+        return Err(CliError::ValidationFailed {
+            failed,
+            total: rows.len(),
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,283 @@
+//! The simulated Mako behind the devices: the physics and the sensor suite, stepped together.
+//!
+//! [`MakoPlant`] implements the devices' [`Plant`] (what an ADC read, a compass read, a
+//! thruster command or a sonar select does) and the core's [`Model`] (fixed-step advance).
+//! After every physics step the sensors sample the new state, so every reading the devices
+//! hand out is of a state the physics really passed through.
+
+use firmware_protocol::sensor_link::{
+    CalibrationAction, CalibrationState, Direction, ThrusterCommand,
+};
+use nalgebra::{UnitQuaternion, Vector3};
+
+use super::config::DaemonConfig;
+use super::core::Model;
+use crate::SimNanos;
+use crate::config::{ConfigError, ConfigSource};
+use crate::devices::multiplexer::Multiplexer;
+use crate::devices::sensor_board::{BoardSettings, SensorBoard};
+use crate::devices::{CalibrationProgress, CalibrationRefused, CompassSample, Plant, SonarEvent};
+use crate::physics::state::VehicleState;
+use crate::physics::{self, InitialState, PhysicsError, Simulation};
+use crate::sensors::{self, CompassMode, SensorSuite, SensorsConfig};
+
+/// Physics and sensors of one run.
+pub struct MakoPlant {
+    sim: Simulation,
+    sensors: SensorSuite,
+    step_ns: u64,
+    resolution_m: f64,
+    calibration: CalibrationProgress,
+    /// Sonar events taken from the sensor model, not yet due.
+    sonar_events: Vec<sensors::SonarEvent>,
+}
+
+impl std::fmt::Debug for MakoPlant {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MakoPlant")
+            .field("t_s", &self.sim.t_s())
+            .finish_non_exhaustive()
+    }
+}
+
+fn ns(t_s: f64) -> SimNanos {
+    (t_s * 1e9).round().max(0.0) as SimNanos
+}
+
+impl MakoPlant {
+    /// Builds the vehicle, world and sensors named by `config` from `source`.
+    pub fn from_config(
+        source: &dyn ConfigSource,
+        config: &DaemonConfig,
+    ) -> Result<Self, ConfigError> {
+        let model = physics::load_model(source, &config.vehicle, &config.world)?;
+        let sensors_config = SensorsConfig::load(source, &config.sensors)?;
+        let initial = InitialState {
+            position_m: config.start.position_m,
+            attitude: UnitQuaternion::from_euler_angles(
+                0.0,
+                0.0,
+                config.start.heading_deg.to_radians(),
+            ),
+            velocity_body_mps: Vector3::zeros(),
+            angular_velocity_body_radps: Vector3::zeros(),
+        };
+        Ok(Self::new(
+            Simulation::new(model, &initial, config.seed),
+            &sensors_config,
+            config.seed,
+        ))
+    }
+
+    /// A plant from an already built simulation and sensor settings.
+    pub fn new(sim: Simulation, sensors_config: &SensorsConfig, seed: u64) -> Self {
+        let step_ns = ns(sim.model().step_s());
+        let mut sensors = SensorSuite::new(sensors_config, seed);
+        // The Vector 2X on Mako runs free (master mode, about 2.5 readings a second); the
+        // device emulator hands out its latest completed reading.
+        sensors.compass.set_mode(CompassMode::Continuous, sim.t_s());
+        sensors.update(&sim.state(), sim.ray_caster());
+        Self {
+            resolution_m: sensors_config.sonar.resolution_m,
+            sim,
+            sensors,
+            step_ns,
+            calibration: CalibrationProgress {
+                state: CalibrationState::Idle,
+                points: 0,
+            },
+            sonar_events: Vec::new(),
+        }
+    }
+
+    pub fn simulation(&self) -> &Simulation {
+        &self.sim
+    }
+
+    pub fn sensors(&self) -> &SensorSuite {
+        &self.sensors
+    }
+
+    fn t_s(now: SimNanos) -> f64 {
+        now as f64 * 1e-9
+    }
+
+    fn pull_sonar(&mut self) {
+        let due = self.sensors.sonar.poll(f64::INFINITY);
+        self.sonar_events.extend(due);
+    }
+}
+
+impl Plant for MakoPlant {
+    fn adc(&mut self, channel: u8, now: SimNanos) -> u16 {
+        self.sensors.read_adc(channel, Self::t_s(now)).unwrap_or(0)
+    }
+
+    fn compass(&mut self, _now: SimNanos) -> CompassSample {
+        let reading = match self.sensors.compass.latest() {
+            Some((_, r)) => r,
+            None => self.sensors.compass.convert_now(),
+        };
+        CompassSample {
+            heading_deg: reading.heading_deg,
+            raw_x: reading.raw_x,
+            raw_y: reading.raw_y,
+        }
+    }
+
+    fn compass_calibrate(
+        &mut self,
+        action: CalibrationAction,
+        _now: SimNanos,
+    ) -> Result<CalibrationProgress, CalibrationRefused> {
+        let c = self.calibration;
+        let refused = CalibrationRefused {
+            action,
+            state: c.state,
+            points: c.points,
+        };
+        self.calibration = match action {
+            CalibrationAction::Start => {
+                self.sensors.compass.calibration_reset();
+                CalibrationProgress {
+                    state: CalibrationState::Collecting,
+                    points: 0,
+                }
+            }
+            CalibrationAction::TakePoint if c.state == CalibrationState::Collecting => {
+                self.sensors.compass.calibration_reading();
+                let points = c.points + 1;
+                CalibrationProgress {
+                    state: if points == 2 {
+                        CalibrationState::ReadyToFinish
+                    } else {
+                        CalibrationState::Collecting
+                    },
+                    points,
+                }
+            }
+            CalibrationAction::Finish if c.state == CalibrationState::ReadyToFinish => {
+                CalibrationProgress {
+                    state: CalibrationState::Idle,
+                    points: 2,
+                }
+            }
+            CalibrationAction::Clear => {
+                self.sensors.compass.calibration_reset();
+                CalibrationProgress {
+                    state: CalibrationState::Idle,
+                    points: 0,
+                }
+            }
+            _ => return Err(refused),
+        };
+        Ok(self.calibration)
+    }
+
+    fn compass_reset(&mut self, now: SimNanos) {
+        // A finished calibration is kept (the Vector 2X holds it in EEPROM, PROTOCOL.md 2.6).
+        self.sensors
+            .compass
+            .set_mode(CompassMode::Continuous, Self::t_s(now));
+        if self.calibration.state != CalibrationState::Idle {
+            self.calibration = CalibrationProgress {
+                state: CalibrationState::Idle,
+                points: 0,
+            };
+        }
+    }
+
+    fn set_thrusters(&mut self, commands: [ThrusterCommand; 4], _now: SimNanos) {
+        self.sim
+            .set_commands(commands.map(|c| physics::ThrusterCommand {
+                duty: c.duty,
+                direction: match c.direction {
+                    Direction::Forward => physics::Direction::Forward,
+                    Direction::Reverse => physics::Direction::Reverse,
+                },
+            }));
+    }
+
+    fn sonar_select(&mut self, transducer: u8, now: SimNanos) {
+        // The wire numbers transducers 1..=4, the sensor model 0..=3.
+        let index = usize::from(transducer.saturating_sub(1));
+        if let Err(e) = self.sensors.sonar.select(index, Self::t_s(now)) {
+            tracing::warn!(error = %e, "sonar select refused");
+        }
+        self.pull_sonar();
+    }
+
+    fn sonar_poll(&mut self, now: SimNanos, out: &mut Vec<(SimNanos, SonarEvent)>) {
+        self.pull_sonar();
+        self.sonar_events
+            .sort_by(|a, b| a.t_s().total_cmp(&b.t_s()));
+        let due = self.sonar_events.partition_point(|e| ns(e.t_s()) <= now);
+        for event in self.sonar_events.drain(..due) {
+            let at = ns(event.t_s());
+            out.push(match event {
+                sensors::SonarEvent::Ack { transducer, .. } => (
+                    at,
+                    SonarEvent::Switched {
+                        transducer: transducer as u8 + 1,
+                    },
+                ),
+                sensors::SonarEvent::Range { range, source, .. } => (
+                    at,
+                    SonarEvent::Reading {
+                        transducer: source as u8 + 1,
+                        range_m: Some(f64::from(range.0) * self.resolution_m),
+                        quality_pct: 100,
+                    },
+                ),
+            });
+        }
+    }
+
+    fn sonar_timeout(&self) -> Option<SimNanos> {
+        let queued = self.sonar_events.iter().map(|e| ns(e.t_s())).min();
+        let model = self.sensors.sonar.poll_timeout().map(ns);
+        queued.into_iter().chain(model).min()
+    }
+}
+
+impl Model for MakoPlant {
+    type Error = PhysicsError;
+
+    fn advance_to(&mut self, t: SimNanos) -> Result<(), PhysicsError> {
+        let mut steps = (t / self.step_ns).saturating_sub(self.sim.sim_state().steps());
+        while steps > 0 {
+            self.sim.step()?;
+            self.sensors
+                .update(&self.sim.state(), self.sim.ray_caster());
+            steps -= 1;
+        }
+        Ok(())
+    }
+
+    fn state(&self) -> VehicleState {
+        self.sim.state()
+    }
+
+    fn contacts(&self) -> u64 {
+        self.sim.contact_count()
+    }
+}
+
+/// The device emulators for `config`.
+pub fn devices(config: &DaemonConfig) -> (SensorBoard, Multiplexer) {
+    let shared = config.sensor.endpoint == super::config::Endpoint::SharedWithSonar;
+    let line = if shared {
+        config.sonar.line
+    } else {
+        config.sensor.line
+    };
+    let board = SensorBoard::new(BoardSettings {
+        tick_ns: config.tick.as_nanos() as u64,
+        lockstep: config.time_mode == super::clock::TimeMode::Lockstep,
+        compass_period_ns: config.compass_period.as_nanos() as u64,
+        line_chars_per_s: 1.0 / line.char_time_s(),
+        watchdog_ns: config.watchdog.map(|d| d.as_nanos() as u64),
+        sonar_on_this_line: shared,
+    });
+    (board, Multiplexer::new(config.multiplexer.clone()))
+}

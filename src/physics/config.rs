@@ -1,0 +1,698 @@
+//! Vehicle and world settings: raw TOML structs (`deny_unknown_fields`) resolved into checked,
+//! derived values (centre of mass, inertia tensor, thruster positions about the centre of mass).
+//!
+//! The loaders take a [`Document`] (text plus its origin), never a path; every range error
+//! names the file, the line and the key.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::Deserialize;
+
+use crate::config::{ConfigError, Document};
+use crate::physics::state::{BOW, PORT, STARBOARD, STERN};
+
+/// Thruster names in index order; the `[[thruster]]` tables must appear in this order.
+pub const THRUSTER_NAMES: [&str; 4] = ["port", "starboard", "bow", "stern"];
+
+// ---------------------------------------------------------------------------------------------
+// Raw vehicle file
+// ---------------------------------------------------------------------------------------------
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawVehicle {
+    body: RawBody,
+    #[serde(rename = "mass")]
+    masses: Vec<RawMass>,
+    hydrostatics: RawHydrostatics,
+    added_mass: RawAddedMass,
+    damping: RawDamping,
+    thrusters: RawThrusters,
+    #[serde(rename = "thruster")]
+    thruster: Vec<RawThruster>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBody {
+    length_m: f64,
+    width_m: f64,
+    height_m: f64,
+}
+
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+enum RawMassShape {
+    /// A solid box with edges `size_m` along body x, y, z.
+    Box,
+    /// A solid cylinder along body x: `size_m` = [length, diameter, diameter].
+    CylinderX,
+    /// A point mass (`size_m` ignored, may be omitted).
+    Point,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMass {
+    name: String,
+    mass_kg: f64,
+    shape: RawMassShape,
+    centre_m: [f64; 3],
+    #[serde(default)]
+    size_m: [f64; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHydrostatics {
+    displaced_volume_m3: f64,
+    centre_of_buoyancy_m: [f64; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAddedMass {
+    surge_kg: f64,
+    sway_kg: f64,
+    heave_kg: f64,
+    roll_kgm2: f64,
+    pitch_kgm2: f64,
+    yaw_kgm2: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDamping {
+    linear: [f64; 6],
+    quadratic: [f64; 6],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawThrusters {
+    forward_max_n: f64,
+    deadband: f64,
+    exponent: f64,
+    lag_s: f64,
+    fluctuation_rel_std: f64,
+    fluctuation_corr_s: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawThruster {
+    name: String,
+    position_m: [f64; 3],
+    direction: [f64; 3],
+    gain: f64,
+    reverse_ratio: f64,
+    hdt_duty: Vec<f64>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Resolved vehicle
+// ---------------------------------------------------------------------------------------------
+
+/// One thruster, resolved: position relative to the centre of mass.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ThrusterConfig {
+    pub name: String,
+    /// Where the thrust acts, body frame, relative to the centre of mass.
+    pub position_cg_m: Vector3<f64>,
+    /// Unit direction of positive (forward / down) thrust, body frame.
+    pub direction: Vector3<f64>,
+    /// This motor's forward thrust relative to `forward_max_n` (motors differ, thesis 4.3).
+    pub gain: f64,
+    /// Reverse thrust at full reverse relative to this motor's full forward thrust.
+    pub reverse_ratio: f64,
+    /// The HDT balancing table: PWM duty for MOTORDrive 0, 10, ..., 100 %.
+    pub hdt_duty: [f64; 11],
+}
+
+/// Thruster settings common to all four motors.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ThrusterCommon {
+    pub forward_max_n: f64,
+    /// PWM on-fraction below which the propeller does not turn.
+    pub deadband: f64,
+    /// Shape of the static curve: thrust ~ ((on - deadband) / (1 - deadband))^exponent.
+    pub exponent: f64,
+    pub lag_s: f64,
+    /// Relative standard deviation of the thrust fluctuation at full speed.
+    pub fluctuation_rel_std: f64,
+    pub fluctuation_corr_s: f64,
+}
+
+/// The vehicle model, resolved. Body frame FRD with its origin at the centre of mass.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VehicleConfig {
+    pub mass_kg: f64,
+    /// Inertia tensor about the centre of mass, body axes (kg m^2).
+    pub inertia_kgm2: Matrix3<f64>,
+    /// Centre of mass relative to the centre of the bounding box (body axes).
+    pub cg_from_box_centre_m: Vector3<f64>,
+    /// Bounding-box half extents (the hull collider).
+    pub half_extents_m: Vector3<f64>,
+    pub displaced_volume_m3: f64,
+    /// Centre of buoyancy relative to the centre of mass.
+    pub cb_m: Vector3<f64>,
+    /// Added mass, diagonal: surge, sway, heave (kg), roll, pitch, yaw (kg m^2).
+    pub added_mass: [f64; 6],
+    pub damping_linear: [f64; 6],
+    pub damping_quadratic: [f64; 6],
+    pub thruster_common: ThrusterCommon,
+    pub thrusters: [ThrusterConfig; 4],
+}
+
+impl VehicleConfig {
+    /// Parses and resolves a vehicle file.
+    pub fn from_document(doc: &Document<'_>) -> Result<Self, ConfigError> {
+        let raw: RawVehicle = doc.parse()?;
+        resolve_vehicle(doc, raw)
+    }
+}
+
+fn check3(
+    doc: &Document<'_>,
+    key: &str,
+    v: [f64; 3],
+    min: f64,
+    max: f64,
+    unit: &str,
+) -> Result<Vector3<f64>, ConfigError> {
+    for (i, x) in v.iter().enumerate() {
+        doc.check_range(&format!("{key}.{i}"), *x, min, max, unit)?;
+    }
+    Ok(Vector3::from(v))
+}
+
+fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig, ConfigError> {
+    let length = doc.check_range("body.length_m", raw.body.length_m, 0.1, 10.0, "m")?;
+    let width = doc.check_range("body.width_m", raw.body.width_m, 0.1, 10.0, "m")?;
+    let height = doc.check_range("body.height_m", raw.body.height_m, 0.1, 10.0, "m")?;
+    let half = Vector3::new(length, width, height) / 2.0;
+
+    // Centre of mass and inertia from the mass distribution (parallel-axis theorem).
+    if raw.masses.is_empty() {
+        return Err(doc.invalid("mass", "at least one [[mass]] component is required"));
+    }
+    let mut total = 0.0;
+    let mut moment = Vector3::zeros();
+    let mut parts = Vec::with_capacity(raw.masses.len());
+    for (i, m) in raw.masses.iter().enumerate() {
+        let key = format!("mass.{i}");
+        let mass = doc.check_range(&format!("{key}.mass_kg"), m.mass_kg, 0.0, 1000.0, "kg")?;
+        let c = check3(doc, &format!("{key}.centre_m"), m.centre_m, -5.0, 5.0, "m")?;
+        let s = check3(doc, &format!("{key}.size_m"), m.size_m, 0.0, 10.0, "m")?;
+        for axis in 0..3 {
+            if c[axis].abs() > half[axis] + 1e-9 {
+                return Err(doc.invalid(
+                    &format!("{key}.centre_m"),
+                    format!(
+                        "component `{}` lies outside the body's bounding box",
+                        m.name
+                    ),
+                ));
+            }
+        }
+        // Inertia of the component about its own centre, body axes.
+        let own = match m.shape {
+            RawMassShape::Point => Matrix3::zeros(),
+            RawMassShape::Box => Matrix3::from_diagonal(&Vector3::new(
+                mass * (s.y * s.y + s.z * s.z) / 12.0,
+                mass * (s.x * s.x + s.z * s.z) / 12.0,
+                mass * (s.x * s.x + s.y * s.y) / 12.0,
+            )),
+            RawMassShape::CylinderX => {
+                let r = s.y / 2.0;
+                let l = s.x;
+                let across = mass * (3.0 * r * r + l * l) / 12.0;
+                Matrix3::from_diagonal(&Vector3::new(mass * r * r / 2.0, across, across))
+            }
+        };
+        total += mass;
+        moment += c * mass;
+        parts.push((mass, c, own));
+    }
+    if total <= 0.0 {
+        return Err(doc.invalid("mass", "the components' masses sum to zero"));
+    }
+    let cg = moment / total;
+    let mut inertia = Matrix3::zeros();
+    for (mass, c, own) in &parts {
+        let d = c - cg;
+        inertia += own + (Matrix3::identity() * d.dot(&d) - d * d.transpose()) * *mass;
+    }
+
+    let volume = doc.check_range(
+        "hydrostatics.displaced_volume_m3",
+        raw.hydrostatics.displaced_volume_m3,
+        1e-4,
+        10.0,
+        "m^3",
+    )?;
+    let cb_box = check3(
+        doc,
+        "hydrostatics.centre_of_buoyancy_m",
+        raw.hydrostatics.centre_of_buoyancy_m,
+        -5.0,
+        5.0,
+        "m",
+    )?;
+    let cb = cb_box - cg;
+    if cb.z >= 0.0 {
+        return Err(doc.invalid(
+            "hydrostatics.centre_of_buoyancy_m",
+            format!(
+                "the centre of buoyancy must lie above the centre of mass (it is {:.3} m below); \
+                 Mako rights itself (thesis 2.2)",
+                cb.z
+            ),
+        ));
+    }
+
+    let am = &raw.added_mass;
+    let added_mass = [
+        doc.check_range("added_mass.surge_kg", am.surge_kg, 0.0, 1000.0, "kg")?,
+        doc.check_range("added_mass.sway_kg", am.sway_kg, 0.0, 1000.0, "kg")?,
+        doc.check_range("added_mass.heave_kg", am.heave_kg, 0.0, 1000.0, "kg")?,
+        doc.check_range("added_mass.roll_kgm2", am.roll_kgm2, 0.0, 100.0, "kg m^2")?,
+        doc.check_range("added_mass.pitch_kgm2", am.pitch_kgm2, 0.0, 100.0, "kg m^2")?,
+        doc.check_range("added_mass.yaw_kgm2", am.yaw_kgm2, 0.0, 100.0, "kg m^2")?,
+    ];
+    let mut damping_linear = [0.0; 6];
+    let mut damping_quadratic = [0.0; 6];
+    for i in 0..6 {
+        damping_linear[i] = doc.check_range(
+            &format!("damping.linear.{i}"),
+            raw.damping.linear[i],
+            0.0,
+            1e4,
+            "N/(m/s) or N m/(rad/s)",
+        )?;
+        damping_quadratic[i] = doc.check_range(
+            &format!("damping.quadratic.{i}"),
+            raw.damping.quadratic[i],
+            0.0,
+            1e4,
+            "N/(m/s)^2 or N m/(rad/s)^2",
+        )?;
+    }
+    if damping_linear
+        .iter()
+        .zip(&damping_quadratic)
+        .any(|(l, q)| *l + *q <= 0.0)
+    {
+        return Err(doc.invalid(
+            "damping",
+            "every axis needs some damping (linear or quadratic)",
+        ));
+    }
+
+    let t = &raw.thrusters;
+    let thruster_common = ThrusterCommon {
+        forward_max_n: doc.check_range(
+            "thrusters.forward_max_n",
+            t.forward_max_n,
+            0.0,
+            500.0,
+            "N",
+        )?,
+        deadband: doc.check_range("thrusters.deadband", t.deadband, 0.0, 0.9, "")?,
+        exponent: doc.check_range("thrusters.exponent", t.exponent, 0.5, 3.0, "")?,
+        lag_s: doc.check_range("thrusters.lag_s", t.lag_s, 0.0, 10.0, "s")?,
+        fluctuation_rel_std: doc.check_range(
+            "thrusters.fluctuation_rel_std",
+            t.fluctuation_rel_std,
+            0.0,
+            0.5,
+            "",
+        )?,
+        fluctuation_corr_s: doc.check_range(
+            "thrusters.fluctuation_corr_s",
+            t.fluctuation_corr_s,
+            0.001,
+            60.0,
+            "s",
+        )?,
+    };
+
+    if raw.thruster.len() != 4 {
+        return Err(doc.invalid(
+            "thruster",
+            format!(
+                "expected exactly four [[thruster]] tables ({}), found {}",
+                THRUSTER_NAMES.join(", "),
+                raw.thruster.len()
+            ),
+        ));
+    }
+    let mut thrusters = Vec::with_capacity(4);
+    for (i, th) in raw.thruster.iter().enumerate() {
+        let key = format!("thruster.{i}");
+        if th.name != THRUSTER_NAMES[i] {
+            return Err(doc.invalid(
+                &format!("{key}.name"),
+                format!(
+                    "thruster {i} must be `{}` (order: {}), found `{}`",
+                    THRUSTER_NAMES[i],
+                    THRUSTER_NAMES.join(", "),
+                    th.name
+                ),
+            ));
+        }
+        let pos = check3(
+            doc,
+            &format!("{key}.position_m"),
+            th.position_m,
+            -5.0,
+            5.0,
+            "m",
+        )?;
+        let dir = check3(
+            doc,
+            &format!("{key}.direction"),
+            th.direction,
+            -1.0,
+            1.0,
+            "",
+        )?;
+        let norm = dir.norm();
+        if (norm - 1.0).abs() > 1e-6 {
+            return Err(doc.invalid(
+                &format!("{key}.direction"),
+                format!("must be a unit vector (its length is {norm})"),
+            ));
+        }
+        let gain = doc.check_range(&format!("{key}.gain"), th.gain, 0.1, 2.0, "")?;
+        let reverse_ratio = doc.check_range(
+            &format!("{key}.reverse_ratio"),
+            th.reverse_ratio,
+            0.0,
+            1.0,
+            "",
+        )?;
+        if th.hdt_duty.len() != 11 {
+            return Err(doc.invalid(
+                &format!("{key}.hdt_duty"),
+                format!(
+                    "expected 11 duties (MOTORDrive 0, 10, ..., 100 %), found {}",
+                    th.hdt_duty.len()
+                ),
+            ));
+        }
+        let mut hdt_duty = [0.0; 11];
+        for (j, d) in th.hdt_duty.iter().enumerate() {
+            hdt_duty[j] =
+                doc.check_range(&format!("{key}.hdt_duty.{j}"), *d, 0.0, 255.0, "duty")?;
+        }
+        // Inverted logic: a larger command must never give a larger duty (less thrust).
+        if hdt_duty.windows(2).any(|w| w[1] > w[0]) {
+            return Err(doc.invalid(
+                &format!("{key}.hdt_duty"),
+                "duties must not increase with the command (duty 0 = full thrust)",
+            ));
+        }
+        thrusters.push(ThrusterConfig {
+            name: th.name.clone(),
+            position_cg_m: pos - cg,
+            direction: dir,
+            gain,
+            reverse_ratio,
+            hdt_duty,
+        });
+    }
+    let thrusters: [ThrusterConfig; 4] = match thrusters.try_into() {
+        Ok(t) => t,
+        Err(_) => return Err(doc.invalid("thruster", "expected four thrusters")),
+    };
+    // The layout the thesis describes (2.2.1): horizontal port/starboard, vertical bow/stern.
+    let horizontal = |i: usize| thrusters[i].direction.z.abs() < 1e-6;
+    let vertical = |i: usize| thrusters[i].direction.z.abs() > 1.0 - 1e-6;
+    if !(horizontal(PORT) && horizontal(STARBOARD) && vertical(BOW) && vertical(STERN)) {
+        return Err(doc.invalid(
+            "thruster",
+            "port and starboard must push horizontally, bow and stern vertically (thesis 2.2.1)",
+        ));
+    }
+
+    Ok(VehicleConfig {
+        mass_kg: total,
+        inertia_kgm2: inertia,
+        cg_from_box_centre_m: cg,
+        half_extents_m: half,
+        displaced_volume_m3: volume,
+        cb_m: cb,
+        added_mass,
+        damping_linear,
+        damping_quadratic,
+        thruster_common,
+        thrusters,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// World file
+// ---------------------------------------------------------------------------------------------
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWorld {
+    pool: RawPool,
+    water: RawWater,
+    simulation: RawSimulation,
+    contact: RawContact,
+    #[serde(default, rename = "obstacle")]
+    obstacles: Vec<RawObstacle>,
+    wall_following: RawWallFollowing,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPool {
+    length_m: f64,
+    width_m: f64,
+    depth_m: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWater {
+    density_kgpm3: f64,
+    gravity_mps2: f64,
+    current_mps: [f64; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSimulation {
+    step_s: f64,
+    max_speed_mps: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawContact {
+    restitution: f64,
+    friction: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, tag = "shape", rename_all = "snake_case")]
+enum RawObstacle {
+    Box {
+        centre_m: [f64; 3],
+        half_extents_m: [f64; 3],
+        #[serde(default)]
+        yaw_deg: f64,
+    },
+    VerticalCylinder {
+        centre_m: [f64; 3],
+        radius_m: f64,
+        height_m: f64,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWallFollowing {
+    start_m: [f64; 3],
+    heading_deg: f64,
+    wall_distance_m: f64,
+    side: WallSide,
+}
+
+/// Which side of the vehicle the followed wall is on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WallSide {
+    Port,
+    Starboard,
+}
+
+/// A static obstacle in the pool (world frame, NED).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Obstacle {
+    Box {
+        centre_m: Vector3<f64>,
+        half_extents_m: Vector3<f64>,
+        yaw_rad: f64,
+    },
+    VerticalCylinder {
+        centre_m: Vector3<f64>,
+        radius_m: f64,
+        height_m: f64,
+    },
+}
+
+/// The wall-following course (thesis 4.8): where a run starts and what it keeps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WallFollowing {
+    pub start_m: Vector3<f64>,
+    pub heading_rad: f64,
+    pub wall_distance_m: f64,
+    pub side: WallSide,
+}
+
+/// The world, resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldConfig {
+    /// Pool extent along north (x), east (y) and depth (z); the origin is a surface corner.
+    pub pool_m: Vector3<f64>,
+    pub water_density_kgpm3: f64,
+    pub gravity_mps2: f64,
+    /// Steady water current, world frame (NED).
+    pub current_mps: Vector3<f64>,
+    pub step_s: f64,
+    /// Divergence guard: a body speed above this stops the run with an error.
+    pub max_speed_mps: f64,
+    pub restitution: f64,
+    pub friction: f64,
+    pub obstacles: Vec<Obstacle>,
+    pub wall_following: WallFollowing,
+}
+
+impl WorldConfig {
+    /// Parses and resolves a world file.
+    pub fn from_document(doc: &Document<'_>) -> Result<Self, ConfigError> {
+        let raw: RawWorld = doc.parse()?;
+        let pool_m = Vector3::new(
+            doc.check_range("pool.length_m", raw.pool.length_m, 2.0, 1000.0, "m")?,
+            doc.check_range("pool.width_m", raw.pool.width_m, 2.0, 1000.0, "m")?,
+            doc.check_range("pool.depth_m", raw.pool.depth_m, 0.6, 100.0, "m")?,
+        );
+        let step_s =
+            doc.check_range("simulation.step_s", raw.simulation.step_s, 1e-4, 0.02, "s")?;
+        let mut obstacles = Vec::with_capacity(raw.obstacles.len());
+        for (i, o) in raw.obstacles.into_iter().enumerate() {
+            let key = format!("obstacle.{i}");
+            obstacles.push(match o {
+                RawObstacle::Box {
+                    centre_m,
+                    half_extents_m,
+                    yaw_deg,
+                } => Obstacle::Box {
+                    centre_m: check3(doc, &format!("{key}.centre_m"), centre_m, -1e3, 1e3, "m")?,
+                    half_extents_m: check3(
+                        doc,
+                        &format!("{key}.half_extents_m"),
+                        half_extents_m,
+                        0.01,
+                        1e3,
+                        "m",
+                    )?,
+                    yaw_rad: doc
+                        .check_range(&format!("{key}.yaw_deg"), yaw_deg, -360.0, 360.0, "deg")?
+                        .to_radians(),
+                },
+                RawObstacle::VerticalCylinder {
+                    centre_m,
+                    radius_m,
+                    height_m,
+                } => Obstacle::VerticalCylinder {
+                    centre_m: check3(doc, &format!("{key}.centre_m"), centre_m, -1e3, 1e3, "m")?,
+                    radius_m: doc.check_range(
+                        &format!("{key}.radius_m"),
+                        radius_m,
+                        0.01,
+                        100.0,
+                        "m",
+                    )?,
+                    height_m: doc.check_range(
+                        &format!("{key}.height_m"),
+                        height_m,
+                        0.01,
+                        100.0,
+                        "m",
+                    )?,
+                },
+            });
+        }
+        let wf = raw.wall_following;
+        let start_m = check3(doc, "wall_following.start_m", wf.start_m, 0.0, 1e3, "m")?;
+        if (0..3).any(|a| start_m[a] > pool_m[a]) {
+            return Err(doc.invalid("wall_following.start_m", "the start lies outside the pool"));
+        }
+        Ok(WorldConfig {
+            pool_m,
+            water_density_kgpm3: doc.check_range(
+                "water.density_kgpm3",
+                raw.water.density_kgpm3,
+                900.0,
+                1100.0,
+                "kg/m^3",
+            )?,
+            gravity_mps2: doc.check_range(
+                "water.gravity_mps2",
+                raw.water.gravity_mps2,
+                9.7,
+                9.9,
+                "m/s^2",
+            )?,
+            current_mps: check3(
+                doc,
+                "water.current_mps",
+                raw.water.current_mps,
+                -2.0,
+                2.0,
+                "m/s",
+            )?,
+            step_s,
+            max_speed_mps: doc.check_range(
+                "simulation.max_speed_mps",
+                raw.simulation.max_speed_mps,
+                0.5,
+                100.0,
+                "m/s",
+            )?,
+            restitution: doc.check_range(
+                "contact.restitution",
+                raw.contact.restitution,
+                0.0,
+                1.0,
+                "",
+            )?,
+            friction: doc.check_range("contact.friction", raw.contact.friction, 0.0, 2.0, "")?,
+            obstacles,
+            wall_following: WallFollowing {
+                start_m,
+                heading_rad: doc
+                    .check_range(
+                        "wall_following.heading_deg",
+                        wf.heading_deg,
+                        -360.0,
+                        360.0,
+                        "deg",
+                    )?
+                    .to_radians(),
+                wall_distance_m: doc.check_range(
+                    "wall_following.wall_distance_m",
+                    wf.wall_distance_m,
+                    0.1,
+                    100.0,
+                    "m",
+                )?,
+                side: wf.side,
+            },
+        })
+    }
+}

@@ -1,0 +1,267 @@
+//! The four trolling thrusters (thesis 2.2.1, 4.3): PWM duty with inverted logic plus a
+//! direction, a per-motor static curve with reverse weaker than forward, a per-motor gain,
+//! first-order lag and a speed fluctuation that grows with speed (thesis fig 4.6).
+//!
+//! The HDT balancing table that turns a MOTORDrive percentage into a duty is configuration
+//! used by the firmware side ([`hdt_command`]); the physics only sees duty and direction.
+
+use rand::{Rng, RngExt};
+use rand_distr::StandardNormal;
+
+use crate::physics::config::{ThrusterCommon, ThrusterConfig};
+
+/// Which way the motor driver turns the propeller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Direction {
+    #[default]
+    Forward,
+    Reverse,
+}
+
+/// What the motor driver is told: an 8-bit PWM duty with inverted logic (0 = full thrust,
+/// 255 = off) and a direction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ThrusterCommand {
+    pub duty: u8,
+    pub direction: Direction,
+}
+
+impl ThrusterCommand {
+    /// Motor off.
+    pub const OFF: Self = Self {
+        duty: 0xff,
+        direction: Direction::Forward,
+    };
+
+    /// PWM on-fraction (0..1): 1 at duty 0 because the logic is inverted (thesis 2.2.1).
+    pub fn on_fraction(&self) -> f64 {
+        1.0 - f64::from(self.duty) / 255.0
+    }
+
+    /// Signed on-fraction (-1..1), negative in reverse.
+    pub fn effort(&self) -> f64 {
+        match self.direction {
+            Direction::Forward => self.on_fraction(),
+            Direction::Reverse => -self.on_fraction(),
+        }
+    }
+}
+
+impl Default for ThrusterCommand {
+    fn default() -> Self {
+        Self::OFF
+    }
+}
+
+/// The HDT lookup: MOTORDrive's signed percentage (-100..100) to duty and direction, by
+/// linear interpolation in the motor's 11-point table (0, 10, ..., 100 %).
+pub fn hdt_command(table: &[f64; 11], percent: f64) -> ThrusterCommand {
+    let p = if percent.is_finite() {
+        percent.clamp(-100.0, 100.0)
+    } else {
+        0.0
+    };
+    let x = p.abs() / 10.0;
+    let i = (x.floor() as usize).min(9);
+    let frac = x - i as f64;
+    let duty = table[i] + (table[i + 1] - table[i]) * frac;
+    ThrusterCommand {
+        duty: duty.round().clamp(0.0, 255.0) as u8,
+        direction: if p < 0.0 {
+            Direction::Reverse
+        } else {
+            Direction::Forward
+        },
+    }
+}
+
+/// The static (steady-state) thrust of one motor for a command, in newtons (+ = forward/down).
+pub fn static_thrust_n(
+    common: &ThrusterCommon,
+    motor: &ThrusterConfig,
+    cmd: ThrusterCommand,
+) -> f64 {
+    let on = cmd.on_fraction();
+    let x = ((on - common.deadband) / (1.0 - common.deadband)).max(0.0);
+    let forward = common.forward_max_n * motor.gain * x.powf(common.exponent);
+    match cmd.direction {
+        Direction::Forward => forward,
+        Direction::Reverse => -forward * motor.reverse_ratio,
+    }
+}
+
+/// Per-step constants of the thruster dynamics, precomputed for one step size.
+#[derive(Debug, Clone)]
+pub(crate) struct ThrusterDynamics {
+    /// Fraction of the gap to the static thrust closed in one step (exact first-order lag).
+    lag_alpha: f64,
+    /// Ornstein-Uhlenbeck decay per step and the matching innovation scale (exact
+    /// discretisation, so the fluctuation's variance does not depend on the step).
+    ou_decay: f64,
+    ou_innovation: f64,
+    rel_std: f64,
+}
+
+impl ThrusterDynamics {
+    pub(crate) fn new(common: &ThrusterCommon, dt_s: f64) -> Self {
+        let lag_alpha = if common.lag_s > 0.0 {
+            1.0 - (-dt_s / common.lag_s).exp()
+        } else {
+            1.0
+        };
+        let ou_decay = (-dt_s / common.fluctuation_corr_s).exp();
+        Self {
+            lag_alpha,
+            ou_decay,
+            ou_innovation: (1.0 - ou_decay * ou_decay).sqrt(),
+            rel_std: common.fluctuation_rel_std,
+        }
+    }
+
+    /// Advances one motor: the lagged thrust moves toward `target_n`, the unit fluctuation
+    /// process takes one step. Returns the thrust delivered now.
+    pub(crate) fn step<R: Rng>(
+        &self,
+        lagged_n: &mut f64,
+        fluctuation: &mut f64,
+        target_n: f64,
+        full_n: f64,
+        rng: &mut R,
+    ) -> f64 {
+        *lagged_n += (target_n - *lagged_n) * self.lag_alpha;
+        let z: f64 = rng.sample(StandardNormal);
+        *fluctuation = *fluctuation * self.ou_decay + self.ou_innovation * z;
+        // Relative fluctuation grows with speed (thesis fig 4.6): zero at rest, rel_std at full.
+        let speed = if full_n > 0.0 {
+            (lagged_n.abs() / full_n).min(1.0)
+        } else {
+            0.0
+        };
+        let factor = (1.0 + self.rel_std * speed * *fluctuation).max(0.0);
+        *lagged_n * factor
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    fn common() -> ThrusterCommon {
+        ThrusterCommon {
+            forward_max_n: 10.0,
+            deadband: 0.1,
+            exponent: 1.0,
+            lag_s: 0.25,
+            fluctuation_rel_std: 0.03,
+            fluctuation_corr_s: 0.3,
+        }
+    }
+
+    fn motor() -> ThrusterConfig {
+        ThrusterConfig {
+            name: "port".into(),
+            position_cg_m: Vector3::zeros(),
+            direction: Vector3::x(),
+            gain: 1.0,
+            reverse_ratio: 0.5,
+            hdt_duty: [
+                255.0, 207.0, 184.0, 161.0, 138.0, 115.0, 92.0, 69.0, 46.0, 23.0, 0.0,
+            ],
+        }
+    }
+
+    #[test]
+    fn duty_zero_is_full_thrust_and_255_is_off() {
+        let c = common();
+        let m = motor();
+        let full = ThrusterCommand {
+            duty: 0,
+            direction: Direction::Forward,
+        };
+        assert_eq!(static_thrust_n(&c, &m, full), 10.0);
+        assert_eq!(static_thrust_n(&c, &m, ThrusterCommand::OFF), 0.0);
+        let rev = ThrusterCommand {
+            duty: 0,
+            direction: Direction::Reverse,
+        };
+        assert_eq!(static_thrust_n(&c, &m, rev), -5.0);
+        // Inside the deadband the propeller does not turn.
+        let slow = ThrusterCommand {
+            duty: 240,
+            direction: Direction::Forward,
+        };
+        assert_eq!(static_thrust_n(&c, &m, slow), 0.0);
+    }
+
+    #[test]
+    fn hdt_maps_percent_to_duty_and_direction() {
+        let t = motor().hdt_duty;
+        assert_eq!(hdt_command(&t, 100.0).duty, 0);
+        assert_eq!(hdt_command(&t, 0.0), ThrusterCommand::OFF);
+        let r = hdt_command(&t, -50.0);
+        assert_eq!(r.direction, Direction::Reverse);
+        assert_eq!(r.duty, 115);
+        assert_eq!(hdt_command(&t, 55.0).duty, 104);
+        assert_eq!(hdt_command(&t, f64::NAN), ThrusterCommand::OFF);
+        assert_eq!(hdt_command(&t, 250.0).duty, 0);
+    }
+
+    #[test]
+    fn lag_reaches_63_percent_after_one_time_constant() {
+        let c = common();
+        let dyn_ = ThrusterDynamics::new(
+            &ThrusterCommon {
+                fluctuation_rel_std: 0.0,
+                ..c
+            },
+            0.01,
+        );
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64_for_test(1);
+        let (mut f, mut n) = (0.0, 0.0);
+        let mut out = 0.0;
+        for _ in 0..25 {
+            out = dyn_.step(&mut f, &mut n, 10.0, 10.0, &mut rng);
+        }
+        assert!((out - 10.0 * (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{out}");
+    }
+
+    trait SeedForTest {
+        fn seed_from_u64_for_test(seed: u64) -> Self;
+    }
+    impl SeedForTest for rand_chacha::ChaCha8Rng {
+        fn seed_from_u64_for_test(seed: u64) -> Self {
+            use rand::SeedableRng;
+            rand_chacha::ChaCha8Rng::seed_from_u64(seed)
+        }
+    }
+
+    #[test]
+    fn fluctuation_grows_with_speed() {
+        let c = common();
+        let dyn_ = ThrusterDynamics::new(
+            &ThrusterCommon {
+                lag_s: 0.0,
+                fluctuation_rel_std: 0.1,
+                ..c
+            },
+            0.01,
+        );
+        let spread = |target: f64| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64_for_test(7);
+            let (mut f, mut n) = (0.0, 0.0);
+            let xs: Vec<f64> = (0..20_000)
+                .map(|_| dyn_.step(&mut f, &mut n, target, 10.0, &mut rng) / target)
+                .collect();
+            let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+            (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / xs.len() as f64).sqrt()
+        };
+        let slow = spread(3.0);
+        let fast = spread(10.0);
+        assert!(
+            fast > 2.5 * slow,
+            "relative spread slow {slow}, fast {fast}"
+        );
+        assert!((fast - 0.1).abs() < 0.02, "{fast}");
+    }
+}
