@@ -396,7 +396,7 @@ fn sonar_t1t2t1_row(config: &SensorsConfig, seed: u64) -> Row {
     let mean = total / f64::from(trials);
     row(
         format!(
-            "sonar T1,T2,T1 of one pair: mean time for three readings ({stale} of {} stale)",
+            "sonar T1,T2,T1 of one pair: mean time for three readings ({stale} of {} stale, {lost} lost)",
             3 * trials
         ),
         Value::Number(4.8),
