@@ -92,3 +92,6 @@ impl SensorSuite {
         self.read_adc(ch, t_s).ok()
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -226,6 +226,8 @@ pub struct LowPass {
     tau_s: f64,
     y: Option<f64>,
     t_s: f64,
+    /// The last step and its gain, so a fixed physics step costs no `exp` per update.
+    cached: (f64, f64),
 }
 
 impl LowPass {
@@ -234,6 +236,7 @@ impl LowPass {
             tau_s: 1.0 / (2.0 * std::f64::consts::PI * cutoff_hz),
             y: None,
             t_s: 0.0,
+            cached: (0.0, 0.0),
         }
     }
 
@@ -243,7 +246,10 @@ impl LowPass {
             None => x,
             Some(y) => {
                 let dt = (t_s - self.t_s).max(0.0);
-                y + (x - y) * (1.0 - (-dt / self.tau_s).exp())
+                if dt != self.cached.0 {
+                    self.cached = (dt, 1.0 - (-dt / self.tau_s).exp());
+                }
+                y + (x - y) * self.cached.1
             }
         };
         self.y = Some(y);

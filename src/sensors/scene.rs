@@ -83,6 +83,24 @@ impl RayCaster for BoxPool {
     }
 }
 
+/// Any number of plane walls; a ray hits the nearest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Walls(pub Vec<PlaneWall>);
+
+impl RayCaster for Walls {
+    fn cast_ray(
+        &self,
+        origin_m: &Point3<f64>,
+        direction: &Unit<Vector3<f64>>,
+        max_range_m: f64,
+    ) -> Option<RayHit> {
+        self.0
+            .iter()
+            .filter_map(|w| w.hit(origin_m, direction, max_range_m))
+            .min_by(|a, b| a.distance_m.total_cmp(&b.distance_m))
+    }
+}
+
 /// A world with nothing in it.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct OpenWater;
@@ -90,24 +108,6 @@ pub struct OpenWater;
 impl RayCaster for OpenWater {
     fn cast_ray(&self, _: &Point3<f64>, _: &Unit<Vector3<f64>>, _: f64) -> Option<RayHit> {
         None
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn box_pool_hits_the_nearest_wall_with_an_inward_normal() {
-        let pool = BoxPool::new(25.0, 10.0, 3.0);
-        let o = Point3::new(5.0, 2.0, 1.0);
-        let west = Unit::new_normalize(Vector3::new(0.0, -1.0, 0.0));
-        let hit = pool.cast_ray(&o, &west, 50.0).unwrap();
-        assert!((hit.distance_m - 2.0).abs() < 1e-12);
-        assert!((hit.normal.y - 1.0).abs() < 1e-12);
-        assert!(pool.cast_ray(&o, &west, 1.5).is_none());
-        let up = Unit::new_normalize(Vector3::new(0.0, 0.0, -1.0));
-        assert!(pool.cast_ray(&o, &up, 50.0).is_none());
     }
 }
 
@@ -130,5 +130,23 @@ pub fn at_rest(
         thruster_force_n: [0.0; 4],
         thruster_effort: [0.0; 4],
         in_contact: false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn box_pool_hits_the_nearest_wall_with_an_inward_normal() {
+        let pool = BoxPool::new(25.0, 10.0, 3.0);
+        let o = Point3::new(5.0, 2.0, 1.0);
+        let west = Unit::new_normalize(Vector3::new(0.0, -1.0, 0.0));
+        let hit = pool.cast_ray(&o, &west, 50.0).unwrap();
+        assert!((hit.distance_m - 2.0).abs() < 1e-12);
+        assert!((hit.normal.y - 1.0).abs() < 1e-12);
+        assert!(pool.cast_ray(&o, &west, 1.5).is_none());
+        let up = Unit::new_normalize(Vector3::new(0.0, 0.0, -1.0));
+        assert!(pool.cast_ray(&o, &up, 50.0).is_none());
     }
 }

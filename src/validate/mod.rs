@@ -4,6 +4,8 @@
 //! rows and sensor rows are produced by their own modules and share the [`Row`] shape, which
 //! is also the JSON schema of `validate --json`.
 
+pub mod sensors;
+
 use serde::Serialize;
 
 /// Which part of the model a row checks.
