@@ -339,8 +339,7 @@ impl Model {
 
         // Thrusters: static curve -> lag -> fluctuation -> fade when out of the water.
         let mut tau = Vector6::zeros();
-        for i in 0..4 {
-            let motor = &self.vehicle.thrusters[i];
+        for (i, motor) in self.vehicle.thrusters.iter().enumerate() {
             let target = static_thrust_n(common, motor, commands[i]);
             let produced = self.thruster_dynamics.step(
                 &mut state.thrust_lagged_n[i],
