@@ -55,6 +55,7 @@ struct RawHeadingHold {
 struct RawDepthHold {
     target_m: f64,
     gain_percent_per_m: f64,
+    integral_percent_per_m_s: f64,
     damping_percent_per_mps: f64,
 }
 
@@ -71,11 +72,13 @@ pub struct HeadingHold {
     pub gain_percent_per_deg: f64,
 }
 
-/// Depth hold: PD on depth for both vertical thrusters.
+/// Depth hold: PID on depth for both vertical thrusters (the integral carries the steady
+/// push against the positive buoyancy; its contribution is clamped to +-100 %).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DepthHold {
     pub target_m: f64,
     pub gain_percent_per_m: f64,
+    pub integral_percent_per_m_s: f64,
     pub damping_percent_per_mps: f64,
 }
 
@@ -149,6 +152,13 @@ impl Experiment {
                     0.0,
                     1e4,
                     "%/m",
+                )?,
+                integral_percent_per_m_s: doc.check_range(
+                    "depth_hold.integral_percent_per_m_s",
+                    d.integral_percent_per_m_s,
+                    0.0,
+                    1e4,
+                    "%/(m s)",
                 )?,
                 damping_percent_per_mps: doc.check_range(
                     "depth_hold.damping_percent_per_mps",
@@ -241,6 +251,7 @@ pub fn run(
     let heading_target_deg = experiment.start.heading_rad.to_degrees();
     let tables: [&[f64; 11]; 4] = std::array::from_fn(|i| &model.vehicle().thrusters[i].hdt_duty);
     let mut commands = [ThrusterCommand::OFF; 4];
+    let mut depth_integral = 0.0;
     let mut vs = model.vehicle_state(&state);
     observe(&vs);
     for k in 0..steps {
@@ -257,7 +268,11 @@ pub fn run(
             }
             if let Some(d) = experiment.depth_hold {
                 let w_down = (vs.attitude * vs.velocity_body_mps).z;
-                let u = d.gain_percent_per_m * (d.target_m - vs.position_m.z)
+                let error = d.target_m - vs.position_m.z;
+                depth_integral = (depth_integral
+                    + d.integral_percent_per_m_s * error * experiment.control_period_s)
+                    .clamp(-100.0, 100.0);
+                let u = d.gain_percent_per_m * error + depth_integral
                     - d.damping_percent_per_mps * w_down;
                 percent[2] = (percent[2] + u).clamp(-100.0, 100.0);
                 percent[3] = (percent[3] + u).clamp(-100.0, 100.0);

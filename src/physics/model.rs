@@ -339,8 +339,7 @@ impl Model {
 
         // Thrusters: static curve -> lag -> fluctuation -> fade when out of the water.
         let mut tau = Vector6::zeros();
-        for i in 0..4 {
-            let motor = &self.vehicle.thrusters[i];
+        for (i, motor) in self.vehicle.thrusters.iter().enumerate() {
             let target = static_thrust_n(common, motor, commands[i]);
             let produced = self.thruster_dynamics.step(
                 &mut state.thrust_lagged_n[i],
@@ -436,6 +435,31 @@ impl Model {
         state.attitude = attitude;
         state.nu_r = nu;
         Ok(())
+    }
+
+    /// Benchmark baseline: the RK4 step of the rigid body alone, with no thrusters, no contact
+    /// query and no divergence guard. Not for simulation; `benches/physics.rs` compares the
+    /// full [`Model::step`] against it in the same run.
+    #[doc(hidden)]
+    pub fn step_rigid_body_only(&self, state: &mut SimState) {
+        let dt = self.dt_s;
+        let tau = Vector6::zeros();
+        let p0 = state.position_m;
+        let q0 = *state.attitude.quaternion();
+        let n0 = state.nu_r;
+        let h = 0.5 * dt;
+        let (dp1, dq1, dn1) = self.derivative(&p0, &q0, &n0, &tau);
+        let (dp2, dq2, dn2) =
+            self.derivative(&(p0 + dp1 * h), &(q0 + dq1 * h), &(n0 + dn1 * h), &tau);
+        let (dp3, dq3, dn3) =
+            self.derivative(&(p0 + dp2 * h), &(q0 + dq2 * h), &(n0 + dn2 * h), &tau);
+        let (dp4, dq4, dn4) =
+            self.derivative(&(p0 + dp3 * dt), &(q0 + dq3 * dt), &(n0 + dn3 * dt), &tau);
+        let s = dt / 6.0;
+        state.position_m = p0 + (dp1 + (dp2 + dp3) * 2.0 + dp4) * s;
+        state.attitude = UnitQuaternion::new_normalize(q0 + (dq1 + (dq2 + dq3) * 2.0 + dq4) * s);
+        state.nu_r = n0 + (dn1 + (dn2 + dn3) * 2.0 + dn4) * s;
+        state.step += 1;
     }
 
     /// Pushes the hull out of the geometry and removes approaching velocity at each contact
