@@ -11,8 +11,11 @@ use crate::validate::{Context, Row, ValidateError, render_table};
 /// A producer of validation rows.
 pub type RowSource = fn(&Context<'_>) -> Result<Vec<Row>, ValidateError>;
 
-/// Every row source, in table order. Add sensor rows here.
-pub const ROW_SOURCES: &[RowSource] = &[crate::validate::physics::rows];
+/// Every row source, in table order.
+pub const ROW_SOURCES: &[RowSource] = &[
+    crate::validate::physics::rows,
+    crate::validate::sensors::row_source,
+];
 
 /// Arguments of `validate`.
 #[derive(Debug, Clone, clap::Args)]

@@ -445,3 +445,10 @@ mod tests {
         assert!(failed.is_empty(), "{failed:?}");
     }
 }
+
+/// The sensor rows as a `validate` row source. They use their own fixed seed ([`SEED`]):
+/// each of the 13 sonar rows is a 95 % interval, so an arbitrary seed fails one of them by
+/// chance about half the time (see docs/sensors.md); the seed was fixed before any result.
+pub fn row_source(ctx: &super::Context<'_>) -> Result<Vec<Row>, super::ValidateError> {
+    Ok(rows(ctx.configs)?)
+}
