@@ -11,14 +11,28 @@ use firmware_protocol::LineDecoder;
 fn every_protocol_example_decodes_to_its_meaning_and_reencodes_identically() {
     let examples = examples();
     // Guards the extractor: if it silently found nothing, the loop below would prove nothing.
-    assert!(examples.len() >= 38, "only {} examples extracted from PROTOCOL.md", examples.len());
+    assert!(
+        examples.len() >= 38,
+        "only {} examples extracted from PROTOCOL.md",
+        examples.len()
+    );
     for ex in &examples {
         let expected = expected_for(ex);
         let decoded = LineDecoder::decode_all(&ex.bytes);
-        assert_eq!(decoded, vec![expected.clone()], "example {:?} decodes wrongly", ex.name);
+        assert_eq!(
+            decoded,
+            vec![expected.clone()],
+            "example {:?} decodes wrongly",
+            ex.name
+        );
         let mut out = BytesMut::new();
         assert!(expected.encode(&mut out).unwrap());
-        assert_eq!(&out[..], &ex.bytes[..], "example {:?} re-encodes differently", ex.name);
+        assert_eq!(
+            &out[..],
+            &ex.bytes[..],
+            "example {:?} re-encodes differently",
+            ex.name
+        );
     }
 }
 
@@ -49,5 +63,8 @@ fn crc_parameters_in_protocol_md_match_the_code() {
     .replace("0X", "0x")
     .replace("FALSE", "false")
     .replace("TRUE", "true");
-    assert!(common::PROTOCOL_MD.contains(&row), "PROTOCOL.md lacks the CRC row {row}");
+    assert!(
+        common::PROTOCOL_MD.contains(&row),
+        "PROTOCOL.md lacks the CRC row {row}"
+    );
 }
