@@ -7,7 +7,9 @@
 /// The algorithm used for every sensor-link frame.
 pub const ALGORITHM: &crc::Algorithm<u16> = &crc::CRC_16_IBM_3740;
 
-const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(ALGORITHM);
+// Slice-by-16 tables (8 KiB, built at compile time): about 4x the byte-table speed on long
+// buffers, which matters when replaying large captures (benches/decode.rs).
+const CRC16: crc::Crc<u16, crc::Table<16>> = crc::Crc::<u16, crc::Table<16>>::new(ALGORITHM);
 
 /// CRC of `bytes` with the sensor-link parameters.
 pub fn crc16(bytes: &[u8]) -> u16 {

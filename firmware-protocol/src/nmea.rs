@@ -43,6 +43,15 @@ pub fn scan_line(buf: &[u8], from: usize) -> LineScan {
     let end = buf.len().min(SENTENCE_MAX_LEN);
     let mut i = from.max(1);
     while i < end {
+        // Skip eight ordinary bytes at a time; fall back to one byte at a time near a special.
+        if let Some(word) = buf.get(i..i + 8).filter(|_| i + 8 <= end) {
+            let mut w = [0u8; 8];
+            w.copy_from_slice(word);
+            if !has_special_byte(u64::from_le_bytes(w)) {
+                i += 8;
+                continue;
+            }
+        }
         let b = buf[i];
         if (0x20..=0x7E).contains(&b) && b != b'$' {
             i += 1;
@@ -78,6 +87,18 @@ pub fn scan_line(buf: &[u8], from: usize) -> LineScan {
     } else {
         LineScan::NeedMore { scanned: i }
     }
+}
+
+/// True when any byte of `w` is outside `0x20..=0x7E` or is `$` (SWAR: exact for "any",
+/// borrows and carries only disturb bytes above a byte that already matched).
+fn has_special_byte(w: u64) -> bool {
+    const LO: u64 = 0x0101_0101_0101_0101;
+    const HI: u64 = 0x8080_8080_8080_8080;
+    let below_space = w.wrapping_sub(LO * 0x20) & !w & HI;
+    let del_or_high = (w.wrapping_add(LO) | w) & HI;
+    let x = w ^ (LO * u64::from(b'$'));
+    let dollar = x.wrapping_sub(LO) & !x & HI;
+    below_space | del_or_high | dollar != 0
 }
 
 fn too_long() -> LineScan {
@@ -628,6 +649,25 @@ mod tests {
                 consume: 1
             }
         ));
+    }
+
+    /// The word-at-a-time test must agree with the byte test for every byte in every lane.
+    #[test]
+    fn swar_special_byte_test_matches_byte_test() {
+        let ordinary = |b: u8| (0x20..=0x7E).contains(&b) && b != b'$';
+        for lane in 0..8 {
+            for b in 0..=255u8 {
+                for fill in [b'A', b' ', b'~', b'0'] {
+                    let mut w = [fill; 8];
+                    w[lane] = b;
+                    assert_eq!(
+                        has_special_byte(u64::from_le_bytes(w)),
+                        !ordinary(b),
+                        "byte {b:#04x} in lane {lane} among {fill:#04x}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -13,7 +13,7 @@ use nom::{
 };
 
 use crate::compass_word::HeadingWord;
-use crate::error::{EncodeError, MessageError};
+use crate::error::{EncodeError, FrameError, LinkError, MessageError};
 use crate::frame::{self, RawFrame};
 
 /// Protocol version this crate speaks (sent in HELLO and HELLO_REPLY).
@@ -533,6 +533,40 @@ impl Frame {
         Self { seq, message }
     }
 
+    /// The NAK the bridge sends for a wire error (PROTOCOL.md section 3), or `None` when the
+    /// error gets no answer (garbage, impossible length, truncation, non-frame errors).
+    pub fn nak_for(error: &LinkError) -> Option<Self> {
+        let (seq, rejected_type, code, detail) = match *error {
+            LinkError::Frame(FrameError::ChecksumMismatch { msg_type, seq, .. }) => {
+                (seq, msg_type, ErrorCode::BadCrc, 0)
+            }
+            LinkError::Message(MessageError::UnknownType { msg_type, seq }) => {
+                (seq, msg_type, ErrorCode::UnknownType, 0)
+            }
+            LinkError::Message(MessageError::BadLength {
+                msg_type,
+                seq,
+                expected,
+                ..
+            }) => (seq, msg_type, ErrorCode::BadLength, expected),
+            LinkError::Message(MessageError::BadValue {
+                msg_type,
+                seq,
+                offset,
+                ..
+            }) => (seq, msg_type, ErrorCode::BadValue, offset),
+            _ => return None,
+        };
+        Some(Self::new(
+            seq,
+            Message::Nak {
+                rejected_type,
+                code,
+                detail,
+            },
+        ))
+    }
+
     /// Append the frame (sync, header, payload, CRC) to `dst`. Cannot fail: every message's
     /// payload is at most 37 bytes.
     pub fn encode(&self, dst: &mut BytesMut) {
@@ -583,6 +617,7 @@ fn fixed_len(t: u8) -> Option<u8> {
 }
 
 type Res<'a, O> = IResult<&'a [u8], O>;
+type NomErr<'a> = nom::Err<nom::error::Error<&'a [u8]>>;
 
 fn u8s<const N: usize>(input: &[u8]) -> Res<'_, [u8; N]> {
     let mut out = [0u8; N];
@@ -770,7 +805,7 @@ fn decode_message(raw: RawFrame<'_>) -> Result<Message, MessageError> {
         m::ADC_VALUE => {
             let (_, (c, v)) = all_consuming((be_u8, be_u16))
                 .parse(payload)
-                .map_err(|_: nom::Err<nom::error::Error<&[u8]>>| bad_len(expected))?;
+                .map_err(|_: NomErr<'_>| bad_len(expected))?;
             let channel = AdcChannel::new(c).map_err(|_| bad(0, c))?;
             Message::AdcValue {
                 channel,
@@ -780,7 +815,7 @@ fn decode_message(raw: RawFrame<'_>) -> Result<Message, MessageError> {
         m::COMPASS_HEADING | m::COMPASS_HEADING_PUSH => {
             let (_, w) = all_consuming(be_u16)
                 .parse(payload)
-                .map_err(|_: nom::Err<nom::error::Error<&[u8]>>| bad_len(expected))?;
+                .map_err(|_: NomErr<'_>| bad_len(expected))?;
             if w & 0xFC00 != 0 {
                 return Err(bad(0, (w >> 8) as u8));
             }
@@ -794,7 +829,7 @@ fn decode_message(raw: RawFrame<'_>) -> Result<Message, MessageError> {
         m::COMPASS_RAW | m::COMPASS_RAW_PUSH => {
             let (_, (x, y)) = all_consuming((be_i16, be_i16))
                 .parse(payload)
-                .map_err(|_: nom::Err<nom::error::Error<&[u8]>>| bad_len(expected))?;
+                .map_err(|_: NomErr<'_>| bad_len(expected))?;
             if t == m::COMPASS_RAW {
                 Message::CompassRaw { x, y }
             } else {
@@ -831,13 +866,12 @@ fn decode_message(raw: RawFrame<'_>) -> Result<Message, MessageError> {
         m::ADC_SAMPLES => {
             let (mut rest, (ticks, mask)) = (be_u32, be_u8)
                 .parse(payload)
-                .map_err(|_: nom::Err<nom::error::Error<&[u8]>>| bad_len(expected))?;
+                .map_err(|_: NomErr<'_>| bad_len(expected))?;
             let mut values = [None; 8];
             for (ch, slot) in values.iter_mut().enumerate() {
                 if mask & (1 << ch) != 0 {
                     let offset = (payload.len() - rest.len()) as u8;
-                    let (r, v) = be_u16(rest)
-                        .map_err(|_: nom::Err<nom::error::Error<&[u8]>>| bad_len(expected))?;
+                    let (r, v) = be_u16(rest).map_err(|_: NomErr<'_>| bad_len(expected))?;
                     rest = r;
                     *slot = Some(adc_value(offset, v)?);
                 }
@@ -856,7 +890,7 @@ fn payload_array<const N: usize>(payload: &[u8]) -> Result<[u8; N], ()> {
     all_consuming(u8s::<N>)
         .parse(payload)
         .map(|(_, a)| a)
-        .map_err(|_: nom::Err<nom::error::Error<&[u8]>>| ())
+        .map_err(|_: NomErr<'_>| ())
 }
 
 #[cfg(test)]
@@ -907,6 +941,70 @@ mod tests {
                 offset: 0,
                 value: 9
             })
+        );
+    }
+
+    /// NAK mapping of PROTOCOL.md section 3: channel 9 gives BAD_VALUE at offset 0 with the
+    /// request's seq (the `nak` example), garbage gives no answer.
+    #[test]
+    fn nak_for_wire_errors_follows_the_table() {
+        let e = LinkError::Message(MessageError::BadValue {
+            msg_type: 0x10,
+            seq: 0x11,
+            offset: 0,
+            value: 9,
+        });
+        assert_eq!(
+            Frame::nak_for(&e),
+            Some(Frame::new(
+                0x11,
+                Message::Nak {
+                    rejected_type: 0x10,
+                    code: ErrorCode::BadValue,
+                    detail: 0
+                }
+            ))
+        );
+        let e = LinkError::Message(MessageError::BadLength {
+            msg_type: 0x10,
+            seq: 1,
+            expected: 1,
+            found: 2,
+        });
+        assert!(matches!(
+            Frame::nak_for(&e),
+            Some(Frame {
+                message: Message::Nak {
+                    code: ErrorCode::BadLength,
+                    detail: 1,
+                    ..
+                },
+                ..
+            })
+        ));
+        let e = LinkError::Frame(FrameError::ChecksumMismatch {
+            calculated: 1,
+            found: 2,
+            msg_type: 0x41,
+            seq: 3,
+        });
+        assert!(matches!(
+            Frame::nak_for(&e),
+            Some(Frame {
+                seq: 3,
+                message: Message::Nak {
+                    code: ErrorCode::BadCrc,
+                    ..
+                }
+            })
+        ));
+        assert_eq!(Frame::nak_for(&LinkError::Skipped { count: 3 }), None);
+        assert_eq!(
+            Frame::nak_for(&LinkError::Frame(FrameError::LengthTooLong {
+                len: 99,
+                max: 64
+            })),
+            None
         );
     }
 

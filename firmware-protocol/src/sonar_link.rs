@@ -20,7 +20,7 @@ use nom::{
     sequence::{delimited, preceded},
 };
 
-use crate::error::SonarCommandError;
+use crate::error::{LinkError, SonarCommandError};
 use crate::nmea::Transducer;
 
 /// First byte of every sonar command.
@@ -45,6 +45,16 @@ impl SonarCommand {
             b'A' => Some(5),
             _ => None,
         }
+    }
+
+    /// The master's answer to a wire error: `@N` for a select with a bad transducer digit,
+    /// nothing for other errors (PROTOCOL.md section 3).
+    pub fn nak_for(error: &LinkError) -> Option<Self> {
+        matches!(
+            error,
+            LinkError::SonarCommand(SonarCommandError::BadTransducer { .. })
+        )
+        .then_some(Self::Nak)
     }
 
     pub fn encode(&self, dst: &mut BytesMut) {
@@ -162,6 +172,16 @@ mod tests {
         assert_eq!(
             parse_command(b"@S5\r"),
             Err(SonarCommandError::BadTransducer { byte: b'5' })
+        );
+    }
+
+    #[test]
+    fn bad_digit_is_answered_with_nak() {
+        let e = LinkError::SonarCommand(SonarCommandError::BadTransducer { byte: b'5' });
+        assert_eq!(SonarCommand::nak_for(&e), Some(SonarCommand::Nak));
+        assert_eq!(
+            SonarCommand::nak_for(&LinkError::Skipped { count: 1 }),
+            None
         );
     }
 
