@@ -21,6 +21,7 @@ pub mod daemon;
 pub mod devices;
 pub mod physics;
 pub mod record;
+pub mod replay;
 pub mod transport;
 pub mod validate;
 

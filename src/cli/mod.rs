@@ -1,6 +1,8 @@
 //! The command-line interface: argument definitions and dispatch. Each subcommand lives in
 //! its own module; `main.rs` only parses, installs tracing and calls [`main`].
 
+pub mod replay;
+
 use clap::{Parser, Subcommand};
 
 /// Hardware-in-the-loop bridge for the EyeBot MK4 controller of the Mako AUV.
@@ -15,6 +17,8 @@ pub struct Cli {
 pub enum Command {
     /// Run the bridge daemon on the embedded default configuration (or --config FILE).
     Run,
+    /// Replay captured NMEA logs onto a pty, a serial device or stdout.
+    Replay(replay::ReplayArgs),
 }
 
 /// Errors that end a CLI command.
@@ -25,6 +29,8 @@ pub enum CliError {
         command: &'static str,
         what: &'static str,
     },
+    #[error(transparent)]
+    Replay(#[from] replay::ReplayCliError),
 }
 
 pub fn main(cli: Cli) -> Result<(), CliError> {
@@ -33,5 +39,6 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
             command: "run",
             what: "the daemon (issue 5) is not built yet; the wire protocols live in firmware-protocol",
         }),
+        Command::Replay(args) => Ok(replay::main(args)?),
     }
 }

@@ -1,0 +1,502 @@
+//! `eyebot-hil replay`: captured NMEA logs back onto a line, with the log's own timing.
+//!
+//! ```text
+//! LOG... ──► input::Source (format, gzip, timestamps, comments) ──► merge::Merger (by time)
+//!        ──► validate::check_line (policy pass/drop/fix, one Problem per fault)
+//!        ──► pacing::Scheduler (deadline from one start instant) ──► output::Sink
+//!                                    ByteSink: pty | serial | stdout, bytes at the baud rate
+//!                                    (pending, issue 5: the daemon's sonar multiplexer)
+//! ```
+//!
+//! Build a [`Replay`] from [`Options`] with [`Replay::open`] (it reads each input's head to
+//! detect formats and `#Serial:`), open an output with [`Replay::line_settings`], then call
+//! [`Replay::run`] with a [`Sink`], an [`Observer`] for the report and a [`Shutdown`].
+//! The format rules are in `docs/replay.md`.
+
+pub mod input;
+pub mod merge;
+pub mod output;
+pub mod pacing;
+pub mod stats;
+pub mod validate;
+
+use std::collections::{BTreeMap, HashSet};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+pub use input::{CommentMode, Event, Format, InputError, Loc, Source, TimestampForm};
+pub use merge::{MergeMode, Merger};
+pub use output::{ByteSink, NullSink, Port, Sent, Shutdown, Sink, SinkError};
+pub use pacing::{Pacing, Placement, Scheduler};
+pub use stats::Summary;
+pub use validate::{Action, Policy, Problem, ProblemKind};
+
+use crate::transport::LineSettings;
+
+/// NMEA 0183's line: 4800 baud 8N1, used when neither `--line` nor `#Serial:` says otherwise.
+pub const DEFAULT_LINE: LineSettings = LineSettings::n81(4800);
+
+/// Problems of one kind listed individually before the rest are only counted.
+pub const LISTED_PER_KIND: u64 = 50;
+
+/// Everything a replay is told. [`Options::new`] gives the defaults.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub inputs: Vec<PathBuf>,
+    pub policy: Policy,
+    /// `None`: by timestamps when every input has them, else back to back at the baud rate.
+    pub pacing: Option<Pacing>,
+    /// Speed factor on the schedule (2 = twice as fast). Bytes keep their wire time.
+    pub speed: f64,
+    /// Log-time offsets in seconds from the first sentence.
+    pub start_s: f64,
+    pub end_s: Option<f64>,
+    pub looping: bool,
+    /// Overrides `#Serial:` comments.
+    pub line: Option<LineSettings>,
+    /// The recorded link replayed from `--record` output.
+    pub link: String,
+    pub comments: CommentMode,
+    /// The instant deadlines count from (default: when `run` starts). Tests inject it.
+    pub origin: Option<Instant>,
+    /// Gaps longer than this are counted in the statistics.
+    pub gap_threshold_s: f64,
+    /// List every problem, not only the first [`LISTED_PER_KIND`] of each kind.
+    pub list_all_problems: bool,
+}
+
+impl Options {
+    pub fn new(inputs: Vec<PathBuf>) -> Self {
+        Self {
+            inputs,
+            policy: Policy::Pass,
+            pacing: None,
+            speed: 1.0,
+            start_s: 0.0,
+            end_s: None,
+            looping: false,
+            line: None,
+            link: "sonar".into(),
+            comments: CommentMode::Report,
+            origin: None,
+            gap_threshold_s: 1.0,
+            list_all_problems: false,
+        }
+    }
+}
+
+/// Why a replay could not start or had to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error(transparent)]
+    Input(#[from] InputError),
+    #[error(transparent)]
+    Sink(#[from] SinkError),
+    #[error("no input logs given")]
+    NoInputs,
+    #[error("{what} must be {expected}, got {value}")]
+    BadOption {
+        what: &'static str,
+        expected: &'static str,
+        value: f64,
+    },
+    #[error("pacing by timestamps needs timestamps, but {path} has none ({format})")]
+    NoTimestamps { path: PathBuf, format: Format },
+}
+
+/// Where the line settings came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LineOrigin {
+    CommandLine,
+    SerialComment(Loc),
+    Default,
+}
+
+/// What was found about one input when it was opened.
+#[derive(Debug, Clone)]
+pub struct InputInfo {
+    pub path: PathBuf,
+    pub format: Format,
+    pub gzip: bool,
+    pub size_bytes: u64,
+}
+
+/// Hears what happens during a replay (the CLI prints it; tests record it).
+pub trait Observer {
+    /// A problem, reported once (first pass only; at most [`LISTED_PER_KIND`] per kind
+    /// unless `list_all_problems`).
+    fn problem(&mut self, _problem: &Problem) {}
+    /// A `#` comment (first pass, `--comments report`).
+    fn comment(&mut self, _loc: &Loc, _text: &str) {}
+    /// The instant deadlines count from.
+    fn started(&mut self, _origin: Instant) {}
+    /// A sentence went to the sink.
+    fn sent(&mut self, _loc: &Loc, _bytes: &[u8], _sent: &Sent) {}
+    /// Bytes read from the inputs so far in this pass, sentences sent so far.
+    fn progress(&mut self, _read_bytes: u64, _sentences: u64) {}
+    /// A pass over the inputs ended (before the next `--loop` pass).
+    fn pass_done(&mut self, _pass: u64) {}
+}
+
+/// An observer that ignores everything.
+#[derive(Debug, Default)]
+pub struct Quiet;
+impl Observer for Quiet {}
+
+/// A replay ready to run.
+#[derive(Debug)]
+pub struct Replay {
+    opts: Options,
+    line: LineSettings,
+    line_origin: LineOrigin,
+    pacing: Pacing,
+    inputs: Vec<InputInfo>,
+}
+
+impl Replay {
+    /// Checks the options, opens every input once to detect its format and read the
+    /// `#Serial:` comments at its head, and resolves the pacing and line settings.
+    pub fn open(opts: Options) -> Result<Self, ReplayError> {
+        if opts.inputs.is_empty() {
+            return Err(ReplayError::NoInputs);
+        }
+        let positive = |what, value: f64| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(ReplayError::BadOption {
+                    what,
+                    expected: "a positive number",
+                    value,
+                })
+            }
+        };
+        positive("--speed", opts.speed)?;
+        if let Some(Pacing::Rate { per_s }) = opts.pacing {
+            positive("--rate", per_s)?;
+        }
+        if !(opts.start_s.is_finite() && opts.start_s >= 0.0) {
+            return Err(ReplayError::BadOption {
+                what: "--start",
+                expected: "zero or more seconds",
+                value: opts.start_s,
+            });
+        }
+        if let Some(end) = opts.end_s
+            && !(end.is_finite() && end >= opts.start_s)
+        {
+            return Err(ReplayError::BadOption {
+                what: "--end",
+                expected: "at least --start",
+                value: end,
+            });
+        }
+        let mut inputs = Vec::new();
+        let mut serial: Option<(LineSettings, Loc)> = None;
+        for (i, path) in opts.inputs.iter().enumerate() {
+            let mut source = Source::open(
+                path,
+                i,
+                &opts.link,
+                opts.comments,
+                Arc::new(AtomicU64::new(0)),
+            )?;
+            // Header comments come before the first line; `#Serial:` later is checked in run.
+            while let Some(event) = source.next_event()? {
+                match event {
+                    Event::Serial { loc, settings } => {
+                        serial.get_or_insert((settings, loc));
+                    }
+                    Event::Line(_) => break,
+                    _ => {}
+                }
+            }
+            let file = input::resolve_path(path)?;
+            inputs.push(InputInfo {
+                size_bytes: std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0),
+                path: file,
+                format: source.format(),
+                gzip: source.is_gzip(),
+            });
+        }
+        let (line, line_origin) = match (opts.line, serial) {
+            (Some(line), _) => (line, LineOrigin::CommandLine),
+            (None, Some((line, loc))) => (line, LineOrigin::SerialComment(loc)),
+            (None, None) => (DEFAULT_LINE, LineOrigin::Default),
+        };
+        let all_timed = inputs.iter().all(|i| i.format.is_timed());
+        let pacing = match opts.pacing {
+            Some(Pacing::Timestamps) if !all_timed => {
+                let untimed = inputs.iter().find(|i| !i.format.is_timed());
+                if let Some(i) = untimed {
+                    return Err(ReplayError::NoTimestamps {
+                        path: i.path.clone(),
+                        format: i.format,
+                    });
+                }
+                Pacing::Timestamps
+            }
+            Some(p) => p,
+            None if all_timed => Pacing::Timestamps,
+            None => Pacing::Baud,
+        };
+        Ok(Self {
+            opts,
+            line,
+            line_origin,
+            pacing,
+            inputs,
+        })
+    }
+
+    pub fn line_settings(&self) -> LineSettings {
+        self.line
+    }
+
+    pub fn line_origin(&self) -> &LineOrigin {
+        &self.line_origin
+    }
+
+    pub fn pacing(&self) -> Pacing {
+        self.pacing
+    }
+
+    pub fn inputs(&self) -> &[InputInfo] {
+        &self.inputs
+    }
+
+    pub fn options(&self) -> &Options {
+        &self.opts
+    }
+
+    /// Total size of the inputs on disk (compressed size for gzip), for a progress bar.
+    pub fn total_input_bytes(&self) -> u64 {
+        self.inputs.iter().map(|i| i.size_bytes).sum()
+    }
+
+    /// Runs the replay into `sink` until the logs end (or, with `--loop`, until `stop`).
+    /// A shutdown request ends it early with the summary so far.
+    pub fn run(
+        &self,
+        sink: &mut dyn Sink,
+        observer: &mut dyn Observer,
+        stop: &Shutdown,
+    ) -> Result<Summary, ReplayError> {
+        let opts = &self.opts;
+        let origin = opts.origin.unwrap_or_else(Instant::now);
+        sink.begin(origin);
+        observer.started(origin);
+        let mut summary = Summary::new(opts.gap_threshold_s);
+        let mut reporter = Reporter {
+            listed: BTreeMap::new(),
+            once: HashSet::new(),
+            list_all: opts.list_all_problems,
+        };
+        let mut base_ns = 0u64;
+        let char_ns = self.line.char_time_ns();
+        let mut pass = 0u64;
+        'passes: loop {
+            let first = pass == 0;
+            let read = Arc::new(AtomicU64::new(0));
+            let mut sources = Vec::with_capacity(opts.inputs.len());
+            for (i, path) in opts.inputs.iter().enumerate() {
+                sources.push(Source::open(
+                    path,
+                    i,
+                    &opts.link,
+                    opts.comments,
+                    read.clone(),
+                )?);
+            }
+            let mut merger = Merger::new(sources);
+            let mut sched =
+                Scheduler::new(self.pacing, opts.speed, opts.start_s, opts.end_s, char_ns);
+            let mut sent_this_pass = 0u64;
+            let mut last_due: Option<u64> = None;
+            while let Some(event) = merger.next_event()? {
+                if stop.is_triggered() {
+                    break 'passes;
+                }
+                match event {
+                    Event::Problem(p) => {
+                        reporter.report(p, usize::MAX, first, &mut summary, observer)
+                    }
+                    Event::Comment { loc, text } => {
+                        if first {
+                            summary.comments += 1;
+                            observer.comment(&loc, &text);
+                        }
+                    }
+                    Event::Serial { loc, settings } => {
+                        if settings != self.line && first {
+                            let why = match self.line_origin {
+                                LineOrigin::CommandLine => "--line given",
+                                _ => "the first #Serial: applies to the whole replay",
+                            };
+                            let problem = Problem {
+                                loc,
+                                kind: ProblemKind::SerialConflict {
+                                    found: settings.to_string(),
+                                    in_force: self.line.to_string(),
+                                    why,
+                                },
+                                action: Action::Ignored,
+                            };
+                            reporter.report(problem, usize::MAX, first, &mut summary, observer);
+                        }
+                    }
+                    Event::Line(line) => {
+                        if first {
+                            summary.lines_read += 1;
+                        }
+                        let checked = match line.kind {
+                            input::LineKind::Data => validate::check_line(
+                                &line.bytes,
+                                line.terminator,
+                                line.overflow,
+                                opts.policy,
+                            ),
+                            input::LineKind::Comment => validate::Checked {
+                                out: Some([&line.bytes[..], b"\r\n"].concat()),
+                                ..Default::default()
+                            },
+                        };
+                        if first {
+                            let mut fixed = false;
+                            let mut passed_bad = false;
+                            for (kind, action) in &checked.problems {
+                                summary.checksum_failures += u64::from(kind.is_checksum());
+                                fixed |=
+                                    matches!(action, Action::Fixed { .. } | Action::JunkRemoved);
+                                passed_bad |= *action == Action::Passed;
+                            }
+                            if checked.out.is_none() {
+                                summary.lines_dropped += 1;
+                            } else if fixed {
+                                summary.lines_fixed += 1;
+                            } else if passed_bad {
+                                summary.lines_passed_with_problems += 1;
+                            }
+                        }
+                        for (kind, action) in checked.problems {
+                            let problem = Problem {
+                                loc: line.loc.clone(),
+                                kind,
+                                action,
+                            };
+                            reporter.report(problem, line.input, first, &mut summary, observer);
+                        }
+                        if let Some(out) = checked.out {
+                            let is_comment = line.kind == input::LineKind::Comment;
+                            let placement = if is_comment {
+                                Placement::Asap
+                            } else {
+                                sched.place(line.time_ns, out.len())
+                            };
+                            let due = match placement {
+                                Placement::Skip => {
+                                    if first {
+                                        summary.skipped_before_start += 1;
+                                    }
+                                    None
+                                }
+                                Placement::Stop => break,
+                                Placement::Due { offset_ns } => Some(Some(base_ns + offset_ns)),
+                                // Without a deadline of its own, a line follows the one before.
+                                Placement::Asap if self.pacing == Pacing::Fast => Some(None),
+                                Placement::Asap => Some(Some(last_due.unwrap_or(base_ns))),
+                            };
+                            if let Some(due) = due {
+                                let sent = match sink.send(&out, due, stop) {
+                                    Ok(s) => s,
+                                    Err(SinkError::Stopped) => break 'passes,
+                                    Err(e) => return Err(e.into()),
+                                };
+                                last_due = due.or(last_due);
+                                sent_this_pass += 1;
+                                summary.bytes_sent += out.len() as u64;
+                                if is_comment {
+                                    summary.comments_sent += 1;
+                                } else {
+                                    summary.sentences_sent += 1;
+                                    if first {
+                                        if let Some(address) = checked.address {
+                                            *summary.by_type.entry(address).or_default() += 1;
+                                        }
+                                        if let Some(t) = line.time_ns {
+                                            summary.note_time(t, &line.loc);
+                                        }
+                                    }
+                                }
+                                if sent.line_wait_ns > 0 {
+                                    summary.line_waits += 1;
+                                    summary.line_wait_max_ns =
+                                        summary.line_wait_max_ns.max(sent.line_wait_ns);
+                                }
+                                observer.sent(&line.loc, &out, &sent);
+                                if sent_this_pass % 256 == 0 {
+                                    observer.progress(
+                                        read.load(Ordering::Relaxed),
+                                        summary.sentences_sent,
+                                    );
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            if first {
+                for s in merger.sources() {
+                    summary.link_messages_skipped += s.link_messages_skipped;
+                    summary.blank_lines += s.blank_lines;
+                }
+            }
+            observer.progress(read.load(Ordering::Relaxed), summary.sentences_sent);
+            summary.passes += 1;
+            observer.pass_done(pass);
+            if !opts.looping || stop.is_triggered() || sent_this_pass == 0 {
+                break;
+            }
+            base_ns = sink.free_at_ns();
+            pass += 1;
+        }
+        summary.elapsed = origin.elapsed();
+        Ok(summary)
+    }
+}
+
+/// Lists each problem once: first pass only, once per file for once-per-file kinds, and at
+/// most [`LISTED_PER_KIND`] per kind unless told to list all. Every one is counted.
+struct Reporter {
+    listed: BTreeMap<&'static str, u64>,
+    once: HashSet<(usize, &'static str)>,
+    list_all: bool,
+}
+
+impl Reporter {
+    fn report(
+        &mut self,
+        problem: Problem,
+        input: usize,
+        first_pass: bool,
+        summary: &mut Summary,
+        observer: &mut dyn Observer,
+    ) {
+        if !first_pass {
+            return;
+        }
+        let name = problem.kind.name();
+        *summary.problems.entry(name).or_default() += 1;
+        let shown = self.listed.entry(name).or_default();
+        let limited = !self.list_all && *shown >= LISTED_PER_KIND;
+        let repeat = problem.kind.once_per_file() && !self.once.insert((input, name));
+        if limited || repeat {
+            summary.problems_not_listed += 1;
+        } else {
+            *shown += 1;
+            observer.problem(&problem);
+        }
+    }
+}
