@@ -90,6 +90,10 @@ pub struct ReplayArgs {
     /// List every problem (default: the first 50 of each kind; all are counted).
     #[arg(long)]
     pub all_problems: bool,
+    /// SCHED_FIFO priority of the pacing thread for timed pacing (0 = do not ask). Without
+    /// it, a loaded machine can wake the replay a scheduler tick (4 ms) late.
+    #[arg(long, value_name = "1-99", default_value_t = 10, value_parser = clap::value_parser!(i32).range(0..=99))]
+    pub rt_priority: i32,
 }
 
 /// Why `replay` failed.
@@ -130,6 +134,7 @@ impl ReplayArgs {
         opts.comments = self.comments;
         opts.gap_threshold_s = self.gap;
         opts.list_all_problems = self.all_problems;
+        opts.realtime_priority = (self.rt_priority > 0).then_some(self.rt_priority);
         Ok(opts)
     }
 }
@@ -161,6 +166,9 @@ impl Observer for Terminal {
             bar.set_position(read_bytes);
             bar.set_message(format!("{sentences} sentences"));
         }
+    }
+    fn note(&mut self, text: &str) {
+        self.line(&format!("replay: {text}"));
     }
     fn pass_done(&mut self, _pass: u64) {
         if let Some(bar) = &self.bar {

@@ -65,6 +65,9 @@ pub struct Options {
     pub gap_threshold_s: f64,
     /// List every problem, not only the first [`LISTED_PER_KIND`] of each kind.
     pub list_all_problems: bool,
+    /// Run the pacing thread under `SCHED_FIFO` at this priority (timed pacing only); if the
+    /// system refuses, the replay goes on without it and says so.
+    pub realtime_priority: Option<i32>,
 }
 
 impl Options {
@@ -83,6 +86,7 @@ impl Options {
             origin: None,
             gap_threshold_s: 1.0,
             list_all_problems: false,
+            realtime_priority: None,
         }
     }
 }
@@ -138,6 +142,8 @@ pub trait Observer {
     fn progress(&mut self, _read_bytes: u64, _sentences: u64) {}
     /// A pass over the inputs ended (before the next `--loop` pass).
     fn pass_done(&mut self, _pass: u64) {}
+    /// Something worth telling the user that is not about a line.
+    fn note(&mut self, _text: &str) {}
 }
 
 /// An observer that ignores everything.
@@ -279,6 +285,34 @@ impl Replay {
     /// Runs the replay into `sink` until the logs end (or, with `--loop`, until `stop`).
     /// A shutdown request ends it early with the summary so far.
     pub fn run(
+        &self,
+        sink: &mut dyn Sink,
+        observer: &mut dyn Observer,
+        stop: &Shutdown,
+    ) -> Result<Summary, ReplayError> {
+        let opts = &self.opts;
+        let mut realtime = false;
+        if let Some(priority) = opts.realtime_priority
+            && self.pacing != Pacing::Fast
+        {
+            match output::set_realtime_priority(priority) {
+                Ok(()) => realtime = true,
+                Err(e) => observer.note(&format!(
+                    "no real-time priority ({e}): byte timing is subject to CPU load"
+                )),
+            }
+        }
+        let result = self.run_inner(sink, observer, stop);
+        if realtime {
+            output::clear_realtime_priority();
+        }
+        result.map(|mut s| {
+            s.realtime = realtime;
+            s
+        })
+    }
+
+    fn run_inner(
         &self,
         sink: &mut dyn Sink,
         observer: &mut dyn Observer,

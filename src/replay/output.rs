@@ -68,6 +68,11 @@ pub struct Sent {
     pub line_wait_ns: u64,
     /// When the last byte was handed to the operating system.
     pub written_at: Instant,
+    /// The longest any of its bytes was handed to the operating system after its completion
+    /// time on the line (ns): how late this process ran, before any consumer is involved.
+    pub write_late_max_ns: u64,
+    /// The longest single `write` call for it took (ns): time spent inside the kernel.
+    pub write_call_max_ns: u64,
 }
 
 /// Somewhere sentences go.
@@ -171,6 +176,30 @@ pub fn sleep_until(deadline: Instant, stop: &Shutdown) -> bool {
     }
 }
 
+/// Asks for `SCHED_FIFO` at `priority` (1-99) for the calling thread, so its wake-ups are
+/// not queued behind other processes' CPU time: on a loaded machine the default scheduler
+/// can wake a sleeper one or more scheduler ticks (4 ms at 250 Hz) late. Needs root or
+/// `CAP_SYS_NICE` or an `rtprio` limit. Linux's real-time throttling still reserves 5 % of
+/// each second for other tasks.
+pub fn set_realtime_priority(priority: i32) -> io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: a plain syscall on the calling thread (pid 0) with a valid parameter struct.
+    if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0 {
+        Ok(())
+    } else {
+        Err(io::Error::last_os_error())
+    }
+}
+
+/// Returns the calling thread to the default scheduler.
+pub fn clear_realtime_priority() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: as above; failure leaves the thread as it was, which is harmless.
+    let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+}
+
 /// Bytes to a [`Port`], each released at its completion time on the line.
 #[derive(Debug)]
 pub struct ByteSink {
@@ -234,6 +263,8 @@ impl Sink for ByteSink {
                 end_ns: None,
                 line_wait_ns: 0,
                 written_at,
+                write_late_max_ns: 0,
+                write_call_max_ns: 0,
             });
         };
         let start_ns = self.free_at_ns.max(due_ns);
@@ -247,6 +278,8 @@ impl Sink for ByteSink {
         debug_assert_eq!(end_ns, start_ns + self.char_ns * sentence.len() as u64);
         self.free_at_ns = end_ns;
         let mut written_at = Instant::now();
+        let mut write_late_max_ns = 0u64;
+        let mut write_call_max_ns = 0u64;
         while let Some(next_ns) = self.pacer.next_release_ns() {
             if !sleep_until(self.origin + Duration::from_nanos(next_ns), stop) {
                 return Err(SinkError::Stopped);
@@ -255,18 +288,26 @@ impl Sink for ByteSink {
             self.out.clear();
             self.pacer.release(now_ns, &mut self.out);
             let out = std::mem::take(&mut self.out);
+            let before_write = Instant::now();
             let result = self.port.write_all(&out, stop);
             self.out = out;
             if let Err(e) = result {
                 return Err(self.io(e, stop));
             }
             written_at = Instant::now();
+            write_call_max_ns =
+                write_call_max_ns.max((written_at - before_write).as_nanos() as u64);
+            // The first byte of this batch was due at `next_ns`: it is the latest one.
+            let at_ns = written_at.saturating_duration_since(self.origin).as_nanos() as u64;
+            write_late_max_ns = write_late_max_ns.max(at_ns.saturating_sub(next_ns));
         }
         Ok(Sent {
             start_ns: Some(start_ns),
             end_ns: Some(end_ns),
             line_wait_ns: start_ns - due_ns,
             written_at,
+            write_late_max_ns,
+            write_call_max_ns,
         })
     }
 
@@ -287,6 +328,8 @@ impl Sink for NullSink {
             end_ns: None,
             line_wait_ns: 0,
             written_at: Instant::now(),
+            write_late_max_ns: 0,
+            write_call_max_ns: 0,
         })
     }
     fn free_at_ns(&self) -> u64 {

@@ -49,6 +49,8 @@ pub struct Summary {
     pub line_waits: u64,
     pub line_wait_max_ns: u64,
     pub elapsed: Duration,
+    /// Whether the pacing thread ran under `SCHED_FIFO`.
+    pub realtime: bool,
     prev_time_ns: Option<i64>,
 }
 

@@ -172,7 +172,7 @@ impl fmt::Display for Action {
             Action::Dropped => f.write_str("dropped"),
             Action::Fixed { checksum } => write!(f, "fixed: checksum set to {checksum:02X}"),
             Action::JunkRemoved => f.write_str("junk removed (policy fix)"),
-            Action::CrAdded => f.write_str("sent with CR LF"),
+            Action::CrAdded => f.write_str("CR added: sent with CR LF"),
             Action::SentInFileOrder => f.write_str("sent in file order"),
             Action::Ignored => f.write_str("ignored"),
         }
