@@ -470,7 +470,7 @@ impl Replay {
                                         summary.line_wait_max_ns.max(sent.line_wait_ns);
                                 }
                                 observer.sent(&line.loc, &out, &sent);
-                                if sent_this_pass % 256 == 0 {
+                                if sent_this_pass.is_multiple_of(256) {
                                     observer.progress(
                                         read.load(Ordering::Relaxed),
                                         summary.sentences_sent,
@@ -532,5 +532,142 @@ impl Reporter {
             *shown += 1;
             observer.problem(&problem);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Write;
+    use std::sync::Mutex;
+
+    use super::*;
+    use crate::record::{Direction, Recorder};
+
+    #[derive(Clone, Default)]
+    struct Shared(Arc<Mutex<Vec<u8>>>);
+
+    impl Write for Shared {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// What the daemon's recorder writes, replay sends back: the sonar link's `tx` sentences,
+    /// reassembled across chunk boundaries, without the select/ack traffic or other links.
+    #[test]
+    fn a_recording_made_by_the_recorder_replays_its_sonar_sentences() {
+        let dir =
+            std::env::temp_dir().join(format!("eyebot-hil-replay-rec-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let rec = Recorder::start(&dir, "seed = 1\n", "t_s").unwrap();
+        let a = b"$SDDBT,6.6,f,2.0,M,1.1,F*04\r\n";
+        let b = b"$SDDPT,2.0,0.5*50\r\n";
+        rec.bytes(0.100, "sonar", Direction::Rx, b"@S1\r");
+        rec.bytes(0.101, "sonar", Direction::Tx, b"@A1\r\n$SDDBT,6.6");
+        rec.bytes(0.102, "sensor", Direction::Tx, &[0xEB, 0x90, 0x00]);
+        rec.bytes(0.103, "sonar", Direction::Tx, b",f,2.0,M,1.1,F*04\r\n$SDD");
+        rec.bytes(0.350, "sonar", Direction::Tx, b"PT,2.0,0.5*50\r\n");
+        rec.finish().unwrap();
+
+        let mut opts = Options::new(vec![dir.clone()]);
+        opts.pacing = Some(Pacing::Fast);
+        let replay = Replay::open(opts).unwrap();
+        assert_eq!(replay.inputs()[0].format, Format::Recording);
+        let out = Shared::default();
+        let mut sink = ByteSink::new(Port::Writer(Box::new(out.clone())), &DEFAULT_LINE);
+        let summary = replay.run(&mut sink, &mut Quiet, &Shutdown::new()).unwrap();
+        assert_eq!(*out.0.lock().unwrap(), [&a[..], &b[..]].concat());
+        assert_eq!(summary.link_messages_skipped, 1);
+        assert_eq!(summary.problem_count(), 0);
+        assert_eq!(summary.first_time_ns, Some(101_000_000));
+        assert_eq!(summary.last_time_ns, Some(103_000_000));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// `--start`/`--end` and the speed factor act on log time. Checked on the modelled line
+    /// times the sink reports.
+    #[test]
+    fn start_end_speed_and_loop_shape_the_schedule() {
+        #[derive(Default)]
+        struct Times(Vec<(u64, u64)>);
+        impl Observer for Times {
+            fn sent(&mut self, loc: &Loc, _b: &[u8], sent: &Sent) {
+                self.0.push((loc.line, sent.start_ns.unwrap()));
+            }
+        }
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-replay-se-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("t.log");
+        let text: String = (0..6)
+            .map(|i| format!("{}.000 $SDDPT,1.{i},0.3*00\r\n", 100 + i))
+            .collect();
+        std::fs::write(&log, text).unwrap();
+        let mut opts = Options::new(vec![log]);
+        opts.start_s = 1.0;
+        opts.end_s = Some(3.0);
+        opts.speed = 50.0;
+        opts.line = Some(LineSettings::n81(115_200));
+        let replay = Replay::open(opts).unwrap();
+        assert_eq!(replay.pacing(), Pacing::Timestamps);
+        let mut sink = ByteSink::new(
+            Port::Writer(Box::new(std::io::sink())),
+            &replay.line_settings(),
+        );
+        let mut times = Times::default();
+        let summary = replay.run(&mut sink, &mut times, &Shutdown::new()).unwrap();
+        // Lines 2..=4 (log 1 s, 2 s, 3 s) at 20 ms intervals (speed 50).
+        assert_eq!(times.0, vec![(2, 0), (3, 20_000_000), (4, 40_000_000)]);
+        assert_eq!(summary.skipped_before_start, 1);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// `--loop` starts the next pass when the line is free, and keeps the schedule of the
+    /// first; problems are listed on the first pass only.
+    #[test]
+    fn loop_passes_follow_each_other_on_the_line() {
+        struct StopAfter(usize, Shutdown, Vec<u64>, usize);
+        impl Observer for StopAfter {
+            fn sent(&mut self, _loc: &Loc, _b: &[u8], sent: &Sent) {
+                self.2.push(sent.start_ns.unwrap());
+                if self.2.len() == self.0 {
+                    self.1.trigger();
+                }
+            }
+            fn problem(&mut self, _p: &Problem) {
+                self.3 += 1;
+            }
+        }
+        let dir =
+            std::env::temp_dir().join(format!("eyebot-hil-replay-loop-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("l.log");
+        std::fs::write(&log, "0.0 $A*41\r\n0.01 $B*00\r\n").unwrap();
+        let mut opts = Options::new(vec![log]);
+        opts.looping = true;
+        opts.line = Some(LineSettings::n81(115_200));
+        let replay = Replay::open(opts).unwrap();
+        let stop = Shutdown::new();
+        let mut obs = StopAfter(5, stop.clone(), Vec::new(), 0);
+        let mut sink = ByteSink::new(
+            Port::Writer(Box::new(std::io::sink())),
+            &replay.line_settings(),
+        );
+        let summary = replay.run(&mut sink, &mut obs, &stop).unwrap();
+        let char_ns = LineSettings::n81(115_200).char_time_ns();
+        let pass_ns = 10_000_000 + 7 * char_ns; // B starts at 10 ms and takes 7 characters
+        assert_eq!(
+            obs.2,
+            vec![0, 10_000_000, pass_ns, pass_ns + 10_000_000, 2 * pass_ns]
+        );
+        assert_eq!(
+            obs.3, 1,
+            "the bad checksum of $B is listed once, not every pass"
+        );
+        assert_eq!(summary.problems.get("checksum mismatch"), Some(&1));
+        std::fs::remove_dir_all(dir).unwrap();
     }
 }

@@ -343,9 +343,11 @@ mod tests {
 
     use super::*;
 
+    type Writes = Vec<(Instant, Vec<u8>)>;
+
     /// A writer that timestamps every write.
     #[derive(Clone, Default)]
-    struct Recording(Arc<Mutex<Vec<(Instant, Vec<u8>)>>>);
+    struct Recording(Arc<Mutex<Writes>>);
 
     impl Write for Recording {
         fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
