@@ -209,6 +209,8 @@ pub struct ByteSink {
     origin: Instant,
     free_at_ns: u64,
     out: Vec<u8>,
+    written_bytes: u64,
+    trace: Option<Vec<(u64, Instant)>>,
 }
 
 impl ByteSink {
@@ -221,6 +223,27 @@ impl ByteSink {
             origin: Instant::now(),
             free_at_ns: 0,
             out: Vec::new(),
+            written_bytes: 0,
+            trace: None,
+        }
+    }
+
+    /// Also keeps, for every `write`, the number of bytes written so far and when that write
+    /// returned: the sender's side of a latency measurement (tests, diagnostics).
+    pub fn with_write_trace(mut self) -> Self {
+        self.trace = Some(Vec::new());
+        self
+    }
+
+    /// The write trace, if enabled: `(bytes written so far, when)` per write.
+    pub fn write_trace(&self) -> &[(u64, Instant)] {
+        self.trace.as_deref().unwrap_or(&[])
+    }
+
+    fn traced(&mut self, n: usize, at: Instant) {
+        self.written_bytes += n as u64;
+        if let Some(trace) = &mut self.trace {
+            trace.push((self.written_bytes, at));
         }
     }
 
@@ -257,6 +280,7 @@ impl Sink for ByteSink {
                 return Err(self.io(e, stop));
             }
             let written_at = Instant::now();
+            self.traced(sentence.len(), written_at);
             self.free_at_ns = written_at.saturating_duration_since(self.origin).as_nanos() as u64;
             return Ok(Sent {
                 start_ns: None,
@@ -295,6 +319,8 @@ impl Sink for ByteSink {
                 return Err(self.io(e, stop));
             }
             written_at = Instant::now();
+            let n = self.out.len();
+            self.traced(n, written_at);
             write_call_max_ns =
                 write_call_max_ns.max((written_at - before_write).as_nanos() as u64);
             // The first byte of this batch was due at `next_ns`: it is the latest one.
