@@ -163,17 +163,15 @@ impl Observer for Terminal {
     fn sent(&mut self, _loc: &Loc, _bytes: &[u8], _sent: &Sent) {}
     fn progress(&mut self, read_bytes: u64, sentences: u64) {
         if let Some(bar) = &self.bar {
+            if read_bytes < bar.position() {
+                bar.reset(); // a new --loop pass
+            }
             bar.set_position(read_bytes);
             bar.set_message(format!("{sentences} sentences"));
         }
     }
     fn note(&mut self, text: &str) {
         self.line(&format!("replay: {text}"));
-    }
-    fn pass_done(&mut self, _pass: u64) {
-        if let Some(bar) = &self.bar {
-            bar.reset();
-        }
     }
 }
 

@@ -670,4 +670,31 @@ mod tests {
         assert_eq!(summary.problems.get("checksum mismatch"), Some(&1));
         std::fs::remove_dir_all(dir).unwrap();
     }
+
+    /// `--comments send` passes comments through as lines, in file order, as gpsfake does;
+    /// `#Serial:` is never sent, and a conflicting later one is reported.
+    #[test]
+    fn comments_are_sent_in_place_when_asked() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-replay-cm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("c.log");
+        std::fs::write(
+            &log,
+            "#Serial: 9600 8N1\n$A*41\r\n# between\r\n#Serial: 4800 8N1\n$A*41\r\n",
+        )
+        .unwrap();
+        let mut opts = Options::new(vec![log]);
+        opts.comments = CommentMode::Send;
+        opts.pacing = Some(Pacing::Fast);
+        let replay = Replay::open(opts).unwrap();
+        assert_eq!(replay.line_settings(), LineSettings::n81(9600));
+        let out = Shared::default();
+        let mut sink = ByteSink::new(Port::Writer(Box::new(out.clone())), &replay.line_settings());
+        let summary = replay.run(&mut sink, &mut Quiet, &Shutdown::new()).unwrap();
+        assert_eq!(*out.0.lock().unwrap(), b"$A*41\r\n# between\r\n$A*41\r\n");
+        assert_eq!(summary.comments_sent, 1);
+        assert_eq!(summary.sentences_sent, 2);
+        assert_eq!(summary.problems.get("#Serial conflict"), Some(&1));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
 }
