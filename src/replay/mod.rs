@@ -470,7 +470,9 @@ impl Replay {
                                         summary.line_wait_max_ns.max(sent.line_wait_ns);
                                 }
                                 observer.sent(&line.loc, &out, &sent);
-                                if sent_this_pass.is_multiple_of(256) {
+                                // Every sentence when paced (a few per second); in batches when fast.
+                                if self.pacing != Pacing::Fast || sent_this_pass.is_multiple_of(256)
+                                {
                                     observer.progress(
                                         read.load(Ordering::Relaxed),
                                         summary.sentences_sent,
