@@ -291,18 +291,19 @@ fn check_body(bytes: &[u8], overflow: Option<usize>, policy: Policy) -> Checked 
             }
         }
     }
-    let prefix = &bytes[..bytes.len() - sentence.len()];
-    let emit = |c: &mut Checked, sentence_out: &[u8]| {
-        let mut out = Vec::with_capacity(prefix.len() + sentence_out.len() + 2);
-        if policy == Policy::Pass {
-            out.extend_from_slice(prefix);
-        }
-        out.extend_from_slice(sentence_out);
-        out.extend_from_slice(b"\r\n");
-        c.out = Some(out);
+    // One buffer: the bytes to send (junk kept only under `pass`) with CR LF; the sentence
+    // part of it is what gets framed and checked.
+    let prefix_len = if policy == Policy::Pass {
+        bytes.len() - sentence.len()
+    } else {
+        0
     };
-    let candidate = with_crlf(sentence);
-    let framing = match scan_line(&candidate, 0) {
+    let mut out = Vec::with_capacity(prefix_len + sentence.len() + 2);
+    out.extend_from_slice(&bytes[..prefix_len]);
+    out.extend_from_slice(sentence);
+    out.extend_from_slice(b"\r\n");
+    let candidate = &out[prefix_len..];
+    let framing = match scan_line(candidate, 0) {
         LineScan::Complete { len } if len == candidate.len() => None,
         LineScan::Reject { error, .. } => Some(error),
         // A CR inside the line ends it early, or no decision within 82 bytes.
@@ -313,7 +314,7 @@ fn check_body(bytes: &[u8], overflow: Option<usize>, policy: Policy) -> Checked 
     };
     if let Some(error) = framing {
         let action = if policy == Policy::Pass {
-            emit(&mut c, sentence);
+            c.out = Some(out);
             Action::Passed
         } else {
             Action::Dropped
@@ -321,42 +322,45 @@ fn check_body(bytes: &[u8], overflow: Option<usize>, policy: Policy) -> Checked 
         c.problems.push((ProblemKind::Framing(error), action));
         return c;
     }
-    match checked_body(&candidate) {
+    let error = match checked_body(candidate) {
         Ok(body) => {
             c.address = Some(address_of(body));
-            emit(&mut c, sentence);
+            c.out = Some(out);
+            return c;
         }
-        Err(error) => {
-            let body_end = sentence
-                .iter()
-                .position(|&b| b == b'*')
-                .unwrap_or(sentence.len());
-            let body = &sentence[1..body_end];
-            c.address = Some(address_of(body));
-            match policy {
-                Policy::Pass => {
-                    emit(&mut c, sentence);
-                    c.problems
-                        .push((ProblemKind::Checksum(error), Action::Passed));
-                }
-                Policy::Drop => {
-                    c.problems
-                        .push((ProblemKind::Checksum(error), Action::Dropped));
-                }
-                Policy::Fix => {
-                    let sum = checksum(body);
-                    let fixed = format!("${}*{sum:02X}", String::from_utf8_lossy(body));
-                    if fixed.len() + 2 > SENTENCE_MAX_LEN {
-                        c.problems
-                            .push((ProblemKind::Checksum(error), Action::Dropped));
-                    } else {
-                        emit(&mut c, fixed.as_bytes());
-                        c.problems.push((
-                            ProblemKind::Checksum(error),
-                            Action::Fixed { checksum: sum },
-                        ));
-                    }
-                }
+        Err(error) => error,
+    };
+    let body_end = sentence
+        .iter()
+        .position(|&b| b == b'*')
+        .unwrap_or(sentence.len());
+    let body = &sentence[1..body_end];
+    c.address = Some(address_of(body));
+    match policy {
+        Policy::Pass => {
+            c.out = Some(out);
+            c.problems
+                .push((ProblemKind::Checksum(error), Action::Passed));
+        }
+        Policy::Drop => {
+            c.problems
+                .push((ProblemKind::Checksum(error), Action::Dropped));
+        }
+        Policy::Fix => {
+            let sum = checksum(body);
+            let mut fixed = Vec::with_capacity(body.len() + 6);
+            fixed.push(b'$');
+            fixed.extend_from_slice(body);
+            fixed.extend_from_slice(format!("*{sum:02X}\r\n").as_bytes());
+            if fixed.len() > SENTENCE_MAX_LEN {
+                c.problems
+                    .push((ProblemKind::Checksum(error), Action::Dropped));
+            } else {
+                c.out = Some(fixed);
+                c.problems.push((
+                    ProblemKind::Checksum(error),
+                    Action::Fixed { checksum: sum },
+                ));
             }
         }
     }
