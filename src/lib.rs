@@ -23,6 +23,7 @@ pub mod physics;
 pub mod probe;
 pub mod record;
 pub mod sensors;
+pub mod replay;
 pub mod transport;
 pub mod validate;
 

@@ -1,1 +1,16 @@
 //! Fixtures for end-to-end tests: pseudo-terminals, a daemon under test, and clean-up in `Drop`.
+//!
+//! - [`process`]: unique names, temporary directories, child processes killed in `Drop`,
+//!   readiness by polling with a timeout, and a loud failure when a system tool is missing.
+//! - [`pty`]: ptys made with the bridge's own `PtyMaster`, and a consumer that timestamps
+//!   every read on the slave side.
+
+pub mod process;
+pub mod pty;
+
+/// The directory of fixture files, e.g. `fixtures/replay`.
+pub fn fixture_dir(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(name)
+}

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand, ValueEnum};
 
 pub mod probe;
+pub mod replay;
 pub mod run;
 pub mod simulate;
 pub mod status;
@@ -42,6 +43,8 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Run the thesis experiments and compare with Mako's measurements and SubSim's.
     Validate(validate::ValidateArgs),
+    /// Replay captured NMEA logs onto a pty, a serial device or stdout.
+    Replay(replay::ReplayArgs),
 }
 
 /// Errors that end a CLI command.
@@ -62,6 +65,8 @@ pub enum CliError {
     },
     #[error(transparent)]
     Validate(#[from] crate::validate::ValidateError),
+    #[error(transparent)]
+    Replay(#[from] replay::ReplayCliError),
     #[error("{failed} of {total} validation rows failed")]
     ValidationFailed { failed: usize, total: usize },
     #[error("cannot write `{}`: {source}", path.display())]
@@ -93,5 +98,6 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
         Command::Probe(args) => probe::main(args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Validate(args) => validate::run(&args),
+        Command::Replay(args) => Ok(replay::main(args)?),
     }
 }

@@ -1,0 +1,987 @@
+//! Reading logs: plain and timestamped NMEA text, our own `--record` output, gzip, comments.
+//!
+//! Every input is streamed one physical line at a time; nothing holds a whole file. A line
+//! longer than [`MAX_PHYSICAL_LINE`] bytes is cut at the input (its length is kept for the
+//! report) so binary junk without line feeds cannot grow memory.
+//!
+//! **Formats, detected per file:**
+//! - gzip by its magic bytes `1f 8b` (the extension is not consulted);
+//! - a `--record` directory (its `bytes.tsv` or `bytes.tsv.gz`) or a file whose first line is
+//!   the `bytes.tsv` header: the `tx` chunks of one link (default `sonar`) are joined and cut
+//!   into lines at LF, so sentences split across chunks are reassembled. A sentence takes the
+//!   `sim_s` of the chunk holding its first byte and the file:line of that chunk. Lines of the
+//!   sonar link's own select/ack protocol (starting with `@`) are skipped and counted;
+//! - otherwise an NMEA text log, with or without a timestamp prefix (see [`TimestampForm`]).
+//!
+//! Lines starting with `#` are gpsfake-style comments. `#Serial: 4800 8N1` (also
+//! `# Serial:`) gives the line settings; other comments are handed to the report.
+
+use std::collections::VecDeque;
+use std::fmt;
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::record::{BYTES_HEADER, Direction, parse_chunk};
+use crate::transport::LineSettings;
+
+use super::validate::{Action, Problem, ProblemKind};
+
+/// The longest physical line kept from an input. Longer lines are cut here and dropped by
+/// validation (they are at least 50 times the NMEA limit of 82 characters).
+pub const MAX_PHYSICAL_LINE: usize = 4096;
+
+/// How many data lines at the start of a file decide its timestamp form.
+pub const DETECT_LINES: usize = 8;
+
+/// Where a line came from.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct Loc {
+    pub file: Arc<Path>,
+    /// 1-based.
+    pub line: u64,
+}
+
+impl fmt::Display for Loc {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}", self.file.display(), self.line)
+    }
+}
+
+/// How a line ended in the log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Terminator {
+    CrLf,
+    /// LF without CR: normalised to CR LF on output, and reported.
+    Lf,
+    /// The file ended without a line feed.
+    Eof,
+}
+
+/// The timestamp prefix of an NMEA text log.
+///
+/// **Detection rule.** The first [`DETECT_LINES`] data lines (not blank, not `#`) are
+/// classified: a line starting with `$` has no prefix; otherwise the text before the first
+/// run of spaces or tabs is the prefix, provided a `$` follows that run. A prefix of digits
+/// with at most one `.` is [`Seconds`](Self::Seconds); a prefix that parses as an ISO 8601
+/// date-time (`2024-05-01T12:00:00.250Z`, `...+02:00`, or without offset, taken as UTC) is
+/// [`Iso8601`](Self::Iso8601). Lines that fit no form (junk) do not vote. The form with most
+/// votes wins; a tie between two forms is an error naming the file. A later line that does
+/// not carry the file's form is reported and dropped, since it cannot be placed in time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TimestampForm {
+    None,
+    /// Seconds, e.g. `12.250` (relative) or `1714564800.250` (Unix time).
+    Seconds,
+    /// ISO 8601 date-time, converted to Unix time.
+    Iso8601,
+}
+
+impl fmt::Display for TimestampForm {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            TimestampForm::None => "no timestamps",
+            TimestampForm::Seconds => "timestamps in seconds",
+            TimestampForm::Iso8601 => "ISO 8601 timestamps",
+        })
+    }
+}
+
+/// What kind of input a file turned out to be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Nmea { timestamps: TimestampForm },
+    Recording,
+}
+
+impl Format {
+    pub fn is_timed(self) -> bool {
+        !matches!(
+            self,
+            Format::Nmea {
+                timestamps: TimestampForm::None
+            }
+        )
+    }
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Format::Nmea { timestamps } => write!(f, "NMEA log, {timestamps}"),
+            Format::Recording => f.write_str("eyebot-hil recording (bytes.tsv)"),
+        }
+    }
+}
+
+/// Whether a log line is data or a comment passed through.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LineKind {
+    Data,
+    /// A `#` comment sent to the output (`--comments send`).
+    Comment,
+}
+
+/// One line of a log, before validation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogLine {
+    pub loc: Loc,
+    /// Index of the input on the command line.
+    pub input: usize,
+    /// Log time in nanoseconds (Unix time for ISO 8601, else as written), if the log has one.
+    pub time_ns: Option<i64>,
+    /// The line without its terminator (and without the timestamp prefix).
+    pub bytes: Vec<u8>,
+    pub terminator: Terminator,
+    /// The line's real length when it exceeded [`MAX_PHYSICAL_LINE`] and was cut.
+    pub overflow: Option<usize>,
+    pub kind: LineKind,
+}
+
+/// What reading an input yields, in file order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    Line(LogLine),
+    Comment { loc: Loc, text: String },
+    Serial { loc: Loc, settings: LineSettings },
+    Problem(Problem),
+}
+
+/// What to do with `#` comments other than `#Serial:`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum CommentMode {
+    /// List them in the report (stderr); do not send them.
+    #[default]
+    Report,
+    /// Send them to the output as lines, as gpsfake does (gpsd ignores them).
+    Send,
+    /// Skip them (counted in the summary).
+    Ignore,
+}
+
+/// Why an input cannot be read at all.
+#[derive(Debug, thiserror::Error)]
+pub enum InputError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+    #[error(
+        "{path}: a directory without bytes.tsv or bytes.tsv.gz (expected an eyebot-hil --record directory)"
+    )]
+    NotARecording { path: PathBuf },
+    #[error(
+        "{path}: cannot tell the timestamp form: lines {first} and {second} disagree ({a} vs {b}) and neither form has a majority in the first {DETECT_LINES} data lines"
+    )]
+    MixedTimestamps {
+        path: PathBuf,
+        first: u64,
+        second: u64,
+        a: TimestampForm,
+        b: TimestampForm,
+    },
+}
+
+/// Counts bytes read from the file (compressed bytes for gzip), for the progress bar.
+struct Counting<R> {
+    inner: R,
+    count: Arc<AtomicU64>,
+}
+
+impl<R: Read> Read for Counting<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.count.fetch_add(n as u64, Ordering::Relaxed);
+        Ok(n)
+    }
+}
+
+/// The file to read for `path`: itself, or the `bytes.tsv` of a recording directory.
+pub fn resolve_path(path: &Path) -> Result<PathBuf, InputError> {
+    let meta = std::fs::metadata(path).map_err(|source| InputError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if !meta.is_dir() {
+        return Ok(path.to_path_buf());
+    }
+    ["bytes.tsv", "bytes.tsv.gz"]
+        .iter()
+        .map(|name| path.join(name))
+        .find(|p| p.is_file())
+        .ok_or_else(|| InputError::NotARecording {
+            path: path.to_path_buf(),
+        })
+}
+
+/// Opens `path` for reading, decompressing when it starts with the gzip magic `1f 8b`.
+/// Returns the reader and whether it was gzip.
+pub fn open_reader(
+    path: &Path,
+    count: Arc<AtomicU64>,
+) -> Result<(Box<dyn BufRead + Send>, bool), InputError> {
+    let io_err = |source| InputError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = File::open(path).map_err(io_err)?;
+    let mut reader = BufReader::with_capacity(64 * 1024, Counting { inner: file, count });
+    let magic = reader.fill_buf().map_err(io_err)?;
+    if magic.starts_with(&[0x1f, 0x8b]) {
+        let gz = flate2::bufread::MultiGzDecoder::new(reader);
+        Ok((Box::new(BufReader::with_capacity(64 * 1024, gz)), true))
+    } else {
+        Ok((Box::new(reader), false))
+    }
+}
+
+/// Reads one physical line (through LF) into `buf` (cleared first, LF not stored), keeping at
+/// most `cap` bytes. Returns `None` at end of input, else the line's full length and whether
+/// it ended with LF.
+pub fn read_capped(
+    reader: &mut dyn BufRead,
+    buf: &mut Vec<u8>,
+    cap: usize,
+) -> io::Result<Option<(usize, bool)>> {
+    buf.clear();
+    let mut total = 0usize;
+    loop {
+        let available = match reader.fill_buf() {
+            Ok(a) => a,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        if available.is_empty() {
+            return Ok((total > 0).then_some((total, false)));
+        }
+        let (take, found) = match available.iter().position(|&b| b == b'\n') {
+            Some(i) => (i, true),
+            None => (available.len(), false),
+        };
+        let keep = take.min(cap.saturating_sub(buf.len()));
+        buf.extend_from_slice(&available[..keep]);
+        total += take;
+        reader.consume(take + usize::from(found));
+        if found {
+            return Ok(Some((total, true)));
+        }
+    }
+}
+
+/// Splits a physical line into content and terminator.
+fn split_terminator(buf: &mut Vec<u8>, ended_with_lf: bool) -> Terminator {
+    if buf.last() == Some(&b'\r') {
+        buf.pop();
+        if ended_with_lf {
+            return Terminator::CrLf;
+        }
+    }
+    if ended_with_lf {
+        Terminator::Lf
+    } else {
+        Terminator::Eof
+    }
+}
+
+/// Parses a seconds prefix (`12`, `12.250`) into nanoseconds.
+pub fn parse_seconds(prefix: &str) -> Option<i64> {
+    let ok = !prefix.is_empty()
+        && prefix.bytes().all(|b| b.is_ascii_digit() || b == b'.')
+        && prefix.bytes().filter(|&b| b == b'.').count() <= 1
+        && prefix.bytes().any(|b| b.is_ascii_digit());
+    if !ok {
+        return None;
+    }
+    let s: f64 = prefix.parse().ok()?;
+    let ns = (s * 1e9).round();
+    (ns.is_finite() && ns < i64::MAX as f64).then_some(ns as i64)
+}
+
+/// Parses an ISO 8601 date-time prefix into Unix nanoseconds (UTC when it has no offset).
+pub fn parse_iso8601(prefix: &str) -> Option<i64> {
+    if !prefix.contains('T') {
+        return None;
+    }
+    if let Ok(t) = chrono::DateTime::parse_from_rfc3339(prefix) {
+        return t.timestamp_nanos_opt();
+    }
+    prefix
+        .parse::<chrono::NaiveDateTime>()
+        .ok()?
+        .and_utc()
+        .timestamp_nanos_opt()
+}
+
+/// Splits `line` into a timestamp prefix and the rest, if a `$` follows the whitespace.
+fn split_prefix(line: &[u8]) -> Option<(&str, &[u8])> {
+    let ws = line.iter().position(|&b| b == b' ' || b == b'\t')?;
+    let rest_at = ws + line[ws..].iter().position(|&b| b != b' ' && b != b'\t')?;
+    let prefix = std::str::from_utf8(&line[..ws]).ok()?;
+    Some((prefix, &line[rest_at..]))
+}
+
+/// The form a single data line shows, if any.
+pub fn classify(line: &[u8]) -> Option<TimestampForm> {
+    if line.first() == Some(&b'$') {
+        return Some(TimestampForm::None);
+    }
+    let (prefix, rest) = split_prefix(line)?;
+    if rest.first() != Some(&b'$') {
+        return None;
+    }
+    if parse_seconds(prefix).is_some() {
+        Some(TimestampForm::Seconds)
+    } else if parse_iso8601(prefix).is_some() {
+        Some(TimestampForm::Iso8601)
+    } else {
+        None
+    }
+}
+
+/// Decides a file's timestamp form from the votes of its first data lines (rule on
+/// [`TimestampForm`]). `votes` holds (line number, form) for lines that showed one.
+pub fn decide_form(
+    path: &Path,
+    votes: &[(u64, TimestampForm)],
+) -> Result<TimestampForm, InputError> {
+    let forms = [
+        TimestampForm::None,
+        TimestampForm::Seconds,
+        TimestampForm::Iso8601,
+    ];
+    let count = |f: TimestampForm| votes.iter().filter(|(_, v)| *v == f).count();
+    let best = forms.iter().map(|&f| count(f)).max().unwrap_or(0);
+    let winners: Vec<TimestampForm> = forms.into_iter().filter(|&f| count(f) == best).collect();
+    match winners.as_slice() {
+        _ if best == 0 => Ok(TimestampForm::None),
+        [one] => Ok(*one),
+        [a, b, ..] => {
+            let line_of = |f: TimestampForm| {
+                votes
+                    .iter()
+                    .find(|(_, v)| *v == f)
+                    .map_or(0, |(line, _)| *line)
+            };
+            Err(InputError::MixedTimestamps {
+                path: path.to_path_buf(),
+                first: line_of(*a),
+                second: line_of(*b),
+                a: *a,
+                b: *b,
+            })
+        }
+        [] => Ok(TimestampForm::None),
+    }
+}
+
+/// A physical line read ahead during detection.
+struct Physical {
+    line_no: u64,
+    bytes: Vec<u8>,
+    total: usize,
+    lf: bool,
+}
+
+/// One opened input, yielding [`Event`]s in file order.
+pub struct Source {
+    reader: Box<dyn BufRead + Send>,
+    file: Arc<Path>,
+    input: usize,
+    format: Format,
+    gzip: bool,
+    comments: CommentMode,
+    line_no: u64,
+    lookahead: VecDeque<Physical>,
+    last_time_ns: Option<i64>,
+    /// Recording inputs: the link whose `tx` bytes are replayed, and the pending partial line.
+    link: String,
+    pending: Vec<u8>,
+    pending_start: Option<(Loc, i64)>,
+    pending_total: usize,
+    done: bool,
+    buf: Vec<u8>,
+    queue: VecDeque<Event>,
+    /// Recording inputs: select/ack lines of the sonar link skipped.
+    pub link_messages_skipped: u64,
+    /// Blank lines skipped.
+    pub blank_lines: u64,
+}
+
+impl fmt::Debug for Source {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Source")
+            .field("file", &self.file)
+            .field("format", &self.format)
+            .field("line_no", &self.line_no)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Source {
+    /// Opens input number `input` and detects its format. `link` names the recorded link
+    /// replayed from recordings. `count` accumulates bytes read from disk.
+    pub fn open(
+        path: &Path,
+        input: usize,
+        link: &str,
+        comments: CommentMode,
+        count: Arc<AtomicU64>,
+    ) -> Result<Self, InputError> {
+        let file_path = resolve_path(path)?;
+        let (reader, gzip) = open_reader(&file_path, count)?;
+        let mut source = Source {
+            reader,
+            file: Arc::from(file_path.as_path()),
+            input,
+            format: Format::Nmea {
+                timestamps: TimestampForm::None,
+            },
+            gzip,
+            comments,
+            line_no: 0,
+            lookahead: VecDeque::new(),
+            last_time_ns: None,
+            link: link.to_string(),
+            pending: Vec::new(),
+            pending_start: None,
+            pending_total: 0,
+            done: false,
+            buf: Vec::new(),
+            queue: VecDeque::new(),
+            link_messages_skipped: 0,
+            blank_lines: 0,
+        };
+        source.detect()?;
+        Ok(source)
+    }
+
+    pub fn format(&self) -> Format {
+        self.format
+    }
+
+    pub fn is_gzip(&self) -> bool {
+        self.gzip
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.file
+    }
+
+    fn io_err(&self, source: io::Error) -> InputError {
+        InputError::Io {
+            path: self.file.to_path_buf(),
+            source,
+        }
+    }
+
+    fn read_physical(&mut self) -> Result<Option<Physical>, InputError> {
+        if let Some(p) = self.lookahead.pop_front() {
+            return Ok(Some(p));
+        }
+        self.read_fresh()
+    }
+
+    /// The next physical line from the reader itself (not the lookahead).
+    fn read_fresh(&mut self) -> Result<Option<Physical>, InputError> {
+        let mut buf = std::mem::take(&mut self.buf);
+        let got = read_capped(self.reader.as_mut(), &mut buf, MAX_PHYSICAL_LINE)
+            .map_err(|e| self.io_err(e))?;
+        let Some((total, lf)) = got else {
+            self.buf = buf;
+            return Ok(None);
+        };
+        self.line_no += 1;
+        Ok(Some(Physical {
+            line_no: self.line_no,
+            bytes: buf,
+            total,
+            lf,
+        }))
+    }
+
+    fn detect(&mut self) -> Result<(), InputError> {
+        let mut votes = Vec::new();
+        let mut data_lines = 0;
+        while data_lines < DETECT_LINES {
+            let Some(p) = self.read_fresh()? else {
+                break;
+            };
+            if p.line_no == 1 {
+                let first = p.bytes.strip_suffix(b"\r").unwrap_or(&p.bytes[..]);
+                if first == BYTES_HEADER.as_bytes() {
+                    self.format = Format::Recording;
+                    return Ok(());
+                }
+            }
+            let trimmed = p.bytes.trim_ascii();
+            if !trimmed.is_empty() && trimmed[0] != b'#' {
+                data_lines += 1;
+                if let Some(form) = classify(trimmed) {
+                    votes.push((p.line_no, form));
+                }
+            }
+            self.lookahead.push_back(p);
+        }
+        self.format = Format::Nmea {
+            timestamps: decide_form(&self.file, &votes)?,
+        };
+        Ok(())
+    }
+
+    fn loc(&self, line: u64) -> Loc {
+        Loc {
+            file: self.file.clone(),
+            line,
+        }
+    }
+
+    /// The next event, or `None` at the end of the input.
+    pub fn next_event(&mut self) -> Result<Option<Event>, InputError> {
+        loop {
+            if let Some(e) = self.queue.pop_front() {
+                return Ok(Some(e));
+            }
+            if self.done {
+                return Ok(None);
+            }
+            match self.format {
+                Format::Recording => self.step_recording()?,
+                Format::Nmea { timestamps } => self.step_nmea(timestamps)?,
+            }
+        }
+    }
+
+    fn comment(&mut self, loc: Loc, text: &[u8], terminator: Terminator) {
+        let text = String::from_utf8_lossy(text).trim().to_string();
+        let payload = text.trim_start_matches('#').trim_start();
+        if let Some(rest) = payload
+            .get(..7)
+            .filter(|head| head.eq_ignore_ascii_case("serial:"))
+            .and_then(|_| payload.get(7..))
+        {
+            match rest.trim().parse::<LineSettings>() {
+                Ok(settings) => self.queue.push_back(Event::Serial { loc, settings }),
+                Err(e) => self.queue.push_back(Event::Problem(Problem {
+                    loc,
+                    kind: ProblemKind::BadSerialComment {
+                        reason: e.to_string(),
+                    },
+                    action: Action::Ignored,
+                })),
+            }
+            return;
+        }
+        match self.comments {
+            CommentMode::Report => self.queue.push_back(Event::Comment { loc, text }),
+            CommentMode::Ignore => {}
+            CommentMode::Send => self.queue.push_back(Event::Line(LogLine {
+                loc,
+                input: self.input,
+                time_ns: self.last_time_ns,
+                bytes: text.into_bytes(),
+                terminator,
+                overflow: None,
+                kind: LineKind::Comment,
+            })),
+        }
+    }
+
+    fn step_nmea(&mut self, form: TimestampForm) -> Result<(), InputError> {
+        let Some(mut p) = self.read_physical()? else {
+            self.done = true;
+            return Ok(());
+        };
+        let terminator = split_terminator(&mut p.bytes, p.lf);
+        let loc = self.loc(p.line_no);
+        let overflow = (p.total > MAX_PHYSICAL_LINE).then_some(p.total);
+        let trimmed = p.bytes.trim_ascii();
+        if trimmed.is_empty() && overflow.is_none() {
+            self.blank_lines += 1;
+        } else if trimmed.first() == Some(&b'#') && overflow.is_none() {
+            let text = trimmed.to_vec();
+            self.comment(loc, &text, terminator);
+        } else if form == TimestampForm::None {
+            self.queue.push_back(Event::Line(LogLine {
+                loc,
+                input: self.input,
+                time_ns: None,
+                bytes: std::mem::take(&mut p.bytes),
+                terminator,
+                overflow,
+                kind: LineKind::Data,
+            }));
+        } else {
+            let parsed = split_prefix(&p.bytes).and_then(|(prefix, rest)| {
+                let t = match form {
+                    TimestampForm::Seconds => parse_seconds(prefix),
+                    _ => parse_iso8601(prefix),
+                }?;
+                Some((t, rest.to_vec()))
+            });
+            match parsed {
+                Some((time_ns, bytes)) => {
+                    self.check_time(&loc, time_ns);
+                    self.queue.push_back(Event::Line(LogLine {
+                        loc,
+                        input: self.input,
+                        time_ns: Some(time_ns),
+                        bytes,
+                        terminator,
+                        overflow,
+                        kind: LineKind::Data,
+                    }));
+                }
+                None => {
+                    let shown = p.bytes.iter().take(24).copied().collect::<Vec<u8>>();
+                    self.queue.push_back(Event::Problem(Problem {
+                        loc,
+                        kind: ProblemKind::BadTimestamp {
+                            expected: form,
+                            found: String::from_utf8_lossy(&shown).escape_debug().to_string(),
+                        },
+                        action: Action::Dropped,
+                    }));
+                }
+            }
+        }
+        self.buf = p.bytes;
+        Ok(())
+    }
+
+    fn check_time(&mut self, loc: &Loc, time_ns: i64) {
+        if let Some(last) = self.last_time_ns
+            && time_ns < last
+        {
+            self.queue.push_back(Event::Problem(Problem {
+                loc: loc.clone(),
+                kind: ProblemKind::TimeWentBack {
+                    by_s: (last - time_ns) as f64 * 1e-9,
+                },
+                action: Action::SentInFileOrder,
+            }));
+        }
+        self.last_time_ns = Some(self.last_time_ns.map_or(time_ns, |l| l.max(time_ns)));
+    }
+
+    fn step_recording(&mut self) -> Result<(), InputError> {
+        let Some(mut p) = self.read_physical()? else {
+            self.done = true;
+            self.flush_pending(Terminator::Eof);
+            return Ok(());
+        };
+        if p.line_no == 1 {
+            self.buf = p.bytes;
+            return Ok(()); // the header
+        }
+        split_terminator(&mut p.bytes, p.lf);
+        let loc = self.loc(p.line_no);
+        let text = String::from_utf8_lossy(&p.bytes).into_owned();
+        self.buf = p.bytes;
+        if text.trim().is_empty() {
+            self.blank_lines += 1;
+            return Ok(());
+        }
+        let chunk = match parse_chunk(&text, loc.line as usize) {
+            Ok(c) if p.total <= MAX_PHYSICAL_LINE => c,
+            Ok(_) => {
+                self.queue.push_back(Event::Problem(Problem {
+                    loc,
+                    kind: ProblemKind::BadRecordLine {
+                        reason: format!("line of {} bytes is too long", p.total),
+                    },
+                    action: Action::Dropped,
+                }));
+                return Ok(());
+            }
+            Err(e) => {
+                self.queue.push_back(Event::Problem(Problem {
+                    loc,
+                    kind: ProblemKind::BadRecordLine { reason: e.reason },
+                    action: Action::Dropped,
+                }));
+                return Ok(());
+            }
+        };
+        if chunk.dir != Direction::Tx || chunk.link != self.link {
+            return Ok(());
+        }
+        let time_ns = (chunk.sim_s * 1e9).round() as i64;
+        for &b in &chunk.data {
+            if self.pending_start.is_none() {
+                self.pending_start = Some((loc.clone(), time_ns));
+            }
+            if b == b'\n' {
+                let terminator = if self.pending.last() == Some(&b'\r') {
+                    self.pending.pop();
+                    Terminator::CrLf
+                } else {
+                    Terminator::Lf
+                };
+                self.flush_pending(terminator);
+            } else {
+                if self.pending.len() < MAX_PHYSICAL_LINE {
+                    self.pending.push(b);
+                }
+                self.pending_total += 1;
+            }
+        }
+        Ok(())
+    }
+
+    fn flush_pending(&mut self, terminator: Terminator) {
+        let Some((loc, time_ns)) = self.pending_start.take() else {
+            return;
+        };
+        let total = std::mem::take(&mut self.pending_total);
+        let bytes = std::mem::take(&mut self.pending);
+        if bytes.first() == Some(&b'@') && total <= MAX_PHYSICAL_LINE {
+            self.link_messages_skipped += 1;
+            return;
+        }
+        self.check_time(&loc, time_ns);
+        self.queue.push_back(Event::Line(LogLine {
+            loc,
+            input: self.input,
+            time_ns: Some(time_ns),
+            bytes,
+            terminator,
+            overflow: (total > MAX_PHYSICAL_LINE).then_some(total),
+            kind: LineKind::Data,
+        }));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Write;
+
+    use super::*;
+
+    pub(crate) fn scratch(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("eyebot-hil-replay-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    fn events(path: &Path) -> (Format, Vec<Event>) {
+        let mut s = Source::open(
+            path,
+            0,
+            "sonar",
+            CommentMode::Report,
+            Arc::new(AtomicU64::new(0)),
+        )
+        .unwrap();
+        let mut out = Vec::new();
+        while let Some(e) = s.next_event().unwrap() {
+            out.push(e);
+        }
+        (s.format(), out)
+    }
+
+    fn lines(events: &[Event]) -> Vec<(Option<i64>, Vec<u8>, Terminator)> {
+        events
+            .iter()
+            .filter_map(|e| match e {
+                Event::Line(l) => Some((l.time_ns, l.bytes.clone(), l.terminator)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn seconds_iso_and_plain_forms_are_told_apart() {
+        assert_eq!(classify(b"$SDDBT,1*00"), Some(TimestampForm::None));
+        assert_eq!(
+            classify(b"12.250 $SDDBT,1*00"),
+            Some(TimestampForm::Seconds)
+        );
+        assert_eq!(
+            classify(b"1714564800\t$SDDBT"),
+            Some(TimestampForm::Seconds)
+        );
+        assert_eq!(
+            classify(b"2024-05-01T12:00:00.250Z $SDDBT"),
+            Some(TimestampForm::Iso8601)
+        );
+        assert_eq!(
+            classify(b"2024-05-01T12:00:00+02:00  $SDDBT"),
+            Some(TimestampForm::Iso8601)
+        );
+        assert_eq!(
+            classify(b"2024-05-01T12:00:00.5 $SDDBT"),
+            Some(TimestampForm::Iso8601)
+        );
+        // Junk does not vote; a prefix without a following sentence is not a timestamp.
+        assert_eq!(classify(b"\x00\x01garbage"), None);
+        assert_eq!(classify(b"12.5 hello"), None);
+        assert_eq!(classify(b"1.2.3 $SDDBT"), None);
+        assert_eq!(classify(b"-5 $SDDBT"), None);
+    }
+
+    #[test]
+    fn iso_times_become_unix_nanoseconds() {
+        assert_eq!(parse_iso8601("1970-01-01T00:00:01.5Z"), Some(1_500_000_000));
+        assert_eq!(parse_iso8601("1970-01-01T01:00:00+01:00"), Some(0));
+        assert_eq!(parse_iso8601("1970-01-01T00:00:02"), Some(2_000_000_000));
+        assert_eq!(parse_iso8601("1970-01-01"), None);
+        assert_eq!(parse_seconds("0.001"), Some(1_000_000));
+    }
+
+    #[test]
+    fn majority_of_first_lines_decides_and_ties_are_errors() {
+        let p = Path::new("log");
+        let s = TimestampForm::Seconds;
+        let n = TimestampForm::None;
+        assert_eq!(decide_form(p, &[(1, s), (2, n), (3, s)]).unwrap(), s);
+        assert_eq!(decide_form(p, &[]).unwrap(), n);
+        let err = decide_form(p, &[(4, s), (9, n)]).unwrap_err();
+        assert!(err.to_string().contains("lines 9 and 4"), "{err}");
+    }
+
+    #[test]
+    fn timestamped_log_with_comments_lf_and_junk() {
+        let dir = scratch("timed");
+        let path = dir.join("a.log");
+        std::fs::write(
+            &path,
+            b"#Serial: 9600 8N1\n# a note\n0.5 $SDDBT,1*00\r\n\n1.25\t$SDDBT,2*00\nnot-a-time $SDDBT,3*00\n\x01\x02junk\n2 $SDDBT,4*00",
+        )
+        .unwrap();
+        let (format, ev) = events(&path);
+        assert_eq!(
+            format,
+            Format::Nmea {
+                timestamps: TimestampForm::Seconds
+            }
+        );
+        assert!(
+            matches!(&ev[0], Event::Serial { settings, loc } if settings.baud == 9600 && loc.line == 1)
+        );
+        assert!(matches!(&ev[1], Event::Comment { text, .. } if text == "# a note"));
+        let l = lines(&ev);
+        assert_eq!(
+            l,
+            vec![
+                (Some(500_000_000), b"$SDDBT,1*00".to_vec(), Terminator::CrLf),
+                (Some(1_250_000_000), b"$SDDBT,2*00".to_vec(), Terminator::Lf),
+                (
+                    Some(2_000_000_000),
+                    b"$SDDBT,4*00".to_vec(),
+                    Terminator::Eof
+                ),
+            ]
+        );
+        let bad: Vec<u64> = ev
+            .iter()
+            .filter_map(|e| match e {
+                Event::Problem(p) => Some(p.loc.line),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(bad, vec![6, 7], "the untimed line and the junk line");
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn gzip_is_detected_by_magic_not_extension() {
+        let dir = scratch("gzip");
+        let plain = b"$SDDBT,1*00\r\n$SDDBT,2*00\r\n";
+        let path = dir.join("log.txt"); // no .gz extension
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        enc.write_all(plain).unwrap();
+        std::fs::write(&path, enc.finish().unwrap()).unwrap();
+        let count = Arc::new(AtomicU64::new(0));
+        let mut s = Source::open(&path, 0, "sonar", CommentMode::Report, count.clone()).unwrap();
+        assert!(s.is_gzip());
+        let mut got = Vec::new();
+        while let Some(Event::Line(l)) = s.next_event().unwrap() {
+            got.push(l.bytes);
+        }
+        assert_eq!(got, vec![b"$SDDBT,1*00".to_vec(), b"$SDDBT,2*00".to_vec()]);
+        assert_eq!(
+            count.load(Ordering::Relaxed),
+            std::fs::metadata(&path).unwrap().len(),
+            "progress counts compressed bytes read from disk"
+        );
+        // A .gz name on a plain file is read as plain text.
+        let fake = dir.join("plain.gz");
+        std::fs::write(&fake, plain).unwrap();
+        let (_, ev) = events(&fake);
+        assert_eq!(lines(&ev).len(), 2);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn recorded_sentences_are_reassembled_across_chunks() {
+        let dir = scratch("record");
+        let rec = dir.join("run1");
+        std::fs::create_dir_all(&rec).unwrap();
+        let sentence = b"$SDDBT,6.6,f,2.0,M,1.1,F*3A\r\n";
+        let mut tsv = format!("{BYTES_HEADER}\n");
+        // Split the first sentence over three chunks, interleave other traffic.
+        let parts: [&[u8]; 3] = [&sentence[..5], &sentence[5..20], &sentence[20..]];
+        tsv += &format!("1.000000000\t0\tsonar\ttx\t{}\n", hex::encode(parts[0]));
+        tsv += &format!("1.001000000\t0\tsonar\trx\t{}\n", hex::encode(b"@S1\r"));
+        tsv += &format!("1.002000000\t0\tsensor\ttx\t{}\n", hex::encode([0xEB, 1]));
+        tsv += &format!("1.003000000\t0\tsonar\ttx\t{}\n", hex::encode(parts[1]));
+        tsv += &format!(
+            "1.004000000\t0\tsonar\ttx\t{}{}\n",
+            hex::encode(parts[2]),
+            hex::encode(b"@A1\r\n$SD")
+        );
+        tsv += "garbage line\n";
+        tsv += &format!("2.5\t0\tsonar\ttx\t{}\n", hex::encode(&sentence[3..]));
+        std::fs::write(rec.join("bytes.tsv"), tsv).unwrap();
+        let mut s = Source::open(
+            &rec,
+            0,
+            "sonar",
+            CommentMode::Report,
+            Arc::new(AtomicU64::new(0)),
+        )
+        .unwrap();
+        assert_eq!(s.format(), Format::Recording);
+        let mut ev = Vec::new();
+        while let Some(e) = s.next_event().unwrap() {
+            ev.push(e);
+        }
+        let l = lines(&ev);
+        assert_eq!(l.len(), 2);
+        assert_eq!(l[0].0, Some(1_000_000_000), "time of the first byte");
+        assert_eq!(l[0].1, &sentence[..sentence.len() - 2]);
+        assert_eq!(l[0].2, Terminator::CrLf);
+        assert_eq!(l[1].1, &sentence[..sentence.len() - 2], "split at $SD");
+        assert_eq!(l[1].0, Some(1_004_000_000));
+        assert_eq!(s.link_messages_skipped, 1, "the @A1 ack");
+        assert!(ev.iter().any(
+            |e| matches!(e, Event::Problem(p) if p.loc.line == 7 && matches!(p.kind, ProblemKind::BadRecordLine { .. }))
+        ));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn a_line_without_line_feeds_is_cut_at_the_cap() {
+        let dir = scratch("cap");
+        let path = dir.join("junk.log");
+        let mut data = vec![0xFFu8; 3 * MAX_PHYSICAL_LINE];
+        data.extend_from_slice(b"\n$SDDBT,1*00\r\n");
+        std::fs::write(&path, data).unwrap();
+        let (_, ev) = events(&path);
+        match &ev[0] {
+            Event::Line(l) => {
+                assert_eq!(l.bytes.len(), MAX_PHYSICAL_LINE);
+                assert_eq!(l.overflow, Some(3 * MAX_PHYSICAL_LINE));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(&ev[1], Event::Line(l) if l.bytes == b"$SDDBT,1*00" && l.loc.line == 2));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+}

@@ -1,0 +1,702 @@
+//! `eyebot-hil replay`: captured NMEA logs back onto a line, with the log's own timing.
+//!
+//! ```text
+//! LOG... ──► input::Source (format, gzip, timestamps, comments) ──► merge::Merger (by time)
+//!        ──► validate::check_line (policy pass/drop/fix, one Problem per fault)
+//!        ──► pacing::Scheduler (deadline from one start instant) ──► output::Sink
+//!                                    ByteSink: pty | serial | stdout, bytes at the baud rate
+//!                                    (pending, issue 5: the daemon's sonar multiplexer)
+//! ```
+//!
+//! Build a [`Replay`] from [`Options`] with [`Replay::open`] (it reads each input's head to
+//! detect formats and `#Serial:`), open an output with [`Replay::line_settings`], then call
+//! [`Replay::run`] with a [`Sink`], an [`Observer`] for the report and a [`Shutdown`].
+//! The format rules are in `docs/replay.md`.
+
+pub mod input;
+pub mod merge;
+pub mod output;
+pub mod pacing;
+pub mod stats;
+pub mod validate;
+
+use std::collections::{BTreeMap, HashSet};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+pub use input::{CommentMode, Event, Format, InputError, Loc, Source, TimestampForm};
+pub use merge::{MergeMode, Merger};
+pub use output::{ByteSink, NullSink, Port, Sent, Shutdown, Sink, SinkError};
+pub use pacing::{Pacing, Placement, Scheduler};
+pub use stats::Summary;
+pub use validate::{Action, Policy, Problem, ProblemKind};
+
+use crate::transport::LineSettings;
+
+/// NMEA 0183's line: 4800 baud 8N1, used when neither `--line` nor `#Serial:` says otherwise.
+pub const DEFAULT_LINE: LineSettings = LineSettings::n81(4800);
+
+/// Problems of one kind listed individually before the rest are only counted.
+pub const LISTED_PER_KIND: u64 = 50;
+
+/// Everything a replay is told. [`Options::new`] gives the defaults.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub inputs: Vec<PathBuf>,
+    pub policy: Policy,
+    /// `None`: by timestamps when every input has them, else back to back at the baud rate.
+    pub pacing: Option<Pacing>,
+    /// Speed factor on the schedule (2 = twice as fast). Bytes keep their wire time.
+    pub speed: f64,
+    /// Log-time offsets in seconds from the first sentence.
+    pub start_s: f64,
+    pub end_s: Option<f64>,
+    pub looping: bool,
+    /// Overrides `#Serial:` comments.
+    pub line: Option<LineSettings>,
+    /// The recorded link replayed from `--record` output.
+    pub link: String,
+    pub comments: CommentMode,
+    /// The instant deadlines count from (default: when `run` starts). Tests inject it.
+    pub origin: Option<Instant>,
+    /// Gaps longer than this are counted in the statistics.
+    pub gap_threshold_s: f64,
+    /// List every problem, not only the first [`LISTED_PER_KIND`] of each kind.
+    pub list_all_problems: bool,
+    /// Run the pacing thread under `SCHED_FIFO` at this priority (timed pacing only); if the
+    /// system refuses, the replay goes on without it and says so.
+    pub realtime_priority: Option<i32>,
+}
+
+impl Options {
+    pub fn new(inputs: Vec<PathBuf>) -> Self {
+        Self {
+            inputs,
+            policy: Policy::Pass,
+            pacing: None,
+            speed: 1.0,
+            start_s: 0.0,
+            end_s: None,
+            looping: false,
+            line: None,
+            link: "sonar".into(),
+            comments: CommentMode::Report,
+            origin: None,
+            gap_threshold_s: 1.0,
+            list_all_problems: false,
+            realtime_priority: None,
+        }
+    }
+}
+
+/// Why a replay could not start or had to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error(transparent)]
+    Input(#[from] InputError),
+    #[error(transparent)]
+    Sink(#[from] SinkError),
+    #[error("no input logs given")]
+    NoInputs,
+    #[error("{what} must be {expected}, got {value}")]
+    BadOption {
+        what: &'static str,
+        expected: &'static str,
+        value: f64,
+    },
+    #[error("pacing by timestamps needs timestamps, but {path} has none ({format})")]
+    NoTimestamps { path: PathBuf, format: Format },
+}
+
+/// Where the line settings came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LineOrigin {
+    CommandLine,
+    SerialComment(Loc),
+    Default,
+}
+
+/// What was found about one input when it was opened.
+#[derive(Debug, Clone)]
+pub struct InputInfo {
+    pub path: PathBuf,
+    pub format: Format,
+    pub gzip: bool,
+    pub size_bytes: u64,
+}
+
+/// Hears what happens during a replay (the CLI prints it; tests record it).
+pub trait Observer {
+    /// A problem, reported once (first pass only; at most [`LISTED_PER_KIND`] per kind
+    /// unless `list_all_problems`).
+    fn problem(&mut self, _problem: &Problem) {}
+    /// A `#` comment (first pass, `--comments report`).
+    fn comment(&mut self, _loc: &Loc, _text: &str) {}
+    /// The instant deadlines count from.
+    fn started(&mut self, _origin: Instant) {}
+    /// A sentence went to the sink.
+    fn sent(&mut self, _loc: &Loc, _bytes: &[u8], _sent: &Sent) {}
+    /// Bytes read from the inputs so far in this pass, sentences sent so far.
+    fn progress(&mut self, _read_bytes: u64, _sentences: u64) {}
+    /// A pass over the inputs ended (before the next `--loop` pass).
+    fn pass_done(&mut self, _pass: u64) {}
+    /// Something worth telling the user that is not about a line.
+    fn note(&mut self, _text: &str) {}
+}
+
+/// An observer that ignores everything.
+#[derive(Debug, Default)]
+pub struct Quiet;
+impl Observer for Quiet {}
+
+/// A replay ready to run.
+#[derive(Debug)]
+pub struct Replay {
+    opts: Options,
+    line: LineSettings,
+    line_origin: LineOrigin,
+    pacing: Pacing,
+    inputs: Vec<InputInfo>,
+}
+
+impl Replay {
+    /// Checks the options, opens every input once to detect its format and read the
+    /// `#Serial:` comments at its head, and resolves the pacing and line settings.
+    pub fn open(opts: Options) -> Result<Self, ReplayError> {
+        if opts.inputs.is_empty() {
+            return Err(ReplayError::NoInputs);
+        }
+        let positive = |what, value: f64| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(ReplayError::BadOption {
+                    what,
+                    expected: "a positive number",
+                    value,
+                })
+            }
+        };
+        positive("--speed", opts.speed)?;
+        if let Some(Pacing::Rate { per_s }) = opts.pacing {
+            positive("--rate", per_s)?;
+        }
+        if !(opts.start_s.is_finite() && opts.start_s >= 0.0) {
+            return Err(ReplayError::BadOption {
+                what: "--start",
+                expected: "zero or more seconds",
+                value: opts.start_s,
+            });
+        }
+        if let Some(end) = opts.end_s
+            && !(end.is_finite() && end >= opts.start_s)
+        {
+            return Err(ReplayError::BadOption {
+                what: "--end",
+                expected: "at least --start",
+                value: end,
+            });
+        }
+        let mut inputs = Vec::new();
+        let mut serial: Option<(LineSettings, Loc)> = None;
+        for (i, path) in opts.inputs.iter().enumerate() {
+            let mut source = Source::open(
+                path,
+                i,
+                &opts.link,
+                opts.comments,
+                Arc::new(AtomicU64::new(0)),
+            )?;
+            // Header comments come before the first line; `#Serial:` later is checked in run.
+            while let Some(event) = source.next_event()? {
+                match event {
+                    Event::Serial { loc, settings } => {
+                        serial.get_or_insert((settings, loc));
+                    }
+                    Event::Line(_) => break,
+                    _ => {}
+                }
+            }
+            let file = input::resolve_path(path)?;
+            inputs.push(InputInfo {
+                size_bytes: std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0),
+                path: file,
+                format: source.format(),
+                gzip: source.is_gzip(),
+            });
+        }
+        let (line, line_origin) = match (opts.line, serial) {
+            (Some(line), _) => (line, LineOrigin::CommandLine),
+            (None, Some((line, loc))) => (line, LineOrigin::SerialComment(loc)),
+            (None, None) => (DEFAULT_LINE, LineOrigin::Default),
+        };
+        let all_timed = inputs.iter().all(|i| i.format.is_timed());
+        let pacing = match opts.pacing {
+            Some(Pacing::Timestamps) if !all_timed => {
+                let untimed = inputs.iter().find(|i| !i.format.is_timed());
+                if let Some(i) = untimed {
+                    return Err(ReplayError::NoTimestamps {
+                        path: i.path.clone(),
+                        format: i.format,
+                    });
+                }
+                Pacing::Timestamps
+            }
+            Some(p) => p,
+            None if all_timed => Pacing::Timestamps,
+            None => Pacing::Baud,
+        };
+        Ok(Self {
+            opts,
+            line,
+            line_origin,
+            pacing,
+            inputs,
+        })
+    }
+
+    pub fn line_settings(&self) -> LineSettings {
+        self.line
+    }
+
+    pub fn line_origin(&self) -> &LineOrigin {
+        &self.line_origin
+    }
+
+    pub fn pacing(&self) -> Pacing {
+        self.pacing
+    }
+
+    pub fn inputs(&self) -> &[InputInfo] {
+        &self.inputs
+    }
+
+    pub fn options(&self) -> &Options {
+        &self.opts
+    }
+
+    /// Total size of the inputs on disk (compressed size for gzip), for a progress bar.
+    pub fn total_input_bytes(&self) -> u64 {
+        self.inputs.iter().map(|i| i.size_bytes).sum()
+    }
+
+    /// Runs the replay into `sink` until the logs end (or, with `--loop`, until `stop`).
+    /// A shutdown request ends it early with the summary so far.
+    pub fn run(
+        &self,
+        sink: &mut dyn Sink,
+        observer: &mut dyn Observer,
+        stop: &Shutdown,
+    ) -> Result<Summary, ReplayError> {
+        let opts = &self.opts;
+        let mut realtime = false;
+        if let Some(priority) = opts.realtime_priority
+            && self.pacing != Pacing::Fast
+        {
+            match output::set_realtime_priority(priority) {
+                Ok(()) => realtime = true,
+                Err(e) => observer.note(&format!(
+                    "no real-time priority ({e}): byte timing is subject to CPU load"
+                )),
+            }
+        }
+        let result = self.run_inner(sink, observer, stop);
+        if realtime {
+            output::clear_realtime_priority();
+        }
+        result.map(|mut s| {
+            s.realtime = realtime;
+            s
+        })
+    }
+
+    fn run_inner(
+        &self,
+        sink: &mut dyn Sink,
+        observer: &mut dyn Observer,
+        stop: &Shutdown,
+    ) -> Result<Summary, ReplayError> {
+        let opts = &self.opts;
+        let origin = opts.origin.unwrap_or_else(Instant::now);
+        sink.begin(origin);
+        observer.started(origin);
+        let mut summary = Summary::new(opts.gap_threshold_s);
+        let mut reporter = Reporter {
+            listed: BTreeMap::new(),
+            once: HashSet::new(),
+            list_all: opts.list_all_problems,
+        };
+        let mut base_ns = 0u64;
+        let char_ns = self.line.char_time_ns();
+        let mut pass = 0u64;
+        'passes: loop {
+            let first = pass == 0;
+            let read = Arc::new(AtomicU64::new(0));
+            let mut sources = Vec::with_capacity(opts.inputs.len());
+            for (i, path) in opts.inputs.iter().enumerate() {
+                sources.push(Source::open(
+                    path,
+                    i,
+                    &opts.link,
+                    opts.comments,
+                    read.clone(),
+                )?);
+            }
+            let mut merger = Merger::new(sources);
+            let mut sched =
+                Scheduler::new(self.pacing, opts.speed, opts.start_s, opts.end_s, char_ns);
+            let mut sent_this_pass = 0u64;
+            let mut last_due: Option<u64> = None;
+            while let Some(event) = merger.next_event()? {
+                if stop.is_triggered() {
+                    break 'passes;
+                }
+                match event {
+                    Event::Problem(p) => {
+                        reporter.report(p, usize::MAX, first, &mut summary, observer)
+                    }
+                    Event::Comment { loc, text } => {
+                        if first {
+                            summary.comments += 1;
+                            observer.comment(&loc, &text);
+                        }
+                    }
+                    Event::Serial { loc, settings } => {
+                        if settings != self.line && first {
+                            let why = match self.line_origin {
+                                LineOrigin::CommandLine => "--line given",
+                                _ => "the first #Serial: applies to the whole replay",
+                            };
+                            let problem = Problem {
+                                loc,
+                                kind: ProblemKind::SerialConflict {
+                                    found: settings.to_string(),
+                                    in_force: self.line.to_string(),
+                                    why,
+                                },
+                                action: Action::Ignored,
+                            };
+                            reporter.report(problem, usize::MAX, first, &mut summary, observer);
+                        }
+                    }
+                    Event::Line(line) => {
+                        if first {
+                            summary.lines_read += 1;
+                        }
+                        let checked = match line.kind {
+                            input::LineKind::Data => validate::check_line(
+                                &line.bytes,
+                                line.terminator,
+                                line.overflow,
+                                opts.policy,
+                            ),
+                            input::LineKind::Comment => validate::Checked {
+                                out: Some([&line.bytes[..], b"\r\n"].concat()),
+                                ..Default::default()
+                            },
+                        };
+                        if first {
+                            let mut fixed = false;
+                            let mut passed_bad = false;
+                            for (kind, action) in &checked.problems {
+                                summary.checksum_failures += u64::from(kind.is_checksum());
+                                fixed |=
+                                    matches!(action, Action::Fixed { .. } | Action::JunkRemoved);
+                                passed_bad |= *action == Action::Passed;
+                            }
+                            if checked.out.is_none() {
+                                summary.lines_dropped += 1;
+                            } else if fixed {
+                                summary.lines_fixed += 1;
+                            } else if passed_bad {
+                                summary.lines_passed_with_problems += 1;
+                            }
+                        }
+                        for (kind, action) in checked.problems {
+                            let problem = Problem {
+                                loc: line.loc.clone(),
+                                kind,
+                                action,
+                            };
+                            reporter.report(problem, line.input, first, &mut summary, observer);
+                        }
+                        if let Some(out) = checked.out {
+                            let is_comment = line.kind == input::LineKind::Comment;
+                            let placement = if is_comment {
+                                Placement::Asap
+                            } else {
+                                sched.place(line.time_ns, out.len())
+                            };
+                            let due = match placement {
+                                Placement::Skip => {
+                                    if first {
+                                        summary.skipped_before_start += 1;
+                                    }
+                                    None
+                                }
+                                Placement::Stop => break,
+                                Placement::Due { offset_ns } => Some(Some(base_ns + offset_ns)),
+                                // Without a deadline of its own, a line follows the one before.
+                                Placement::Asap if self.pacing == Pacing::Fast => Some(None),
+                                Placement::Asap => Some(Some(last_due.unwrap_or(base_ns))),
+                            };
+                            if let Some(due) = due {
+                                let sent = match sink.send(&out, due, stop) {
+                                    Ok(s) => s,
+                                    Err(SinkError::Stopped) => break 'passes,
+                                    Err(e) => return Err(e.into()),
+                                };
+                                last_due = due.or(last_due);
+                                sent_this_pass += 1;
+                                summary.bytes_sent += out.len() as u64;
+                                if is_comment {
+                                    summary.comments_sent += 1;
+                                } else {
+                                    summary.sentences_sent += 1;
+                                    if first {
+                                        if let Some(address) = checked.address {
+                                            *summary.by_type.entry(address).or_default() += 1;
+                                        }
+                                        if let Some(t) = line.time_ns {
+                                            summary.note_time(t, &line.loc);
+                                        }
+                                    }
+                                }
+                                if sent.line_wait_ns > 0 {
+                                    summary.line_waits += 1;
+                                    summary.line_wait_max_ns =
+                                        summary.line_wait_max_ns.max(sent.line_wait_ns);
+                                }
+                                observer.sent(&line.loc, &out, &sent);
+                                // Every sentence when paced (a few per second); in batches when fast.
+                                if self.pacing != Pacing::Fast || sent_this_pass.is_multiple_of(256)
+                                {
+                                    observer.progress(
+                                        read.load(Ordering::Relaxed),
+                                        summary.sentences_sent,
+                                    );
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            if first {
+                for s in merger.sources() {
+                    summary.link_messages_skipped += s.link_messages_skipped;
+                    summary.blank_lines += s.blank_lines;
+                }
+            }
+            observer.progress(read.load(Ordering::Relaxed), summary.sentences_sent);
+            summary.passes += 1;
+            observer.pass_done(pass);
+            if !opts.looping || stop.is_triggered() || sent_this_pass == 0 {
+                break;
+            }
+            base_ns = sink.free_at_ns();
+            pass += 1;
+        }
+        summary.elapsed = origin.elapsed();
+        Ok(summary)
+    }
+}
+
+/// Lists each problem once: first pass only, once per file for once-per-file kinds, and at
+/// most [`LISTED_PER_KIND`] per kind unless told to list all. Every one is counted.
+struct Reporter {
+    listed: BTreeMap<&'static str, u64>,
+    once: HashSet<(usize, &'static str)>,
+    list_all: bool,
+}
+
+impl Reporter {
+    fn report(
+        &mut self,
+        problem: Problem,
+        input: usize,
+        first_pass: bool,
+        summary: &mut Summary,
+        observer: &mut dyn Observer,
+    ) {
+        if !first_pass {
+            return;
+        }
+        let name = problem.kind.name();
+        *summary.problems.entry(name).or_default() += 1;
+        let shown = self.listed.entry(name).or_default();
+        let limited = !self.list_all && *shown >= LISTED_PER_KIND;
+        let repeat = problem.kind.once_per_file() && !self.once.insert((input, name));
+        if limited || repeat {
+            summary.problems_not_listed += 1;
+        } else {
+            *shown += 1;
+            observer.problem(&problem);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Write;
+    use std::sync::Mutex;
+
+    use super::*;
+    use crate::record::{Direction, Recorder};
+
+    #[derive(Clone, Default)]
+    struct Shared(Arc<Mutex<Vec<u8>>>);
+
+    impl Write for Shared {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// What the daemon's recorder writes, replay sends back: the sonar link's `tx` sentences,
+    /// reassembled across chunk boundaries, without the select/ack traffic or other links.
+    #[test]
+    fn a_recording_made_by_the_recorder_replays_its_sonar_sentences() {
+        let dir =
+            std::env::temp_dir().join(format!("eyebot-hil-replay-rec-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let rec = Recorder::start(&dir, "seed = 1\n", "t_s").unwrap();
+        let a = b"$SDDBT,6.6,f,2.0,M,1.1,F*04\r\n";
+        let b = b"$SDDPT,2.0,0.5*50\r\n";
+        rec.bytes(0.100, "sonar", Direction::Rx, b"@S1\r");
+        rec.bytes(0.101, "sonar", Direction::Tx, b"@A1\r\n$SDDBT,6.6");
+        rec.bytes(0.102, "sensor", Direction::Tx, &[0xEB, 0x90, 0x00]);
+        rec.bytes(0.103, "sonar", Direction::Tx, b",f,2.0,M,1.1,F*04\r\n$SDD");
+        rec.bytes(0.350, "sonar", Direction::Tx, b"PT,2.0,0.5*50\r\n");
+        rec.finish().unwrap();
+
+        let mut opts = Options::new(vec![dir.clone()]);
+        opts.pacing = Some(Pacing::Fast);
+        let replay = Replay::open(opts).unwrap();
+        assert_eq!(replay.inputs()[0].format, Format::Recording);
+        let out = Shared::default();
+        let mut sink = ByteSink::new(Port::Writer(Box::new(out.clone())), &DEFAULT_LINE);
+        let summary = replay.run(&mut sink, &mut Quiet, &Shutdown::new()).unwrap();
+        assert_eq!(*out.0.lock().unwrap(), [&a[..], &b[..]].concat());
+        assert_eq!(summary.link_messages_skipped, 1);
+        assert_eq!(summary.problem_count(), 0);
+        assert_eq!(summary.first_time_ns, Some(101_000_000));
+        assert_eq!(summary.last_time_ns, Some(103_000_000));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// `--start`/`--end` and the speed factor act on log time. Checked on the modelled line
+    /// times the sink reports.
+    #[test]
+    fn start_end_speed_and_loop_shape_the_schedule() {
+        #[derive(Default)]
+        struct Times(Vec<(u64, u64)>);
+        impl Observer for Times {
+            fn sent(&mut self, loc: &Loc, _b: &[u8], sent: &Sent) {
+                self.0.push((loc.line, sent.start_ns.unwrap()));
+            }
+        }
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-replay-se-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("t.log");
+        let text: String = (0..6)
+            .map(|i| format!("{}.000 $SDDPT,1.{i},0.3*00\r\n", 100 + i))
+            .collect();
+        std::fs::write(&log, text).unwrap();
+        let mut opts = Options::new(vec![log]);
+        opts.start_s = 1.0;
+        opts.end_s = Some(3.0);
+        opts.speed = 50.0;
+        opts.line = Some(LineSettings::n81(115_200));
+        let replay = Replay::open(opts).unwrap();
+        assert_eq!(replay.pacing(), Pacing::Timestamps);
+        let mut sink = ByteSink::new(
+            Port::Writer(Box::new(std::io::sink())),
+            &replay.line_settings(),
+        );
+        let mut times = Times::default();
+        let summary = replay.run(&mut sink, &mut times, &Shutdown::new()).unwrap();
+        // Lines 2..=4 (log 1 s, 2 s, 3 s) at 20 ms intervals (speed 50).
+        assert_eq!(times.0, vec![(2, 0), (3, 20_000_000), (4, 40_000_000)]);
+        assert_eq!(summary.skipped_before_start, 1);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// `--loop` starts the next pass when the line is free, and keeps the schedule of the
+    /// first; problems are listed on the first pass only.
+    #[test]
+    fn loop_passes_follow_each_other_on_the_line() {
+        struct StopAfter(usize, Shutdown, Vec<u64>, usize);
+        impl Observer for StopAfter {
+            fn sent(&mut self, _loc: &Loc, _b: &[u8], sent: &Sent) {
+                self.2.push(sent.start_ns.unwrap());
+                if self.2.len() == self.0 {
+                    self.1.trigger();
+                }
+            }
+            fn problem(&mut self, _p: &Problem) {
+                self.3 += 1;
+            }
+        }
+        let dir =
+            std::env::temp_dir().join(format!("eyebot-hil-replay-loop-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("l.log");
+        std::fs::write(&log, "0.0 $A*41\r\n0.01 $B*00\r\n").unwrap();
+        let mut opts = Options::new(vec![log]);
+        opts.looping = true;
+        opts.line = Some(LineSettings::n81(115_200));
+        let replay = Replay::open(opts).unwrap();
+        let stop = Shutdown::new();
+        let mut obs = StopAfter(5, stop.clone(), Vec::new(), 0);
+        let mut sink = ByteSink::new(
+            Port::Writer(Box::new(std::io::sink())),
+            &replay.line_settings(),
+        );
+        let summary = replay.run(&mut sink, &mut obs, &stop).unwrap();
+        let char_ns = LineSettings::n81(115_200).char_time_ns();
+        let pass_ns = 10_000_000 + 7 * char_ns; // B starts at 10 ms and takes 7 characters
+        assert_eq!(
+            obs.2,
+            vec![0, 10_000_000, pass_ns, pass_ns + 10_000_000, 2 * pass_ns]
+        );
+        assert_eq!(
+            obs.3, 1,
+            "the bad checksum of $B is listed once, not every pass"
+        );
+        assert_eq!(summary.problems.get("checksum mismatch"), Some(&1));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// `--comments send` passes comments through as lines, in file order, as gpsfake does;
+    /// `#Serial:` is never sent, and a conflicting later one is reported.
+    #[test]
+    fn comments_are_sent_in_place_when_asked() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-replay-cm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("c.log");
+        std::fs::write(
+            &log,
+            "#Serial: 9600 8N1\n$A*41\r\n# between\r\n#Serial: 4800 8N1\n$A*41\r\n",
+        )
+        .unwrap();
+        let mut opts = Options::new(vec![log]);
+        opts.comments = CommentMode::Send;
+        opts.pacing = Some(Pacing::Fast);
+        let replay = Replay::open(opts).unwrap();
+        assert_eq!(replay.line_settings(), LineSettings::n81(9600));
+        let out = Shared::default();
+        let mut sink = ByteSink::new(Port::Writer(Box::new(out.clone())), &replay.line_settings());
+        let summary = replay.run(&mut sink, &mut Quiet, &Shutdown::new()).unwrap();
+        assert_eq!(*out.0.lock().unwrap(), b"$A*41\r\n# between\r\n$A*41\r\n");
+        assert_eq!(summary.comments_sent, 1);
+        assert_eq!(summary.sentences_sent, 2);
+        assert_eq!(summary.problems.get("#Serial conflict"), Some(&1));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+}
