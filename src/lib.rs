@@ -22,8 +22,8 @@ pub mod devices;
 pub mod physics;
 pub mod probe;
 pub mod record;
-pub mod sensors;
 pub mod replay;
+pub mod sensors;
 pub mod transport;
 pub mod validate;
 

@@ -78,6 +78,11 @@ pub struct ReplayArgs {
     /// Output: standard output.
     #[arg(long)]
     pub stdout: bool,
+    /// Output: the sonar multiplexer inside a running `eyebot-hil run` whose run directory is
+    /// RUN_DIR (default `run`): the sentences replace the simulated sonar, and the EyeBot
+    /// reads them through the normal select/ack protocol (docs/replay.md).
+    #[arg(long, value_name = "RUN_DIR", num_args = 0..=1, default_missing_value = "run", conflicts_with_all = ["pty", "serial", "stdout"])]
+    pub into_sonar: Option<PathBuf>,
     /// Read, check and schedule everything, send nothing, no waiting.
     #[arg(long)]
     pub dry_run: bool,
@@ -105,6 +110,14 @@ pub enum ReplayCliError {
     Pty(#[from] PtyError),
     #[error("replay output: {0}")]
     Serial(#[from] SerialError),
+    #[error(
+        "--into-sonar: cannot reach the daemon's sonar feed {path}: {source} (is `eyebot-hil run` running with that run directory?)"
+    )]
+    IntoSonar {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("--pacing rate needs --rate HZ")]
     RateMissing,
     #[error("cannot start the runtime for the output: {0}")]
@@ -224,6 +237,19 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
         Box::new(NullSink)
     } else if args.stdout {
         Box::new(ByteSink::new(Port::Stdout(std::io::stdout()), &line))
+    } else if let Some(run_dir) = &args.into_sonar {
+        let path = run_dir.join(crate::daemon::feed::FEED_SOCKET);
+        let stream = std::os::unix::net::UnixStream::connect(&path).map_err(|source| {
+            ReplayCliError::IntoSonar {
+                path: path.clone(),
+                source,
+            }
+        })?;
+        println!(
+            "replay into the sonar multiplexer of the daemon at {}",
+            run_dir.display()
+        );
+        Box::new(ByteSink::new(Port::Writer(Box::new(stream)), &line))
     } else if let Some(device) = &args.serial {
         let port = serial::open(device, &line)?;
         println!("replay {} ({line})", device.display());

@@ -97,6 +97,13 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
     if let Some(dir) = args.run_dir {
         config.run_dir = dir;
     }
+    // A sonar replay log named in a config file is relative to that file.
+    if let (Some(log), Some(file)) = (config.sonar_replay.as_mut(), args.config.as_ref())
+        && log.is_relative()
+        && let Some(dir) = file.parent()
+    {
+        *log = dir.join(&*log);
+    }
     let model = crate::daemon::plant::MakoPlant::from_config(source.as_ref(), &config)?;
     let (board, mux) = crate::daemon::plant::devices(&config);
     let meta = format!(

@@ -88,6 +88,8 @@ struct RawMultiplexer {
     dpt_offset_m: f64,
     invalid_echo: String,
     proprietary: bool,
+    #[serde(default)]
+    replay: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -163,6 +165,9 @@ pub struct DaemonConfig {
     pub multiplexer: MultiplexerSettings,
     /// Period of the compass's continuous mode.
     pub compass_period: Duration,
+    /// A captured NMEA log forwarded in place of the simulated sonar (`devices.multiplexer
+    /// .replay`); relative paths are relative to the configuration file's directory.
+    pub sonar_replay: Option<PathBuf>,
 }
 
 impl DaemonConfig {
@@ -286,6 +291,11 @@ impl DaemonConfig {
                 proprietary: m.proprietary,
             },
             compass_period: Duration::from_secs_f64(compass_period_s),
+            sonar_replay: m
+                .replay
+                .as_ref()
+                .filter(|p| !p.is_empty())
+                .map(PathBuf::from),
         })
     }
 }

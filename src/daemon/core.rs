@@ -93,6 +93,10 @@ pub struct Core<M: Model> {
     device_out: Vec<(SimNanos, firmware_protocol::Frame)>,
     mux_out: Vec<(SimNanos, Bytes)>,
     receiving: Option<usize>,
+    feed_decoder: LineDecoder,
+    feed_inbox: BytesMut,
+    feed_schedule: std::collections::VecDeque<(SimNanos, Bytes)>,
+    feed_errors: u64,
 }
 
 impl<M: Model> Core<M> {
@@ -135,6 +139,80 @@ impl<M: Model> Core<M> {
             device_out: Vec::new(),
             mux_out: Vec::new(),
             receiving: None,
+            feed_decoder: LineDecoder::new(),
+            feed_inbox: BytesMut::new(),
+            feed_schedule: std::collections::VecDeque::new(),
+            feed_errors: 0,
+        }
+    }
+
+    /// Captured sentences to forward as the sonar controllers' output, each at its simulated
+    /// time (`replay = "FILE"`): deterministic in both time modes.
+    pub fn set_feed_schedule(&mut self, schedule: Vec<(SimNanos, Bytes)>) {
+        self.mux.set_feed_active(!schedule.is_empty());
+        self.feed_schedule = schedule.into();
+    }
+
+    /// A live feed (`replay --into-sonar`) connected or left.
+    pub fn set_feed_connected(&mut self, connected: bool) {
+        self.mux
+            .set_feed_active(connected || !self.feed_schedule.is_empty());
+        self.feed_inbox.clear();
+        self.feed_decoder = LineDecoder::new();
+    }
+
+    /// Bytes from a live feed, taken as arriving at the current simulated time.
+    pub fn feed_bytes(&mut self, data: &[u8]) {
+        self.feed_inbox.extend_from_slice(data);
+        loop {
+            let d = self.feed_decoder.decode_slice(&self.feed_inbox);
+            let raw = self.feed_inbox.split_to(d.consumed).freeze();
+            match d.item {
+                None => break,
+                Some(LineItem::Nmea(sentence)) => {
+                    let start = raw.iter().position(|&b| b == b'$').unwrap_or(0);
+                    self.forward_fed(&sentence, raw.slice(start..));
+                }
+                Some(other) => {
+                    self.feed_errors += 1;
+                    tracing::debug!(item = ?other, "feed input that is not an NMEA sentence");
+                }
+            }
+        }
+    }
+
+    /// Feed input that was not a valid sentence (garbage, bad checksum, unknown sentence).
+    pub fn feed_errors(&self) -> u64 {
+        self.feed_errors
+    }
+
+    fn forward_fed(&mut self, sentence: &firmware_protocol::Sentence, raw: Bytes) {
+        if let Some(out) = self.mux.feed(sentence, raw, self.now) {
+            let line = self.sonar_line();
+            self.queue(line, self.now, out, false);
+        }
+    }
+
+    fn poll_feed(&mut self) {
+        while self
+            .feed_schedule
+            .front()
+            .is_some_and(|(t, _)| *t <= self.now)
+        {
+            let Some((_, raw)) = self.feed_schedule.pop_front() else {
+                break;
+            };
+            match firmware_protocol::nmea::parse_line(&raw) {
+                Ok(sentence) => self.forward_fed(&sentence, raw),
+                Err(e) => {
+                    self.feed_errors += 1;
+                    tracing::debug!(error = %e, "scheduled feed line is not a sentence");
+                }
+            }
+        }
+        if let Some(out) = self.mux.poll_feed(self.now) {
+            let line = self.sonar_line();
+            self.queue(line, self.now, out, false);
         }
     }
 
@@ -299,6 +377,8 @@ impl<M: Model> Core<M> {
             let next = [
                 self.board.poll_timeout(),
                 self.mux.poll_timeout(&self.model),
+                self.mux.feed_timeout(),
+                self.feed_schedule.front().map(|(t, _)| *t),
                 self.recorder.as_ref().map(|_| self.next_state_ns),
             ]
             .into_iter()
@@ -349,6 +429,7 @@ impl<M: Model> Core<M> {
             frame.encode(&mut buf);
             self.queue(sensor_line, at, buf.freeze(), false);
         }
+        self.poll_feed();
         self.mux_out.clear();
         self.mux.poll(now, &mut self.model, &mut self.mux_out);
         let sonar_line = self.sonar_line();
@@ -708,6 +789,33 @@ mod tests {
             .unwrap();
         let _ = c.take_output(1);
         assert!(c.line_counters(1).errors > before);
+    }
+
+    /// `replay = "FILE"`: logged sentences are forwarded at their simulated times in place of
+    /// the model's, only for the selected transducer when the log names transducers.
+    #[test]
+    fn a_scheduled_feed_forwards_the_selected_transducers_logged_ranges() {
+        let mut c = core(true, false);
+        let line = |text: &str| Bytes::from(format!("{text}\r\n"));
+        c.set_feed_schedule(vec![
+            (200 * MS, line("$SDDBT,8.2,f,2.5,M,1.4,F*0E")),
+            (270 * MS, line("$PEBHS,1,2.5,90*71")),
+            (1_200 * MS, line("$SDDBT,9.9,f,3.0,M,1.6,F*02")),
+            (1_270 * MS, line("$PEBHS,2,3.0,90*76")),
+            (2_200 * MS, line("$SDDBT,8.2,f,2.5,M,1.4,F*0E")),
+        ]);
+        let mut select = BytesMut::new();
+        SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
+        c.receive(0, &select).unwrap();
+        c.receive(1, &frame_bytes(1, Message::TimeAdvance { ticks: 300 }))
+            .unwrap();
+        let sonar = c.take_output(0).unwrap();
+        let text = String::from_utf8_lossy(&sonar);
+        assert_eq!(
+            text, "@A1\r\n$SDDBT,8.2,f,2.5,M,1.4,F*0E\r\n$SDDBT,8.2,f,2.5,M,1.4,F*0E\r\n",
+            "transducer 2's 3.0 m is withheld; the last, unmapped one goes out after its wait"
+        );
+        assert_eq!(c.mux_counters().fed_withheld, 1);
     }
 
     #[test]

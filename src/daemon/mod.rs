@@ -10,6 +10,7 @@
 pub mod clock;
 pub mod config;
 pub mod core;
+pub mod feed;
 pub mod link;
 pub mod plant;
 pub mod status;
@@ -56,6 +57,8 @@ pub enum DaemonError {
         #[source]
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Feed(#[from] feed::FeedError),
     #[error("the simulation stopped: {0}")]
     Model(#[source] Box<dyn std::error::Error + Send + Sync>),
 }
@@ -146,6 +149,11 @@ where
         .transpose()?;
 
     let mut core = Core::new(model, board, mux, &specs, lockstep);
+    if let Some(log) = &config.sonar_replay {
+        core.set_feed_schedule(feed::load_schedule(log)?);
+    }
+    let feed_path = run_dir.join(feed::FEED_SOCKET);
+    let feed_listener = feed::bind(&feed_path)?;
     if let Some(dir) = &options.record {
         let recorder = Recorder::start(dir, &options.record_meta, crate::record::STATE_HEADER)?;
         core.set_recorder(recorder, (1e9 / config.state_record_hz) as u64);
@@ -181,6 +189,13 @@ where
     }
     drop(in_tx);
 
+    let (feed_tx, mut feed_rx) = mpsc::channel(64);
+    let feed_task = tokio::spawn(feed::serve(
+        feed_listener,
+        feed_path,
+        feed_tx,
+        shutdown.clone(),
+    ));
     let (status_tx, status_rx) = watch::channel(StatusSnapshot::default());
     let status_task = {
         let shutdown = shutdown.clone();
@@ -240,6 +255,16 @@ where
                     }
                     None => return Ok(()),
                 },
+                Some(event) = feed_rx.recv() => {
+                    if let Some(map) = map.as_ref() {
+                        core.advance_to(map.target(started.elapsed())).map_err(model_error)?;
+                    }
+                    match event {
+                        feed::FeedEvent::Connected => core.set_feed_connected(true),
+                        feed::FeedEvent::Bytes(data) => core.feed_bytes(&data),
+                        feed::FeedEvent::Closed => core.set_feed_connected(false),
+                    }
+                }
                 _ = tokio::time::sleep_until(wake) => {}
                 changed = shutdown.changed() => {
                     if changed.is_err() || *shutdown.borrow() {
@@ -261,6 +286,7 @@ where
         let _ = tokio::time::timeout(Duration::from_millis(500), task).await;
     }
     status_task.abort();
+    let _ = tokio::time::timeout(Duration::from_millis(200), feed_task).await;
     let records = match core.take_recorder() {
         Some(recorder) => Some(recorder.finish()?),
         None => None,

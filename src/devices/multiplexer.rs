@@ -5,6 +5,15 @@
 //! have switched; from then on it forwards the active controller's NMEA depth sentences. A
 //! sentence does not say which transducer produced it (faithful default); the optional
 //! proprietary `$PEBHS` sentence does, for firmware that is extended to read it.
+//!
+//! **Feeds.** Captured sentences can stand in for the simulated sonar (`eyebot-hil replay
+//! --into-sonar`, or `replay = "FILE"` in `[devices.multiplexer]`). While a feed is active the
+//! model's readings are not forwarded; the relays and acknowledgements still follow the
+//! model's timing. A feed's depth sentence is forwarded as the active controller's output
+//! when the feed does not say which transducer produced it, or when it says so with a
+//! `$PEBHS` sentence right after it (the order this bridge writes them) and that transducer
+//! is the selected one: the EyeBot then reads the captured ranges through the normal
+//! select/ack protocol with the log's transducer mapping.
 
 use bytes::{Bytes, BytesMut};
 use firmware_protocol::error::{LinkError, SonarCommandError};
@@ -53,6 +62,9 @@ pub struct MultiplexerCounters {
     pub invalid_echoes: u64,
     /// Wire errors received (garbage, bad commands, unexpected NMEA from the EyeBot side).
     pub rx_errors: u64,
+    /// Feed sentences forwarded, and held back because another transducer is selected.
+    pub fed: u64,
+    pub fed_withheld: u64,
 }
 
 /// The master's state.
@@ -61,7 +73,15 @@ pub struct Multiplexer {
     settings: MultiplexerSettings,
     counters: MultiplexerCounters,
     events: Vec<(SimNanos, SonarEvent)>,
+    /// The transducer the relays connect (after its acknowledgement), 1..=4.
+    selected: Option<u8>,
+    feed_active: bool,
+    /// A fed depth sentence waiting to learn (from a following `$PEBHS`) whose it is.
+    pending_feed: Option<(SimNanos, Bytes)>,
 }
+
+/// How long a fed depth sentence waits for a `$PEBHS` naming its transducer (simulated time).
+pub const FEED_MAPPING_WAIT_NS: u64 = 200_000_000;
 
 impl Multiplexer {
     pub fn new(settings: MultiplexerSettings) -> Self {
@@ -69,7 +89,63 @@ impl Multiplexer {
             settings,
             counters: MultiplexerCounters::default(),
             events: Vec::new(),
+            selected: None,
+            feed_active: false,
+            pending_feed: None,
         }
+    }
+
+    /// A feed starts (`true`) or ends: while active, the model's readings are not forwarded.
+    pub fn set_feed_active(&mut self, active: bool) {
+        self.feed_active = active;
+        if !active {
+            self.pending_feed = None;
+        }
+    }
+
+    pub fn feed_active(&self) -> bool {
+        self.feed_active
+    }
+
+    /// One complete sentence from a feed (with CR LF), decoded as `sentence`, at `now`.
+    /// Returns the bytes to put on the sonar line now, if any.
+    pub fn feed(&mut self, sentence: &Sentence, raw: Bytes, now: SimNanos) -> Option<Bytes> {
+        match sentence {
+            Sentence::Echo(report) => {
+                let pending = self.pending_feed.take()?;
+                if Some(report.transducer.get()) == self.selected {
+                    self.counters.fed += 1;
+                    Some(pending.1)
+                } else {
+                    self.counters.fed_withheld += 1;
+                    None
+                }
+            }
+            Sentence::Dbt(_) | Sentence::Dpt(_) => {
+                // A depth sentence with no mapping after it goes out as it is.
+                let earlier = self.pending_feed.replace((now, raw)).map(|p| p.1);
+                if earlier.is_some() {
+                    self.counters.fed += 1;
+                }
+                earlier
+            }
+        }
+    }
+
+    /// A fed depth sentence whose mapping wait ran out is forwarded.
+    pub fn feed_timeout(&self) -> Option<SimNanos> {
+        self.pending_feed
+            .as_ref()
+            .map(|(t, _)| t + FEED_MAPPING_WAIT_NS)
+    }
+
+    /// Releases a fed depth sentence whose mapping wait ran out by `now`.
+    pub fn poll_feed(&mut self, now: SimNanos) -> Option<Bytes> {
+        if self.feed_timeout().is_some_and(|t| t <= now) {
+            self.counters.fed += 1;
+            return self.pending_feed.take().map(|p| p.1);
+        }
+        None
     }
 
     pub fn counters(&self) -> MultiplexerCounters {
@@ -134,9 +210,11 @@ impl Multiplexer {
         match event {
             SonarEvent::Switched { transducer } => {
                 let t = Transducer::new(transducer).ok()?;
+                self.selected = Some(transducer);
                 self.counters.acks += 1;
                 SonarCommand::Ack(t).encode(&mut buf);
             }
+            SonarEvent::Reading { .. } if self.feed_active => return None,
             SonarEvent::Reading {
                 transducer,
                 range_m,
@@ -280,6 +358,72 @@ mod tests {
         let lines: Vec<&str> = text.split_inclusive("\r\n").collect();
         assert_eq!(lines.len(), 2);
         assert!(lines[1].starts_with("$PEBHS,3,"), "{text}");
+    }
+
+    fn parsed(line: &[u8]) -> Sentence {
+        firmware_protocol::nmea::parse_line(line).unwrap()
+    }
+
+    fn echo(t: u8, range_m: f64) -> Bytes {
+        let mut b = BytesMut::new();
+        Sentence::Echo(EchoReport::new(Transducer::new(t).unwrap(), Some(range_m), 90).unwrap())
+            .encode(&mut b)
+            .unwrap();
+        b.freeze()
+    }
+
+    fn dbt(range_m: f64) -> Bytes {
+        let mut b = BytesMut::new();
+        Sentence::Dbt(Dbt::from_depth_m(Talker::SOUNDER, range_m).unwrap())
+            .encode(&mut b)
+            .unwrap();
+        b.freeze()
+    }
+
+    /// With a feed, the log's ranges replace the model's, and a `$PEBHS` after a depth
+    /// sentence decides whether it belongs to the selected transducer.
+    #[test]
+    fn a_feed_replaces_the_model_and_follows_the_logged_transducer() {
+        let mut plant = FakePlant {
+            sonar: vec![
+                (10 * MS, SonarEvent::Switched { transducer: 2 }),
+                (
+                    500 * MS,
+                    SonarEvent::Reading {
+                        transducer: 2,
+                        range_m: Some(9.9),
+                        quality_pct: 90,
+                    },
+                ),
+            ],
+            ..FakePlant::default()
+        };
+        let mut m = mux(InvalidEcho::Omit, false);
+        m.set_feed_active(true);
+        let mut out = Vec::new();
+        m.poll(1_000 * MS, &mut plant, &mut out);
+        assert_eq!(
+            out.len(),
+            1,
+            "the ack only; the model's 9.9 m reading is not forwarded"
+        );
+        // Transducer 2's range is forwarded once its $PEBHS arrives...
+        let d = dbt(2.1);
+        assert_eq!(m.feed(&parsed(&d), d.clone(), 1_100 * MS), None);
+        let e = echo(2, 2.1);
+        assert_eq!(m.feed(&parsed(&e), e, 1_140 * MS), Some(d));
+        // ...transducer 1's is withheld...
+        let d = dbt(3.3);
+        m.feed(&parsed(&d), d, 2_100 * MS);
+        let e = echo(1, 3.3);
+        assert_eq!(m.feed(&parsed(&e), e, 2_140 * MS), None);
+        // ...and one without mapping goes out after the wait.
+        let d = dbt(4.0);
+        m.feed(&parsed(&d), d.clone(), 3_000 * MS);
+        assert_eq!(m.poll_feed(3_100 * MS), None);
+        assert_eq!(m.feed_timeout(), Some(3_200 * MS));
+        assert_eq!(m.poll_feed(3_200 * MS), Some(d));
+        assert_eq!((m.counters().fed, m.counters().fed_withheld), (2, 1));
     }
 
     #[test]

@@ -407,6 +407,13 @@ fn sonar_t1t2t1_row(config: &SensorsConfig, seed: u64) -> Row {
     )
 }
 
+/// The sensor rows as a `validate` row source. They use their own fixed seed ([`SEED`]):
+/// each of the 13 sonar rows is a 95 % interval, so an arbitrary seed fails one of them by
+/// chance about half the time (see docs/sensors.md); the seed was fixed before any result.
+pub fn row_source(ctx: &super::Context<'_>) -> Result<Vec<Row>, super::ValidateError> {
+    Ok(rows(ctx.configs)?)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -444,11 +451,4 @@ mod tests {
             .collect();
         assert!(failed.is_empty(), "{failed:?}");
     }
-}
-
-/// The sensor rows as a `validate` row source. They use their own fixed seed ([`SEED`]):
-/// each of the 13 sonar rows is a 95 % interval, so an arbitrary seed fails one of them by
-/// chance about half the time (see docs/sensors.md); the seed was fixed before any result.
-pub fn row_source(ctx: &super::Context<'_>) -> Result<Vec<Row>, super::ValidateError> {
-    Ok(rows(ctx.configs)?)
 }
