@@ -1,6 +1,7 @@
 //! Sensor rows of `eyebot-hil validate`: each number is computed here, now, by running the
-//! sensor models against simple analytic scenes (`sensors::scene`), and compared with the
-//! thesis's measurements.
+//! sensor models, and compared with the thesis's measurements. The sonar detection rows ping
+//! the default pool's rapier3d walls (`worlds/pool.toml`), the geometry the daemon uses; the
+//! other rows need no geometry or a simple analytic scene (`sensors::scene`).
 //!
 //! Statistics: the sonar detection rows compare our rate over 500 pings with the 95 % Wilson
 //! score interval of the thesis's 5 x 100 samples (Wilson rather than the normal
@@ -37,15 +38,19 @@ pub fn wilson_interval(k: u32, n: u32) -> (f64, f64) {
     ((centre - half).max(0.0), (centre + half).min(1.0))
 }
 
-/// Loads [`CONFIG`] from `source` and computes the rows with [`SEED`].
+/// The world whose walls the sonar rows ping.
+pub const WORLD: &str = crate::physics::DEFAULT_WORLD;
+
+/// Loads [`CONFIG`] and [`WORLD`] from `source` and computes the rows with [`SEED`].
 pub fn rows(source: &dyn ConfigSource) -> Result<Vec<Row>, ConfigError> {
     let config = SensorsConfig::load(source, CONFIG)?;
-    Ok(rows_for(&config, SEED))
+    let pool = crate::physics::world::Pool::new(&crate::physics::load_world(source, WORLD)?);
+    Ok(rows_for(&config, &pool, SEED))
 }
 
-/// The rows for any sensor config and seed.
-pub fn rows_for(config: &SensorsConfig, seed: u64) -> Vec<Row> {
-    let mut rows = sonar_detection_rows(config, seed);
+/// The rows for any sensor config, pool and seed.
+pub fn rows_for(config: &SensorsConfig, pool: &crate::physics::world::Pool, seed: u64) -> Vec<Row> {
+    let mut rows = sonar_detection_rows(config, pool, seed);
     rows.extend(accelerometer_noise_rows(config, seed));
     rows.push(accelerometer_codes_row(config, seed));
     rows.push(peak_acceleration_row(config, seed));
@@ -80,27 +85,35 @@ fn level() -> UnitQuaternion<f64> {
 }
 
 /// Thesis table 4.7: 500 pings at each distance, transducer square to a wall, vehicle still.
-fn sonar_detection_rows(config: &SensorsConfig, seed: u64) -> Vec<Row> {
+fn sonar_detection_rows(
+    config: &SensorsConfig,
+    pool: &crate::physics::world::Pool,
+    seed: u64,
+) -> Vec<Row> {
     let s = &config.sonar;
     let Some(ts) = s.transducers.first() else {
         return Vec::new();
     };
     let mut tr = Transducer::new(ts, s, seed);
-    let state = at_rest(0.0, Vector3::new(10.0, 10.0, 1.0), level());
-    let origin = tr.origin_m(&state);
-    let axis = tr.axis_world(&state);
+    // Turn the vehicle so the transducer's axis points west, square to the pool's west wall
+    // (y = 0), and put the transducer `d` metres from it, mid-length and 1 m deep.
+    let probe = at_rest(0.0, Vector3::zeros(), level());
+    let axis0 = tr.axis_world(&probe);
+    let yaw = -std::f64::consts::FRAC_PI_2 - axis0.y.atan2(axis0.x);
+    let attitude = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+    let offset = tr
+        .origin_m(&at_rest(0.0, Vector3::zeros(), attitude))
+        .coords;
     let n = 500u32;
     s.detection
         .iter()
         .enumerate()
         .map(|(i, &(d, p))| {
-            let wall = PlaneWall {
-                point_m: origin + axis.into_inner() * d,
-                normal: Unit::new_normalize(-axis.into_inner()),
-            };
+            let target = Vector3::new(pool.size_m().x / 2.0, d, 1.0);
+            let state = at_rest(0.0, target - offset, attitude);
             let hits = (0..n)
                 .filter(|k| {
-                    tr.ping(&state, &wall, s, f64::from(i as u32 * n + k))
+                    tr.ping(&state, pool, s, f64::from(i as u32 * n + k))
                         .is_some()
                 })
                 .count() as u32;
@@ -108,7 +121,7 @@ fn sonar_detection_rows(config: &SensorsConfig, seed: u64) -> Vec<Row> {
             let (lo, hi) = wilson_interval(k_thesis, 500);
             let rate = f64::from(hits) / f64::from(n);
             row(
-                format!("sonar static detection at {d:.1} m"),
+                format!("sonar static detection at {d:.1} m (pool wall)"),
                 Value::Number(p * 100.0),
                 Value::Number(rate * 100.0),
                 format!("95 % Wilson {:.1}..{:.1}", lo * 100.0, hi * 100.0),
