@@ -14,9 +14,9 @@
  * triangular membership functions, min for AND, outputs TURN RIGHT / CONTINUE STRAIGHT /
  * TURN LEFT as singletons, centroid defuzzification.
  *
- * The corner: the bow pair watches the wall ahead (one reading of transducer 3 per cycle;
- * both bow transducers see a wall ahead). Once it is nearer than APPROACH_M the program keeps
- * transducer 3 selected and reads every ping; at CORNER_M it turns right by 90 deg with the
+ * The corner: the bow pair watches the wall ahead (one bow reading per cycle, transducers 3
+ * and 4 in turn; both see a wall ahead). Once it is nearer than APPROACH_M the program keeps
+ * that transducer selected and reads every ping; at CORNER_M it turns right by 90 deg with the
  * compass, and the wall ahead becomes the new port wall.
  */
 #include <stdio.h>
@@ -26,16 +26,16 @@
 #include "eyebot.h"
 
 #define SONAR SERIAL2
-#define RUN_S 330
+#define RUN_S 270
 #define PERIOD_TICKS 10       /* inner loop: 100 ms */
 #define BASE_PERCENT 10       /* thesis 4.8: 10 % average thrust */
 #define TARGET_M 1.0          /* thesis 4.8: 10 dm from the port wall */
-#define MAX_OFFSET_DEG 20.0   /* the compass limits the turn away from the wall direction */
-#define TURN_DEG 20.0         /* the TURN LEFT / TURN RIGHT singletons */
+#define MAX_OFFSET_DEG 12
+#define TURN_DEG 12         /* the TURN LEFT / TURN RIGHT singletons */
 #define DIST_BAND_M 0.3       /* JUST RIGHT spans TARGET +- this */
 #define RATE_BAND_MPS 0.03    /* JUST RIGHT rate spans +- this */
-#define APPROACH_M 2.5
-#define CORNER_M 1.1
+#define APPROACH_M 3.5
+#define CORNER_M 1.2
 #define KP 4.0                /* % differential per degree */
 #define KD 3.0                /* % differential per degree/s */
 
@@ -143,8 +143,10 @@ int main(void) {
     int wall_heading, previous, start, step = 0;
     double offset = 0.0, last_distance = -1.0;
     int last_distance_at = 0;
-    /* the reading plan: T1, T2, T1 on the port pair, then T3 on the bow */
-    static const int plan[] = {1, 2, 1, 3};
+    /* the reading plan: T1, T2, T1 on the port pair, then one bow transducer, alternating
+     * between 3 (15 deg to port) and 4 (15 deg to starboard) */
+    static const int plan[] = {1, 2, 1, 3, 1, 2, 1, 4};
+    static const int plan_len = 8;
     int plan_i = 0;
     double port_best = -1.0;
     int approach = 0, turning = 0;
@@ -175,7 +177,7 @@ int main(void) {
             int t = sonar.transducer;
             if (turning) {
                 /* readings during the turn are not used */
-            } else if (t == 3) {
+            } else if (t == 3 || t == 4) {
                 if (range > 0.0 && range <= CORNER_M) {
                     wall_heading = (wall_heading + 90) % 360;
                     offset = 0.0;
@@ -190,8 +192,8 @@ int main(void) {
             } else {
                 if (range > 0.0 && (port_best < 0.0 || range < port_best)) port_best = range;
             }
-            if (t != 3 || !approach || turning) {
-                if (t != 3 && plan_i == 2) {
+            if (t < 3 || !approach || turning) {
+                if (t < 3 && plan_i % 4 == 2) {
                     /* T1, T2, T1 done: one fuzzy step on the shortest distance */
                     if (port_best > 0.0) {
                         int now = OSGetCount();
@@ -210,10 +212,9 @@ int main(void) {
                 }
                 if (approach && !turning) {
                     offset = 0.0; /* hold the wall direction until the corner */
-                    plan_i = 3;
-                    sonar_select(3);
+                    /* transducer t stays selected: every ping is a reading */
                 } else {
-                    plan_i = (plan_i + 1) % 4;
+                    plan_i = (plan_i + 1) % plan_len;
                     sonar_select(plan[plan_i]);
                 }
             }
