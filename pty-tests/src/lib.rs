@@ -4,7 +4,10 @@
 //!   readiness by polling with a timeout, and a loud failure when a system tool is missing.
 //! - [`pty`]: ptys made with the bridge's own `PtyMaster`, and a consumer that timestamps
 //!   every read on the slave side.
+//! - [`eyebot_c`]: builds the EyeBot C library and examples (host and 68k) and runs them
+//!   against the daemon.
 
+pub mod eyebot_c;
 pub mod process;
 pub mod pty;
 

@@ -30,6 +30,11 @@ pub struct MakoPlant {
     calibration: CalibrationProgress,
     /// Sonar events taken from the sensor model, not yet due.
     sonar_events: Vec<sensors::SonarEvent>,
+    /// Each transducer's controller (sensor-model index order).
+    transducer_controller: Vec<usize>,
+    /// The controller whose sentences the master forwards: the one that owns the last
+    /// acknowledged transducer; `None` from a select until its ack (PROTOCOL.md 1.2).
+    forwarding: Option<usize>,
 }
 
 impl std::fmt::Debug for MakoPlant {
@@ -87,6 +92,13 @@ impl MakoPlant {
                 points: 0,
             },
             sonar_events: Vec::new(),
+            transducer_controller: sensors_config
+                .sonar
+                .transducers
+                .iter()
+                .map(|t| t.controller)
+                .collect(),
+            forwarding: None,
         }
     }
 
@@ -205,6 +217,9 @@ impl Plant for MakoPlant {
             tracing::warn!(error = %e, "sonar select refused");
         }
         self.pull_sonar();
+        // PROTOCOL.md 1.2: on a select the master stops forwarding until it acknowledges.
+        // Sentences already due at `now` were released by earlier polls.
+        self.forwarding = None;
     }
 
     fn sonar_poll(&mut self, now: SimNanos, out: &mut Vec<(SimNanos, SonarEvent)>) {
@@ -215,12 +230,22 @@ impl Plant for MakoPlant {
         for event in self.sonar_events.drain(..due) {
             let at = ns(event.t_s());
             out.push(match event {
-                sensors::SonarEvent::Ack { transducer, .. } => (
-                    at,
-                    SonarEvent::Switched {
-                        transducer: transducer as u8 + 1,
-                    },
-                ),
+                sensors::SonarEvent::Ack { transducer, .. } => {
+                    self.forwarding = self.transducer_controller.get(transducer).copied();
+                    (
+                        at,
+                        SonarEvent::Switched {
+                            transducer: transducer as u8 + 1,
+                        },
+                    )
+                }
+                // The master forwards only the selected transducer's controller
+                // (PROTOCOL.md 1.2); the other controller's sentences go nowhere.
+                sensors::SonarEvent::Range { controller, .. }
+                    if self.forwarding != Some(controller) =>
+                {
+                    continue;
+                }
                 sensors::SonarEvent::Range { range, source, .. } => (
                     at,
                     SonarEvent::Reading {

@@ -1,0 +1,644 @@
+/*
+ * eyebot.c - the portable core of libeyebot: the sensor-link client (PROTOCOL.md section 2)
+ * and the RoBIOS calls on top of it.
+ *
+ * Endian-clean: every multi-byte field is assembled with shifts. No allocation: all buffers
+ * are static. One request outstanding at a time, a fresh sequence number per request, the
+ * identical frame resent on timeout (PROTOCOL.md 2.2).
+ *
+ * The session opens lazily on the first call that needs the bridge: HELLO, then the time
+ * mode check (TIME_MODE), so an unchanged program needs no extra init call.
+ */
+#include "eyebot.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "eb_hdt.h"
+#include "eb_port.h"
+
+/* ---- protocol constants (PROTOCOL.md 2.3) ----------------------------------------------- */
+#define SYNC0 0xEB
+#define SYNC1 0x90
+#define MAX_PAYLOAD 64
+#define PROTOCOL_VERSION 1
+
+#define T_HELLO 0x01
+#define T_ADC_READ 0x10
+#define T_COMPASS_MODE 0x20
+#define T_COMPASS_READ 0x21
+#define T_COMPASS_CALIBRATE 0x22
+#define T_COMPASS_RESET 0x23
+#define T_THRUSTER_SET 0x30
+#define T_TIME_GET 0x40
+#define T_TIME_ADVANCE 0x41
+#define T_TIME_MODE 0x42
+#define T_ACK 0x80
+#define T_HELLO_REPLY 0x81
+#define T_ADC_VALUE 0x90
+#define T_COMPASS_HEADING 0xA1
+#define T_CALIBRATION_STATUS 0xA3
+#define T_TIME 0xB0
+#define T_NAK 0xBF
+#define T_COMPASS_HEADING_PUSH 0xE1
+
+#define CAL_START 0
+#define CAL_TAKE_POINT 1
+#define CAL_FINISH 2
+#define CAL_CLEAR 3
+
+/* The program's tick: 1/100 s (MK4 OSGetCount, hardware-facts.md "Timing"). */
+#define PROGRAM_TICK_US 10000UL
+
+/* ---- byte helpers --------------------------------------------------------------------- */
+static uint16_t get_be16(const uint8_t *p) { return (uint16_t)(((unsigned)p[0] << 8) | p[1]); }
+static uint32_t get_be32(const uint8_t *p) {
+    return ((uint32_t)p[0] << 24) | ((uint32_t)p[1] << 16) | ((uint32_t)p[2] << 8) | p[3];
+}
+static void put_be16(uint8_t *p, uint16_t v) {
+    p[0] = (uint8_t)(v >> 8);
+    p[1] = (uint8_t)(v & 0xFF);
+}
+static void put_be32(uint8_t *p, uint32_t v) {
+    p[0] = (uint8_t)(v >> 24);
+    p[1] = (uint8_t)((v >> 16) & 0xFF);
+    p[2] = (uint8_t)((v >> 8) & 0xFF);
+    p[3] = (uint8_t)(v & 0xFF);
+}
+
+uint16_t eb_crc16(const uint8_t *p, size_t n);
+uint16_t eb_crc16(const uint8_t *p, size_t n) {
+    uint16_t crc = 0xFFFF;
+    int i;
+    while (n--) {
+        crc ^= (uint16_t)((uint16_t)(*p++) << 8);
+        for (i = 0; i < 8; i++)
+            crc = (crc & 0x8000) ? (uint16_t)((crc << 1) ^ 0x1021) : (uint16_t)(crc << 1);
+    }
+    return crc;
+}
+
+/* ---- session state (all static) --------------------------------------------------------- */
+enum { MODE_REALTIME = 0, MODE_LOCKSTEP = 1 };
+
+static struct {
+    int state; /* 0 = not opened, 1 = open, -1 = failed */
+    int mode;
+    uint8_t seq;
+    uint32_t tick_us;      /* the bridge's tick */
+    uint16_t capabilities;
+    long timeout_ms;
+    int retries;
+    int shared_port;       /* SERIALn whose bytes share the sensor line, 0 = none */
+    long start_ms;         /* realtime clock origin */
+    uint32_t stop_ticks;   /* EYEBOT_STOP_S in program ticks, 0 = none */
+    long recv_timeout_ticks;
+    /* receive buffer of the sensor line */
+    uint8_t rx[512];
+    size_t rx_len;
+    unsigned long skipped;
+    /* the frame being handled */
+    uint8_t f_type, f_seq, f_len;
+    uint8_t f_payload[MAX_PAYLOAD];
+    /* last NAK */
+    uint8_t nak_code, nak_detail;
+    /* compass */
+    int compass_cycle;
+    int compass_started;
+    int compass_latest;    /* last pushed heading, -1 none */
+    int compass_fresh;
+    int cal_points;
+    /* thrusters */
+    int motor_open[4];
+} S;
+
+/* Serial port receive rings for SERIAL1..3 (bytes already read from the driver). */
+static struct {
+    int open;
+    uint8_t buf[1024];
+    size_t head, len;
+} ring[EB_LINKS];
+
+static void ring_push(int port, uint8_t b) {
+    if (ring[port].len < sizeof ring[port].buf) {
+        ring[port].buf[(ring[port].head + ring[port].len) % sizeof ring[port].buf] = b;
+        ring[port].len++;
+    }
+}
+
+static int ring_pop(int port, uint8_t *b) {
+    if (ring[port].len == 0) return 0;
+    *b = ring[port].buf[ring[port].head];
+    ring[port].head = (ring[port].head + 1) % sizeof ring[port].buf;
+    ring[port].len--;
+    return 1;
+}
+
+static char msgbuf[200];
+
+static void fail(const char *what) {
+    snprintf(msgbuf, sizeof msgbuf, "eyebot: sensor link: %s", what);
+    eb_exit(3, msgbuf);
+}
+
+static long config_long(const char *name, long fallback) {
+    const char *v = eb_config(name);
+    char *end;
+    long x;
+    if (v == NULL || *v == '\0') return fallback;
+    x = strtol(v, &end, 10);
+    if (*end != '\0') {
+        snprintf(msgbuf, sizeof msgbuf, "eyebot: %s=%s: expected an integer", name, v);
+        eb_exit(2, msgbuf);
+    }
+    return x;
+}
+
+/* ---- frames --------------------------------------------------------------------------- */
+static int send_frame(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len) {
+    static uint8_t wire[5 + MAX_PAYLOAD + 2];
+    uint16_t crc;
+    wire[0] = SYNC0;
+    wire[1] = SYNC1;
+    wire[2] = type;
+    wire[3] = seq;
+    wire[4] = len;
+    if (len) memcpy(wire + 5, payload, len);
+    crc = eb_crc16(wire + 2, (size_t)3 + len);
+    put_be16(wire + 5 + len, crc);
+    return eb_port_write(EB_LINK_SENSOR, wire, (size_t)7 + len);
+}
+
+static void rx_drop(size_t n) {
+    if (n >= S.rx_len) {
+        S.rx_len = 0;
+        return;
+    }
+    memmove(S.rx, S.rx + n, S.rx_len - n);
+    S.rx_len -= n;
+}
+
+/* A byte that is not part of a frame: on a shared line it belongs to the serial port that
+ * shares it (NMEA, sonar acks); otherwise it is garbage (PROTOCOL.md section 3). */
+static void rx_not_frame(void) {
+    if (S.shared_port) ring_push(S.shared_port, S.rx[0]);
+    else S.skipped++;
+    rx_drop(1);
+}
+
+/* Takes one complete frame out of S.rx into S.f_*; 1 when one was found. */
+static int scan_frame(void) {
+    while (S.rx_len > 0) {
+        size_t len, total;
+        uint16_t crc;
+        if (S.rx[0] != SYNC0) {
+            rx_not_frame();
+            continue;
+        }
+        if (S.rx_len < 2) return 0;
+        if (S.rx[1] != SYNC1) {
+            rx_not_frame();
+            continue;
+        }
+        if (S.rx_len < 5) return 0;
+        len = S.rx[4];
+        if (len > MAX_PAYLOAD) {
+            rx_not_frame();
+            continue;
+        }
+        total = 7 + len;
+        if (S.rx_len < total) return 0;
+        crc = eb_crc16(S.rx + 2, 3 + len);
+        if (crc != get_be16(S.rx + 5 + len)) {
+            rx_not_frame();
+            continue;
+        }
+        S.f_type = S.rx[2];
+        S.f_seq = S.rx[3];
+        S.f_len = (uint8_t)len;
+        memcpy(S.f_payload, S.rx + 5, len);
+        rx_drop(total);
+        return 1;
+    }
+    return 0;
+}
+
+/* Pushes are kept for the calls that want them. */
+static void handle_push(void) {
+    if (S.f_type == T_COMPASS_HEADING_PUSH && S.f_len == 2) {
+        uint16_t word = get_be16(S.f_payload);
+        if (word <= 359) {
+            S.compass_latest = word;
+            S.compass_fresh = 1;
+        }
+    }
+}
+
+/* Reads from the sensor line until a frame arrives or timeout_ms passes. 1 = frame. */
+static int read_frame(long timeout_ms) {
+    long deadline = eb_clock_ms() + timeout_ms;
+    for (;;) {
+        long left, n;
+        if (scan_frame()) return 1;
+        left = deadline - eb_clock_ms();
+        if (left < 0) left = 0;
+        if (S.rx_len >= sizeof S.rx) rx_drop(1);
+        n = eb_port_read(EB_LINK_SENSOR, S.rx + S.rx_len, sizeof S.rx - S.rx_len, left);
+        if (n < 0) fail("read error");
+        if (n == 0) return scan_frame();
+        S.rx_len += (size_t)n;
+    }
+}
+
+static void session_open(void);
+
+/* Sends a request and waits for its reply (same seq): returns the reply type (payload in
+ * S.f_payload), or -1 after the retries. A NAK returns T_NAK with S.nak_code set. */
+static int request(uint8_t type, const uint8_t *payload, uint8_t len, long extra_ms) {
+    int attempt;
+    if (S.state == 0) session_open();
+    S.seq = (uint8_t)(S.seq + 1);
+    for (attempt = 0; attempt <= S.retries; attempt++) {
+        long deadline;
+        if (send_frame(type, S.seq, payload, len) != 0) fail("write error");
+        deadline = eb_clock_ms() + S.timeout_ms + extra_ms;
+        for (;;) {
+            long left = deadline - eb_clock_ms();
+            if (left <= 0 || !read_frame(left)) break;
+            if (S.f_type >= 0xC0) {
+                handle_push();
+                continue;
+            }
+            if (S.f_seq != S.seq) continue; /* a late reply to an earlier attempt */
+            if (S.f_type == T_NAK && S.f_len == 3) {
+                S.nak_code = S.f_payload[1];
+                S.nak_detail = S.f_payload[2];
+                if (S.nak_code == 0x01) break; /* BAD_CRC: advisory, resend at once */
+            }
+            return S.f_type;
+        }
+    }
+    return -1;
+}
+
+/* ---- session ---------------------------------------------------------------------------- */
+static void session_open(void) {
+    const char *mode;
+    uint8_t p[1];
+    int r;
+    long stop_s;
+    S.state = 1; /* request() must not recurse into here */
+    S.timeout_ms = config_long("EYEBOT_TIMEOUT_MS", 100);
+    S.retries = (int)config_long("EYEBOT_RETRIES", 3);
+    S.shared_port = (int)config_long("EYEBOT_SHARED_PORT", 0);
+    S.recv_timeout_ticks = config_long("EYEBOT_RECV_TIMEOUT_TICKS", 100);
+    stop_s = config_long("EYEBOT_STOP_S", 0);
+    S.stop_ticks = stop_s > 0 ? (uint32_t)stop_s * 100U : 0;
+    S.compass_latest = -1;
+    if (S.shared_port < 0 || S.shared_port > 3) eb_exit(2, "eyebot: EYEBOT_SHARED_PORT must be 0..3");
+    if (eb_port_open(EB_LINK_SENSOR, -1) != 0) eb_exit(3, "eyebot: cannot open the sensor link");
+    eb_port_flush_in(EB_LINK_SENSOR);
+    S.start_ms = eb_clock_ms();
+
+    p[0] = PROTOCOL_VERSION;
+    r = request(T_HELLO, p, 1, 0);
+    if (r == T_NAK) {
+        snprintf(msgbuf, sizeof msgbuf,
+                 "eyebot: the bridge refused HELLO (code %u, it speaks version %u)",
+                 S.nak_code, S.nak_detail);
+        eb_exit(3, msgbuf);
+    }
+    if (r != T_HELLO_REPLY || S.f_len != 8) fail("no HELLO_REPLY from the bridge (is it running?)");
+    S.capabilities = get_be16(S.f_payload + 1);
+    S.tick_us = get_be32(S.f_payload + 3);
+    if (S.tick_us == 0) fail("HELLO_REPLY with a zero tick");
+
+    mode = eb_config("EYEBOT_TIME_MODE");
+    if (mode == NULL || *mode == '\0') mode = "auto";
+    if (strcmp(mode, "realtime") == 0) {
+        p[0] = MODE_REALTIME;
+    } else if (strcmp(mode, "lockstep") == 0 || strcmp(mode, "auto") == 0) {
+        p[0] = MODE_LOCKSTEP;
+    } else {
+        snprintf(msgbuf, sizeof msgbuf,
+                 "eyebot: EYEBOT_TIME_MODE=%s: expected lockstep, realtime or auto", mode);
+        eb_exit(2, msgbuf);
+    }
+    r = request(T_TIME_MODE, p, 1, 0);
+    if (r == T_ACK) {
+        S.mode = p[0];
+    } else if (r == T_NAK && strcmp(mode, "auto") == 0) {
+        S.mode = MODE_REALTIME;
+    } else if (r == T_NAK) {
+        snprintf(msgbuf, sizeof msgbuf,
+                 "eyebot: EYEBOT_TIME_MODE=%s but the bridge runs in the other time mode", mode);
+        eb_exit(3, msgbuf);
+    } else {
+        fail("no reply to TIME_MODE");
+    }
+}
+
+static void ensure_session(void) {
+    if (S.state == 0) session_open();
+}
+
+/* Program ticks <-> bridge ticks. */
+static uint32_t to_bridge_ticks(uint32_t program_ticks) {
+    return (uint32_t)(((uint64_t)program_ticks * PROGRAM_TICK_US + S.tick_us / 2) / S.tick_us);
+}
+
+static uint32_t bridge_now_ticks(void) {
+    int r = request(T_TIME_GET, NULL, 0, 0);
+    if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+    return get_be32(S.f_payload);
+}
+
+/* Reads what the serial ports' drivers hold into their rings (no waiting). */
+static void poll_serial(void) {
+    int port;
+    uint8_t tmp[256];
+    if (S.shared_port) {
+        /* the shared line: its bytes come with the sensor link's */
+        long n = eb_port_read(EB_LINK_SENSOR, S.rx + S.rx_len,
+                              sizeof S.rx - S.rx_len, 0);
+        if (n > 0) S.rx_len += (size_t)n;
+        while (scan_frame()) {
+            if (S.f_type >= 0xC0) handle_push();
+        }
+    }
+    for (port = 1; port < EB_LINKS; port++) {
+        long n, i;
+        if (!ring[port].open || port == S.shared_port) continue;
+        n = eb_port_read(port, tmp, sizeof tmp, 0);
+        for (i = 0; i < n; i++) ring_push(port, tmp[i]);
+    }
+}
+
+static void advance(uint32_t program_ticks) {
+    uint8_t p[4];
+    uint32_t n = to_bridge_ticks(program_ticks);
+    int r;
+    put_be32(p, n);
+    /* the bridge needs time to simulate n ticks: allow 1 ms per tick on top */
+    r = request(T_TIME_ADVANCE, p, 4, (long)(n > 100000 ? 100000 : n));
+    if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_ADVANCE");
+    if (S.stop_ticks) {
+        uint64_t now_us = (uint64_t)get_be32(S.f_payload) * S.tick_us;
+        if (now_us >= (uint64_t)S.stop_ticks * PROGRAM_TICK_US) {
+            int i;
+            uint8_t off[3];
+            for (i = 0; i < 4; i++) {
+                off[0] = (uint8_t)i;
+                off[1] = 0xFF;
+                off[2] = 0;
+                request(T_THRUSTER_SET, off, 3, 0);
+            }
+            eb_exit(0, "eyebot: EYEBOT_STOP_S reached; thrusters off");
+        }
+    }
+}
+
+/* ---- timing ---------------------------------------------------------------------------- */
+void OSWait(int n) {
+    ensure_session();
+    if (n < 0) n = 0;
+    if (S.mode == MODE_LOCKSTEP) {
+        advance((uint32_t)n);
+    } else {
+        eb_sleep_ms((long)n * 10);
+        if (S.stop_ticks && (uint32_t)OSGetCount() >= S.stop_ticks)
+            eb_exit(0, "eyebot: EYEBOT_STOP_S reached");
+    }
+}
+
+int OSSleep(int n) {
+    OSWait(n);
+    return 0;
+}
+
+int OSGetCount(void) {
+    ensure_session();
+    if (S.mode == MODE_LOCKSTEP) {
+        uint64_t us = (uint64_t)bridge_now_ticks() * S.tick_us;
+        return (int)(us / PROGRAM_TICK_US);
+    }
+    return (int)((eb_clock_ms() - S.start_ms) / 10);
+}
+
+/* ---- serial ports ----------------------------------------------------------------------- */
+static int valid_port(int port) { return port >= 1 && port <= 3; }
+
+int OSInitRS232(int baud, int handshake, int port) {
+    (void)handshake;
+    if (!valid_port(port)) return -1;
+    ensure_session();
+    if (port != S.shared_port && eb_port_open(port, baud) != 0) return -1;
+    ring[port].open = 1;
+    ring[port].len = 0;
+    ring[port].head = 0;
+    return 0;
+}
+
+int OSSendCharRS232(char chr, int port) {
+    uint8_t b = (uint8_t)chr;
+    if (!valid_port(port) || !ring[port].open) return -1;
+    return eb_port_write(port == S.shared_port ? EB_LINK_SENSOR : port, &b, 1) == 0 ? 0 : -1;
+}
+
+int OSSendRS232(char *chr, int port) {
+    if (chr == NULL) return -1;
+    return OSSendCharRS232(*chr, port);
+}
+
+int OSCheckInRS232(int port) {
+    if (!valid_port(port) || !ring[port].open) return -1;
+    poll_serial();
+    return (int)ring[port].len;
+}
+
+int OSRecvRS232(char *buf, int port) {
+    uint8_t b;
+    long waited = 0;
+    if (buf == NULL || !valid_port(port) || !ring[port].open) return -1;
+    for (;;) {
+        poll_serial();
+        if (ring_pop(port, &b)) {
+            *buf = (char)b;
+            return 0;
+        }
+        if (waited >= S.recv_timeout_ticks) return 1;
+        if (S.mode == MODE_LOCKSTEP) {
+            /* nothing arrives unless simulated time moves */
+            advance(1);
+            waited++;
+        } else {
+            uint8_t tmp[64];
+            long n, i;
+            int link = port == S.shared_port ? EB_LINK_SENSOR : port;
+            if (link == EB_LINK_SENSOR) {
+                eb_sleep_ms(10);
+                waited++;
+                continue;
+            }
+            n = eb_port_read(link, tmp, sizeof tmp, 10);
+            for (i = 0; i < n; i++) ring_push(port, tmp[i]);
+            if (n <= 0) waited++;
+        }
+    }
+}
+
+int OSFlushInRS232(int port) {
+    if (!valid_port(port) || !ring[port].open) return -1;
+    poll_serial();
+    ring[port].len = 0;
+    ring[port].head = 0;
+    return 0;
+}
+
+/* ---- analog input ------------------------------------------------------------------------ */
+int OSGetAD(int channel) {
+    uint8_t p[1];
+    int r;
+    if (channel < 0 || channel > 7) return -1;
+    p[0] = (uint8_t)channel;
+    r = request(T_ADC_READ, p, 1, 0);
+    if (r != T_ADC_VALUE || S.f_len != 3 || S.f_payload[0] != channel) return -1;
+    return (int)(get_be16(S.f_payload + 1) & 0x3FF);
+}
+
+/* ---- compass ------------------------------------------------------------------------------ */
+int COMPASSInit(DeviceSemantics semantics) {
+    uint8_t p[2] = {0, 0}; /* poll, binary word */
+    (void)semantics;
+    if (request(T_COMPASS_MODE, p, 2, 0) != T_ACK) return -1;
+    S.compass_cycle = 0;
+    S.compass_started = 0;
+    S.compass_latest = -1;
+    S.compass_fresh = 0;
+    return 0;
+}
+
+int COMPASSStart(int cycle) {
+    uint8_t p[2];
+    p[0] = cycle ? 1 : 0;
+    p[1] = 0;
+    if (request(T_COMPASS_MODE, p, 2, 0) != T_ACK) return -1;
+    S.compass_cycle = cycle ? 1 : 0;
+    S.compass_started = 1;
+    S.compass_fresh = 0;
+    return 0;
+}
+
+int COMPASSCheck(void) {
+    ensure_session();
+    if (!S.compass_started) return 0;
+    if (!S.compass_cycle) return 1; /* poll mode: COMPASSGet converts on demand */
+    poll_serial();
+    if (!S.compass_fresh && !S.shared_port) {
+        /* pushes wait in the driver until read */
+        long n = eb_port_read(EB_LINK_SENSOR, S.rx + S.rx_len, sizeof S.rx - S.rx_len, 0);
+        if (n > 0) S.rx_len += (size_t)n;
+        while (scan_frame())
+            if (S.f_type >= 0xC0) handle_push();
+    }
+    return S.compass_fresh;
+}
+
+static int decode_heading(void) {
+    uint16_t word;
+    if (S.f_len != 2) return -1;
+    word = get_be16(S.f_payload);
+    if (word > 359) return -1;
+    return (int)word;
+}
+
+int COMPASSGet(void) {
+    int r;
+    ensure_session();
+    if (S.compass_cycle && S.compass_fresh) {
+        S.compass_fresh = 0;
+        return S.compass_latest;
+    }
+    r = request(T_COMPASS_READ, NULL, 0, 0);
+    if (r != T_COMPASS_HEADING) return -1;
+    S.compass_fresh = 0;
+    return decode_heading();
+}
+
+static int calibrate(uint8_t action) {
+    uint8_t p[1];
+    p[0] = action;
+    if (request(T_COMPASS_CALIBRATE, p, 1, 0) != T_CALIBRATION_STATUS || S.f_len != 2) return -1;
+    return S.f_payload[1]; /* points taken */
+}
+
+/* PROTOCOL.md 2.6, RoBIOS mapping: mode 0 = CLEAR; the first mode 1 = START + TAKE_POINT;
+ * the second = TAKE_POINT + FINISH. */
+int COMPASSCalibrate(int mode) {
+    if (mode == 0) {
+        S.cal_points = 0;
+        return calibrate(CAL_CLEAR) < 0 ? -1 : 0;
+    }
+    if (mode != 1) return -1;
+    if (S.cal_points == 0) {
+        if (calibrate(CAL_START) < 0) return -1;
+        if (calibrate(CAL_TAKE_POINT) != 1) return -1;
+        S.cal_points = 1;
+        return 0;
+    }
+    S.cal_points = 0;
+    if (calibrate(CAL_TAKE_POINT) != 2) return -1;
+    return calibrate(CAL_FINISH) < 0 ? -1 : 0;
+}
+
+int COMPASSRelease(void) {
+    S.compass_started = 0;
+    S.compass_cycle = 0;
+    return request(T_COMPASS_RESET, NULL, 0, 0) == T_ACK ? 0 : -1;
+}
+
+/* ---- thrusters ---------------------------------------------------------------------------- */
+static int thruster_of(DeviceSemantics semantics) {
+    switch ((int)semantics) {
+    case MOTOR_PORT: return 0;
+    case MOTOR_STARBOARD: return 1;
+    case MOTOR_BOW: return 2;
+    case MOTOR_STERN: return 3;
+    default: return -1;
+    }
+}
+
+#include <stdint.h>
+#define HANDLE_OF(i) ((MotorHandle)(intptr_t)((i) + 1))
+#define INDEX_OF(h) ((int)(intptr_t)(h)-1)
+
+MotorHandle MOTORInit(DeviceSemantics semantics) {
+    int i = thruster_of(semantics);
+    if (i < 0) return HANDLE_OF(-1);
+    ensure_session();
+    S.motor_open[i] = 1;
+    if (MOTORDrive(HANDLE_OF(i), 0) != 0) return HANDLE_OF(-1);
+    return HANDLE_OF(i);
+}
+
+int MOTORDrive(MotorHandle handle, int speed) {
+    int i = INDEX_OF(handle);
+    uint8_t p[3];
+    if (i < 0 || i > 3 || !S.motor_open[i]) return -1;
+    if (speed > 100) speed = 100;
+    if (speed < -100) speed = -100;
+    p[0] = (uint8_t)i;
+    p[1] = eb_hdt_duty(i, speed < 0 ? -speed : speed);
+    p[2] = speed < 0 ? 1 : 0;
+    return request(T_THRUSTER_SET, p, 3, 0) == T_ACK ? 0 : -1;
+}
+
+int MOTORRelease(MotorHandle handle) {
+    int i = INDEX_OF(handle);
+    int r;
+    if (i < 0 || i > 3 || !S.motor_open[i]) return -1;
+    r = MOTORDrive(handle, 0);
+    S.motor_open[i] = 0;
+    return r;
+}
