@@ -26,9 +26,11 @@ for name, data in examples:
     put("line_decoder", name, bytes([3]) + b"\x00junk" + data)
     if data[:1] == b"$":
         put("nmea_line", name, data)
+        put("nmea_fields", name, data[1:data.index(b"*")])
     elif data[:1] == b"@":
         put("sonar_command", name, data)
     else:
         put("sensor_frame", name, data)
+        put("sensor_message", name, data[2:4] + data[5:-2])
 put("line_decoder", "all-examples", bytes([7]) + everything)
 print(f"{len(examples)} examples seeded")

@@ -6,7 +6,9 @@ use firmware_protocol::{LineDecoder, LineItem};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let Some((&chunk, bytes)) = data.split_first() else { return };
+    let Some((&chunk, bytes)) = data.split_first() else {
+        return;
+    };
     let whole = LineDecoder::decode_all(bytes);
 
     let chunk = usize::from(chunk).max(1);
