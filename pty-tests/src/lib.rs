@@ -4,12 +4,14 @@
 //!   readiness by polling with a timeout, and a loud failure when a system tool is missing.
 //! - [`pty`]: ptys made with the bridge's own `PtyMaster`, and a consumer that timestamps
 //!   every read on the slave side.
+//! - [`replay`]: what the replay pty tests share.
 //! - [`eyebot_c`]: builds the EyeBot C library and examples (host and 68k) and runs them
 //!   against the daemon.
 
 pub mod eyebot_c;
 pub mod process;
 pub mod pty;
+pub mod replay;
 
 /// The directory of fixture files, e.g. `fixtures/replay`.
 pub fn fixture_dir(name: &str) -> std::path::PathBuf {
