@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
+pub mod gap;
 pub mod probe;
 pub mod run;
 pub mod simulate;
@@ -42,6 +43,8 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Run the thesis experiments and compare with Mako's measurements and SubSim's.
     Validate(validate::ValidateArgs),
+    /// Reality gap: compare measured data with a model, name and fit the missing effect.
+    Gap(gap::GapArgs),
 }
 
 /// Errors that end a CLI command.
@@ -93,5 +96,6 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
         Command::Probe(args) => probe::main(args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Validate(args) => validate::run(&args),
+        Command::Gap(args) => gap::run(&args),
     }
 }
