@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
+pub mod gap;
 pub mod probe;
 pub mod replay;
 pub mod run;
@@ -45,6 +46,8 @@ pub enum Command {
     Validate(validate::ValidateArgs),
     /// Replay captured NMEA logs onto a pty, a serial device or stdout.
     Replay(replay::ReplayArgs),
+    /// Reality gap: compare measured data with a model, name and fit the missing effect.
+    Gap(gap::GapArgs),
 }
 
 /// Errors that end a CLI command.
@@ -99,5 +102,6 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Validate(args) => validate::run(&args),
         Command::Replay(args) => Ok(replay::main(args)?),
+        Command::Gap(args) => gap::run(&args),
     }
 }

@@ -1,0 +1,178 @@
+//! `eyebot-hil gap`: the reality-gap workflow (`docs/gap.md`).
+//!
+//! - `gap --measured DIR --model MODEL.toml [--out DIR]`: re-simulate, localise, name, add,
+//!   show the gap shrink.
+//! - `gap generate --truth TRUTH.toml --schedule EXPERIMENT.toml --out DIR`: hidden-effect
+//!   data from a truth model.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::cli::CliError;
+use crate::config::{ConfigSource, Directory, Document};
+use crate::gap::format::Measurement;
+use crate::gap::model::GapModel;
+use crate::gap::{self, GapError, effects, generate, report};
+use crate::physics::experiment::Experiment;
+
+#[derive(Debug, Clone, clap::Args)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct GapArgs {
+    #[command(subcommand)]
+    pub command: Option<GapCommand>,
+    /// The measurement directory (experiment.toml, commands.csv, measured.csv).
+    #[arg(long)]
+    pub measured: Option<PathBuf>,
+    /// The model file (configs/models/*.toml format).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Where to write the report (default: DIR/gap-report).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum GapCommand {
+    /// Generate a measurement from a truth model (for hidden-effect tests).
+    Generate(GenerateArgs),
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct GenerateArgs {
+    /// The truth model: a model file whose [[effect]]s are hidden in the data.
+    #[arg(long)]
+    pub truth: PathBuf,
+    /// The command schedule: an experiment file (configs/experiments/ format).
+    #[arg(long)]
+    pub schedule: PathBuf,
+    /// Seed of every noise source.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Overhead-camera position noise (m, 1 sigma).
+    #[arg(long, default_value_t = 0.01)]
+    pub camera_std_m: f64,
+    /// The measurement directory to write.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+fn to_cli(e: GapError) -> CliError {
+    CliError::Output(e.to_string())
+}
+
+pub fn run(args: &GapArgs) -> Result<(), CliError> {
+    if let Some(GapCommand::Generate(g)) = &args.command {
+        return run_generate(g);
+    }
+    let (Some(measured), Some(model_path)) = (&args.measured, &args.model) else {
+        return Err(CliError::Usage(
+            "gap needs --measured DIR and --model MODEL.toml (or a subcommand)".into(),
+        ));
+    };
+    let m = Measurement::load(measured).map_err(to_cli)?;
+    for n in &m.notices {
+        eprintln!("notice: {n}");
+    }
+    let model = GapModel::load(model_path).map_err(to_cli)?;
+    let total = (gap::fit::MAX_EFFECTS * effects::LIBRARY.len()) as u64;
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}") {
+        bar.set_style(style);
+    }
+    let analysis = gap::analyse(&model, &m, measured, &mut |round, name| {
+        bar.inc(1);
+        bar.set_message(format!("round {}: {name}", round + 1));
+    })
+    .map_err(to_cli)?;
+    bar.finish_and_clear();
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| measured.join("gap-report"));
+    report::write_all(&analysis, &m, measured, model_path, &out).map_err(to_cli)?;
+    match analysis.accepted.first() {
+        Some(_) => {
+            for e in &analysis.accepted {
+                let p: Vec<String> = e
+                    .parameters
+                    .iter()
+                    .zip(&e.ci95)
+                    .map(|((n, v), (_, c))| format!("{n} = {v:.4} [{:.4}, {:.4}]", c[0], c[1]))
+                    .collect();
+                println!(
+                    "effect: {} ({}), delta BIC {:.1}",
+                    e.name,
+                    p.join(", "),
+                    e.delta_bic
+                );
+            }
+        }
+        None => println!("no significant missing effect"),
+    }
+    println!(
+        "gap: {:.2} -> {:.2} ({:.0} % smaller); report in {}",
+        analysis.excess_before,
+        analysis.excess_after,
+        analysis.gap_reduction_pct,
+        out.display()
+    );
+    Ok(())
+}
+
+fn run_generate(g: &GenerateArgs) -> Result<(), CliError> {
+    let truth = GapModel::load(&g.truth).map_err(to_cli)?;
+    let (dir, name) = Directory::for_file(&g.schedule);
+    let text = dir.read(&name)?;
+    let schedule = Experiment::from_document(&Document::new(dir.describe(&name), &text))?;
+    let world = truth
+        .world_ref
+        .clone()
+        .unwrap_or_else(|| crate::physics::DEFAULT_WORLD.to_string());
+    let sensors = truth
+        .sensors_ref
+        .clone()
+        .unwrap_or_else(|| "sensors/mako-2008.toml".to_string());
+    let info = crate::gap::format::ExperimentInfo {
+        name: schedule.name.clone(),
+        description: String::new(),
+        duration_s: schedule.duration_s,
+        world: world.clone(),
+        sensors: sensors.clone(),
+        initial: crate::gap::format::Initial {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: None,
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            surge_mps: 0.0,
+        },
+        camera_position_std_m: g.camera_std_m,
+        camera_speed_std_mps: 0.02,
+    };
+    let configs = truth.configs(&info, &truth.base).map_err(to_cli)?;
+    let m = generate::generate(
+        &configs,
+        &schedule,
+        &world,
+        &sensors,
+        g.camera_std_m,
+        g.seed,
+    )
+    .map_err(to_cli)?;
+    m.write(&g.out).map_err(to_cli)?;
+    println!(
+        "{}: {} channels, {:.0} s -> {}",
+        m.experiment.name,
+        m.channels.len(),
+        m.experiment.duration_s,
+        g.out.display()
+    );
+    Ok(())
+}

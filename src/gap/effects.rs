@@ -1,0 +1,240 @@
+//! The candidate library: effects a model may be missing, each a set of named parameters
+//! (0 = "as the model already says"), a model extension (how the parameters change the
+//! vehicle, world or sensor configuration in memory) and the channels its residual signature
+//! lives in.
+//!
+//! Every extension changes existing configuration parameters; nothing in `physics` or
+//! `sensors` had to change for the library.
+
+use crate::physics::state::{PORT, STARBOARD};
+use crate::physics::{VehicleConfig, WorldConfig};
+use crate::sensors::SensorsConfig;
+
+/// Everything a re-simulation needs, held in memory so effects can modify it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Configs {
+    pub vehicle: VehicleConfig,
+    pub world: WorldConfig,
+    pub sensors: SensorsConfig,
+}
+
+/// How an effect shows itself in the data.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// Changes the predicted mean of channels (fitted on residuals).
+    Mean,
+    /// Changes the spread of a channel (fitted on the Gaussian likelihood).
+    Variance,
+}
+
+/// One candidate effect.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Effect {
+    pub name: &'static str,
+    pub parameters: &'static [&'static str],
+    /// Scale of each parameter for the fit and the starting step (a typical size).
+    pub scales: &'static [f64],
+    pub signature: &'static str,
+    /// Channels the signature lives in.
+    pub channels: &'static [&'static str],
+    pub kind: Kind,
+    /// True when the extension changes the physics (the trajectory must be re-run).
+    pub physics: bool,
+}
+
+/// The library, in the order of the table.
+pub const LIBRARY: [Effect; 13] = [
+    Effect {
+        name: "thruster_imbalance",
+        parameters: &["differential_gain"],
+        scales: &[0.05],
+        signature: "yaw bias that grows with thrust: heading and track curve the same way at every heading",
+        channels: &["compass_deg", "x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: true,
+    },
+    Effect {
+        name: "reverse_thrust_asymmetry",
+        parameters: &["reverse_ratio_scale"],
+        scales: &[0.1],
+        signature: "track and heading disagree only while a horizontal thruster runs in reverse",
+        channels: &["x_m", "y_m", "compass_deg"],
+        kind: Kind::Mean,
+        physics: true,
+    },
+    Effect {
+        name: "drag_mismatch",
+        parameters: &["surge_linear_scale", "surge_quadratic_scale"],
+        scales: &[0.2, 0.2],
+        signature: "speed error that grows with speed; along-track position error",
+        channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps"],
+        kind: Kind::Mean,
+        physics: true,
+    },
+    Effect {
+        name: "added_mass",
+        parameters: &["surge_added_kg"],
+        scales: &[5.0],
+        signature: "along-track error only after thrust steps (acceleration), none at steady speed",
+        channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps"],
+        kind: Kind::Mean,
+        physics: true,
+    },
+    Effect {
+        name: "thruster_lag",
+        parameters: &["lag_s"],
+        scales: &[0.2],
+        signature: "error right after command changes, decaying with a time constant",
+        channels: &["x_m", "y_m", "compass_deg"],
+        kind: Kind::Mean,
+        physics: true,
+    },
+    Effect {
+        name: "water_current",
+        parameters: &["north_mps", "east_mps"],
+        scales: &[0.01, 0.01],
+        signature: "drift fixed to the world, independent of heading",
+        channels: &["x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: true,
+    },
+    Effect {
+        name: "compass_hard_iron",
+        parameters: &["x_ut", "y_ut"],
+        scales: &[1.0, 1.0],
+        signature: "compass error once per turn (first harmonic of heading)",
+        channels: &["compass_deg"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "compass_soft_iron",
+        parameters: &["diagonal_difference", "off_diagonal"],
+        scales: &[0.02, 0.02],
+        signature: "compass error twice per turn (second harmonic of heading)",
+        channels: &["compass_deg"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "compass_tilt",
+        parameters: &["inclination_deg"],
+        scales: &[2.0],
+        signature: "compass error only while tilted, depending on heading",
+        channels: &["compass_deg"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "sensor_latency",
+        parameters: &["compass_latency_s"],
+        scales: &[0.1],
+        signature: "compass error proportional to the turn rate",
+        channels: &["compass_deg"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "depth_pwm_emi",
+        parameters: &["emi_v_rms_full_duty"],
+        scales: &[0.05],
+        signature: "depth variance grows with the stern motor's duty",
+        channels: &["depth_adc"],
+        kind: Kind::Variance,
+        physics: false,
+    },
+    Effect {
+        name: "velocity_sensor_scale",
+        parameters: &["scale_factor"],
+        scales: &[0.1],
+        signature: "paddle speed off by a constant factor at every speed",
+        channels: &["paddle_speed_mps"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "sonar_incidence_dropout",
+        parameters: &["max_incidence_deg"],
+        scales: &[5.0],
+        signature: "sonar readings missing when the wall is seen obliquely",
+        channels: &["sonar1_m", "sonar2_m", "sonar3_m", "sonar4_m"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+];
+
+/// Looks an effect up by name.
+pub fn by_name(name: &str) -> Option<&'static Effect> {
+    LIBRARY.iter().find(|e| e.name == name)
+}
+
+/// Applies `effect` with `params` (same order as `effect.parameters`) to `c`. Values are
+/// changes relative to the configuration: scale parameters multiply by `1 + p`, offsets add.
+/// Results are clamped into each parameter's physical range.
+pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
+    let p = |i: usize| params.get(i).copied().unwrap_or(0.0);
+    match effect.name {
+        "thruster_imbalance" => {
+            c.vehicle.thrusters[PORT].gain =
+                (c.vehicle.thrusters[PORT].gain * (1.0 + p(0) / 2.0)).clamp(0.1, 2.0);
+            c.vehicle.thrusters[STARBOARD].gain =
+                (c.vehicle.thrusters[STARBOARD].gain * (1.0 - p(0) / 2.0)).clamp(0.1, 2.0);
+        }
+        "reverse_thrust_asymmetry" => {
+            for i in [PORT, STARBOARD] {
+                let t = &mut c.vehicle.thrusters[i];
+                t.reverse_ratio = (t.reverse_ratio * (1.0 + p(0))).clamp(0.0, 1.0);
+            }
+        }
+        "drag_mismatch" => {
+            c.vehicle.damping_linear[0] = (c.vehicle.damping_linear[0] * (1.0 + p(0))).max(0.0);
+            c.vehicle.damping_quadratic[0] =
+                (c.vehicle.damping_quadratic[0] * (1.0 + p(1))).max(0.0);
+            if c.vehicle.damping_linear[0] + c.vehicle.damping_quadratic[0] <= 0.0 {
+                c.vehicle.damping_linear[0] = 1e-3;
+            }
+        }
+        "added_mass" => {
+            c.vehicle.added_mass[0] = (c.vehicle.added_mass[0] + p(0)).max(0.0);
+        }
+        "thruster_lag" => {
+            c.vehicle.thruster_common.lag_s = (c.vehicle.thruster_common.lag_s + p(0)).max(0.0);
+        }
+        "water_current" => {
+            c.world.current_mps.x += p(0);
+            c.world.current_mps.y += p(1);
+        }
+        "compass_hard_iron" => {
+            c.sensors.compass.hard_iron_ut[0] += p(0);
+            c.sensors.compass.hard_iron_ut[1] += p(1);
+        }
+        "compass_soft_iron" => {
+            let s = &mut c.sensors.compass.soft_iron;
+            s[0][0] += p(0) / 2.0;
+            s[1][1] -= p(0) / 2.0;
+            s[0][1] += p(1);
+            s[1][0] += p(1);
+        }
+        "compass_tilt" => {
+            c.sensors.compass.inclination_deg =
+                (c.sensors.compass.inclination_deg + p(0)).clamp(-90.0, 90.0);
+        }
+        "sensor_latency" => {
+            c.sensors.compass.errors.latency_s =
+                (c.sensors.compass.errors.latency_s + p(0)).max(0.0);
+        }
+        "depth_pwm_emi" => {
+            c.sensors.depth.emi_v_rms_full_duty =
+                (c.sensors.depth.emi_v_rms_full_duty + p(0)).max(0.0);
+        }
+        "velocity_sensor_scale" => {
+            c.sensors.velocity.firmware_scale =
+                (c.sensors.velocity.firmware_scale * (1.0 + p(0))).max(0.01);
+        }
+        "sonar_incidence_dropout" => {
+            c.sensors.sonar.max_incidence_deg =
+                (c.sensors.sonar.max_incidence_deg + p(0)).clamp(0.0, 90.0);
+        }
+        _ => {}
+    }
+}

@@ -1,0 +1,564 @@
+//! The measured-data format (`docs/gap.md`): a directory holding `experiment.toml`,
+//! `commands.csv` and `measured.csv`.
+//!
+//! The loader takes text, not paths ([`Measurement::from_texts`]); [`Measurement::load`] reads
+//! the three files of a directory. Every error names the file, the line and, for CSV cells,
+//! the column. Unknown CSV columns are kept out of the data and reported as notices.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::Deserialize;
+
+use crate::config::{ConfigError, Document};
+use crate::gap::GapError;
+
+/// Measured channels `gap` understands (`measured.csv` column names).
+pub const CHANNELS: [&str; 13] = [
+    "x_m",
+    "y_m",
+    "surge_mps",
+    "compass_deg",
+    "depth_adc",
+    "accel_x_adc",
+    "accel_y_adc",
+    "accel_z_adc",
+    "paddle_speed_mps",
+    "sonar1_m",
+    "sonar2_m",
+    "sonar3_m",
+    "sonar4_m",
+];
+
+/// Header of `commands.csv`.
+pub const COMMANDS_HEADER: &str = "t_s,port,starboard,bow,stern";
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawExperiment {
+    name: String,
+    #[serde(default)]
+    description: String,
+    duration_s: f64,
+    #[serde(default = "default_world")]
+    world: String,
+    #[serde(default = "default_sensors")]
+    sensors: String,
+    initial: RawInitial,
+    #[serde(default)]
+    camera: Option<RawCamera>,
+}
+
+fn default_world() -> String {
+    crate::physics::DEFAULT_WORLD.to_string()
+}
+
+fn default_sensors() -> String {
+    "sensors/mako-2008.toml".to_string()
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInitial {
+    x_m: f64,
+    y_m: f64,
+    z_m: Option<f64>,
+    heading_deg: f64,
+    #[serde(default)]
+    roll_deg: f64,
+    #[serde(default)]
+    pitch_deg: f64,
+    #[serde(default)]
+    surge_mps: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    position_std_m: f64,
+    #[serde(default = "default_speed_std")]
+    speed_std_mps: f64,
+}
+
+fn default_speed_std() -> f64 {
+    0.02
+}
+
+/// Where the run started (world NED; `z_m = None`: floating at the surface).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Initial {
+    pub x_m: f64,
+    pub y_m: f64,
+    pub z_m: Option<f64>,
+    pub heading_deg: f64,
+    pub roll_deg: f64,
+    pub pitch_deg: f64,
+    pub surge_mps: f64,
+}
+
+/// `experiment.toml`, resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExperimentInfo {
+    pub name: String,
+    pub description: String,
+    pub duration_s: f64,
+    /// World config: an embedded name (`worlds/pool.toml`) or a path relative to the directory.
+    pub world: String,
+    /// Sensor config, the same way.
+    pub sensors: String,
+    pub initial: Initial,
+    /// Overhead-camera position noise (m, 1 sigma), the set-up's own figure.
+    pub camera_position_std_m: f64,
+    /// Camera-derived speed noise (m/s, 1 sigma).
+    pub camera_speed_std_mps: f64,
+}
+
+/// One `commands.csv` row: MOTORDrive percent for port, starboard, bow, stern from `t_s` on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CommandRow {
+    pub t_s: f64,
+    pub percent: [f64; 4],
+}
+
+/// One measured channel: samples `(t_s, value)` in time order (empty cells left out).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channel {
+    pub name: String,
+    pub samples: Vec<(f64, f64)>,
+}
+
+/// A measurement directory, loaded and checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measurement {
+    pub experiment: ExperimentInfo,
+    pub commands: Vec<CommandRow>,
+    pub channels: Vec<Channel>,
+    /// Things the loader tolerated (extra columns), to be shown to the user.
+    pub notices: Vec<String>,
+}
+
+impl Measurement {
+    /// Reads `experiment.toml`, `commands.csv` and `measured.csv` from `dir`.
+    pub fn load(dir: &Path) -> Result<Self, GapError> {
+        let read = |name: &str| {
+            let path = dir.join(name);
+            std::fs::read_to_string(&path).map_err(|source| GapError::Io { path, source })
+        };
+        let exp = read("experiment.toml")?;
+        let cmd = read("commands.csv")?;
+        let meas = read("measured.csv")?;
+        let origin = |n: &str| dir.join(n).display().to_string();
+        Self::from_texts(
+            (&origin("experiment.toml"), &exp),
+            (&origin("commands.csv"), &cmd),
+            (&origin("measured.csv"), &meas),
+        )
+    }
+
+    /// Parses the three files from text; each pair is (origin for messages, text).
+    pub fn from_texts(
+        experiment: (&str, &str),
+        commands: (&str, &str),
+        measured: (&str, &str),
+    ) -> Result<Self, GapError> {
+        let info = parse_experiment(experiment.0, experiment.1)?;
+        let commands = parse_commands(commands.0, commands.1, info.duration_s)?;
+        let mut notices = Vec::new();
+        let channels = parse_measured(measured.0, measured.1, &mut notices)?;
+        Ok(Self {
+            experiment: info,
+            commands,
+            channels,
+            notices,
+        })
+    }
+
+    /// The channel called `name`, if measured.
+    pub fn channel(&self, name: &str) -> Option<&Channel> {
+        self.channels.iter().find(|c| c.name == name)
+    }
+
+    /// MOTORDrive percentages in force at `t_s`.
+    pub fn percent_at(&self, t_s: f64) -> [f64; 4] {
+        self.commands
+            .iter()
+            .take_while(|c| c.t_s <= t_s + 1e-9)
+            .last()
+            .map_or([0.0; 4], |c| c.percent)
+    }
+
+    /// Writes the three files into `dir` (created if needed).
+    pub fn write(&self, dir: &Path) -> Result<(), GapError> {
+        std::fs::create_dir_all(dir).map_err(|source| GapError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+        let write = |name: &str, text: String| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).map_err(|source| GapError::Io { path, source })
+        };
+        write("experiment.toml", self.experiment_toml())?;
+        let mut c = format!("{COMMANDS_HEADER}\n");
+        for row in &self.commands {
+            let _ = writeln!(
+                c,
+                "{},{},{},{},{}",
+                row.t_s, row.percent[0], row.percent[1], row.percent[2], row.percent[3]
+            );
+        }
+        write("commands.csv", c)?;
+        write("measured.csv", self.measured_csv())
+    }
+
+    fn experiment_toml(&self) -> String {
+        let e = &self.experiment;
+        let i = &e.initial;
+        let mut s = String::new();
+        let _ = writeln!(s, "name = {:?}", e.name);
+        let _ = writeln!(s, "description = {:?}", e.description);
+        let _ = writeln!(s, "duration_s = {}            # s", e.duration_s);
+        let _ = writeln!(s, "world = {:?}", e.world);
+        let _ = writeln!(s, "sensors = {:?}", e.sensors);
+        let _ = writeln!(s, "\n[initial]");
+        let _ = writeln!(s, "x_m = {}   # m, north", i.x_m);
+        let _ = writeln!(s, "y_m = {}   # m, east", i.y_m);
+        if let Some(z) = i.z_m {
+            let _ = writeln!(s, "z_m = {z}   # m, depth of the centre of mass");
+        }
+        let _ = writeln!(s, "heading_deg = {}", i.heading_deg);
+        let _ = writeln!(s, "roll_deg = {}", i.roll_deg);
+        let _ = writeln!(s, "pitch_deg = {}", i.pitch_deg);
+        let _ = writeln!(s, "surge_mps = {}", i.surge_mps);
+        let _ = writeln!(s, "\n[camera]");
+        let _ = writeln!(
+            s,
+            "position_std_m = {}   # m, 1 sigma",
+            e.camera_position_std_m
+        );
+        let _ = writeln!(
+            s,
+            "speed_std_mps = {}   # m/s, 1 sigma",
+            e.camera_speed_std_mps
+        );
+        s
+    }
+
+    /// `measured.csv`: one row per distinct sample time, empty cells where a channel has none.
+    fn measured_csv(&self) -> String {
+        let mut times: Vec<f64> = self
+            .channels
+            .iter()
+            .flat_map(|c| c.samples.iter().map(|(t, _)| *t))
+            .collect();
+        times.sort_by(f64::total_cmp);
+        times.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        let mut cursors = vec![0usize; self.channels.len()];
+        let mut s = String::from("t_s");
+        for c in &self.channels {
+            s.push(',');
+            s.push_str(&c.name);
+        }
+        s.push('\n');
+        for t in times {
+            let _ = write!(s, "{t:.3}");
+            for (c, k) in self.channels.iter().zip(cursors.iter_mut()) {
+                s.push(',');
+                if let Some((tc, v)) = c.samples.get(*k)
+                    && (tc - t).abs() < 1e-9
+                {
+                    let _ = write!(s, "{v:.6}");
+                    *k += 1;
+                }
+            }
+            s.push('\n');
+        }
+        s
+    }
+}
+
+fn parse_experiment(origin: &str, text: &str) -> Result<ExperimentInfo, GapError> {
+    let doc = Document::new(origin, text);
+    let raw: RawExperiment = doc.parse()?;
+    let i = &raw.initial;
+    let check = |k: &str, v: f64, lo: f64, hi: f64, u: &str| -> Result<f64, ConfigError> {
+        doc.check_range(k, v, lo, hi, u)
+    };
+    let (pos_std, speed_std) = match &raw.camera {
+        Some(c) => (
+            check("camera.position_std_m", c.position_std_m, 1e-4, 1.0, "m")?,
+            check("camera.speed_std_mps", c.speed_std_mps, 1e-4, 1.0, "m/s")?,
+        ),
+        None => (0.01, default_speed_std()),
+    };
+    Ok(ExperimentInfo {
+        duration_s: check("duration_s", raw.duration_s, 0.1, 3600.0, "s")?,
+        initial: Initial {
+            x_m: check("initial.x_m", i.x_m, 0.0, 1e3, "m")?,
+            y_m: check("initial.y_m", i.y_m, 0.0, 1e3, "m")?,
+            z_m: match i.z_m {
+                Some(z) => Some(check("initial.z_m", z, -0.5, 100.0, "m")?),
+                None => None,
+            },
+            heading_deg: check("initial.heading_deg", i.heading_deg, -360.0, 360.0, "deg")?,
+            roll_deg: check("initial.roll_deg", i.roll_deg, -90.0, 90.0, "deg")?,
+            pitch_deg: check("initial.pitch_deg", i.pitch_deg, -90.0, 90.0, "deg")?,
+            surge_mps: check("initial.surge_mps", i.surge_mps, -2.0, 2.0, "m/s")?,
+        },
+        name: raw.name,
+        description: raw.description,
+        world: raw.world,
+        sensors: raw.sensors,
+        camera_position_std_m: pos_std,
+        camera_speed_std_mps: speed_std,
+    })
+}
+
+fn csv_error(origin: &str, line: usize, column: &str, message: impl Into<String>) -> GapError {
+    GapError::Csv {
+        origin: origin.to_string(),
+        line,
+        column: column.to_string(),
+        message: message.into(),
+    }
+}
+
+/// Splits a CSV text into (line number, cells) for non-empty, non-comment lines.
+fn rows(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
+    text.lines().enumerate().filter_map(|(i, l)| {
+        let l = l.trim_end_matches('\r');
+        (!l.trim().is_empty() && !l.starts_with('#'))
+            .then(|| (i + 1, l.split(',').map(str::trim).collect()))
+    })
+}
+
+fn number(origin: &str, line: usize, column: &str, cell: &str) -> Result<f64, GapError> {
+    let v: f64 = cell.parse().map_err(|_| {
+        csv_error(
+            origin,
+            line,
+            column,
+            format!("expected a number, found `{cell}`"),
+        )
+    })?;
+    if !v.is_finite() {
+        return Err(csv_error(origin, line, column, "value is not finite"));
+    }
+    Ok(v)
+}
+
+fn parse_commands(origin: &str, text: &str, duration_s: f64) -> Result<Vec<CommandRow>, GapError> {
+    let mut it = rows(text);
+    let (hl, header) = it
+        .next()
+        .ok_or_else(|| csv_error(origin, 1, "", "empty file: expected the header"))?;
+    let expected: Vec<&str> = COMMANDS_HEADER.split(',').collect();
+    if header != expected {
+        return Err(csv_error(
+            origin,
+            hl,
+            "",
+            format!(
+                "expected the header `{COMMANDS_HEADER}`, found `{}`",
+                header.join(",")
+            ),
+        ));
+    }
+    let mut out: Vec<CommandRow> = Vec::new();
+    for (line, cells) in it {
+        if cells.len() != 5 {
+            return Err(csv_error(
+                origin,
+                line,
+                "",
+                format!("expected 5 cells, found {}", cells.len()),
+            ));
+        }
+        let t_s = number(origin, line, "t_s", cells[0])?;
+        if t_s < 0.0 || t_s > duration_s {
+            return Err(csv_error(
+                origin,
+                line,
+                "t_s",
+                format!("{t_s} s is outside the experiment (0..{duration_s} s)"),
+            ));
+        }
+        if out.last().is_some_and(|p| t_s < p.t_s) {
+            return Err(csv_error(origin, line, "t_s", "rows must be in time order"));
+        }
+        let mut percent = [0.0; 4];
+        for j in 0..4 {
+            let p = number(origin, line, expected[j + 1], cells[j + 1])?;
+            if !(-100.0..=100.0).contains(&p) {
+                return Err(csv_error(
+                    origin,
+                    line,
+                    expected[j + 1],
+                    format!("{p} is outside -100..100 % (MOTORDrive)"),
+                ));
+            }
+            percent[j] = p;
+        }
+        out.push(CommandRow { t_s, percent });
+    }
+    if out.is_empty() {
+        return Err(csv_error(origin, hl, "", "no command rows"));
+    }
+    Ok(out)
+}
+
+fn parse_measured(
+    origin: &str,
+    text: &str,
+    notices: &mut Vec<String>,
+) -> Result<Vec<Channel>, GapError> {
+    let mut it = rows(text);
+    let (hl, header) = it
+        .next()
+        .ok_or_else(|| csv_error(origin, 1, "", "empty file: expected the header"))?;
+    if header.first() != Some(&"t_s") {
+        return Err(csv_error(
+            origin,
+            hl,
+            header.first().copied().unwrap_or(""),
+            "the first column must be `t_s`",
+        ));
+    }
+    // Column index -> channel slot (None = ignored).
+    let mut slots: Vec<Option<usize>> = vec![None];
+    let mut channels: Vec<Channel> = Vec::new();
+    for name in &header[1..] {
+        if CHANNELS.contains(name) {
+            if channels.iter().any(|c| c.name == *name) {
+                return Err(csv_error(origin, hl, name, "column appears twice"));
+            }
+            slots.push(Some(channels.len()));
+            channels.push(Channel {
+                name: (*name).to_string(),
+                samples: Vec::new(),
+            });
+        } else {
+            notices.push(format!(
+                "{origin}:{hl}: column `{name}` is not a channel gap knows; ignored"
+            ));
+            slots.push(None);
+        }
+    }
+    if channels.is_empty() {
+        return Err(csv_error(
+            origin,
+            hl,
+            "",
+            format!("no known channel; expected some of {}", CHANNELS.join(", ")),
+        ));
+    }
+    let mut last_t = f64::NEG_INFINITY;
+    for (line, cells) in it {
+        if cells.len() != header.len() {
+            return Err(csv_error(
+                origin,
+                line,
+                "",
+                format!(
+                    "expected {} cells (as the header), found {}",
+                    header.len(),
+                    cells.len()
+                ),
+            ));
+        }
+        let t = number(origin, line, "t_s", cells[0])?;
+        if t < last_t {
+            return Err(csv_error(origin, line, "t_s", "rows must be in time order"));
+        }
+        last_t = t;
+        for (k, cell) in cells.iter().enumerate().skip(1) {
+            let Some(slot) = slots[k] else { continue };
+            if cell.is_empty() {
+                continue;
+            }
+            let v = number(origin, line, header[k], cell)?;
+            channels[slot].samples.push((t, v));
+        }
+    }
+    Ok(channels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const EXP: &str =
+        "name = \"t\"\nduration_s = 10.0\n[initial]\nx_m = 1.0\ny_m = 2.0\nheading_deg = 0.0\n";
+
+    #[test]
+    fn loads_a_minimal_measurement_and_notes_extra_columns() {
+        let m = Measurement::from_texts(
+            ("e", EXP),
+            (
+                "c",
+                "t_s,port,starboard,bow,stern\n0,50,50,0,0\n5,0,0,0,0\n",
+            ),
+            (
+                "m",
+                "t_s,x_m,extra,compass_deg\n0.0,1.0,9,\n0.2,1.01,9,12\n",
+            ),
+        )
+        .unwrap();
+        assert_eq!(m.commands.len(), 2);
+        assert_eq!(m.channel("x_m").unwrap().samples.len(), 2);
+        assert_eq!(m.channel("compass_deg").unwrap().samples, vec![(0.2, 12.0)]);
+        assert_eq!(m.notices.len(), 1);
+        assert!(m.notices[0].contains("extra"), "{:?}", m.notices);
+        assert_eq!(m.percent_at(6.0), [0.0; 4]);
+        assert_eq!(m.percent_at(1.0), [50.0, 50.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn bad_cell_names_file_line_and_column() {
+        let err = Measurement::from_texts(
+            ("e", EXP),
+            ("cmd.csv", "t_s,port,starboard,bow,stern\n0,50,abc,0,0\n"),
+            ("m", "t_s,x_m\n0,1\n"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("cmd.csv:2") && err.contains("starboard"),
+            "{err}"
+        );
+        let err = Measurement::from_texts(
+            ("e", EXP),
+            ("c", "t_s,port,starboard,bow,stern\n0,150,0,0,0\n"),
+            ("m", "t_s,x_m\n0,1\n"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("-100..100"), "{err}");
+        let err = Measurement::from_texts(
+            ("e", EXP),
+            ("c", "t_s,port,starboard,bow,stern\n0,0,0,0,0\n"),
+            ("meas.csv", "t_s,x_m\n0,1\n1,nan\n"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("meas.csv:3") && err.contains("x_m"), "{err}");
+    }
+
+    #[test]
+    fn write_then_load_round_trips() {
+        let m = Measurement::from_texts(
+            ("e", EXP),
+            ("c", "t_s,port,starboard,bow,stern\n0,50,50,0,0\n"),
+            (
+                "m",
+                "t_s,x_m,y_m\n0.000,1.000000,\n0.200,1.010000,2.000000\n",
+            ),
+        )
+        .unwrap();
+        let dir = std::env::temp_dir().join(format!("gap-format-{}", std::process::id()));
+        m.write(&dir).unwrap();
+        let back = Measurement::load(&dir).unwrap();
+        assert_eq!(back.channels, m.channels);
+        assert_eq!(back.commands, m.commands);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

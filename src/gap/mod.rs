@@ -1,0 +1,238 @@
+//! The reality-gap workflow (`eyebot-hil gap`, `docs/gap.md`): given measured data, find where
+//! the model disagrees, name the missing effect, add it with fitted parameters and show the
+//! gap shrink.
+//!
+//! ```text
+//! measurement dir ──format──▶ Measurement ──resim──▶ predictions + noise floor
+//!     ──residuals──▶ where the gap is ──fit (effects library, LM, BIC)──▶ named effect
+//!     ──report──▶ MODEL.fitted.toml, report.md, report.json, SVG plots
+//! ```
+//!
+//! - [`format`]: `experiment.toml`, `commands.csv`, `measured.csv`.
+//! - [`model`]: the model file `gap` compares against (and writes back, fitted).
+//! - [`effects`]: the candidate library.
+//! - [`resim`]: open-loop re-simulation, channel predictions, noise floor.
+//! - [`residuals`]: statistics, whiteness, correlations, regimes.
+//! - [`fit`]: Levenberg-Marquardt fits, BIC ranking, greedy selection.
+//! - [`generate`]: hidden-effect data from a truth model (for tests and the benchmark).
+//! - [`report`]: the output files.
+
+pub mod effects;
+pub mod fit;
+pub mod format;
+pub mod generate;
+pub mod model;
+pub mod report;
+pub mod residuals;
+pub mod resim;
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::gap::effects::Configs;
+use crate::gap::fit::CandidateResult;
+use crate::gap::format::Measurement;
+use crate::gap::model::{EnabledEffect, GapModel};
+use crate::gap::residuals::ChannelStats;
+
+/// Errors of the gap workflow; each names its input.
+#[derive(Debug, thiserror::Error)]
+pub enum GapError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{origin}:{line}: column `{column}`: {message}")]
+    Csv {
+        origin: String,
+        line: usize,
+        column: String,
+        message: String,
+    },
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    #[error("re-simulating `{experiment}`: {source}")]
+    Physics {
+        experiment: String,
+        source: crate::physics::PhysicsError,
+    },
+    #[error("{0}")]
+    Data(String),
+    #[error("cannot write plot `{path}`: {message}")]
+    Plot { path: String, message: String },
+}
+
+/// The verdict of one run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Verdict {
+    Effect,
+    None,
+}
+
+/// Everything `gap` found.
+#[derive(Debug, Clone)]
+pub struct Analysis {
+    pub before: Vec<ChannelStats>,
+    pub after: Vec<ChannelStats>,
+    /// Candidate results of each greedy round, best first.
+    pub rounds: Vec<Vec<CandidateResult>>,
+    pub accepted: Vec<CandidateResult>,
+    pub verdict: Verdict,
+    pub fitted: GapModel,
+    /// Channels present in the data that the re-simulation does not model.
+    pub unmodelled: Vec<String>,
+    /// Mean distance between measured and simulated track at matched times (thesis [49]).
+    pub track_distance_before_m: Option<f64>,
+    pub track_distance_after_m: Option<f64>,
+    /// Excess of the normalised residual over the noise floor, before and after.
+    pub excess_before: f64,
+    pub excess_after: f64,
+    pub gap_reduction_pct: f64,
+    /// Traces for the plots.
+    pub clean_before: resim::Run,
+    pub clean_after: resim::Run,
+    pub configs_before: Configs,
+    pub configs_after: Configs,
+    pub floors: Vec<Option<resim::Floor>>,
+}
+
+fn stats_for(
+    m: &Measurement,
+    c: &Configs,
+    run: &resim::Run,
+    floors: &[Option<resim::Floor>],
+) -> Vec<ChannelStats> {
+    let mut out = Vec::new();
+    for (i, ch) in m.channels.iter().enumerate() {
+        let Some(floor) = &floors[i] else { continue };
+        let Some(p) = resim::predict(c, run, ch, 0.0) else {
+            continue;
+        };
+        let r = resim::residuals(ch, &p);
+        let t: Vec<f64> = ch.samples.iter().map(|(t, _)| *t).collect();
+        // Constant lag: the shift in -1..1 s (50 ms steps) with the smallest RMS.
+        let mut best = (0.0, f64::INFINITY);
+        for k in -20..=20 {
+            let lag = f64::from(k) * 0.05;
+            if let Some(pl) = resim::predict(c, run, ch, lag) {
+                let rl = resim::residuals(ch, &pl);
+                let rms = (rl.iter().map(|v| v * v).sum::<f64>() / rl.len().max(1) as f64).sqrt();
+                if rms < best.1 - 1e-12 {
+                    best = (lag, rms);
+                }
+            }
+        }
+        out.push(residuals::channel_stats(&ch.name, &t, &r, floor, run, best));
+    }
+    out
+}
+
+fn track_distance(m: &Measurement, run: &resim::Run) -> Option<f64> {
+    let x = m.channel("x_m")?;
+    let y = m.channel("y_m")?;
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for ((tx, vx), (ty, vy)) in x.samples.iter().zip(&y.samples) {
+        if (tx - ty).abs() > 1e-6 {
+            continue;
+        }
+        let s = run.at(*tx);
+        sum += ((vx - s.position_m.x).powi(2) + (vy - s.position_m.y).powi(2)).sqrt();
+        n += 1;
+    }
+    (n > 0).then(|| sum / n as f64)
+}
+
+fn excess(stats: &[ChannelStats]) -> f64 {
+    if stats.is_empty() {
+        return 0.0;
+    }
+    let mean = stats.iter().map(|s| s.chi2_per_sample).sum::<f64>() / stats.len() as f64;
+    (mean - 1.0).max(0.0).sqrt()
+}
+
+/// Runs the whole workflow on a measurement. `exp_dir` resolves the experiment's relative
+/// references; `progress(round, effect)` is called before each candidate fit.
+pub fn analyse(
+    model: &GapModel,
+    m: &Measurement,
+    exp_dir: &Path,
+    progress: &mut dyn FnMut(usize, &str),
+) -> Result<Analysis, GapError> {
+    let start = model.configs(&m.experiment, exp_dir)?;
+    let clean0 = resim::simulate(&start, m, None)?;
+    let floors = resim::noise_floor(&start, m, &clean0)?;
+    if floors.iter().all(Option::is_none) {
+        return Err(GapError::Data(format!(
+            "no measured channel can be re-simulated; modelled channels are {}",
+            resim::MODELLED.join(", ")
+        )));
+    }
+    let unmodelled = m
+        .channels
+        .iter()
+        .zip(&floors)
+        .filter(|(_, f)| f.is_none())
+        .map(|(c, _)| c.name.clone())
+        .collect();
+    let before = stats_for(m, &start, &clean0, &floors);
+
+    let mut fitted = model.clone();
+    let mut accepted: Vec<CandidateResult> = Vec::new();
+    let mut rounds = Vec::new();
+    let mut configs = start.clone();
+    for round in 0..fit::MAX_EFFECTS {
+        let setup = fit::setup(m, configs.clone(), &floors)?;
+        let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
+        skip.extend(model.effects.iter().map(|e| e.effect.name));
+        let results = fit::fit_candidates(&setup, &skip, &mut |name| progress(round, name));
+        let win = fit::winner(&results).cloned();
+        rounds.push(results);
+        let Some(win) = win else { break };
+        let Some(effect) = effects::by_name(&win.name) else {
+            break;
+        };
+        let values: Vec<f64> = win.parameters.iter().map(|(_, v)| *v).collect();
+        effects::apply(effect, &values, &mut configs);
+        fitted.effects.push(EnabledEffect {
+            effect,
+            values,
+            ci95: win.ci95.iter().map(|(_, c)| *c).collect(),
+            delta_bic: Some(win.delta_bic),
+        });
+        accepted.push(win);
+    }
+    let clean1 = resim::simulate(&configs, m, None)?;
+    let after = stats_for(m, &configs, &clean1, &floors);
+    let (eb, ea) = (excess(&before), excess(&after));
+    Ok(Analysis {
+        verdict: if accepted.is_empty() {
+            Verdict::None
+        } else {
+            Verdict::Effect
+        },
+        track_distance_before_m: track_distance(m, &clean0),
+        track_distance_after_m: track_distance(m, &clean1),
+        excess_before: eb,
+        excess_after: ea,
+        gap_reduction_pct: if eb > 0.0 {
+            100.0 * (1.0 - ea / eb)
+        } else {
+            0.0
+        },
+        before,
+        after,
+        rounds,
+        accepted,
+        fitted,
+        unmodelled,
+        clean_before: clean0,
+        clean_after: clean1,
+        configs_before: start,
+        configs_after: configs,
+        floors,
+    })
+}

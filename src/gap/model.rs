@@ -1,0 +1,272 @@
+//! The model file `gap` compares against (`--model MODEL.toml`): which vehicle, world and
+//! sensor configurations make up the model, plus any effects already added (what `gap` writes
+//! into `MODEL.fitted.toml`).
+//!
+//! ```toml
+//! name = "mako"
+//! vehicle = "vehicles/mako.toml"      # embedded name, or a path relative to this file
+//! world = "worlds/pool.toml"          # optional: default = the experiment's world
+//! sensors = "sensors/mako-2008.toml"  # optional: default = the experiment's sensors
+//!
+//! [[effect]]
+//! name = "water_current"
+//! parameters = { north_mps = 0.02, east_mps = -0.01 }
+//! ci95 = { north_mps = [0.018, 0.022], east_mps = [-0.012, -0.008] }   # informational
+//! ```
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::config::{ConfigError, ConfigSource, Directory, Document, Embedded};
+use crate::gap::GapError;
+use crate::gap::effects::{self, Configs, Effect};
+use crate::gap::format::ExperimentInfo;
+use crate::physics::{VehicleConfig, WorldConfig};
+use crate::sensors::SensorsConfig;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawModel {
+    name: String,
+    vehicle: String,
+    world: Option<String>,
+    sensors: Option<String>,
+    #[serde(default, rename = "effect")]
+    effects: Vec<RawEffect>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawEffect {
+    name: String,
+    parameters: BTreeMap<String, f64>,
+    #[serde(default)]
+    ci95: BTreeMap<String, [f64; 2]>,
+    #[serde(default)]
+    delta_bic: Option<f64>,
+}
+
+/// An effect enabled in a model, with its values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnabledEffect {
+    pub effect: &'static Effect,
+    pub values: Vec<f64>,
+    pub ci95: Vec<[f64; 2]>,
+    pub delta_bic: Option<f64>,
+}
+
+/// A model file, resolved.
+#[derive(Debug, Clone)]
+pub struct GapModel {
+    pub name: String,
+    pub vehicle_ref: String,
+    pub world_ref: Option<String>,
+    pub sensors_ref: Option<String>,
+    /// Where relative references resolve (the model file's directory).
+    pub base: PathBuf,
+    pub effects: Vec<EnabledEffect>,
+}
+
+/// Reads `name` relative to `base` if such a file exists, else from the embedded configs.
+pub fn read_ref(base: &Path, name: &str) -> Result<(String, String), ConfigError> {
+    let dir = Directory::new(base);
+    if base.join(name).is_file() {
+        Ok((dir.describe(name), dir.read(name)?.into_owned()))
+    } else {
+        Ok((Embedded.describe(name), Embedded.read(name)?.into_owned()))
+    }
+}
+
+impl GapModel {
+    pub fn load(path: &Path) -> Result<Self, GapError> {
+        let text = std::fs::read_to_string(path).map_err(|source| GapError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        Self::from_text(&path.display().to_string(), &text, base)
+    }
+
+    pub fn from_text(origin: &str, text: &str, base: PathBuf) -> Result<Self, GapError> {
+        let doc = Document::new(origin, text);
+        let raw: RawModel = doc.parse()?;
+        let mut effects = Vec::new();
+        for (i, e) in raw.effects.iter().enumerate() {
+            let key = format!("effect.{i}");
+            let effect = effects::by_name(&e.name).ok_or_else(|| {
+                doc.invalid(
+                    &format!("{key}.name"),
+                    format!(
+                        "unknown effect `{}`; known: {}",
+                        e.name,
+                        effects::LIBRARY
+                            .iter()
+                            .map(|e| e.name)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?;
+            if let Some(k) = e
+                .parameters
+                .keys()
+                .find(|k| !effect.parameters.contains(&k.as_str()))
+            {
+                return Err(doc
+                    .invalid(
+                        &format!("{key}.parameters"),
+                        format!(
+                            "`{}` has no parameter `{k}`; it has {}",
+                            effect.name,
+                            effect.parameters.join(", ")
+                        ),
+                    )
+                    .into());
+            }
+            let values = effect
+                .parameters
+                .iter()
+                .map(|p| e.parameters.get(*p).copied().unwrap_or(0.0))
+                .collect::<Vec<_>>();
+            if values.iter().any(|v| !v.is_finite()) {
+                return Err(doc
+                    .invalid(&format!("{key}.parameters"), "values must be finite")
+                    .into());
+            }
+            let ci95 = effect
+                .parameters
+                .iter()
+                .zip(&values)
+                .map(|(p, v)| e.ci95.get(*p).copied().unwrap_or([*v, *v]))
+                .collect();
+            effects.push(EnabledEffect {
+                effect,
+                values,
+                ci95,
+                delta_bic: e.delta_bic,
+            });
+        }
+        Ok(Self {
+            name: raw.name,
+            vehicle_ref: raw.vehicle,
+            world_ref: raw.world,
+            sensors_ref: raw.sensors,
+            base,
+            effects,
+        })
+    }
+
+    /// The base configurations (no effects), with the experiment's world and sensors unless
+    /// the model names its own.
+    pub fn base_configs(
+        &self,
+        experiment: &ExperimentInfo,
+        exp_dir: &Path,
+    ) -> Result<Configs, GapError> {
+        let (o, t) = read_ref(&self.base, &self.vehicle_ref)?;
+        let vehicle = VehicleConfig::from_document(&Document::new(o, &t))?;
+        let (o, t) = match &self.world_ref {
+            Some(w) => read_ref(&self.base, w)?,
+            None => read_ref(exp_dir, &experiment.world)?,
+        };
+        let world = WorldConfig::from_document(&Document::new(o, &t))?;
+        let (o, t) = match &self.sensors_ref {
+            Some(s) => read_ref(&self.base, s)?,
+            None => read_ref(exp_dir, &experiment.sensors)?,
+        };
+        let sensors = SensorsConfig::from_text(o, &t)?;
+        Ok(Configs {
+            vehicle,
+            world,
+            sensors,
+        })
+    }
+
+    /// The configurations with every enabled effect applied.
+    pub fn configs(
+        &self,
+        experiment: &ExperimentInfo,
+        exp_dir: &Path,
+    ) -> Result<Configs, GapError> {
+        let mut c = self.base_configs(experiment, exp_dir)?;
+        for e in &self.effects {
+            effects::apply(e.effect, &e.values, &mut c);
+        }
+        Ok(c)
+    }
+
+    /// The model file text, with a provenance comment on top. References are written so they
+    /// resolve from `out_dir`.
+    pub fn to_toml(&self, provenance: &str, out_dir: &Path) -> String {
+        let rel = |r: &str| -> String {
+            let candidate = self.base.join(r);
+            if candidate.is_file() {
+                std::path::absolute(&candidate)
+                    .ok()
+                    .and_then(|abs| {
+                        let out = std::path::absolute(out_dir).ok()?;
+                        relative(&abs, &out)
+                    })
+                    .unwrap_or_else(|| candidate.display().to_string())
+            } else {
+                r.to_string()
+            }
+        };
+        let mut s = String::new();
+        for line in provenance.lines() {
+            let _ = writeln!(s, "# {line}");
+        }
+        let _ = writeln!(s, "name = {:?}", self.name);
+        let _ = writeln!(s, "vehicle = {:?}", rel(&self.vehicle_ref));
+        if let Some(w) = &self.world_ref {
+            let _ = writeln!(s, "world = {:?}", rel(w));
+        }
+        if let Some(x) = &self.sensors_ref {
+            let _ = writeln!(s, "sensors = {:?}", rel(x));
+        }
+        for e in &self.effects {
+            let _ = writeln!(s, "\n[[effect]]\nname = {:?}", e.effect.name);
+            let params: Vec<String> = e
+                .effect
+                .parameters
+                .iter()
+                .zip(&e.values)
+                .map(|(p, v)| format!("{p} = {v:.6}"))
+                .collect();
+            let _ = writeln!(s, "parameters = {{ {} }}", params.join(", "));
+            let ci: Vec<String> = e
+                .effect
+                .parameters
+                .iter()
+                .zip(&e.ci95)
+                .map(|(p, c)| format!("{p} = [{:.6}, {:.6}]", c[0], c[1]))
+                .collect();
+            let _ = writeln!(s, "ci95 = {{ {} }}   # 95 % intervals", ci.join(", "));
+            if let Some(d) = e.delta_bic {
+                let _ = writeln!(s, "delta_bic = {d:.1}");
+            }
+        }
+        s
+    }
+}
+
+/// `target` relative to `from` (both absolute), if they share a root.
+fn relative(target: &Path, from: &Path) -> Option<String> {
+    let t: Vec<_> = target.components().collect();
+    let f: Vec<_> = from.components().collect();
+    let common = t.iter().zip(&f).take_while(|(a, b)| a == b).count();
+    if common == 0 {
+        return None;
+    }
+    let mut p = PathBuf::new();
+    for _ in common..f.len() {
+        p.push("..");
+    }
+    for c in &t[common..] {
+        p.push(c);
+    }
+    Some(p.to_string_lossy().replace('\\', "/"))
+}

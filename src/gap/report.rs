@@ -1,0 +1,397 @@
+//! The output of `gap`: `report.json`, `report.md`, `MODEL.fitted.toml` and SVG plots.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use plotters::prelude::*;
+use serde_json::{Value, json};
+
+use crate::gap::format::Measurement;
+use crate::gap::{Analysis, GapError, fit, resim};
+
+/// `report.json`.
+pub fn json(a: &Analysis) -> Value {
+    let rms = |s: &[crate::gap::residuals::ChannelStats]| -> Value {
+        s.iter()
+            .map(|c| (c.channel.clone(), json!(c.rms)))
+            .collect::<serde_json::Map<_, _>>()
+            .into()
+    };
+    let effect = |r: &fit::CandidateResult| {
+        json!({
+            "name": r.name,
+            "parameters": r.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_,_>>(),
+            "ci95": r.ci95.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_,_>>(),
+            "delta_bic": r.delta_bic,
+            "signature_pass": r.signature_pass,
+        })
+    };
+    json!({
+        "effects": a.accepted.iter().map(effect).collect::<Vec<_>>(),
+        "verdict": a.verdict,
+        "bic_margin": fit::BIC_MARGIN,
+        "gap_before": rms(&a.before),
+        "gap_after": rms(&a.after),
+        "gap_reduction_pct": a.gap_reduction_pct,
+        "track_distance_before_m": a.track_distance_before_m,
+        "track_distance_after_m": a.track_distance_after_m,
+        "channels_before": a.before,
+        "channels_after": a.after,
+        "unmodelled_channels": a.unmodelled,
+        "rounds": a.rounds.iter().map(|r| r.iter().map(|c| json!({
+            "name": c.name, "delta_bic": if c.delta_bic.is_finite() { json!(c.delta_bic) } else { Value::Null },
+            "parameters": c.parameters, "signature_pass": c.signature_pass,
+            "signature": c.signature, "testable": c.testable,
+        })).collect::<Vec<_>>()).collect::<Vec<_>>(),
+    })
+}
+
+/// `report.md`.
+pub fn markdown(a: &Analysis, m: &Measurement) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Reality gap: {}\n", m.experiment.name);
+    let verdict = match a.accepted.first() {
+        Some(w) => format!("missing effect: **{}**", w.name),
+        None => "no significant missing effect".to_string(),
+    };
+    let _ = writeln!(
+        s,
+        "Verdict: {verdict} (margin: delta BIC > {}).\n",
+        fit::BIC_MARGIN
+    );
+    for n in &m.notices {
+        let _ = writeln!(s, "- notice: {n}");
+    }
+    if !a.unmodelled.is_empty() {
+        let _ = writeln!(s, "- not re-simulated: {}", a.unmodelled.join(", "));
+    }
+    let _ = writeln!(s, "\n## Where the gap is (before)\n");
+    let _ = writeln!(
+        s,
+        "| channel | n | RMS | noise floor | chi2/n | significant | Ljung-Box Q (crit) | lag s |\n|---|---|---|---|---|---|---|---|"
+    );
+    for c in &a.before {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.4} | {:.4} | {:.2} | {} | {:.1} ({:.1}) | {:+.2} |",
+            c.channel,
+            c.samples,
+            c.rms,
+            c.noise_floor_rms,
+            c.chi2_per_sample,
+            if c.significant { "yes" } else { "no" },
+            c.ljung_box_q,
+            c.ljung_box_critical_95,
+            c.lag_s
+        );
+    }
+    for c in a.before.iter().filter(|c| c.significant) {
+        let _ = writeln!(s, "\n**{}**: strongest correlations:", c.channel);
+        for k in c.correlations.iter().filter(|k| k.significant) {
+            let _ = writeln!(s, "- {} at lag {} s: r = {:.2}", k.with, k.lag_s, k.r);
+        }
+        let regs: Vec<String> = c
+            .regimes
+            .iter()
+            .filter(|r| r.significant)
+            .map(|r| format!("{} (chi2/n {:.1})", r.regime, r.chi2_per_sample))
+            .collect();
+        let _ = writeln!(s, "- significant regimes: {}", regs.join(", "));
+        let w: Vec<String> = c
+            .windows
+            .iter()
+            .map(|(a, b, x)| format!("{a:.0}-{b:.0} s ({x:.1})"))
+            .collect();
+        let _ = writeln!(s, "- significant windows: {}", w.join(", "));
+    }
+    for (i, round) in a.rounds.iter().enumerate() {
+        let _ = writeln!(s, "\n## Candidates, round {}\n", i + 1);
+        let _ = writeln!(
+            s,
+            "| rank | effect | delta BIC | parameters | signature |\n|---|---|---|---|---|"
+        );
+        for (k, c) in round.iter().enumerate() {
+            let p: Vec<String> = c
+                .parameters
+                .iter()
+                .zip(&c.ci95)
+                .map(|((n, v), (_, ci))| format!("{n} = {v:.4} [{:.4}, {:.4}]", ci[0], ci[1]))
+                .collect();
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | {} {} |",
+                k + 1,
+                c.name,
+                if c.delta_bic.is_finite() {
+                    format!("{:.1}", c.delta_bic)
+                } else {
+                    "-".into()
+                },
+                p.join("; "),
+                if c.signature_pass { "pass:" } else { "fail:" },
+                c.signature
+            );
+        }
+    }
+    let _ = writeln!(s, "\n## The gap, before and after\n");
+    let _ = writeln!(
+        s,
+        "| channel | RMS before | RMS after | fit % before | fit % after |\n|---|---|---|---|---|"
+    );
+    for (b, af) in a.before.iter().zip(&a.after) {
+        let _ = writeln!(
+            s,
+            "| {} | {:.4} | {:.4} | {:.1} | {:.1} |",
+            b.channel,
+            b.rms,
+            af.rms,
+            fit_pct(m, &b.channel, b.rms),
+            fit_pct(m, &b.channel, af.rms)
+        );
+    }
+    if let (Some(x), Some(y)) = (a.track_distance_before_m, a.track_distance_after_m) {
+        let _ = writeln!(
+            s,
+            "\nTrack distance at matched times (thesis [49]): {x:.3} m before, {y:.3} m after."
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nGap (excess of the normalised residual over the noise floor): {:.2} before, {:.2} after: {:.0} % smaller.",
+        a.excess_before, a.excess_after, a.gap_reduction_pct
+    );
+    let _ = writeln!(
+        s,
+        "\n![trajectories](trajectories.svg)\n![residuals](residuals.svg)\n![ranking](ranking.svg)"
+    );
+    s
+}
+
+/// NRMSE fit % = 100 (1 - RMS / std(measured)).
+fn fit_pct(m: &Measurement, channel: &str, rms: f64) -> f64 {
+    let Some(c) = m.channel(channel) else {
+        return f64::NAN;
+    };
+    let n = c.samples.len().max(1) as f64;
+    let mean = c.samples.iter().map(|(_, v)| v).sum::<f64>() / n;
+    let sd = (c
+        .samples
+        .iter()
+        .map(|(_, v)| (v - mean).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    if sd > 0.0 {
+        100.0 * (1.0 - rms / sd)
+    } else {
+        f64::NAN
+    }
+}
+
+fn plot_err(path: &Path, e: impl std::fmt::Display) -> GapError {
+    GapError::Plot {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
+}
+
+/// Writes trajectories.svg, residuals.svg and ranking.svg into `out`.
+pub fn plots(a: &Analysis, m: &Measurement, out: &Path) -> Result<(), GapError> {
+    // Trajectories over the pool.
+    let path = out.join("trajectories.svg");
+    {
+        let root = SVGBackend::new(&path, (800, 500)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(&path, e))?;
+        let pool = a.configs_before.world.pool_m;
+        let mut chart = ChartBuilder::on(&root)
+            .caption("track over the pool (east vs north)", ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(45)
+            .build_cartesian_2d(0.0..pool.y, 0.0..pool.x)
+            .map_err(|e| plot_err(&path, e))?;
+        chart
+            .configure_mesh()
+            .x_desc("east (m)")
+            .y_desc("north (m)")
+            .draw()
+            .map_err(|e| plot_err(&path, e))?;
+        if let (Some(x), Some(y)) = (m.channel("x_m"), m.channel("y_m")) {
+            chart
+                .draw_series(
+                    x.samples
+                        .iter()
+                        .zip(&y.samples)
+                        .map(|((_, a), (_, b))| Circle::new((*b, *a), 1, BLACK.filled())),
+                )
+                .map_err(|e| plot_err(&path, e))?
+                .label("measured")
+                .legend(|(x, y)| Circle::new((x, y), 3, BLACK.filled()));
+        }
+        for (run, colour, label) in [
+            (&a.clean_before, RED, "model"),
+            (&a.clean_after, BLUE, "model + fitted effects"),
+        ] {
+            chart
+                .draw_series(LineSeries::new(
+                    run.states
+                        .iter()
+                        .step_by(10)
+                        .map(|s| (s.position_m.y, s.position_m.x)),
+                    colour,
+                ))
+                .map_err(|e| plot_err(&path, e))?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], colour));
+        }
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE)
+            .draw()
+            .map_err(|e| plot_err(&path, e))?;
+        root.present().map_err(|e| plot_err(&path, e))?;
+    }
+    // Normalised residuals over time, before and after.
+    let path = out.join("residuals.svg");
+    {
+        let modelled: Vec<usize> = (0..m.channels.len())
+            .filter(|&i| a.floors[i].is_some())
+            .collect();
+        let rows = modelled.len().max(1);
+        let root = SVGBackend::new(&path, (900, 160 * rows as u32)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(&path, e))?;
+        let areas = root.split_evenly((rows, 1));
+        for (area, &i) in areas.iter().zip(&modelled) {
+            let ch = &m.channels[i];
+            let Some(floor) = &a.floors[i] else { continue };
+            let series = |c: &crate::gap::effects::Configs, run: &resim::Run| -> Vec<(f64, f64)> {
+                resim::predict(c, run, ch, 0.0)
+                    .map(|p| {
+                        resim::residuals(ch, &p)
+                            .iter()
+                            .zip(&floor.sigma)
+                            .zip(&ch.samples)
+                            .map(|((r, s), (t, _))| (*t, (r / s).clamp(-20.0, 20.0)))
+                            .collect()
+                    })
+                    .unwrap_or_default()
+            };
+            let b = series(&a.configs_before, &a.clean_before);
+            let af = series(&a.configs_after, &a.clean_after);
+            let t1 = m.experiment.duration_s;
+            let mut chart = ChartBuilder::on(area)
+                .caption(
+                    format!("{}: residual / noise floor", ch.name),
+                    ("sans-serif", 14),
+                )
+                .margin(5)
+                .x_label_area_size(25)
+                .y_label_area_size(40)
+                .build_cartesian_2d(0.0..t1, -20.0..20.0)
+                .map_err(|e| plot_err(&path, e))?;
+            chart
+                .configure_mesh()
+                .x_desc("t (s)")
+                .draw()
+                .map_err(|e| plot_err(&path, e))?;
+            chart
+                .draw_series(b.iter().map(|p| Circle::new(*p, 1, RED.filled())))
+                .map_err(|e| plot_err(&path, e))?;
+            chart
+                .draw_series(af.iter().map(|p| Circle::new(*p, 1, BLUE.filled())))
+                .map_err(|e| plot_err(&path, e))?;
+        }
+        root.present().map_err(|e| plot_err(&path, e))?;
+    }
+    // Candidate ranking (first round).
+    let path = out.join("ranking.svg");
+    {
+        let round: Vec<&fit::CandidateResult> = a
+            .rounds
+            .first()
+            .map(|r| r.iter().filter(|c| c.delta_bic.is_finite()).collect())
+            .unwrap_or_default();
+        let root = SVGBackend::new(&path, (800, 400)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(&path, e))?;
+        let n = round.len().max(1);
+        let sym = |v: f64| v.signum() * (1.0 + v.abs()).log10();
+        let hi = round.iter().map(|c| sym(c.delta_bic)).fold(2.0, f64::max);
+        let lo = round.iter().map(|c| sym(c.delta_bic)).fold(-1.0, f64::min);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "candidates, round 1: sign(dBIC) log10(1 + |dBIC|); line = margin",
+                ("sans-serif", 16),
+            )
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(160)
+            .build_cartesian_2d(lo..hi, 0..n)
+            .map_err(|e| plot_err(&path, e))?;
+        let names: Vec<String> = round.iter().map(|c| c.name.clone()).collect();
+        chart
+            .configure_mesh()
+            .y_label_formatter(&|i| names.get(*i).cloned().unwrap_or_default())
+            .y_labels(n)
+            .draw()
+            .map_err(|e| plot_err(&path, e))?;
+        chart
+            .draw_series(round.iter().enumerate().map(|(i, c)| {
+                let colour = if c.signature_pass && c.delta_bic > fit::BIC_MARGIN {
+                    GREEN
+                } else {
+                    RED
+                };
+                Rectangle::new([(0.0, i), (sym(c.delta_bic), i + 1)], colour.filled())
+            }))
+            .map_err(|e| plot_err(&path, e))?;
+        chart
+            .draw_series(LineSeries::new(
+                [(sym(fit::BIC_MARGIN), 0), (sym(fit::BIC_MARGIN), n)],
+                BLACK,
+            ))
+            .map_err(|e| plot_err(&path, e))?;
+        root.present().map_err(|e| plot_err(&path, e))?;
+    }
+    Ok(())
+}
+
+/// Writes every output file into `out`; `model_stem` names `MODEL.fitted.toml`.
+pub fn write_all(
+    a: &Analysis,
+    m: &Measurement,
+    measured_dir: &Path,
+    model_path: &Path,
+    out: &Path,
+) -> Result<(), GapError> {
+    std::fs::create_dir_all(out).map_err(|source| GapError::Io {
+        path: out.to_path_buf(),
+        source,
+    })?;
+    let write = |name: &str, text: String| {
+        let path = out.join(name);
+        std::fs::write(&path, text).map_err(|source| GapError::Io { path, source })
+    };
+    let text = serde_json::to_string_pretty(&json(a)).map_err(|e| GapError::Data(e.to_string()))?;
+    write("report.json", text)?;
+    write("report.md", markdown(a, m))?;
+    let stem = model_path
+        .file_stem()
+        .map_or_else(|| "model".to_string(), |s| s.to_string_lossy().into_owned());
+    let provenance = format!(
+        "Written by `eyebot-hil gap --measured {} --model {}` (eyebot-hil {}).\n\
+         Effects fitted by Levenberg-Marquardt on the measurement `{}`; each accepted because it\n\
+         beat \"no effect\" by delta BIC > {} and passed its residual-signature test.\n\
+         Parameters are changes relative to the base configuration (see docs/gap.md).",
+        measured_dir.display(),
+        model_path.display(),
+        env!("CARGO_PKG_VERSION"),
+        m.experiment.name,
+        fit::BIC_MARGIN
+    );
+    write(
+        &format!("{stem}.fitted.toml"),
+        a.fitted.to_toml(&provenance, out),
+    )?;
+    plots(a, m, out)
+}

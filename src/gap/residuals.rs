@@ -1,0 +1,279 @@
+//! Localising the gap: per-channel residual statistics against the noise floor, whiteness
+//! (Ljung-Box), correlation with inputs and states at several lags, and a breakdown by regime
+//! and by time window.
+
+use serde::Serialize;
+
+use crate::gap::resim::{Floor, Run};
+
+/// Lags (s) at which residuals are correlated with inputs and states.
+pub const XCORR_LAGS_S: [f64; 4] = [0.0, 0.5, 1.0, 2.0];
+/// Ljung-Box lags (samples).
+pub const LJUNG_BOX_LAGS: usize = 10;
+/// Length of the time windows of the breakdown (s).
+pub const WINDOW_S: f64 = 10.0;
+
+/// Residual statistics of one channel.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChannelStats {
+    pub channel: String,
+    pub samples: usize,
+    pub mean: f64,
+    pub rms: f64,
+    /// RMS of the model's own noise at these samples.
+    pub noise_floor_rms: f64,
+    /// Mean squared normalised residual (1 = as noisy as the model expects).
+    pub chi2_per_sample: f64,
+    /// Samples per independent sample (autocorrelation of the model's process noise).
+    pub tau_samples: f64,
+    /// True when chi2 exceeds its expectation by more than 3 standard deviations.
+    pub significant: bool,
+    pub ljung_box_q: f64,
+    pub ljung_box_critical_95: f64,
+    pub white: bool,
+    /// Estimated constant lag (s, + = measurement later than the model) and the RMS with it.
+    pub lag_s: f64,
+    pub rms_at_lag: f64,
+    pub correlations: Vec<Correlation>,
+    pub regimes: Vec<RegimeStats>,
+    /// Time windows where the disagreement is significant: (start s, end s, chi2 per sample).
+    pub windows: Vec<(f64, f64, f64)>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Correlation {
+    pub with: &'static str,
+    pub lag_s: f64,
+    pub r: f64,
+    pub significant: bool,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RegimeStats {
+    pub regime: String,
+    pub samples: usize,
+    pub chi2_per_sample: f64,
+    pub significant: bool,
+}
+
+/// The 95 % point of chi-square with `k` degrees of freedom (Wilson-Hilferty).
+pub fn chi2_critical_95(k: usize) -> f64 {
+    let k = k as f64;
+    let a = 2.0 / (9.0 * k);
+    k * (1.0 - a + 1.645 * a.sqrt()).powi(3)
+}
+
+/// Ljung-Box Q over `h` lags of `x`.
+pub fn ljung_box(x: &[f64], h: usize) -> f64 {
+    let n = x.len();
+    if n <= h + 1 {
+        return 0.0;
+    }
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let c0: f64 = x.iter().map(|v| (v - mean).powi(2)).sum();
+    if c0 <= 0.0 {
+        return 0.0;
+    }
+    let nf = n as f64;
+    (1..=h)
+        .map(|k| {
+            let ck: f64 = (0..n - k).map(|i| (x[i] - mean) * (x[i + k] - mean)).sum();
+            let r = ck / c0;
+            r * r / (nf - k as f64)
+        })
+        .sum::<f64>()
+        * nf
+        * (nf + 2.0)
+}
+
+fn pearson(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    if n < 3 {
+        return 0.0;
+    }
+    let ma = a[..n].iter().sum::<f64>() / n as f64;
+    let mb = b[..n].iter().sum::<f64>() / n as f64;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for i in 0..n {
+        sab += (a[i] - ma) * (b[i] - mb);
+        saa += (a[i] - ma).powi(2);
+        sbb += (b[i] - mb).powi(2);
+    }
+    if saa <= 0.0 || sbb <= 0.0 {
+        0.0
+    } else {
+        sab / (saa * sbb).sqrt()
+    }
+}
+
+/// Inputs and states the residuals are correlated with, at time `t`.
+fn regressors(run: &Run, t: f64) -> [(&'static str, f64); 9] {
+    let s = run.at(t);
+    let (_, pitch, yaw) = s.euler_rad();
+    let p = run.percent_at(t);
+    [
+        ("sin(heading)", yaw.sin()),
+        ("cos(heading)", yaw.cos()),
+        ("sin(2 heading)", (2.0 * yaw).sin()),
+        ("cos(2 heading)", (2.0 * yaw).cos()),
+        ("thrust sum", p[0] + p[1]),
+        ("thrust difference", p[0] - p[1]),
+        ("stern duty", p[3].abs()),
+        ("surge speed", s.velocity_body_mps.x),
+        ("turn rate", s.angular_velocity_body_radps.z),
+    ]
+    .map(|(n, v)| (n, if n == "tilt" { pitch } else { v }))
+}
+
+fn regime_of(run: &Run, t: f64) -> [String; 4] {
+    let s = run.at(t);
+    let (roll, pitch, yaw) = s.euler_rad();
+    let p = run.percent_at(t);
+    let heading = yaw.to_degrees().rem_euclid(360.0);
+    let quadrant = ["heading N", "heading E", "heading S", "heading W"]
+        [(((heading + 45.0) % 360.0) / 90.0) as usize % 4];
+    let thrust = if p[0].abs() < 1.0 && p[1].abs() < 1.0 {
+        "thrust off"
+    } else if p[0] * p[1] < 0.0 {
+        "spot turn"
+    } else if p[0] + p[1] < 0.0 {
+        "thrust reverse"
+    } else if p[0] + p[1] > 120.0 {
+        "thrust forward > 60 %"
+    } else {
+        "thrust forward <= 60 %"
+    };
+    let tilt = if roll.abs().max(pitch.abs()).to_degrees() > 3.0 {
+        "tilted > 3 deg"
+    } else {
+        "level"
+    };
+    let u = s.velocity_body_mps.x.abs();
+    let speed = if u < 0.1 {
+        "speed < 0.1 m/s"
+    } else if u < 0.25 {
+        "speed 0.1-0.25 m/s"
+    } else {
+        "speed > 0.25 m/s"
+    };
+    [quadrant, thrust, tilt, speed].map(str::to_string)
+}
+
+/// chi2 per sample is significant above 1 + 3 sqrt(2 / n_independent).
+fn excess(chi2: f64, n: usize, tau: f64) -> bool {
+    let n_eff = (n as f64 / tau).max(1.0);
+    chi2 > 1.0 + 3.0 * (2.0 / n_eff).sqrt()
+}
+
+/// Statistics of one channel's residuals `r` at times `t` against the floor.
+pub fn channel_stats(
+    name: &str,
+    t: &[f64],
+    r: &[f64],
+    floor: &Floor,
+    run: &Run,
+    lag: (f64, f64),
+) -> ChannelStats {
+    let n = r.len();
+    let nf = n.max(1) as f64;
+    let z: Vec<f64> = r.iter().zip(&floor.sigma).map(|(a, s)| a / s).collect();
+    let chi2 = z.iter().map(|v| v * v).sum::<f64>() / nf;
+    let q = ljung_box(&z, LJUNG_BOX_LAGS);
+    let crit = chi2_critical_95(LJUNG_BOX_LAGS);
+    // Correlations with inputs and states at several lags.
+    let mut correlations = Vec::new();
+    let n_eff = (nf / floor.tau).max(3.0);
+    for lag_s in XCORR_LAGS_S {
+        let regs: Vec<[(&'static str, f64); 9]> =
+            t.iter().map(|ti| regressors(run, ti - lag_s)).collect();
+        for j in 0..9 {
+            let x: Vec<f64> = regs.iter().map(|r| r[j].1).collect();
+            let rr = pearson(&z, &x);
+            correlations.push(Correlation {
+                with: regs.first().map_or("", |r| r[j].0),
+                lag_s,
+                r: rr,
+                significant: rr.abs() > 3.0 / n_eff.sqrt(),
+            });
+        }
+    }
+    correlations.sort_by(|a, b| b.r.abs().total_cmp(&a.r.abs()));
+    correlations.truncate(6);
+    // Regimes.
+    let mut groups: std::collections::BTreeMap<String, (usize, f64)> = Default::default();
+    for (ti, zi) in t.iter().zip(&z) {
+        for g in regime_of(run, *ti) {
+            let e = groups.entry(g).or_default();
+            e.0 += 1;
+            e.1 += zi * zi;
+        }
+    }
+    let regimes = groups
+        .into_iter()
+        .map(|(regime, (k, s))| {
+            let c = s / k.max(1) as f64;
+            RegimeStats {
+                regime,
+                samples: k,
+                chi2_per_sample: c,
+                significant: excess(c, k, floor.tau),
+            }
+        })
+        .collect();
+    // Time windows.
+    let mut windows = Vec::new();
+    let end = t.last().copied().unwrap_or(0.0);
+    let mut w0 = 0.0;
+    while w0 < end {
+        let idx: Vec<usize> = (0..n)
+            .filter(|&i| t[i] >= w0 && t[i] < w0 + WINDOW_S)
+            .collect();
+        if !idx.is_empty() {
+            let c = idx.iter().map(|&i| z[i] * z[i]).sum::<f64>() / idx.len() as f64;
+            if excess(c, idx.len(), floor.tau) {
+                windows.push((w0, w0 + WINDOW_S, c));
+            }
+        }
+        w0 += WINDOW_S;
+    }
+    ChannelStats {
+        channel: name.to_string(),
+        samples: n,
+        mean: r.iter().sum::<f64>() / nf,
+        rms: (r.iter().map(|v| v * v).sum::<f64>() / nf).sqrt(),
+        noise_floor_rms: (floor.sigma.iter().map(|s| s * s).sum::<f64>() / nf).sqrt(),
+        chi2_per_sample: chi2,
+        tau_samples: floor.tau,
+        significant: excess(chi2, n, floor.tau),
+        ljung_box_q: q,
+        ljung_box_critical_95: crit,
+        white: q <= crit,
+        lag_s: lag.0,
+        rms_at_lag: lag.1,
+        correlations,
+        regimes,
+        windows,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi2_critical_matches_tables() {
+        // chi2(0.95; 10) = 18.307 (standard tables).
+        assert!((chi2_critical_95(10) - 18.307).abs() < 0.1);
+    }
+
+    #[test]
+    fn ljung_box_flags_a_sine_and_passes_noise() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let noise: Vec<f64> = (0..500).map(|_| StandardNormal.sample(&mut rng)).collect();
+        assert!(ljung_box(&noise, 10) < chi2_critical_95(10));
+        let sine: Vec<f64> = (0..500).map(|i| (i as f64 * 0.1).sin()).collect();
+        assert!(ljung_box(&sine, 10) > 10.0 * chi2_critical_95(10));
+    }
+}

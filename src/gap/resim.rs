@@ -1,0 +1,305 @@
+//! Re-simulation: run the model open loop from the measured commands and initial state, and
+//! predict each measured channel at its sample times, noise-free. The model's own noise floor
+//! comes from the sensor settings (measurement noise) and from an ensemble of runs with the
+//! model's process noise switched on (thrust fluctuation).
+
+use nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
+
+use crate::gap::GapError;
+use crate::gap::effects::Configs;
+use crate::gap::format::{Channel, Measurement};
+use crate::physics::state::{STERN, VehicleState};
+use crate::physics::{InitialState, Model, ThrusterCommand, hdt_command};
+use crate::sensors::{AdcBoard, Compass};
+
+/// Channels `gap` can re-simulate; the others are loaded and reported as not modelled.
+pub const MODELLED: [&str; 6] = [
+    "x_m",
+    "y_m",
+    "surge_mps",
+    "compass_deg",
+    "depth_adc",
+    "paddle_speed_mps",
+];
+
+/// Ensemble size for the process-noise floor.
+pub const ENSEMBLE: u64 = 4;
+
+/// One re-simulated run: the state after every step (index 0 = start) and the commands.
+#[derive(Debug, Clone)]
+pub struct Run {
+    pub dt_s: f64,
+    pub states: Vec<VehicleState>,
+    pub percent: Vec<[f64; 4]>,
+}
+
+impl Run {
+    /// The state nearest `t_s` (clamped to the run).
+    pub fn at(&self, t_s: f64) -> &VehicleState {
+        let i = (t_s / self.dt_s).round().max(0.0) as usize;
+        &self.states[i.min(self.states.len() - 1)]
+    }
+
+    pub fn percent_at(&self, t_s: f64) -> [f64; 4] {
+        let i = (t_s / self.dt_s).round().max(0.0) as usize;
+        self.percent[i.min(self.percent.len() - 1)]
+    }
+}
+
+/// Runs the model from the measurement's initial state under its commands. `noise_seed`
+/// `None` switches the thrust fluctuation off (the mean prediction).
+pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result<Run, GapError> {
+    let mut vehicle = c.vehicle.clone();
+    if noise_seed.is_none() {
+        vehicle.thruster_common.fluctuation_rel_std = 0.0;
+    }
+    let model = Model::new(vehicle, c.world.clone());
+    let i = &m.experiment.initial;
+    let depth = i.z_m.unwrap_or_else(|| model.floating_depth_m());
+    let initial = InitialState {
+        position_m: Vector3::new(i.x_m, i.y_m, depth),
+        attitude: UnitQuaternion::from_euler_angles(
+            i.roll_deg.to_radians(),
+            i.pitch_deg.to_radians(),
+            i.heading_deg.to_radians(),
+        ),
+        velocity_body_mps: Vector3::new(i.surge_mps, 0.0, 0.0),
+        angular_velocity_body_radps: Vector3::zeros(),
+    };
+    let mut state = model.initial_state(&initial, noise_seed.unwrap_or(0));
+    let dt = model.step_s();
+    let steps = (m.experiment.duration_s / dt).round() as usize;
+    let mut states = Vec::with_capacity(steps + 1);
+    let mut percent = Vec::with_capacity(steps + 1);
+    states.push(model.vehicle_state(&state));
+    let mut p = m.percent_at(0.0);
+    percent.push(p);
+    let tables: [[f64; 11]; 4] = std::array::from_fn(|k| model.vehicle().thrusters[k].hdt_duty);
+    let mut commands: [ThrusterCommand; 4] = std::array::from_fn(|k| hdt_command(&tables[k], p[k]));
+    for k in 0..steps {
+        let t = k as f64 * dt;
+        let now = m.percent_at(t);
+        if now != p {
+            p = now;
+            commands = std::array::from_fn(|j| hdt_command(&tables[j], p[j]));
+        }
+        model
+            .step(&mut state, &commands)
+            .map_err(|source| GapError::Physics {
+                experiment: m.experiment.name.clone(),
+                source,
+            })?;
+        states.push(model.vehicle_state(&state));
+        percent.push(p);
+    }
+    Ok(Run {
+        dt_s: dt,
+        states,
+        percent,
+    })
+}
+
+/// Wraps an angle difference into -180..180 deg.
+pub fn wrap_deg(a: f64) -> f64 {
+    (a + 180.0).rem_euclid(360.0) - 180.0
+}
+
+/// The compass heading the model predicts for a state (deg, 0..360, not rounded).
+pub fn compass_heading_deg(c: &Configs, earth_ned_ut: &Vector3<f64>, s: &VehicleState) -> f64 {
+    let k = &c.sensors.compass;
+    let soft = Matrix2::new(
+        k.soft_iron[0][0],
+        k.soft_iron[0][1],
+        k.soft_iron[1][0],
+        k.soft_iron[1][1],
+    );
+    let b = s.attitude.inverse_transform_vector(earth_ned_ut);
+    let m = soft * Vector2::new(b.x, b.y) + Vector2::from(k.hard_iron_ut);
+    ((-m.y).atan2(m.x).to_degrees() + k.errors.bias).rem_euclid(360.0)
+}
+
+fn earth_field(c: &Configs) -> Vector3<f64> {
+    Compass::new(&c.sensors.compass, 0).earth_field_ned_ut()
+}
+
+/// Predicted values of `channel` at its sample times, shifted by `lag_s` (a prediction for
+/// time t uses the state at t - lag). `None` for channels not modelled.
+pub fn predict(c: &Configs, run: &Run, channel: &Channel, lag_s: f64) -> Option<Vec<f64>> {
+    let ts = channel.samples.iter().map(|(t, _)| *t);
+    Some(match channel.name.as_str() {
+        "x_m" => ts.map(|t| run.at(t - lag_s).position_m.x).collect(),
+        "y_m" => ts.map(|t| run.at(t - lag_s).position_m.y).collect(),
+        "surge_mps" => ts.map(|t| run.at(t - lag_s).velocity_body_mps.x).collect(),
+        "compass_deg" => {
+            let earth = earth_field(c);
+            let lat = c.sensors.compass.errors.latency_s;
+            ts.map(|t| compass_heading_deg(c, &earth, run.at(t - lag_s - lat)))
+                .collect()
+        }
+        "depth_adc" => {
+            let d = &c.sensors.depth;
+            let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
+            let pos = Vector3::from(d.position_body_m);
+            ts.map(|t| {
+                let s = run.at(t - lag_s - d.errors.latency_s);
+                let depth = s.depth_of_m(&pos).max(0.0) + d.errors.bias;
+                depth * d.volts_per_m / lsb + c.sensors.adc.offset_lsb
+            })
+            .collect()
+        }
+        "paddle_speed_mps" => {
+            let v = &c.sensors.velocity;
+            let n = ((v.window_s / run.dt_s).round() as usize).max(1);
+            ts.map(|t| {
+                let end =
+                    (((t - lag_s) / run.dt_s).round().max(0.0) as usize).min(run.states.len() - 1);
+                let start = end.saturating_sub(n);
+                let slice = &run.states[start..=end];
+                let mean = slice
+                    .iter()
+                    .map(|s| s.velocity_water_body_mps.x.abs())
+                    .sum::<f64>()
+                    / slice.len() as f64;
+                v.firmware_scale * mean
+            })
+            .collect()
+        }
+        _ => return None,
+    })
+}
+
+/// Residual measured - predicted (compass wrapped).
+pub fn residuals(channel: &Channel, predicted: &[f64]) -> Vec<f64> {
+    channel
+        .samples
+        .iter()
+        .zip(predicted)
+        .map(|((_, m), p)| {
+            if channel.name == "compass_deg" {
+                wrap_deg(m - p)
+            } else {
+                m - p
+            }
+        })
+        .collect()
+}
+
+/// The white measurement noise (1 sigma) of each sample of a channel, from the sensor
+/// settings and the camera set-up.
+pub fn measurement_std(c: &Configs, m: &Measurement, run: &Run, channel: &Channel) -> Vec<f64> {
+    let n = channel.samples.len();
+    match channel.name.as_str() {
+        "x_m" | "y_m" => vec![m.experiment.camera_position_std_m; n],
+        "surge_mps" => vec![m.experiment.camera_speed_std_mps; n],
+        "compass_deg" => {
+            let k = &c.sensors.compass;
+            let e = earth_field(c);
+            let horizontal = (e.x * e.x + e.y * e.y).sqrt().max(1e-6);
+            let field = (k.field_noise_ut / horizontal).to_degrees();
+            let s = (field * field + k.errors.gaussian_std.powi(2) + 1.0 / 12.0).sqrt();
+            vec![s; n]
+        }
+        "depth_adc" => {
+            let d = &c.sensors.depth;
+            let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
+            let att = d.low_pass_cutoff_hz.map_or(1.0, |fc| {
+                (std::f64::consts::FRAC_PI_2 * fc / d.emi_bandwidth_hz).sqrt()
+            });
+            channel
+                .samples
+                .iter()
+                .map(|(t, _)| {
+                    let duty = run.at(*t).thruster_effort[STERN].abs().min(1.0);
+                    let emi = d.emi_v_rms_full_duty * duty * att;
+                    let v = d.noise_v_rms.powi(2)
+                        + c.sensors.adc.noise_v_rms.powi(2)
+                        + emi * emi
+                        + (d.errors.gaussian_std * d.volts_per_m).powi(2);
+                    (v / (lsb * lsb) + 1.0 / 12.0).sqrt()
+                })
+                .collect()
+        }
+        "paddle_speed_mps" => {
+            let v = &c.sensors.velocity;
+            let step = v.firmware_scale / (v.pulses_per_metre * v.window_s);
+            vec![step / 6f64.sqrt(); n]
+        }
+        _ => vec![1.0; n],
+    }
+}
+
+/// The model's noise floor for one channel.
+#[derive(Debug, Clone)]
+pub struct Floor {
+    /// Per-sample 1-sigma spread (measurement and process noise together).
+    pub sigma: Vec<f64>,
+    /// Integrated autocorrelation time in samples: `n / tau` samples are independent.
+    pub tau: f64,
+}
+
+/// Noise floors of every modelled channel: measurement noise from the settings plus the
+/// spread of [`ENSEMBLE`] runs with the model's process noise on.
+pub fn noise_floor(
+    c: &Configs,
+    m: &Measurement,
+    clean: &Run,
+) -> Result<Vec<Option<Floor>>, GapError> {
+    let mut noisy = Vec::new();
+    for seed in 0..ENSEMBLE {
+        noisy.push(simulate(c, m, Some(0x6a70_0000 + seed))?);
+    }
+    Ok(m.channels
+        .iter()
+        .map(|ch| {
+            let base = predict(c, clean, ch, 0.0)?;
+            let meas = measurement_std(c, m, clean, ch);
+            let n = base.len();
+            let devs: Vec<Vec<f64>> = noisy
+                .iter()
+                .filter_map(|r| predict(c, r, ch, 0.0))
+                .map(|p| {
+                    p.iter()
+                        .zip(&base)
+                        .map(|(a, b)| {
+                            if ch.name == "compass_deg" {
+                                wrap_deg(a - b)
+                            } else {
+                                a - b
+                            }
+                        })
+                        .collect()
+                })
+                .collect();
+            let k = devs.len().max(1) as f64;
+            let proc_var: Vec<f64> = (0..n)
+                .map(|i| devs.iter().map(|d| d[i] * d[i]).sum::<f64>() / k)
+                .collect();
+            let sigma: Vec<f64> = (0..n)
+                .map(|i| (meas[i] * meas[i] + proc_var[i]).sqrt().max(1e-9))
+                .collect();
+            // Autocorrelation of the normalised process deviations (white measurement noise
+            // only adds to lag 0).
+            let mut tau = 1.0;
+            if n > 4 {
+                let c0: f64 = (0..n).map(|i| 1.0 + 0.0 * sigma[i]).sum::<f64>();
+                for lag in 1..n / 4 {
+                    let cl: f64 = devs
+                        .iter()
+                        .map(|d| {
+                            (0..n - lag)
+                                .map(|i| d[i] * d[i + lag] / (sigma[i] * sigma[i + lag]))
+                                .sum::<f64>()
+                        })
+                        .sum::<f64>()
+                        / k;
+                    let rho = cl / c0;
+                    if rho < 0.05 {
+                        break;
+                    }
+                    tau += 2.0 * rho;
+                }
+            }
+            Some(Floor { sigma, tau })
+        })
+        .collect())
+}
