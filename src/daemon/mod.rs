@@ -573,13 +573,52 @@ mod tests {
         assert_eq!(status.sim_time_s, 1.5);
         assert_eq!(status.time_mode, "lockstep");
 
+        // `replay --into-sonar`: captured sentences through the feed socket replace the
+        // model's; the log's $PEBHS maps each to its transducer (1 is selected, 2 is not).
+        let mut feed = tokio::net::UnixStream::connect(run_dir.join(feed::FEED_SOCKET))
+            .await
+            .unwrap();
+        feed.write_all(
+            b"$SDDBT,8.2,f,2.5,M,1.4,F*0E\r\n$PEBHS,1,2.5,90*71\r\n$SDDBT,9.9,f,3.0,M,1.6,F*02\r\n$PEBHS,2,3.0,90*76\r\n",
+        )
+        .await
+        .unwrap();
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        sensor
+            .write_all(&send(3, Message::TimeAdvance { ticks: 50 }))
+            .await
+            .unwrap();
+        assert!(matches!(
+            read_item(&mut sensor, &mut sbuf, &mut sdec).await,
+            LineItem::Frame(Frame {
+                seq: 3,
+                message: Message::Time { ticks: 200, .. }
+            })
+        ));
+        let fed = read_item(&mut sonar, &mut nbuf, &mut ndec).await;
+        let LineItem::Nmea(firmware_protocol::Sentence::Dbt(dbt)) = fed else {
+            panic!("expected the fed DBT, got {fed:?}")
+        };
+        assert_eq!(
+            dbt.metres.map(|m| m.tenths()),
+            Some(25),
+            "transducer 1's logged 2.5 m"
+        );
+        let mut more = [0u8; 64];
+        let late = tokio::time::timeout(Duration::from_millis(300), sonar.read(&mut more)).await;
+        assert!(
+            nbuf.is_empty() && late.is_err(),
+            "transducer 2's 3.0 m was withheld"
+        );
+        drop(feed);
+
         stop_tx.send(true).unwrap();
         let summary = tokio::time::timeout(Duration::from_secs(1), daemon)
             .await
             .expect("shutdown within 1 s")
             .unwrap()
             .unwrap();
-        assert_eq!(summary.sim_time_s, 1.5);
+        assert_eq!(summary.sim_time_s, 2.0);
         let records = summary.records.unwrap();
         assert!(records.chunks >= 6, "{records:?}");
         assert!(records.states > 0);
