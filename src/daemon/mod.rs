@@ -196,11 +196,15 @@ where
         TimeMode::Lockstep => None,
     };
     let mut next_status = started;
+    // When the loop meant to wake next (wall time since start). Lag is measured against it:
+    // the sleep between wakes is not an overrun, only waking late is.
+    let mut planned_wake = Duration::ZERO;
     let result: Result<(), DaemonError> = async {
         loop {
             if let Some(map) = map.as_mut() {
                 let wall = started.elapsed();
-                if let Some(slip) = map.settle(core.now(), wall) {
+                let reached = core.now().max(map.target(planned_wake));
+                if let Some(slip) = map.settle(reached, wall) {
                     tracing::warn!(
                         slip_ms = slip as f64 * 1e-6,
                         "overrun: simulated time slipped behind the wall clock"
@@ -226,7 +230,9 @@ where
                     let due = core
                         .next_deadline()
                         .map_or(Duration::MAX, |t| map.wall_at(t));
-                    started + due.min(started.elapsed() + IDLE_WAKE)
+                    let due = due.min(started.elapsed() + IDLE_WAKE);
+                    planned_wake = due;
+                    started + due
                 }
                 None => now + STATUS_PERIOD,
             };
@@ -441,6 +447,38 @@ mod tests {
     /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
     /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
     /// the time; shutdown removes the links and finishes the recording.
+    /// Regression: the overrun check compared the time reached at the last wake with the
+    /// target now, so a normal 20 ms idle sleep at speed 10 (200 ms simulated) counted as an
+    /// overrun of more than `max_lag` (100 ms); the map re-anchored at the old time on every
+    /// wake and simulated time never advanced without client traffic.
+    #[tokio::test]
+    async fn realtime_at_speed_10_advances_without_a_client() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-rt10-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut config = config(&dir.join("run"));
+        config.time_mode = TimeMode::Realtime { speed: 10.0 };
+        let (board, mux) = devices();
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let daemon = tokio::spawn(async move {
+            run(
+                &config,
+                FakeModel::default(),
+                board,
+                mux,
+                RunOptions::default(),
+                stop_rx,
+                |_| {},
+            )
+            .await
+        });
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        stop_tx.send(true).unwrap();
+        let summary = daemon.await.unwrap().unwrap();
+        // 10 s in an ideal world; a loaded machine may slip a little (counted overruns).
+        assert!(summary.sim_time_s >= 5.0, "1 s at speed 10: {summary:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[tokio::test]
     async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
         let dir = std::env::temp_dir().join(format!("eyebot-hil-daemon-{}", std::process::id()));
