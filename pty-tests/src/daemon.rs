@@ -476,8 +476,8 @@ impl InProcessDaemon {
         self.run_dir.join(name)
     }
 
-    /// Stops the daemon and returns its summary.
-    pub fn stop(mut self) -> RunSummary {
+    /// Stops the daemon and returns its summary (the test directory stays until `Drop`).
+    pub fn stop(&mut self) -> RunSummary {
         self.stop_inner().expect("daemon was running")
     }
 

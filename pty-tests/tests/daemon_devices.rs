@@ -448,7 +448,7 @@ async fn every_device_answers_over_ptys_in_process() {
         NEAR_WALL,
         ("time_mode = \"realtime\"", "time_mode = \"lockstep\""),
     ]);
-    let daemon = InProcessDaemon::start(dir, &text, None, |_| {});
+    let mut daemon = InProcessDaemon::start(dir, &text, None, |_| {});
     let socket = daemon.status_socket.clone();
     exercise_every_device(&daemon.link("sensor"), &daemon.link("sonar"), &|| {
         status_at(&socket)

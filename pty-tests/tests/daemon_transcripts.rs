@@ -159,7 +159,7 @@ fn in_process_run(tag: &str, seed: u64) -> Transcript {
         ("time_mode = \"realtime\"", "time_mode = \"lockstep\""),
         ("speed = 1.0", "speed = 0.5"),
     ]);
-    let daemon = InProcessDaemon::start(dir, &text, Some(record.clone()), |c| c.seed = seed);
+    let mut daemon = InProcessDaemon::start(dir, &text, Some(record.clone()), |c| c.seed = seed);
     let socket = daemon.status_socket.clone();
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
