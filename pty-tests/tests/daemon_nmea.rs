@@ -87,32 +87,48 @@ async fn dbt_sentences_are_valid_nmea_to_the_nmea_crate() {
     }
 }
 
-/// DPT with empty-field sentences for invalid echoes: fully decoded by the `nmea` crate.
+/// DPT (with a transducer offset): fully decoded by the `nmea` crate.
 #[tokio::test]
 async fn dpt_sentences_decode_with_the_nmea_crate() {
     let daemon = start(
         "nmea-dpt",
         &[
             ("sentence = \"DBT\"", "sentence = \"DPT\""),
-            ("invalid_echo = \"omit\"", "invalid_echo = \"empty\""),
             ("dpt_offset_m = 0.0", "dpt_offset_m = 0.3"),
         ],
     );
     let sentences = collect_sentences(&daemon).await;
-    let (mut valid, mut empty) = (0, 0);
+    assert!(sentences.len() >= 4, "{sentences:?}");
     for s in &sentences {
         match nmea::parse_str(s) {
-            Ok(nmea::ParseResult::DPT(dpt)) => match dpt.water_depth {
-                Some(depth) => {
-                    assert!((0.3..=5.0).contains(&depth), "{s}");
-                    assert_eq!(dpt.offset, Some(0.3), "{s}");
-                    valid += 1;
-                }
-                None => empty += 1,
-            },
+            Ok(nmea::ParseResult::DPT(dpt)) => {
+                let depth = dpt.water_depth.expect("omit policy: only valid echoes");
+                assert!((0.3..=5.0).contains(&depth), "{s}");
+                assert_eq!(dpt.offset, Some(0.3), "{s}");
+            }
             other => panic!("nmea rejected {s:?}: {other:?}"),
         }
     }
-    assert!(valid >= 2, "echoes from the wall: {sentences:?}");
+}
+
+/// `invalid_echo = "empty"` should send a sentence with empty fields for each ping without a
+/// valid echo (the bow transducers here see no wall). It sends nothing: `MakoPlant` only
+/// turns the sonar model's valid ranges into readings (`sensors::SonarEvent` has no event
+/// for a ping without an echo), so the multiplexer never sees an invalid echo.
+#[tokio::test]
+#[ignore = "known bug: the sonar model reports no invalid echoes, so invalid_echo = \"empty\" has no effect"]
+async fn invalid_echoes_give_empty_sentences_that_the_nmea_crate_accepts() {
+    let daemon = start(
+        "nmea-empty",
+        &[
+            ("sentence = \"DBT\"", "sentence = \"DPT\""),
+            ("invalid_echo = \"omit\"", "invalid_echo = \"empty\""),
+        ],
+    );
+    let sentences = collect_sentences(&daemon).await;
+    let empty = sentences
+        .iter()
+        .filter(|s| matches!(nmea::parse_str(s), Ok(nmea::ParseResult::DPT(d)) if d.water_depth.is_none()))
+        .count();
     assert!(empty >= 1, "the bow transducers see no wall: {sentences:?}");
 }

@@ -8,10 +8,10 @@ use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use firmware_protocol::sensor_link::Message;
-use nix::sys::termios::{self, BaudRate, ControlFlags};
 use pty_tests::daemon::{
     DaemonProcess, TestDir, link_status, poll_until, require_tool, sensor_client,
 };
+use std::os::fd::AsRawFd;
 
 /// `socat pty,raw,echo=0,link=A pty,raw,echo=0,link=B`, killed in `Drop`.
 struct Socat {
@@ -100,17 +100,16 @@ async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_v
     );
 
     // termios reached the device: socat made it 38400 baud; the daemon set 115200 8N1.
+    // serialport sets the speed through termios2 (BOTHER), so read it back the same way.
     let device = std::fs::File::open(&a).unwrap();
-    let attrs = termios::tcgetattr(&device).unwrap();
-    assert_eq!(termios::cfgetospeed(&attrs), BaudRate::B115200);
-    assert!(
-        !attrs.control_flags.contains(ControlFlags::CSTOPB),
-        "1 stop bit"
-    );
-    assert!(
-        !attrs.control_flags.contains(ControlFlags::PARENB),
-        "no parity"
-    );
+    // SAFETY: TCGETS2 fills a termios2 struct for a tty descriptor we hold open.
+    let mut t2: libc::termios2 = unsafe { std::mem::zeroed() };
+    let r = unsafe { libc::ioctl(device.as_raw_fd(), libc::TCGETS2 as _, &mut t2) };
+    assert_eq!(r, 0, "TCGETS2 on {}", a.display());
+    assert_eq!((t2.c_ospeed, t2.c_ispeed), (115_200, 115_200), "baud");
+    assert_eq!(t2.c_cflag & libc::CSIZE, libc::CS8, "8 data bits");
+    assert_eq!(t2.c_cflag & libc::CSTOPB, 0, "1 stop bit");
+    assert_eq!(t2.c_cflag & libc::PARENB, 0, "no parity");
     drop(device);
 
     hello(&b).await;
@@ -121,7 +120,10 @@ async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_v
     daemon.wait_status(Duration::from_secs(10), "the lost device noticed", |s| {
         link_status(s, "sensor").errors > 0 || !a.exists()
     });
-    // ...and comes back under the same name.
+    // ...and comes back under the same name (socat killed with SIGKILL leaves its links).
+    let _ = std::fs::remove_file(&a);
+    let _ = std::fs::remove_file(&b);
+    // Same names, new devices.
     let _socat = Socat::start(&a, &b);
     let s = daemon.wait_status(Duration::from_secs(15), "a reconnect", |s| {
         link_status(s, "sensor").reconnects > 0
