@@ -66,6 +66,8 @@ fn pty_echo_baseline() -> Vec<f64> {
             master.read_exact(&mut req).unwrap();
             master.write_all(&[0u8; 10]).unwrap();
         }
+        // Closing the master hangs up the slave: keep it until the last reply is read.
+        master
     });
     let mut reply = [0u8; 10];
     let mut out = Vec::new();
@@ -77,7 +79,7 @@ fn pty_echo_baseline() -> Vec<f64> {
             out.push(t.elapsed().as_secs_f64() * 1e6);
         }
     }
-    echo.join().unwrap();
+    drop(echo.join().unwrap());
     out
 }
 
@@ -109,6 +111,7 @@ fn adc() {
     let mut overhead: Vec<f64> = latency.iter().map(|l| l - wire_us).collect();
     let (l50, l99, lmax) = summary(&mut latency);
     let (o50, o99, omax) = summary(&mut overhead);
+    let o90 = percentile(&overhead, 0.90);
     let mut baseline = baseline;
     let (b50, b99, bmax) = summary(&mut baseline);
     println!("adc read over a pty, 115200 baud, {ROUNDS} requests (after {WARMUP} warm-up)");
