@@ -93,6 +93,10 @@ struct LineRuntime {
     describe: String,
     to_link: mpsc::Sender<Bytes>,
     counters: Arc<LinkCounters>,
+    /// Released bytes the link task has not taken yet, sent as one chunk when it has room.
+    backlog: bytes::BytesMut,
+    /// Beyond this many waiting bytes the client is taken for not reading: drop and count.
+    backlog_limit: usize,
 }
 
 /// Runs the bridge until `shutdown` turns true.
@@ -177,6 +181,8 @@ where
             describe,
             to_link: out_tx,
             counters,
+            backlog: bytes::BytesMut::new(),
+            backlog_limit: specs[index].tx_queue_bytes,
         });
     }
     drop(in_tx);
@@ -213,7 +219,7 @@ where
                 }
                 core.advance_to(map.target(wall)).map_err(model_error)?;
             }
-            flush_outputs(&mut core, &lines);
+            flush_outputs(&mut core, &mut lines);
             let now = Instant::now();
             if now >= next_status {
                 status_tx.send_replace(snapshot(
@@ -260,7 +266,7 @@ where
 
     // Shut down: flush what is due, stop the link tasks (they remove their symlinks), finish
     // the recording, remove the pid file.
-    flush_outputs(&mut core, &lines);
+    flush_outputs(&mut core, &mut lines);
     let sim_time_s = core.now() as f64 * 1e-9;
     let overruns = map.as_ref().map_or(0, RealtimeMap::overruns);
     drop(lines);
@@ -338,6 +344,9 @@ impl PreciseTimer {
         };
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {
+            // Already due: still take part in tokio's cooperative budget, as tokio's own
+            // sleep does, so a loop that keeps running late cannot starve the link tasks.
+            tokio::task::consume_budget().await;
             return;
         }
         let armed = fd.get_ref().0.set(
@@ -375,13 +384,30 @@ fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonErro
     DaemonError::Model(Box::new(e))
 }
 
-fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &[LineRuntime]) {
-    for (index, line) in lines.iter().enumerate() {
+/// Hands released bytes to the link tasks. Paced bytes are released a few at a time, so the
+/// hand-over channel (counted in chunks) fills after a short stall of the link task even
+/// when the client reads: bytes that do not fit wait in the line's backlog and go as one
+/// chunk next time. Only a backlog beyond the line's `tx_queue_bytes` (a client that does
+/// not read, or is gone) is dropped and counted; the daemon never blocks on a client.
+fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &mut [LineRuntime]) {
+    for (index, line) in lines.iter_mut().enumerate() {
         while let Some(data) = core.take_output(index) {
-            let len = data.len();
-            if line.to_link.try_send(data).is_err() {
-                // The EyeBot side is not reading (or is gone): drop and count, never block.
-                core.note_dropped(index, len);
+            line.backlog.extend_from_slice(&data);
+        }
+        if line.backlog.is_empty() {
+            continue;
+        }
+        let chunk = line.backlog.split().freeze();
+        match line.to_link.try_send(chunk) {
+            Ok(()) => {}
+            Err(mpsc::error::TrySendError::Full(chunk)) if chunk.len() <= line.backlog_limit => {
+                line.backlog.extend_from_slice(&chunk);
+            }
+            Err(e) => {
+                let chunk = match e {
+                    mpsc::error::TrySendError::Full(c) | mpsc::error::TrySendError::Closed(c) => c,
+                };
+                core.note_dropped(index, chunk.len());
             }
         }
     }
@@ -538,6 +564,64 @@ mod tests {
     /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
     /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
     /// the time; shutdown removes the links and finishes the recording.
+    /// Regression: every released chunk went to the link task's channel (64 chunks) and was
+    /// dropped when the channel was full. Paced bytes are released a few at a time, so a link
+    /// task that stalled for a few ms lost bytes of a client that was reading (33,318 bytes
+    /// in the one-hour run at speed 100 of `bench daemon rss`). Now they wait in a backlog.
+    #[test]
+    fn released_bytes_wait_for_a_busy_link_task_instead_of_being_dropped() {
+        use crate::daemon::core::Carries;
+        let (board, mux) = devices();
+        let spec = |name, sonar, baud| LineSpec {
+            name,
+            carries: Carries {
+                sonar,
+                sensor: !sonar,
+            },
+            settings: crate::transport::LineSettings::n81(baud),
+            tx_queue_bytes: 4096,
+        };
+        let specs = [spec("sonar", true, 4800), spec("sensor", false, 115_200)];
+        let mut core = Core::new(FakeModel::default(), board, mux, &specs, false);
+        // A link task that takes one chunk and then stalls: a channel with room for one.
+        let (sonar_tx, _sonar_rx) = mpsc::channel(1);
+        let (sensor_tx, mut sensor_rx) = mpsc::channel(1);
+        let runtime = |name, to_link| LineRuntime {
+            name,
+            describe: String::new(),
+            to_link,
+            counters: Arc::default(),
+            backlog: bytes::BytesMut::new(),
+            backlog_limit: 4096,
+        };
+        let mut lines = vec![runtime("sonar", sonar_tx), runtime("sensor", sensor_tx)];
+        let mut stream = BytesMut::new();
+        Frame::new(
+            1,
+            Message::AdcStream {
+                channels: 0b1,
+                period_ms: 10,
+            },
+        )
+        .encode(&mut stream);
+        core.receive(1, &stream).unwrap();
+        let mut delivered = 0;
+        for step in 1..=100u64 {
+            core.advance_to(step * 10_000_000).unwrap();
+            flush_outputs(&mut core, &mut lines);
+            if step % 25 == 0 {
+                // The link task catches up now and then.
+                while let Ok(chunk) = sensor_rx.try_recv() {
+                    delivered += chunk.len();
+                    flush_outputs(&mut core, &mut lines);
+                }
+            }
+        }
+        assert_eq!(core.line_counters(1).dropped_tx, 0);
+        // The ACK and about 100 samples of 14 bytes, all delivered.
+        assert!(delivered > 1300, "{delivered} bytes delivered");
+    }
+
     /// Regression: the overrun check compared the time reached at the last wake with the
     /// target now, so a normal 20 ms idle sleep at speed 10 (200 ms simulated) counted as an
     /// overrun of more than `max_lag` (100 ms); the map re-anchored at the old time on every
