@@ -97,6 +97,13 @@ fn shutdown_loses_nothing(signal: Signal, tag: &str) {
         written.extend_from_slice(&frame);
         std::thread::sleep(Duration::from_millis(1));
     }
+    // A last burst, back to back, with the signal straight after it.
+    for _ in 0..50 {
+        seq = seq.wrapping_add(1);
+        let frame = adc_read(seq);
+        sensor.write_all(&frame).unwrap();
+        written.extend_from_slice(&frame);
+    }
     let signalled = Instant::now();
     daemon.signal(signal);
     let exit = daemon

@@ -209,6 +209,14 @@ impl<M: Model> Core<M> {
         result
     }
 
+    /// Records bytes that arrived on `line` but will not be processed (the daemon is
+    /// stopping): the recording still holds every byte the EyeBot sent.
+    pub fn record_unprocessed(&mut self, line: usize, data: &[u8]) {
+        if let (Some(rec), Some(l)) = (&self.recorder, self.lines.get(line)) {
+            rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Rx, data);
+        }
+    }
+
     fn drain_inbox(&mut self, line: usize) -> Result<(), M::Error> {
         loop {
             let l = &mut self.lines[line];

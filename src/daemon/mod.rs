@@ -273,6 +273,12 @@ where
     for task in tasks {
         let _ = tokio::time::timeout(Duration::from_millis(500), task).await;
     }
+    // Input that arrived before the shutdown but was not processed (the loop may stop with
+    // chunks still queued, and the link tasks drain their endpoints as they stop) is
+    // recorded, not acted on: the run is over.
+    while let Ok(inbound) = in_rx.try_recv() {
+        core.record_unprocessed(inbound.line, &inbound.data);
+    }
     status_task.abort();
     let records = match core.take_recorder() {
         Some(recorder) => Some(recorder.finish()?),
