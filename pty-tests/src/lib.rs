@@ -5,9 +5,12 @@
 //! - [`pty`]: ptys made with the bridge's own `PtyMaster`, and a consumer that timestamps
 //!   every read on the slave side.
 //! - [`replay`]: what the replay pty tests share.
+//! - [`daemon`]: the bridge as the built binary or in-process, with a private run directory,
+//!   readiness by its `ready` line, recordings and status helpers.
 //! - [`eyebot_c`]: builds the EyeBot C library and examples (host and 68k) and runs them
 //!   against the daemon.
 
+pub mod daemon;
 pub mod eyebot_c;
 pub mod process;
 pub mod pty;

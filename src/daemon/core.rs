@@ -62,6 +62,10 @@ struct Line {
     counters: LineCounters,
     last_rx_ns: SimNanos,
     idle_flush_ns: u64,
+    /// The decoder consumed garbage it has not reported yet (it reports a run of garbage
+    /// only before the next item, or at the idle flush): the inbox can be empty while a
+    /// report is owed.
+    garbage_pending: bool,
 }
 
 /// A partial message is dropped after this much silence on a line that carries the sensor
@@ -119,6 +123,7 @@ impl<M: Model> Core<M> {
                 outbox: Vec::new(),
                 counters: LineCounters::default(),
                 last_rx_ns: 0,
+                garbage_pending: false,
                 idle_flush_ns: if spec.carries.sensor {
                     SENSOR_IDLE_FLUSH_NS
                 } else {
@@ -282,12 +287,25 @@ impl<M: Model> Core<M> {
         result
     }
 
+    /// Records bytes that arrived on `line` but will not be processed (the daemon is
+    /// stopping): the recording still holds every byte the EyeBot sent.
+    pub fn record_unprocessed(&mut self, line: usize, data: &[u8]) {
+        if let (Some(rec), Some(l)) = (&self.recorder, self.lines.get(line)) {
+            rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Rx, data);
+        }
+    }
+
     fn drain_inbox(&mut self, line: usize) -> Result<(), M::Error> {
         loop {
             let l = &mut self.lines[line];
+            let before = l.inbox.len();
             let Some(item) = l.decoder.decode(&mut l.inbox) else {
+                // Bytes consumed without an item: garbage, counted inside the decoder.
+                l.garbage_pending |= l.inbox.len() < before;
                 return Ok(());
             };
+            // The decoder reports pending garbage before any other item.
+            l.garbage_pending = false;
             self.route(line, item)?;
         }
     }
@@ -371,7 +389,9 @@ impl<M: Model> Core<M> {
                 .lines
                 .iter()
                 .enumerate()
-                .filter(|(i, l)| !l.inbox.is_empty() && self.receiving != Some(*i))
+                .filter(|(i, l)| {
+                    (!l.inbox.is_empty() || l.garbage_pending) && self.receiving != Some(*i)
+                })
                 .map(|(_, l)| l)
                 .map(|l| l.last_rx_ns + l.idle_flush_ns);
             let next = [
@@ -402,11 +422,12 @@ impl<M: Model> Core<M> {
         for line in 0..self.lines.len() {
             let l = &self.lines[line];
             if self.receiving == Some(line)
-                || l.inbox.is_empty()
+                || (l.inbox.is_empty() && !l.garbage_pending)
                 || self.now < l.last_rx_ns + l.idle_flush_ns
             {
                 continue;
             }
+            self.lines[line].garbage_pending = false;
             loop {
                 let l = &mut self.lines[line];
                 let Some(item) = l.decoder.decode_eof(&mut l.inbox) else {
@@ -816,6 +837,29 @@ mod tests {
             "transducer 2's 3.0 m is withheld; the last, unmapped one goes out after its wait"
         );
         assert_eq!(c.mux_counters().fed_withheld, 1);
+    }
+
+    /// Regression: garbage after the last frame was consumed by the decoder (which reports a
+    /// run of garbage only before the next item) and, with the inbox empty, the idle flush
+    /// never ran: the error was never counted while the EyeBot stayed quiet.
+    #[test]
+    fn trailing_garbage_is_reported_after_the_idle_limit() {
+        let mut c = core(false, false);
+        let mut input = frame_bytes(1, Message::TimeGet);
+        input.extend_from_slice(b"\x00\x01garbage");
+        c.receive(1, &input).unwrap();
+        assert_eq!(c.line_counters(1).frames_rx, 1);
+        assert_eq!(
+            c.line_counters(1).errors,
+            0,
+            "not reported before the idle limit"
+        );
+        c.advance_to(SENSOR_IDLE_FLUSH_NS + MS).unwrap();
+        assert_eq!(
+            c.line_counters(1).errors,
+            1,
+            "one report for the run of garbage"
+        );
     }
 
     #[test]

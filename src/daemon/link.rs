@@ -23,6 +23,8 @@ use crate::transport::{LineSettings, serial};
 pub const REOPEN_BACKOFF_MIN: Duration = Duration::from_millis(100);
 /// The longest wait between reopen attempts.
 pub const REOPEN_BACKOFF_MAX: Duration = Duration::from_secs(2);
+/// At shutdown, input is read until the endpoint stays quiet this long.
+pub const SHUTDOWN_DRAIN: Duration = Duration::from_millis(10);
 /// Chunks the core may have handed over but the endpoint has not yet written.
 pub const TX_CHANNEL_CHUNKS: usize = 64;
 
@@ -298,11 +300,30 @@ async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
         }
         Pumped::Shutdown
     };
-    tokio::select! {
+    let outcome = tokio::select! {
         r = reader => r,
         w = writer => w,
         _ = shutdown.changed() => Pumped::Shutdown,
+    };
+    if outcome == Pumped::Shutdown {
+        // What the EyeBot side wrote before the shutdown is still taken, so the recording
+        // holds it: read until the endpoint has nothing more for a moment.
+        let mut buf = vec![0u8; 4096];
+        while let Ok(Ok(n)) = tokio::time::timeout(SHUTDOWN_DRAIN, rd.read(&mut buf)).await {
+            if n == 0 {
+                break;
+            }
+            counters.bytes_rx.fetch_add(n as u64, Ordering::Relaxed);
+            let inbound = Inbound {
+                line,
+                data: Bytes::copy_from_slice(&buf[..n]),
+            };
+            if to_core.try_send(inbound).is_err() {
+                break;
+            }
+        }
     }
+    outcome
 }
 
 #[cfg(test)]
@@ -389,6 +410,30 @@ mod tests {
             std::fs::symlink_metadata(&path).is_err(),
             "symlink removed at shutdown"
         );
+    }
+
+    /// Regression: bytes the EyeBot wrote just before shutdown were lost when the task's
+    /// select picked the shutdown over the pending read (and so never reached the
+    /// recording). The task now drains its endpoint as it stops.
+    #[tokio::test]
+    async fn bytes_written_just_before_shutdown_still_reach_the_core() {
+        for round in 0..20 {
+            let mut run = start(&format!("drain{round}")).await;
+            let mut client = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&run.client_path)
+                .unwrap();
+            // The shutdown is signalled before the link task has run at all.
+            client.write_all(b"#S2\r").unwrap();
+            run.stop.send(true).unwrap();
+            tokio::time::timeout(Duration::from_secs(1), run.task)
+                .await
+                .expect("link task ends")
+                .unwrap();
+            let got = run.to_core.try_recv().map(|i| i.data.to_vec());
+            assert_eq!(got.as_deref(), Ok(&b"#S2\r"[..]), "round {round}");
+        }
     }
 
     /// A client that opens the line but never reads must not wedge the daemon: the hand-over

@@ -96,6 +96,10 @@ struct LineRuntime {
     describe: String,
     to_link: mpsc::Sender<Bytes>,
     counters: Arc<LinkCounters>,
+    /// Released bytes the link task has not taken yet, sent as one chunk when it has room.
+    backlog: bytes::BytesMut,
+    /// Beyond this many waiting bytes the client is taken for not reading: drop and count.
+    backlog_limit: usize,
 }
 
 /// Runs the bridge until `shutdown` turns true.
@@ -185,6 +189,8 @@ where
             describe,
             to_link: out_tx,
             counters,
+            backlog: bytes::BytesMut::new(),
+            backlog_limit: specs[index].tx_queue_bytes,
         });
     }
     drop(in_tx);
@@ -211,11 +217,16 @@ where
         TimeMode::Lockstep => None,
     };
     let mut next_status = started;
+    // When the loop meant to wake next (wall time since start). Lag is measured against it:
+    // the sleep between wakes is not an overrun, only waking late is.
+    let mut planned_wake = Duration::ZERO;
+    let timer = PreciseTimer::new();
     let result: Result<(), DaemonError> = async {
         loop {
             if let Some(map) = map.as_mut() {
                 let wall = started.elapsed();
-                if let Some(slip) = map.settle(core.now(), wall) {
+                let reached = core.now().max(map.target(planned_wake));
+                if let Some(slip) = map.settle(reached, wall) {
                     tracing::warn!(
                         slip_ms = slip as f64 * 1e-6,
                         "overrun: simulated time slipped behind the wall clock"
@@ -223,7 +234,7 @@ where
                 }
                 core.advance_to(map.target(wall)).map_err(model_error)?;
             }
-            flush_outputs(&mut core, &lines);
+            flush_outputs(&mut core, &mut lines);
             let now = Instant::now();
             if now >= next_status {
                 status_tx.send_replace(snapshot(
@@ -241,7 +252,9 @@ where
                     let due = core
                         .next_deadline()
                         .map_or(Duration::MAX, |t| map.wall_at(t));
-                    started + due.min(started.elapsed() + IDLE_WAKE)
+                    let due = due.min(started.elapsed() + IDLE_WAKE);
+                    planned_wake = due;
+                    started + due
                 }
                 None => now + STATUS_PERIOD,
             };
@@ -265,7 +278,7 @@ where
                         feed::FeedEvent::Closed => core.set_feed_connected(false),
                     }
                 }
-                _ = tokio::time::sleep_until(wake) => {}
+                _ = timer.sleep_until(wake) => {}
                 changed = shutdown.changed() => {
                     if changed.is_err() || *shutdown.borrow() {
                         return Ok(());
@@ -278,12 +291,18 @@ where
 
     // Shut down: flush what is due, stop the link tasks (they remove their symlinks), finish
     // the recording, remove the pid file.
-    flush_outputs(&mut core, &lines);
+    flush_outputs(&mut core, &mut lines);
     let sim_time_s = core.now() as f64 * 1e-9;
     let overruns = map.as_ref().map_or(0, RealtimeMap::overruns);
     drop(lines);
     for task in tasks {
         let _ = tokio::time::timeout(Duration::from_millis(500), task).await;
+    }
+    // Input that arrived before the shutdown but was not processed (the loop may stop with
+    // chunks still queued, and the link tasks drain their endpoints as they stop) is
+    // recorded, not acted on: the run is over.
+    while let Ok(inbound) = in_rx.try_recv() {
+        core.record_unprocessed(inbound.line, &inbound.data);
     }
     status_task.abort();
     let _ = tokio::time::timeout(Duration::from_millis(200), feed_task).await;
@@ -300,17 +319,127 @@ where
     })
 }
 
+/// Sleeps until a deadline with the precision of a Linux timerfd.
+///
+/// tokio's timer wheel rounds every deadline up to the next millisecond, so a paced byte
+/// (86.8 us at 115200 baud) would leave up to 1 ms after its wire time and an ADC reply
+/// would take about 1.2 ms instead of 0.87 ms. The timerfd wakes within microseconds. tokio's
+/// sleep still runs alongside, so a test that pauses tokio's clock wakes as before, and
+/// if the timerfd cannot be created or armed the daemon falls back to tokio's timer alone.
+struct PreciseTimer {
+    fd: Option<tokio::io::unix::AsyncFd<TimerFd>>,
+}
+
+struct TimerFd(nix::sys::timerfd::TimerFd);
+
+impl std::os::fd::AsRawFd for TimerFd {
+    fn as_raw_fd(&self) -> std::os::fd::RawFd {
+        use std::os::fd::AsFd;
+        self.0.as_fd().as_raw_fd()
+    }
+}
+
+impl PreciseTimer {
+    fn new() -> Self {
+        use nix::sys::timerfd::{ClockId, TimerFlags};
+        let fd = nix::sys::timerfd::TimerFd::new(
+            ClockId::CLOCK_MONOTONIC,
+            TimerFlags::TFD_NONBLOCK | TimerFlags::TFD_CLOEXEC,
+        )
+        .map_err(std::io::Error::from)
+        .and_then(|fd| {
+            // SAFETY: the timerfd is a valid open descriptor owned by the `TimerFd`, which
+            // returns the same descriptor from `as_raw_fd` for as long as the `AsyncFd` owns it.
+            unsafe {
+                tokio::io::unix::AsyncFd::register_with_interest(
+                    TimerFd(fd),
+                    tokio::io::Interest::READABLE,
+                )
+            }
+            .map_err(std::io::Error::from)
+        });
+        match fd {
+            Ok(fd) => Self { fd: Some(fd) },
+            Err(error) => {
+                tracing::warn!(%error, "no timerfd; timing falls back to tokio's 1 ms timer");
+                Self { fd: None }
+            }
+        }
+    }
+
+    async fn sleep_until(&self, deadline: Instant) {
+        use nix::sys::time::TimeSpec;
+        use nix::sys::timerfd::{Expiration, TimerSetTimeFlags};
+        let coarse = tokio::time::sleep_until(deadline);
+        let Some(fd) = &self.fd else {
+            return coarse.await;
+        };
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            // Already due: still take part in tokio's cooperative budget, as tokio's own
+            // sleep does, so a loop that keeps running late cannot starve the link tasks.
+            tokio::task::consume_budget().await;
+            return;
+        }
+        let armed = fd.get_ref().0.set(
+            Expiration::OneShot(TimeSpec::from_duration(left)),
+            TimerSetTimeFlags::empty(),
+        );
+        if armed.is_err() {
+            return coarse.await;
+        }
+        let fine = async {
+            loop {
+                let Ok(mut guard) = fd.readable().await else {
+                    return std::future::pending::<()>().await;
+                };
+                let mut expirations = [0u8; 8];
+                match guard.try_io(|f| {
+                    nix::unistd::read(&f.get_ref().0, &mut expirations)
+                        .map_err(std::io::Error::from)
+                }) {
+                    // Expired (an expiry left over from an earlier, abandoned sleep only
+                    // makes the loop wake once early, which it tolerates).
+                    Ok(_) => return,
+                    Err(_would_block) => continue,
+                }
+            }
+        };
+        tokio::select! {
+            _ = fine => {}
+            _ = coarse => {}
+        }
+    }
+}
+
 fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonError {
     DaemonError::Model(Box::new(e))
 }
 
-fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &[LineRuntime]) {
-    for (index, line) in lines.iter().enumerate() {
+/// Hands released bytes to the link tasks. Paced bytes are released a few at a time, so the
+/// hand-over channel (counted in chunks) fills after a short stall of the link task even
+/// when the client reads: bytes that do not fit wait in the line's backlog and go as one
+/// chunk next time. Only a backlog beyond the line's `tx_queue_bytes` (a client that does
+/// not read, or is gone) is dropped and counted; the daemon never blocks on a client.
+fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &mut [LineRuntime]) {
+    for (index, line) in lines.iter_mut().enumerate() {
         while let Some(data) = core.take_output(index) {
-            let len = data.len();
-            if line.to_link.try_send(data).is_err() {
-                // The EyeBot side is not reading (or is gone): drop and count, never block.
-                core.note_dropped(index, len);
+            line.backlog.extend_from_slice(&data);
+        }
+        if line.backlog.is_empty() {
+            continue;
+        }
+        let chunk = line.backlog.split().freeze();
+        match line.to_link.try_send(chunk) {
+            Ok(()) => {}
+            Err(mpsc::error::TrySendError::Full(chunk)) if chunk.len() <= line.backlog_limit => {
+                line.backlog.extend_from_slice(&chunk);
+            }
+            Err(e) => {
+                let chunk = match e {
+                    mpsc::error::TrySendError::Full(c) | mpsc::error::TrySendError::Closed(c) => c,
+                };
+                core.note_dropped(index, chunk.len());
             }
         }
     }
@@ -467,6 +596,96 @@ mod tests {
     /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
     /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
     /// the time; shutdown removes the links and finishes the recording.
+    /// Regression: every released chunk went to the link task's channel (64 chunks) and was
+    /// dropped when the channel was full. Paced bytes are released a few at a time, so a link
+    /// task that stalled for a few ms lost bytes of a client that was reading (33,318 bytes
+    /// in the one-hour run at speed 100 of `bench daemon rss`). Now they wait in a backlog.
+    #[test]
+    fn released_bytes_wait_for_a_busy_link_task_instead_of_being_dropped() {
+        use crate::daemon::core::Carries;
+        let (board, mux) = devices();
+        let spec = |name, sonar, baud| LineSpec {
+            name,
+            carries: Carries {
+                sonar,
+                sensor: !sonar,
+            },
+            settings: crate::transport::LineSettings::n81(baud),
+            tx_queue_bytes: 4096,
+        };
+        let specs = [spec("sonar", true, 4800), spec("sensor", false, 115_200)];
+        let mut core = Core::new(FakeModel::default(), board, mux, &specs, false);
+        // A link task that takes one chunk and then stalls: a channel with room for one.
+        let (sonar_tx, _sonar_rx) = mpsc::channel(1);
+        let (sensor_tx, mut sensor_rx) = mpsc::channel(1);
+        let runtime = |name, to_link| LineRuntime {
+            name,
+            describe: String::new(),
+            to_link,
+            counters: Arc::default(),
+            backlog: bytes::BytesMut::new(),
+            backlog_limit: 4096,
+        };
+        let mut lines = vec![runtime("sonar", sonar_tx), runtime("sensor", sensor_tx)];
+        let mut stream = BytesMut::new();
+        Frame::new(
+            1,
+            Message::AdcStream {
+                channels: 0b1,
+                period_ms: 10,
+            },
+        )
+        .encode(&mut stream);
+        core.receive(1, &stream).unwrap();
+        let mut delivered = 0;
+        for step in 1..=100u64 {
+            core.advance_to(step * 10_000_000).unwrap();
+            flush_outputs(&mut core, &mut lines);
+            if step % 25 == 0 {
+                // The link task catches up now and then.
+                while let Ok(chunk) = sensor_rx.try_recv() {
+                    delivered += chunk.len();
+                    flush_outputs(&mut core, &mut lines);
+                }
+            }
+        }
+        assert_eq!(core.line_counters(1).dropped_tx, 0);
+        // The ACK and about 100 samples of 14 bytes, all delivered.
+        assert!(delivered > 1300, "{delivered} bytes delivered");
+    }
+
+    /// Regression: the overrun check compared the time reached at the last wake with the
+    /// target now, so a normal 20 ms idle sleep at speed 10 (200 ms simulated) counted as an
+    /// overrun of more than `max_lag` (100 ms); the map re-anchored at the old time on every
+    /// wake and simulated time never advanced without client traffic.
+    #[tokio::test]
+    async fn realtime_at_speed_10_advances_without_a_client() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-rt10-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut config = config(&dir.join("run"));
+        config.time_mode = TimeMode::Realtime { speed: 10.0 };
+        let (board, mux) = devices();
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let daemon = tokio::spawn(async move {
+            run(
+                &config,
+                FakeModel::default(),
+                board,
+                mux,
+                RunOptions::default(),
+                stop_rx,
+                |_| {},
+            )
+            .await
+        });
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        stop_tx.send(true).unwrap();
+        let summary = daemon.await.unwrap().unwrap();
+        // 10 s in an ideal world; a loaded machine may slip a little (counted overruns).
+        assert!(summary.sim_time_s >= 5.0, "1 s at speed 10: {summary:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[tokio::test]
     async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
         let dir = std::env::temp_dir().join(format!("eyebot-hil-daemon-{}", std::process::id()));

@@ -261,7 +261,13 @@ impl Plant for MakoPlant {
     fn sonar_timeout(&self) -> Option<SimNanos> {
         let queued = self.sonar_events.iter().map(|e| ns(e.t_s())).min();
         let model = self.sensors.sonar.poll_timeout().map(ns);
-        queued.into_iter().chain(model).min()
+        // A ping's sentence is only known after the physics step that covers the ping, and
+        // is due `sentence_latency_s` later. Without this deadline a realtime bridge with no
+        // other traffic stepped only on its idle wake (20 ms wall = 200 ms simulated at speed
+        // 10), found sentences already past due and sent them in one burst.
+        let ping = ns(self.sensors.sonar.next_ping_s());
+        let covering_step = ping.div_ceil(self.step_ns.max(1)) * self.step_ns.max(1);
+        queued.into_iter().chain(model).chain([covering_step]).min()
     }
 }
 
@@ -305,4 +311,54 @@ pub fn devices(config: &DaemonConfig) -> (SensorBoard, Multiplexer) {
         sonar_on_this_line: shared,
     });
     (board, Multiplexer::new(config.multiplexer.clone()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{DEFAULT_CONFIG, Document, Embedded};
+    use crate::daemon::core::{Carries, Core, LineSpec};
+    use crate::transport::LineSettings;
+
+    /// Regression: a ping's sentence is known only after the physics step that covers the
+    /// ping, and no deadline announced that step. A realtime bridge with no other traffic
+    /// stepped only on its idle wake (200 ms simulated at speed 10), found each sentence
+    /// already past due and wrote all its bytes at once instead of one per character time.
+    #[test]
+    fn sonar_sentences_leave_byte_by_byte_when_the_bridge_steps_only_to_its_deadlines() {
+        let text = Embedded.read(DEFAULT_CONFIG).unwrap();
+        let mut config = DaemonConfig::resolve(&Document::new("default", &text)).unwrap();
+        // 1.5 m off the west wall: the port transducers see it.
+        config.start.position_m = nalgebra::Vector3::new(3.0, 1.5, 0.5);
+        let plant = MakoPlant::from_config(&Embedded, &config).unwrap();
+        let (board, mux) = devices(&config);
+        let lines = [LineSpec {
+            name: "sonar",
+            carries: Carries {
+                sonar: true,
+                sensor: false,
+            },
+            settings: LineSettings::n81(4800),
+            tx_queue_bytes: 4096,
+        }];
+        let mut core = Core::new(plant, board, mux, &lines, false);
+        core.receive(0, b"@S1\r").unwrap();
+        // The daemon's realtime loop at speed 10: wake at the next deadline, or after the
+        // idle wake of 20 ms wall = 200 ms simulated.
+        let (mut sentences, mut largest_chunk) = (0, 0);
+        while core.now() < 20_000_000_000 {
+            let idle = core.now() + 200_000_000;
+            core.advance_to(core.next_deadline().map_or(idle, |d| d.min(idle)))
+                .unwrap();
+            if let Some(out) = core.take_output(0) {
+                if out.starts_with(b"@A") {
+                    continue;
+                }
+                largest_chunk = largest_chunk.max(out.len());
+                sentences += out.iter().filter(|&&b| b == b'\n').count();
+            }
+        }
+        assert!(sentences >= 2, "the wall gave {sentences} sentences");
+        assert_eq!(largest_chunk, 1, "sentence bytes were released in bursts");
+    }
 }

@@ -1,0 +1,364 @@
+//! Daemon benchmarks against the built binary (release profile), printed as plain figures:
+//!
+//! - `adc`: ADC read over a pty at 115200 baud, request to complete reply, minus the
+//!   modelled wire time of the reply; baseline: a raw pty echo round trip in the same run.
+//! - `nmea`: real-time NMEA emission jitter: arrival of each sentence's last byte against
+//!   the sonar's ping schedule mapped to wall time.
+//! - `cpu`: daemon CPU idle and under a 100 Hz ADC stream, from /proc/PID/stat.
+//! - `rss`: resident memory over one simulated hour at speed 100 with a client.
+//!
+//! `cargo bench -p pty-tests --bench daemon [-- adc|nmea|cpu|rss]` (all by default).
+
+use std::io::{Read, Write};
+use std::os::fd::AsFd;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use bytes::BytesMut;
+use firmware_protocol::Frame;
+use firmware_protocol::sensor_link::{AdcChannel, Message};
+use nix::sys::termios;
+use pty_tests::daemon::{DaemonProcess, TestDir, link_status};
+
+fn open_raw(path: &Path) -> std::fs::File {
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
+}
+
+fn frame(seq: u8, message: Message) -> Vec<u8> {
+    let mut b = BytesMut::new();
+    Frame::new(seq, message).encode(&mut b);
+    b.to_vec()
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
+    sorted[i]
+}
+
+fn summary(values: &mut [f64]) -> (f64, f64, f64) {
+    values.sort_by(f64::total_cmp);
+    (
+        percentile(values, 0.5),
+        percentile(values, 0.99),
+        values[values.len() - 1],
+    )
+}
+
+const ROUNDS: usize = 2000;
+const WARMUP: usize = 100;
+
+/// Request/response over a raw pty pair, echoed by a thread: what the kernel and two
+/// context switches cost, with no daemon.
+fn pty_echo_baseline() -> Vec<f64> {
+    let pair = nix::pty::openpty(None, None).expect("openpty");
+    let mut attrs = termios::tcgetattr(&pair.slave).unwrap();
+    termios::cfmakeraw(&mut attrs);
+    termios::tcsetattr(&pair.slave, termios::SetArg::TCSANOW, &attrs).unwrap();
+    let mut master = std::fs::File::from(pair.master);
+    let mut slave = std::fs::File::from(pair.slave);
+    let echo = std::thread::spawn(move || {
+        let mut req = [0u8; 8];
+        for _ in 0..ROUNDS + WARMUP {
+            master.read_exact(&mut req).unwrap();
+            master.write_all(&[0u8; 10]).unwrap();
+        }
+        // Closing the master hangs up the slave: keep it until the last reply is read.
+        master
+    });
+    let mut reply = [0u8; 10];
+    let mut out = Vec::new();
+    for i in 0..ROUNDS + WARMUP {
+        let t = Instant::now();
+        slave.write_all(&[0u8; 8]).unwrap();
+        slave.read_exact(&mut reply).unwrap();
+        if i >= WARMUP {
+            out.push(t.elapsed().as_secs_f64() * 1e6);
+        }
+    }
+    drop(echo.join().unwrap());
+    out
+}
+
+fn adc() {
+    let baseline = pty_echo_baseline();
+    let dir = TestDir::new("bench-adc");
+    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
+    let mut port = open_raw(&daemon.link("sensor"));
+    // ADC_VALUE is 10 bytes: 10 x 10 bits at 115200 baud.
+    let wire_us = 10.0 * 10.0 / 115_200.0 * 1e6;
+    let mut latency = Vec::new();
+    let mut reply = [0u8; 10];
+    for i in 0..ROUNDS + WARMUP {
+        let request = frame(
+            i as u8,
+            Message::AdcRead {
+                channel: AdcChannel::new((i % 8) as u8).unwrap(),
+            },
+        );
+        let t = Instant::now();
+        port.write_all(&request).unwrap();
+        port.read_exact(&mut reply).unwrap();
+        let us = t.elapsed().as_secs_f64() * 1e6;
+        assert_eq!(&reply[..3], &[0xEB, 0x90, 0x90], "an ADC_VALUE reply");
+        if i >= WARMUP {
+            latency.push(us);
+        }
+    }
+    let mut overhead: Vec<f64> = latency.iter().map(|l| l - wire_us).collect();
+    let (l50, l99, lmax) = summary(&mut latency);
+    let (o50, o99, omax) = summary(&mut overhead);
+    let o90 = percentile(&overhead, 0.90);
+    let mut baseline = baseline;
+    let (b50, b99, bmax) = summary(&mut baseline);
+    println!("adc read over a pty, 115200 baud, {ROUNDS} requests (after {WARMUP} warm-up)");
+    println!("  modelled wire time of the 10-byte reply: {wire_us:.1} us");
+    println!("  request -> reply:          p50 {l50:8.1} us  p99 {l99:8.1} us  max {lmax:8.1} us");
+    println!(
+        "  minus wire time:           p50 {o50:8.1} us  p99 {o99:8.1} us  max {omax:8.1} us  (target p99 < 200 us; p90 {o90:.1} us)"
+    );
+    println!("  baseline raw pty echo RTT: p50 {b50:8.1} us  p99 {b99:8.1} us  max {bmax:8.1} us");
+    println!(
+        "  ratio (minus wire) / echo: p50 {:.1}x  p99 {:.1}x",
+        o50 / b50,
+        o99 / b99
+    );
+}
+
+/// Byte arrivals of each NMEA sentence at the client against the wire schedule.
+///
+/// The bridge releases a sentence byte by byte, each when its last bit would have left the
+/// 4800 baud line: byte k of a sentence is due at S + (k + 1) x 2.083 ms / speed. S (when
+/// the sentence went on the wire) is fitted per sentence as the earliest arrival minus its
+/// offset, so every byte's lateness is >= 0 and measured against the best byte of its own
+/// sentence: the jitter of the emission, without the constant pty transfer time.
+fn nmea() {
+    // Speed 1 is what a real EyeBot sees; speed 10 gives ten times the sentences per second.
+    for speed in [1.0, 10.0] {
+        nmea_at(speed, 30.0);
+    }
+}
+
+fn nmea_at(speed: f64, wall_s: f64) {
+    let dir = TestDir::new("bench-nmea");
+    let config = dir.write_config(
+        "near-wall.toml",
+        &[(
+            "position_m = [3.0, 6.25, 0.3]",
+            "position_m = [3.0, 1.5, 0.5]",
+        )],
+    );
+    let daemon = DaemonProcess::start(
+        dir,
+        &[
+            "--config",
+            config.to_str().unwrap(),
+            "--time-mode",
+            "realtime",
+            "--speed",
+            &speed.to_string(),
+        ],
+    );
+    let mut port = open_raw(&daemon.link("sonar"));
+    let mut attrs = termios::tcgetattr(port.as_fd()).unwrap();
+    termios::cfmakeraw(&mut attrs);
+    termios::tcsetattr(port.as_fd(), termios::SetArg::TCSANOW, &attrs).unwrap();
+    port.write_all(b"@S1\r").unwrap();
+    let char_s = 10.0 / 4800.0 / speed;
+    let started = Instant::now();
+    let mut sentences: Vec<Vec<f64>> = Vec::new();
+    let mut current: Option<Vec<f64>> = None;
+    let mut buf = [0u8; 256];
+    while started.elapsed() < Duration::from_secs_f64(wall_s) {
+        let n = port.read(&mut buf).unwrap();
+        let at = started.elapsed().as_secs_f64();
+        for &b in &buf[..n] {
+            if b == b'$' {
+                current = Some(Vec::new());
+            }
+            if let Some(arrivals) = current.as_mut() {
+                arrivals.push(at);
+                if b == b'\n' {
+                    sentences.push(current.take().unwrap());
+                }
+            }
+        }
+    }
+    let mut late_us = Vec::new();
+    for arrivals in &sentences {
+        let offsets: Vec<f64> = arrivals
+            .iter()
+            .enumerate()
+            .map(|(k, t)| t - (k + 1) as f64 * char_s)
+            .collect();
+        let start = offsets.iter().copied().fold(f64::INFINITY, f64::min);
+        late_us.extend(offsets.iter().map(|o| (o - start) * 1e6));
+    }
+    let samples = late_us.len();
+    let (p50, p99, max) = summary(&mut late_us);
+    let s = daemon.status();
+    println!(
+        "nmea emission jitter, realtime speed {speed}, {} sentences ({samples} bytes) over {wall_s} s wall, overruns {}",
+        sentences.len(),
+        s.overruns
+    );
+    println!(
+        "  byte lateness vs wire schedule: p50 {p50:8.1} us  p99 {p99:8.1} us  max {max:8.1} us  (target p99 < 1000 us)"
+    );
+}
+
+fn cpu_percent(daemon: &DaemonProcess, over: Duration) -> f64 {
+    let c0 = daemon.cpu_time();
+    let t0 = Instant::now();
+    std::thread::sleep(over);
+    let used = daemon.cpu_time() - c0;
+    100.0 * used.as_secs_f64() / t0.elapsed().as_secs_f64()
+}
+
+fn cpu() {
+    let dir = TestDir::new("bench-cpu");
+    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
+    std::thread::sleep(Duration::from_secs(1));
+    let interval = Duration::from_secs(10);
+    let idle = cpu_percent(&daemon, interval);
+    let mut port = open_raw(&daemon.link("sensor"));
+    port.write_all(&frame(
+        1,
+        Message::AdcStream {
+            channels: 0xFF,
+            period_ms: 10,
+        },
+    ))
+    .unwrap();
+    let mut reader = port.try_clone().unwrap();
+    let drain = std::thread::spawn(move || {
+        let mut buf = [0u8; 4096];
+        let mut total = 0usize;
+        let started = Instant::now();
+        while started.elapsed() < Duration::from_secs(12) {
+            total += reader.read(&mut buf).unwrap_or(0);
+        }
+        total
+    });
+    std::thread::sleep(Duration::from_secs(1));
+    let streaming = cpu_percent(&daemon, interval);
+    let received = drain.join().unwrap();
+    let s = daemon.status();
+    println!(
+        "daemon CPU over {interval:?} (ticks of {} Hz; /proc/PID/stat utime+stime)",
+        pty_tests::daemon::clock_ticks_per_s()
+    );
+    println!("  idle (realtime, speed 1, no client):          {idle:5.2} % of one core");
+    println!(
+        "  100 Hz ADC stream, 8 channels, client reading: {streaming:5.2} % of one core  ({received} bytes received, {} frames sent)  (target < 5 %)",
+        link_status(&s, "sensor").frames_tx
+    );
+}
+
+fn rss() {
+    let dir = TestDir::new("bench-rss");
+    let record = dir.join("rec");
+    let daemon = DaemonProcess::start(
+        dir,
+        &[
+            "--time-mode",
+            "realtime",
+            "--speed",
+            "100",
+            "--record",
+            record.to_str().unwrap(),
+        ],
+    );
+    let mut port = open_raw(&daemon.link("sensor"));
+    port.write_all(&frame(
+        1,
+        Message::AdcStream {
+            channels: 0b0000_0111,
+            period_ms: 100,
+        },
+    ))
+    .unwrap();
+    let mut sonar = open_raw(&daemon.link("sonar"));
+    sonar.write_all(b"@S3\r").unwrap();
+    let mut readers = Vec::new();
+    for mut f in [port.try_clone().unwrap(), sonar.try_clone().unwrap()] {
+        readers.push(std::thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            let mut total = 0usize;
+            while let Ok(n) = f.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                total += n;
+            }
+            total
+        }));
+    }
+    let mut series = Vec::new();
+    let started = Instant::now();
+    loop {
+        let s = daemon.status();
+        series.push((s.sim_time_s, daemon.rss_kb()));
+        if s.sim_time_s >= 3600.0 || started.elapsed() > Duration::from_secs(60) {
+            break;
+        }
+        std::thread::sleep(Duration::from_secs(2));
+    }
+    let s = daemon.status();
+    // Least-squares slope over the second half (after start-up allocations settle).
+    let half = &series[series.len() / 2..];
+    let n = half.len() as f64;
+    let mx = half.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = half.iter().map(|p| p.1 as f64).sum::<f64>() / n;
+    let sxy: f64 = half.iter().map(|p| (p.0 - mx) * (p.1 as f64 - my)).sum();
+    let sxx: f64 = half.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let slope_kb_per_h = sxy / sxx * 3600.0;
+    println!(
+        "resident memory, realtime speed 100 with a client (ADC stream + sonar) and --record, {:.0} s wall",
+        started.elapsed().as_secs_f64()
+    );
+    println!(
+        "  sim_s:rss_kB  {}",
+        series
+            .iter()
+            .map(|(t, r)| format!("{t:.0}:{r}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    println!(
+        "  first {} kB, last {} kB, slope over the second half {slope_kb_per_h:+.1} kB per simulated hour; overruns {}; sensor tx {} bytes, dropped {}",
+        series[0].1,
+        series[series.len() - 1].1,
+        s.overruns,
+        link_status(&s, "sensor").bytes_tx,
+        link_status(&s, "sensor").dropped_tx
+    );
+    drop(daemon);
+    for r in readers {
+        let _ = r.join();
+    }
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; any other argument picks sections.
+    let picked: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let run = |name: &str| picked.is_empty() || picked.iter().any(|p| p == name);
+    if run("adc") {
+        adc();
+    }
+    if run("nmea") {
+        nmea();
+    }
+    if run("cpu") {
+        cpu();
+    }
+    if run("rss") {
+        rss();
+    }
+}

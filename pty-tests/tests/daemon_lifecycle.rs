@@ -1,0 +1,288 @@
+//! Life cycle of the binary: clean shutdown on SIGTERM/SIGINT loses no recorded byte,
+//! `kill -9` loses at most the last 100 ms, and `eyebot-hil status` reports the run.
+
+use std::io::{Read, Write};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use bytes::BytesMut;
+use eyebot_hil::record::Direction;
+use firmware_protocol::Frame;
+use firmware_protocol::sensor_link::{AdcChannel, Message};
+use nix::sys::signal::Signal;
+use pty_tests::daemon::{DaemonProcess, TestDir, read_chunks, stream};
+
+fn adc_read(seq: u8) -> Vec<u8> {
+    let mut b = BytesMut::new();
+    Frame::new(
+        seq,
+        Message::AdcRead {
+            channel: AdcChannel::new(seq % 8).unwrap(),
+        },
+    )
+    .encode(&mut b);
+    b.to_vec()
+}
+
+/// Opens a link as a raw file (blocking), as a plain C program would.
+fn open_raw(path: &Path) -> std::fs::File {
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
+}
+
+/// Reads everything from `file` on a thread until `stop`; returns the bytes read.
+fn reader(mut file: std::fs::File, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<Vec<u8>> {
+    let fd = std::os::fd::AsRawFd::as_raw_fd(&file);
+    // Poll with a timeout so the thread notices `stop`.
+    std::thread::spawn(move || {
+        let mut got = Vec::new();
+        let mut buf = [0u8; 4096];
+        while !stop.load(Ordering::Relaxed) {
+            let mut fds = [nix::poll::PollFd::new(
+                unsafe { std::os::fd::BorrowedFd::borrow_raw(fd) },
+                nix::poll::PollFlags::POLLIN,
+            )];
+            match nix::poll::poll(&mut fds, 20u16) {
+                Ok(n) if n > 0 => match file.read(&mut buf) {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => got.extend_from_slice(&buf[..n]),
+                },
+                _ => {}
+            }
+        }
+        got
+    })
+}
+
+fn shutdown_loses_nothing(signal: Signal, tag: &str) {
+    let dir = TestDir::new(tag);
+    let record = dir.join("rec");
+    let pid_file = dir.join("eyebot-hil.pid");
+    let mut daemon = DaemonProcess::start(
+        dir,
+        &[
+            "--time-mode",
+            "realtime",
+            "--record",
+            record.to_str().unwrap(),
+            "--pid-file",
+            pid_file.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(
+        std::fs::read_to_string(&pid_file).unwrap().trim(),
+        daemon.pid().to_string()
+    );
+    let mut sensor = open_raw(&daemon.link("sensor"));
+    let mut sonar = open_raw(&daemon.link("sonar"));
+    let stop = Arc::new(AtomicBool::new(false));
+    let sensor_rx = reader(sensor.try_clone().unwrap(), stop.clone());
+    let sonar_rx = reader(sonar.try_clone().unwrap(), stop.clone());
+
+    sonar.write_all(b"@S1\r").unwrap();
+    // Requests back to back for a second (the line is busy), then the signal right after a
+    // write, while replies are still on their way.
+    let mut written = Vec::new();
+    let started = Instant::now();
+    let mut seq = 0u8;
+    while started.elapsed() < Duration::from_millis(1500) {
+        seq = seq.wrapping_add(1);
+        let frame = adc_read(seq);
+        sensor.write_all(&frame).unwrap();
+        written.extend_from_slice(&frame);
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    // A last burst, back to back, with the signal straight after it.
+    for _ in 0..50 {
+        seq = seq.wrapping_add(1);
+        let frame = adc_read(seq);
+        sensor.write_all(&frame).unwrap();
+        written.extend_from_slice(&frame);
+    }
+    let signalled = Instant::now();
+    daemon.signal(signal);
+    let exit = daemon
+        .wait(Duration::from_secs(5))
+        .expect("the daemon exits after the signal");
+    let took = signalled.elapsed();
+    assert!(exit.success(), "{signal}: exit {exit:?}\n{}", daemon.log());
+    assert!(
+        took < Duration::from_secs(1),
+        "{signal}: shutdown took {took:?}"
+    );
+    // Give the readers a moment to take what is still in the ptys, then stop them.
+    std::thread::sleep(Duration::from_millis(100));
+    stop.store(true, Ordering::Relaxed);
+    let sensor_got = sensor_rx.join().unwrap();
+    let sonar_got = sonar_rx.join().unwrap();
+
+    let chunks = read_chunks(&record);
+    let rx = stream(&chunks, "sensor", Direction::Rx);
+    assert!(
+        rx == written,
+        "{signal}: the recording holds {} of the {} bytes the client sent",
+        rx.len(),
+        written.len()
+    );
+    assert_eq!(stream(&chunks, "sonar", Direction::Rx), b"@S1\r");
+    let tx = stream(&chunks, "sensor", Direction::Tx);
+    assert!(
+        sensor_got.len() > 100,
+        "replies arrived: {}",
+        sensor_got.len()
+    );
+    assert!(
+        tx.starts_with(&sensor_got),
+        "{signal}: what the client received ({} bytes) is not what was recorded ({} bytes)",
+        sensor_got.len(),
+        tx.len()
+    );
+    assert!(
+        stream(&chunks, "sonar", Direction::Tx).starts_with(&sonar_got),
+        "sonar bytes received and recorded differ"
+    );
+    // The run directory is clean.
+    for name in ["sonar", "sensor", "status.sock"] {
+        let path = daemon.run_dir.join(name);
+        assert!(
+            std::fs::symlink_metadata(&path).is_err(),
+            "{signal}: {} left behind",
+            path.display()
+        );
+    }
+    assert!(!pid_file.exists(), "{signal}: pid file left behind");
+}
+
+/// SIGTERM while a client talks and the recorder writes: every byte is recorded, exit 0
+/// within 1 s, links, socket and pid file removed.
+#[test]
+fn sigterm_mid_recording_loses_nothing() {
+    shutdown_loses_nothing(Signal::SIGTERM, "sigterm");
+}
+
+/// The same for SIGINT (Ctrl-C).
+#[test]
+fn sigint_mid_recording_loses_nothing() {
+    shutdown_loses_nothing(Signal::SIGINT, "sigint");
+}
+
+/// `kill -9` while a client streams requests: every chunk written more than 100 ms before
+/// the kill is in `bytes.tsv`.
+#[test]
+fn kill_9_loses_at_most_the_last_100_ms() {
+    let dir = TestDir::new("kill9");
+    let record = dir.join("rec");
+    let mut daemon = DaemonProcess::start(
+        dir,
+        &[
+            "--time-mode",
+            "realtime",
+            "--record",
+            record.to_str().unwrap(),
+        ],
+    );
+    let mut sensor = open_raw(&daemon.link("sensor"));
+    let stop = Arc::new(AtomicBool::new(false));
+    let replies = reader(sensor.try_clone().unwrap(), stop.clone());
+    let log: Arc<Mutex<Vec<(Instant, usize)>>> = Arc::default();
+    let mut written = Vec::new();
+    let started = Instant::now();
+    let mut seq = 0u8;
+    while started.elapsed() < Duration::from_millis(1500) {
+        seq = seq.wrapping_add(1);
+        let frame = adc_read(seq);
+        sensor.write_all(&frame).unwrap();
+        written.extend_from_slice(&frame);
+        log.lock().unwrap().push((Instant::now(), written.len()));
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let killed = Instant::now();
+    daemon.signal(Signal::SIGKILL);
+    daemon.wait(Duration::from_secs(5)).expect("killed");
+    stop.store(true, Ordering::Relaxed);
+    let _ = replies.join();
+
+    let must_have = log
+        .lock()
+        .unwrap()
+        .iter()
+        .filter(|(t, _)| killed.duration_since(*t) > Duration::from_millis(100))
+        .map(|(_, n)| *n)
+        .max()
+        .expect("writes more than 100 ms before the kill");
+    let rx = stream(&read_chunks(&record), "sensor", Direction::Rx);
+    assert!(
+        written.starts_with(&rx),
+        "the recording holds bytes that were never sent"
+    );
+    assert!(
+        rx.len() >= must_have,
+        "kill -9 lost bytes written more than 100 ms before it: recorded {} of {} required ({} written)",
+        rx.len(),
+        must_have,
+        written.len()
+    );
+}
+
+/// `eyebot-hil status` prints uptime, simulated time, mode, per-link counters and the pose;
+/// `--json` parses and agrees.
+#[test]
+fn status_reports_uptime_time_mode_links_and_pose() {
+    let dir = TestDir::new("status");
+    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime", "--speed", "2"]);
+    let mut sensor = open_raw(&daemon.link("sensor"));
+    sensor.write_all(&adc_read(1)).unwrap();
+    sensor.write_all(b"\x00\x01garbage").unwrap();
+    let s = daemon.wait_status(Duration::from_secs(10), "the request and the junk", |s| {
+        let l = pty_tests::daemon::link_status(s, "sensor");
+        l.frames_rx >= 1 && l.errors >= 1 && s.sim_time_s > 0.5
+    });
+    assert_eq!(s.time_mode, "realtime");
+    assert_eq!(s.speed, 2.0);
+    assert_eq!(s.pid, daemon.pid());
+    assert!(s.uptime_s > 0.0);
+    // Realtime at speed 2: simulated time runs at about twice the uptime.
+    assert!(
+        (s.sim_time_s / s.uptime_s - 2.0).abs() < 0.5,
+        "sim {} s after {} s up",
+        s.sim_time_s,
+        s.uptime_s
+    );
+    let sensor_link = pty_tests::daemon::link_status(&s, "sensor");
+    assert_eq!(sensor_link.bytes_rx, 8 + 9);
+    assert!(sensor_link.bytes_tx >= 10, "{sensor_link:?}");
+    assert!(
+        (s.pose.depth_m - 0.3).abs() < 0.5 && (s.pose.x_m - 3.0).abs() < 0.5,
+        "{:?}",
+        s.pose
+    );
+
+    let text = daemon.status_command(&[]);
+    for needle in [
+        "uptime",
+        "sim time",
+        "time mode   realtime",
+        "pose",
+        "depth",
+        "heading",
+        "sonar",
+        "sensor",
+        "errors",
+    ] {
+        assert!(text.contains(needle), "`{needle}` missing from:\n{text}");
+    }
+    let sensor_row = text
+        .lines()
+        .find(|l| l.starts_with("sensor "))
+        .expect("a sensor row");
+    assert!(
+        sensor_row.split_whitespace().any(|f| f == "17"),
+        "the sensor row shows the 17 bytes received: {sensor_row}"
+    );
+    drop(sensor);
+}

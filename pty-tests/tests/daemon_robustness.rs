@@ -1,0 +1,217 @@
+//! Hostile EyeBot sides: garbage at full speed, hang-ups mid-frame, endless reopening, and a
+//! client that never reads. The daemon keeps answering, counts the trouble, keeps memory
+//! bounded.
+
+use std::io::Write;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use eyebot_hil::probe::SonarItem;
+use firmware_protocol::Transducer;
+use firmware_protocol::sensor_link::Message;
+use pty_tests::daemon::{DaemonProcess, TestDir, link_status, sensor_client, sonar_client};
+use rand::{Rng, SeedableRng};
+
+const MIB: u64 = 1024;
+
+fn open_raw(path: &Path) -> std::fs::File {
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
+}
+
+async fn hello(path: &Path) {
+    let mut client = sensor_client(path);
+    let reply = client
+        .request(
+            "hello",
+            Message::Hello { client_version: 1 },
+            Duration::ZERO,
+        )
+        .await
+        .expect("the daemon still answers HELLO");
+    assert!(matches!(reply, Message::HelloReply { .. }), "{reply:?}");
+}
+
+/// Writes seeded random bytes to `path` for `for_how_long`; returns how many.
+fn flood(path: &Path, seed: u64, for_how_long: Duration) -> u64 {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut port = open_raw(path);
+    let mut chunk = [0u8; 4096];
+    let mut sent = 0u64;
+    let started = Instant::now();
+    while started.elapsed() < for_how_long {
+        rng.fill_bytes(&mut chunk);
+        port.write_all(&chunk).expect("write garbage");
+        sent += chunk.len() as u64;
+    }
+    sent
+}
+
+/// Garbage at full speed on both links, twice: the daemon keeps answering, counts errors, and
+/// its resident memory does not grow with the amount of garbage.
+///
+/// Bound: the second flood (as long as the first) may add at most 1 MiB, and the whole run
+/// at most 8 MiB over the idle daemon. In-flight buffers are bounded by design: 256 inbound
+/// chunks of at most 4 KiB (1 MiB), 64 outbound chunks per line, a 4 KiB transmit queue per
+/// line and decoder buffers capped at one candidate frame; anything proportional to the
+/// flood (many MiB) would exceed both bounds.
+#[tokio::test]
+async fn garbage_floods_are_survived_with_bounded_memory() {
+    let dir = TestDir::new("flood");
+    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
+    let sensor = daemon.link("sensor");
+    let sonar = daemon.link("sonar");
+    hello(&sensor).await;
+    let idle_kb = daemon.rss_kb();
+    let mut sizes = Vec::new();
+    let mut rss = Vec::new();
+    for round in 0..2u64 {
+        let (a, b) = (sensor.clone(), sonar.clone());
+        let t1 = std::thread::spawn(move || flood(&a, round, Duration::from_millis(1500)));
+        let t2 = std::thread::spawn(move || flood(&b, 100 + round, Duration::from_millis(1500)));
+        sizes.push(t1.join().unwrap() + t2.join().unwrap());
+        // Let the daemon work off what it already read.
+        daemon.wait_status(Duration::from_secs(10), "the flood was read", |s| {
+            link_status(s, "sensor").bytes_rx + link_status(s, "sonar").bytes_rx
+                >= sizes.iter().sum::<u64>() * 9 / 10
+        });
+        rss.push(daemon.rss_kb());
+    }
+    hello(&sensor).await;
+    let s = daemon.status();
+    let sensor_link = link_status(&s, "sensor");
+    let sonar_link = link_status(&s, "sonar");
+    eprintln!(
+        "flood: {} + {} bytes; RSS idle {idle_kb} kB, after each flood {rss:?} kB; sensor {sensor_link:?}; sonar {sonar_link:?}",
+        sizes[0], sizes[1]
+    );
+    assert!(
+        sizes[1] > 4 * MIB * 1024,
+        "the flood was big: {sizes:?} bytes"
+    );
+    assert!(sensor_link.errors > 1000, "{sensor_link:?}");
+    assert!(sonar_link.errors > 1000, "{sonar_link:?}");
+    assert!(
+        rss[1] <= rss[0] + MIB,
+        "the second flood grew RSS from {} to {} kB",
+        rss[0],
+        rss[1]
+    );
+    assert!(
+        rss[1] <= idle_kb + 8 * MIB,
+        "RSS {idle_kb} kB idle, {} kB after the floods",
+        rss[1]
+    );
+}
+
+/// An EyeBot that hangs up mid-frame (50 times on the sensor link, 50 mid-sentence on the
+/// sonar link), then one that opens and closes the ptys 100 times: the daemon still answers,
+/// reports the broken input, and memory stays flat.
+#[tokio::test]
+async fn hang_ups_and_reopens_are_survived() {
+    let dir = TestDir::new("hangup");
+    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
+    let sensor = daemon.link("sensor");
+    let sonar = daemon.link("sonar");
+    hello(&sensor).await;
+    let before = daemon.rss_kb();
+    // HELLO is EB 90 01 seq 01 01 crc crc: cut after 5 bytes.
+    for i in 0..50u8 {
+        open_raw(&sensor)
+            .write_all(&[0xEB, 0x90, 0x01, i, 0x01])
+            .unwrap();
+        open_raw(&sonar).write_all(b"@S").unwrap();
+    }
+    daemon.wait_status(Duration::from_secs(10), "the broken input counted", |s| {
+        link_status(s, "sensor").errors >= 1 && link_status(s, "sonar").errors >= 1
+    });
+    hello(&sensor).await;
+    for _ in 0..100 {
+        drop(open_raw(&sensor));
+        drop(open_raw(&sonar));
+    }
+    hello(&sensor).await;
+    let mut sonar_client = sonar_client(&sonar);
+    sonar_client
+        .select(Transducer::new(2).unwrap())
+        .await
+        .unwrap();
+    assert_eq!(
+        sonar_client.next(Duration::from_secs(10)).await.unwrap(),
+        Some(SonarItem::Ack(2)),
+        "the sonar link still answers after the hang-ups"
+    );
+    let after = daemon.rss_kb();
+    assert!(
+        after <= before + MIB,
+        "RSS grew from {before} to {after} kB over 100 hang-ups and 200 reopens"
+    );
+}
+
+/// A client that opens the sensor link, starts a fast stream and never reads: the sonar link
+/// keeps being served, and status reports the dropped bytes.
+#[tokio::test]
+async fn a_client_that_never_reads_does_not_stall_the_other_link() {
+    let dir = TestDir::new("noread");
+    // 1.5 m off the west wall, so the port transducer has echoes (see daemon_devices.rs).
+    let config = dir.write_config(
+        "near-wall.toml",
+        &[(
+            "position_m = [3.0, 6.25, 0.3]",
+            "position_m = [3.0, 1.5, 0.5]",
+        )],
+    );
+    let daemon = DaemonProcess::start(
+        dir,
+        &[
+            "--config",
+            config.to_str().unwrap(),
+            "--time-mode",
+            "realtime",
+            "--speed",
+            "10",
+        ],
+    );
+    let mut sensor = sensor_client(&daemon.link("sensor"));
+    let reply = sensor
+        .request(
+            "stream",
+            Message::AdcStream {
+                channels: 0xFF,
+                period_ms: 5,
+            },
+            Duration::ZERO,
+        )
+        .await
+        .unwrap();
+    assert!(matches!(reply, Message::Ack { .. }), "{reply:?}");
+    // From here on nobody reads the sensor link.
+    let s = daemon.wait_status(Duration::from_secs(15), "dropped bytes", |s| {
+        link_status(s, "sensor").dropped_tx > 0
+    });
+    let dropped = link_status(&s, "sensor").dropped_tx;
+    let mut sonar = sonar_client(&daemon.link("sonar"));
+    sonar.select(Transducer::new(1).unwrap()).await.unwrap();
+    let mut sentences = 0;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while sentences < 3 && Instant::now() < deadline {
+        match sonar.next(Duration::from_secs(2)).await.unwrap() {
+            Some(SonarItem::Sentence { .. }) => sentences += 1,
+            Some(SonarItem::Ack(1)) | None => {}
+            Some(other) => panic!("unexpected {other:?}"),
+        }
+    }
+    assert_eq!(
+        sentences, 3,
+        "the sonar link is served while the sensor link is stuck"
+    );
+    let later = daemon.status();
+    assert!(
+        link_status(&later, "sensor").dropped_tx > dropped,
+        "dropping goes on while the client does not read"
+    );
+    drop(sensor);
+}
