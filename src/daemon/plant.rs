@@ -92,13 +92,19 @@ impl MakoPlant {
                 points: 0,
             },
             sonar_events: Vec::new(),
+            // At power-up the relays connect transducer 1 and the master forwards its
+            // controller's sentences until the first select (PROTOCOL.md 1.2).
+            forwarding: sensors_config
+                .sonar
+                .transducers
+                .first()
+                .map(|t| t.controller),
             transducer_controller: sensors_config
                 .sonar
                 .transducers
                 .iter()
                 .map(|t| t.controller)
                 .collect(),
-            forwarding: None,
         }
     }
 
