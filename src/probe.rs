@@ -85,7 +85,10 @@ impl SensorClient {
         Ok(Self {
             port,
             path: path.display().to_string(),
-            seq: 0,
+            // A fresh process must not repeat its predecessor's last (seq, request): the bridge
+            // answers an identical request from its stored reply (PROTOCOL.md 2.2). Starting
+            // from the process id makes back-to-back `probe` runs differ.
+            seq: std::process::id() as u8,
             decoder: LineDecoder::new(),
             buf: BytesMut::new(),
             pushes: VecDeque::new(),

@@ -245,11 +245,10 @@ impl Plant for MakoPlant {
                         },
                     )
                 }
-                // The master forwards only the selected transducer's controller
-                // (PROTOCOL.md 1.2); the other controller's sentences go nowhere.
-                sensors::SonarEvent::Range { controller, .. }
-                    if self.forwarding != Some(controller) =>
-                {
+                // Until the first acknowledgement after a select, the master forwards
+                // nothing (PROTOCOL.md 1.2); after it, both controllers' sentences, which
+                // do not say which transducer they came from (thesis 4.8).
+                sensors::SonarEvent::Range { .. } if self.forwarding.is_none() => {
                     continue;
                 }
                 sensors::SonarEvent::Range { range, source, .. } => (
