@@ -92,8 +92,8 @@ impl MakoPlant {
                 points: 0,
             },
             sonar_events: Vec::new(),
-            // At power-up the relays connect transducer 1 and the master forwards its
-            // controller's sentences until the first select (PROTOCOL.md 1.2).
+            // At power-up the master forwards (both controllers' sentences) until the first
+            // select; `None` only between a select and its acknowledgement (PROTOCOL.md 1.2).
             forwarding: sensors_config
                 .sonar
                 .transducers
