@@ -117,22 +117,8 @@ impl SensorClient {
                     LineItem::Nmea(_) | LineItem::Sonar(_) => {}
                 }
             }
-            let mut chunk = [0u8; 512];
-            let read = tokio::time::timeout_at(deadline, self.port.read(&mut chunk)).await;
-            match read {
-                Err(_) => return Ok(None),
-                Ok(Ok(0)) => {
-                    return Err(ProbeError::Closed {
-                        path: self.path.clone(),
-                    });
-                }
-                Ok(Ok(n)) => self.buf.extend_from_slice(&chunk[..n]),
-                Ok(Err(source)) => {
-                    return Err(ProbeError::Io {
-                        path: self.path.clone(),
-                        source,
-                    });
-                }
+            if !read_more(&mut self.port, &mut self.buf, deadline, &self.path).await? {
+                return Ok(None);
             }
         }
     }
@@ -260,22 +246,34 @@ impl SonarClient {
                     LineItem::Frame(_) => continue,
                 }));
             }
-            let mut chunk = [0u8; 256];
-            match tokio::time::timeout_at(deadline, self.port.read(&mut chunk)).await {
-                Err(_) => return Ok(None),
-                Ok(Ok(0)) => {
-                    return Err(ProbeError::Closed {
-                        path: self.path.clone(),
-                    });
-                }
-                Ok(Ok(n)) => self.buf.extend_from_slice(&chunk[..n]),
-                Ok(Err(source)) => {
-                    return Err(ProbeError::Io {
-                        path: self.path.clone(),
-                        source,
-                    });
-                }
+            if !read_more(&mut self.port, &mut self.buf, deadline, &self.path).await? {
+                return Ok(None);
             }
         }
+    }
+}
+
+/// Reads what the port has into `buf` before `deadline`: `Ok(false)` when the deadline
+/// passed first. Shared by both clients.
+async fn read_more(
+    port: &mut SerialStream,
+    buf: &mut BytesMut,
+    deadline: tokio::time::Instant,
+    path: &str,
+) -> Result<bool, ProbeError> {
+    let mut chunk = [0u8; 512];
+    match tokio::time::timeout_at(deadline, port.read(&mut chunk)).await {
+        Err(_) => Ok(false),
+        Ok(Ok(0)) => Err(ProbeError::Closed {
+            path: path.to_string(),
+        }),
+        Ok(Ok(n)) => {
+            buf.extend_from_slice(&chunk[..n]);
+            Ok(true)
+        }
+        Ok(Err(source)) => Err(ProbeError::Io {
+            path: path.to_string(),
+            source,
+        }),
     }
 }
