@@ -1,6 +1,6 @@
 //! Simulated seconds per wall second of the vehicle model on one thread.
 //!
-//! `cargo bench --bench physics`
+//! `cargo bench -p pty-tests --bench physics`
 //!
 //! Cases, all measured in the same run:
 //! - full model in open water (spot turn: thrusters, lag, fluctuation RNG, hydrodynamics,

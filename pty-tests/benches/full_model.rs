@@ -1,6 +1,6 @@
 //! The full model the daemon runs: physics plus every sensor, on one thread.
 //!
-//! `cargo bench --bench full_model`
+//! `cargo bench -p pty-tests --bench full_model`
 //!
 //! Both cases run in the same process, best of three:
 //! - **full model**: [`MakoPlant`] (physics + sensor suite, sensors updated after every

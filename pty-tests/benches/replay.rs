@@ -1,6 +1,6 @@
 //! Replay throughput and memory on generated logs, against a same-run baseline.
 //!
-//! `cargo bench --bench replay` generates timestamped NMEA logs of 10 MB and 100 MB in a
+//! `cargo bench -p pty-tests --bench replay` generates timestamped NMEA logs of 10 MB and 100 MB in a
 //! temporary directory (deleted afterwards), and for each:
 //! - baseline: reads the file line by line (`BufRead::read_until`) into a sink;
 //! - replay: `eyebot-hil replay --pacing fast` of the same file into a sink writer, with

@@ -46,7 +46,7 @@ fn experiment(name: &str) -> Experiment {
 /// Every vehicle, world and experiment file in configs/ loads and resolves.
 #[test]
 fn every_physics_config_file_loads() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs");
     let dir = Directory::new(&root);
     let mut loaded = 0;
     for kind in ["vehicles", "worlds", "experiments"] {

@@ -2,8 +2,8 @@
 //! plots of docs/calibration.md.
 //!
 //! ```text
-//! cargo run --release --example calibrate            # fit, print the numbers for mako.toml, plot
-//! cargo run --release --example calibrate -- --plot  # only plot the model in configs/
+//! cargo run --release -p pty-tests --example calibrate            # fit, print the numbers for mako.toml, plot
+//! cargo run --release -p pty-tests --example calibrate -- --plot  # only plot the model in configs/
 //! ```
 //!
 //! Fitted (Levenberg-Marquardt, residuals scaled by each measurement's tolerance; parameters
@@ -169,7 +169,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Fit<'_> {
 }
 
 fn configs_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("configs")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -225,7 +225,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
 fn docs(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("docs")
+        .join("../docs")
         .join(name)
 }
 

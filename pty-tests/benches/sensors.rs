@@ -1,5 +1,5 @@
 //! Cost of the whole sensor suite per simulated second, next to a baseline measured in the
-//! same run. `cargo bench --bench sensors`.
+//! same run. `cargo bench -p pty-tests --bench sensors`.
 //!
 //! Scenario: Mako (mako-2008 sensors) in a 25 x 10 x 3 m box pool, circling slowly, physics
 //! step 1 ms (1000 updates per simulated second). Each simulated second: 1000 `update`s,
