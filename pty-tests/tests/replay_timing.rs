@@ -63,6 +63,11 @@ fn timed_replay(check_consumer: bool) {
     let mut opts = Options::new(vec![fixture("timed.log")]);
     opts.policy = Policy::Fix;
     opts.realtime_priority = fifo.then_some(10);
+    // And, as cyclictest does, a CPU latency request of 0 µs: an idle vCPU of this VM halts,
+    // and the host can take milliseconds to wake it for the kernel's pty delivery worker
+    // (measured with REPLAY_NO_QOS=1: see docs/performance.md).
+    let qos = std::env::var_os("REPLAY_NO_QOS").is_none();
+    opts.cpu_latency_us = qos.then_some(0);
     let out = replay_to_pty(
         opts,
         expected.len(),
@@ -70,8 +75,12 @@ fn timed_replay(check_consumer: bool) {
         fifo.then_some(20),
     );
     eprintln!(
-        "SCHED_FIFO: consumer {}, replay {}",
-        out.realtime, out.summary.realtime
+        "SCHED_FIFO: consumer {}, replay {}; CPU latency request: {:?} µs",
+        out.realtime, out.summary.realtime, out.summary.cpu_latency_us
+    );
+    assert!(
+        !qos || out.summary.cpu_latency_us == Some(0),
+        "the CPU latency request was refused (needs write access to /dev/cpu_dma_latency, normally root)"
     );
     assert!(
         !fifo || (out.realtime && out.summary.realtime),

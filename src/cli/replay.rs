@@ -99,6 +99,11 @@ pub struct ReplayArgs {
     /// it, a loaded machine can wake the replay a scheduler tick (4 ms) late.
     #[arg(long, value_name = "1-99", default_value_t = 10, value_parser = clap::value_parser!(i32).range(0..=99))]
     pub rt_priority: i32,
+    /// Hold a CPU latency QoS request (/dev/cpu_dma_latency) of this many µs while pacing, as
+    /// cyclictest does, so idle CPUs poll rather than halt; 0 asks for the shortest wake-up.
+    /// Costs power; needs root. Off by default.
+    #[arg(long, value_name = "MICROSECONDS")]
+    pub cpu_latency_us: Option<u32>,
 }
 
 /// Why `replay` failed.
@@ -148,6 +153,7 @@ impl ReplayArgs {
         opts.gap_threshold_s = self.gap;
         opts.list_all_problems = self.all_problems;
         opts.realtime_priority = (self.rt_priority > 0).then_some(self.rt_priority);
+        opts.cpu_latency_us = self.cpu_latency_us;
         Ok(opts)
     }
 }

@@ -68,6 +68,9 @@ pub struct Options {
     /// Run the pacing thread under `SCHED_FIFO` at this priority (timed pacing only); if the
     /// system refuses, the replay goes on without it and says so.
     pub realtime_priority: Option<i32>,
+    /// Hold a CPU latency QoS request of this many µs while timed pacing runs
+    /// ([`output::CpuLatencyRequest`]); if the system refuses, the replay goes on and says so.
+    pub cpu_latency_us: Option<u32>,
 }
 
 impl Options {
@@ -87,6 +90,7 @@ impl Options {
             gap_threshold_s: 1.0,
             list_all_problems: false,
             realtime_priority: None,
+            cpu_latency_us: None,
         }
     }
 }
@@ -302,12 +306,26 @@ impl Replay {
                 )),
             }
         }
+        let mut qos = None;
+        if let Some(latency_us) = opts.cpu_latency_us
+            && self.pacing != Pacing::Fast
+        {
+            match output::CpuLatencyRequest::hold(latency_us) {
+                Ok(request) => qos = Some(request),
+                Err(e) => observer.note(&format!(
+                    "no CPU latency request ({}: {e}): an idle CPU may be slow to wake",
+                    output::CPU_LATENCY_QOS
+                )),
+            }
+        }
         let result = self.run_inner(sink, observer, stop);
+        let cpu_latency_us = qos.take().map(|q| q.latency_us);
         if realtime {
             output::clear_realtime_priority();
         }
         result.map(|mut s| {
             s.realtime = realtime;
+            s.cpu_latency_us = cpu_latency_us;
             s
         })
     }

@@ -51,6 +51,8 @@ pub struct Summary {
     pub elapsed: Duration,
     /// Whether the pacing thread ran under `SCHED_FIFO`.
     pub realtime: bool,
+    /// The CPU latency QoS request held while pacing (µs), if any.
+    pub cpu_latency_us: Option<u32>,
     prev_time_ns: Option<i64>,
 }
 
