@@ -76,11 +76,21 @@ impl RayCaster for BoxPool {
         direction: &Unit<Vector3<f64>>,
         max_range_m: f64,
     ) -> Option<RayHit> {
-        self.walls
-            .iter()
-            .filter_map(|w| w.hit(origin_m, direction, max_range_m))
-            .min_by(|a, b| a.distance_m.total_cmp(&b.distance_m))
+        nearest(&self.walls, origin_m, direction, max_range_m)
     }
+}
+
+/// The nearest hit of a ray among plane walls.
+fn nearest(
+    walls: &[PlaneWall],
+    origin_m: &Point3<f64>,
+    direction: &Unit<Vector3<f64>>,
+    max_range_m: f64,
+) -> Option<RayHit> {
+    walls
+        .iter()
+        .filter_map(|w| w.hit(origin_m, direction, max_range_m))
+        .min_by(|a, b| a.distance_m.total_cmp(&b.distance_m))
 }
 
 /// Any number of plane walls; a ray hits the nearest.
@@ -94,10 +104,7 @@ impl RayCaster for Walls {
         direction: &Unit<Vector3<f64>>,
         max_range_m: f64,
     ) -> Option<RayHit> {
-        self.0
-            .iter()
-            .filter_map(|w| w.hit(origin_m, direction, max_range_m))
-            .min_by(|a, b| a.distance_m.total_cmp(&b.distance_m))
+        nearest(&self.0, origin_m, direction, max_range_m)
     }
 }
 
