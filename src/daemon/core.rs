@@ -81,6 +81,8 @@ pub struct LineSpec {
     pub carries: Carries,
     pub settings: LineSettings,
     pub tx_queue_bytes: usize,
+    /// Longest a complete byte waits for its hand-over to the port (`transport::pacer`).
+    pub release_quantum_ns: u64,
 }
 
 /// The core.
@@ -119,7 +121,8 @@ impl<M: Model> Core<M> {
                 carries: spec.carries,
                 decoder: LineDecoder::new(),
                 inbox: BytesMut::new(),
-                pacer: WirePacer::new(&spec.settings, spec.tx_queue_bytes),
+                pacer: WirePacer::new(&spec.settings, spec.tx_queue_bytes)
+                    .with_quantum(spec.release_quantum_ns),
                 outbox: Vec::new(),
                 counters: LineCounters::default(),
                 last_rx_ns: 0,
@@ -639,6 +642,7 @@ mod tests {
                 },
                 settings: LineSettings::n81(115_200),
                 tx_queue_bytes: 4096,
+                release_quantum_ns: MS,
             }]
         } else {
             vec![
@@ -650,6 +654,7 @@ mod tests {
                     },
                     settings: LineSettings::n81(4800),
                     tx_queue_bytes: 4096,
+                    release_quantum_ns: MS,
                 },
                 LineSpec {
                     name: "sensor",
@@ -659,6 +664,7 @@ mod tests {
                     },
                     settings: LineSettings::n81(115_200),
                     tx_queue_bytes: 4096,
+                    release_quantum_ns: MS,
                 },
             ]
         };

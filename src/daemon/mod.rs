@@ -129,6 +129,7 @@ where
         },
         settings: config.sonar.line,
         tx_queue_bytes: config.sonar.tx_queue_bytes,
+        release_quantum_ns: config.release_quantum.as_nanos() as u64,
     }];
     let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, &run_dir).await?];
     if !shared {
@@ -140,6 +141,7 @@ where
             },
             settings: config.sensor.line,
             tx_queue_bytes: config.sensor.tx_queue_bytes,
+            release_quantum_ns: config.release_quantum.as_nanos() as u64,
         });
         endpoints.push(OpenEndpoint::open("sensor", &config.sensor, &run_dir).await?);
     }
@@ -612,6 +614,7 @@ mod tests {
             },
             settings: crate::transport::LineSettings::n81(baud),
             tx_queue_bytes: 4096,
+            release_quantum_ns: 1_000_000,
         };
         let specs = [spec("sonar", true, 4800), spec("sensor", false, 115_200)];
         let mut core = Core::new(FakeModel::default(), board, mux, &specs, false);

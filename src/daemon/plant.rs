@@ -345,6 +345,7 @@ mod tests {
             },
             settings: LineSettings::n81(4800),
             tx_queue_bytes: 4096,
+            release_quantum_ns: 1_000_000,
         }];
         let mut core = Core::new(plant, board, mux, &lines, false);
         core.receive(0, b"@S1\r").unwrap();
