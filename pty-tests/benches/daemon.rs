@@ -1,10 +1,13 @@
 //! Daemon benchmarks against the built binary (release profile), printed as plain figures:
 //!
 //! - `adc`: ADC read over a pty at 115200 baud, request to complete reply, minus the
-//!   modelled wire time of the reply; baseline: a raw pty echo round trip in the same run.
+//!   modelled wire time of the reply; baseline: a raw pty echo round trip in the same run;
+//!   also with `release_quantum_ms = 0` (one wake-up per byte), to show the quantum costs
+//!   no latency.
 //! - `nmea`: real-time NMEA emission jitter: arrival of each sentence's last byte against
 //!   the sonar's ping schedule mapped to wall time.
-//! - `cpu`: daemon CPU idle and under a 100 Hz ADC stream, from /proc/PID/stat.
+//! - `cpu`: daemon CPU idle and under a 100 Hz ADC stream, from /proc/PID/stat; baseline: the
+//!   same stream with `release_quantum_ms = 0` (one wake-up per byte) in the same run.
 //! - `rss`: resident memory over one simulated hour at speed 100 with a client.
 //!
 //! `cargo bench -p pty-tests --bench daemon [-- adc|nmea|cpu|rss]` (all by default).
@@ -83,10 +86,34 @@ fn pty_echo_baseline() -> Vec<f64> {
     out
 }
 
+/// `--config` arguments for a run with `release_quantum_ms = quantum_ms` (None: the default).
+fn quantum_args(dir: &TestDir, quantum_ms: Option<f64>) -> Vec<String> {
+    let mut args = vec!["--time-mode".to_string(), "realtime".to_string()];
+    if let Some(q) = quantum_ms {
+        let config = dir.write_config(
+            "quantum.toml",
+            &[(
+                "release_quantum_ms = 1.0",
+                &format!("release_quantum_ms = {q:.1}"),
+            )],
+        );
+        args.extend(["--config".to_string(), config.display().to_string()]);
+    }
+    args
+}
+
 fn adc() {
     let baseline = pty_echo_baseline();
+    for quantum in [None, Some(0.0)] {
+        adc_with(&baseline, quantum);
+    }
+}
+
+fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
     let dir = TestDir::new("bench-adc");
-    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
+    let args = quantum_args(&dir, quantum_ms);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let daemon = DaemonProcess::start(dir, &args);
     let mut port = open_raw(&daemon.link("sensor"));
     // ADC_VALUE is 10 bytes: 10 x 10 bits at 115200 baud.
     let wire_us = 10.0 * 10.0 / 115_200.0 * 1e6;
@@ -112,9 +139,12 @@ fn adc() {
     let (l50, l99, lmax) = summary(&mut latency);
     let (o50, o99, omax) = summary(&mut overhead);
     let o90 = percentile(&overhead, 0.90);
-    let mut baseline = baseline;
+    let mut baseline = baseline.to_vec();
     let (b50, b99, bmax) = summary(&mut baseline);
-    println!("adc read over a pty, 115200 baud, {ROUNDS} requests (after {WARMUP} warm-up)");
+    let quantum = quantum_ms.map_or("1.0 (default)".to_string(), |q| format!("{q:.1}"));
+    println!(
+        "adc read over a pty, 115200 baud, release_quantum_ms {quantum}, {ROUNDS} requests (after {WARMUP} warm-up)"
+    );
     println!("  modelled wire time of the 10-byte reply: {wire_us:.1} us");
     println!("  request -> reply:          p50 {l50:8.1} us  p99 {l99:8.1} us  max {lmax:8.1} us");
     println!(
@@ -219,8 +249,20 @@ fn cpu_percent(daemon: &DaemonProcess, over: Duration) -> f64 {
 }
 
 fn cpu() {
+    let byte_by_byte = cpu_with(Some(0.0));
+    let quantum = cpu_with(None);
+    println!(
+        "  ratio stream CPU, release quantum 1 ms / one wake-up per byte: {:.2}x",
+        quantum / byte_by_byte
+    );
+}
+
+/// Prints and returns the CPU under the stream.
+fn cpu_with(quantum_ms: Option<f64>) -> f64 {
     let dir = TestDir::new("bench-cpu");
-    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
+    let args = quantum_args(&dir, quantum_ms);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let daemon = DaemonProcess::start(dir, &args);
     std::thread::sleep(Duration::from_secs(1));
     let interval = Duration::from_secs(10);
     let idle = cpu_percent(&daemon, interval);
@@ -247,8 +289,9 @@ fn cpu() {
     let streaming = cpu_percent(&daemon, interval);
     let received = drain.join().unwrap();
     let s = daemon.status();
+    let quantum = quantum_ms.map_or("1.0 (default)".to_string(), |q| format!("{q:.1}"));
     println!(
-        "daemon CPU over {interval:?} (ticks of {} Hz; /proc/PID/stat utime+stime)",
+        "daemon CPU over {interval:?}, release_quantum_ms {quantum} (ticks of {} Hz; /proc/PID/stat utime+stime)",
         pty_tests::daemon::clock_ticks_per_s()
     );
     println!("  idle (realtime, speed 1, no client):          {idle:5.2} % of one core");
@@ -256,6 +299,7 @@ fn cpu() {
         "  100 Hz ADC stream, 8 channels, client reading: {streaming:5.2} % of one core  ({received} bytes received, {} frames sent)  (target < 5 %)",
         link_status(&s, "sensor").frames_tx
     );
+    streaming
 }
 
 fn rss() {

@@ -430,6 +430,7 @@ impl InProcessDaemon {
             record,
             pid_file: None,
             record_meta: format!("seed = {}\n", config.seed),
+            ..RunOptions::default()
         };
         let (stop, stop_rx) = tokio::sync::watch::channel(false);
         let (ready_tx, ready_rx) = mpsc::channel();
@@ -518,6 +519,24 @@ pub fn read_chunks(record_dir: &Path) -> Vec<ByteChunk> {
     assert_eq!(header, eyebot_hil::record::BYTES_HEADER);
     lines
         .map(|(i, l)| eyebot_hil::record::parse_chunk(l, i + 1).expect("a valid bytes.tsv line"))
+        .collect()
+}
+
+/// Reads `drops.tsv` of a recording: (link, reason, bytes) per row.
+pub fn read_drops(record_dir: &Path) -> Vec<(String, String, Vec<u8>)> {
+    let text = std::fs::read_to_string(record_dir.join("drops.tsv")).expect("read drops.tsv");
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(eyebot_hil::record::DROPS_HEADER));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split('\t').collect();
+            assert_eq!(f.len(), 5, "drops.tsv row {l:?}");
+            (
+                f[2].to_string(),
+                f[3].to_string(),
+                hex::decode(f[4]).expect("drops.tsv hex"),
+            )
+        })
         .collect()
 }
 

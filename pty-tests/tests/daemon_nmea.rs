@@ -111,12 +111,11 @@ async fn dpt_sentences_decode_with_the_nmea_crate() {
     }
 }
 
-/// `invalid_echo = "empty"` should send a sentence with empty fields for each ping without a
-/// valid echo (the bow transducers here see no wall). It sends nothing: `MakoPlant` only
-/// turns the sonar model's valid ranges into readings (`sensors::SonarEvent` has no event
-/// for a ping without an echo), so the multiplexer never sees an invalid echo.
+/// `invalid_echo = "empty"` sends a sentence with empty fields for each ping without a valid
+/// echo (the bow transducers here see no wall), and the `nmea` crate accepts it as a DPT
+/// with no depth. Regression: the sonar model reported only valid ranges, so the setting
+/// had no effect and nothing was sent.
 #[tokio::test]
-#[ignore = "known bug: the sonar model reports no invalid echoes, so invalid_echo = \"empty\" has no effect"]
 async fn invalid_echoes_give_empty_sentences_that_the_nmea_crate_accepts() {
     let daemon = start(
         "nmea-empty",
@@ -126,9 +125,17 @@ async fn invalid_echoes_give_empty_sentences_that_the_nmea_crate_accepts() {
         ],
     );
     let sentences = collect_sentences(&daemon).await;
-    let empty = sentences
-        .iter()
-        .filter(|s| matches!(nmea::parse_str(s), Ok(nmea::ParseResult::DPT(d)) if d.water_depth.is_none()))
-        .count();
+    let (mut empty, mut ranged) = (0, 0);
+    for s in &sentences {
+        match nmea::parse_str(s) {
+            Ok(nmea::ParseResult::DPT(d)) if d.water_depth.is_none() => empty += 1,
+            Ok(nmea::ParseResult::DPT(_)) => ranged += 1,
+            other => panic!("nmea rejected {s:?}: {other:?}"),
+        }
+    }
     assert!(empty >= 1, "the bow transducers see no wall: {sentences:?}");
+    assert!(
+        ranged >= 1,
+        "the port transducers see the wall: {sentences:?}"
+    );
 }

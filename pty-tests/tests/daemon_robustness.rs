@@ -129,10 +129,25 @@ async fn hang_ups_and_reopens_are_survived() {
         link_status(s, "sensor").errors >= 1 && link_status(s, "sonar").errors >= 1
     });
     hello(&sensor).await;
+    let reconnects = |s: &eyebot_hil::daemon::status::StatusSnapshot| {
+        (
+            link_status(s, "sensor").reconnects,
+            link_status(s, "sonar").reconnects,
+        )
+    };
     for _ in 0..100 {
         drop(open_raw(&sensor));
         drop(open_raw(&sonar));
     }
+    // Each reopen is reported (regression: the bridge keeps the slave open, so a reopen was
+    // invisible and never counted). Opens so far: sensor 1 + 50 + 1 + 100 (the HELLO
+    // clients, the cut frames, the reopens), sonar 50 + 100; the first is a connect.
+    let expected = (151, 149);
+    let s = daemon.wait_status(Duration::from_secs(10), "the reopens counted", |s| {
+        let (a, b) = reconnects(s);
+        a >= expected.0 && b >= expected.1
+    });
+    assert_eq!(reconnects(&s), expected, "one reconnect per reopen");
     hello(&sensor).await;
     let mut sonar_client = sonar_client(&sonar);
     sonar_client
@@ -151,6 +166,70 @@ async fn hang_ups_and_reopens_are_survived() {
     );
 }
 
+/// A garbage flood on both links with `--record`: the recorder's queue is bounded, so a
+/// flood cannot grow memory through it, and nothing read is lost from the recording (the
+/// bridge waits for the recorder instead: back-pressure down to the EyeBot's writes).
+#[tokio::test]
+async fn a_recorded_garbage_flood_loses_nothing_and_keeps_memory_bounded() {
+    let dir = TestDir::new("flood-rec");
+    let record = dir.join("rec");
+    let mut daemon = DaemonProcess::start(
+        dir,
+        &[
+            "--time-mode",
+            "realtime",
+            "--record",
+            record.to_str().unwrap(),
+        ],
+    );
+    let sensor = daemon.link("sensor");
+    let sonar = daemon.link("sonar");
+    hello(&sensor).await;
+    let idle_kb = daemon.rss_kb();
+    let (a, b) = (sensor.clone(), sonar.clone());
+    let t1 = std::thread::spawn(move || flood(&a, 7, Duration::from_millis(2000)));
+    let t2 = std::thread::spawn(move || flood(&b, 107, Duration::from_millis(2000)));
+    let mut peak_kb = idle_kb;
+    while !(t1.is_finished() && t2.is_finished()) {
+        peak_kb = peak_kb.max(daemon.rss_kb());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let sent = (t1.join().unwrap(), t2.join().unwrap());
+    daemon.wait_status(Duration::from_secs(30), "the flood was read", |s| {
+        link_status(s, "sensor").bytes_rx >= sent.0 + 8
+            && link_status(s, "sonar").bytes_rx >= sent.1
+    });
+    peak_kb = peak_kb.max(daemon.rss_kb());
+    daemon.signal(nix::sys::signal::Signal::SIGTERM);
+    assert!(
+        daemon
+            .wait(Duration::from_secs(5))
+            .expect("exits")
+            .success()
+    );
+    let chunks = pty_tests::daemon::read_chunks(&record);
+    let recorded = |link: &str| -> u64 {
+        chunks
+            .iter()
+            .filter(|c| c.link == link && c.dir == eyebot_hil::record::Direction::Rx)
+            .map(|c| c.data.len() as u64)
+            .sum()
+    };
+    eprintln!(
+        "recorded flood: sent {sent:?} bytes; recorded rx sensor {} sonar {}; RSS idle {idle_kb} kB, peak {peak_kb} kB",
+        recorded("sensor"),
+        recorded("sonar")
+    );
+    assert!(sent.0 > 4 * MIB * 1024, "the flood was big: {sent:?}");
+    // HELLO (8 bytes) before the flood on the sensor link.
+    assert_eq!(recorded("sensor"), sent.0 + 8, "every sensor byte recorded");
+    assert_eq!(recorded("sonar"), sent.1, "every sonar byte recorded");
+    assert!(
+        peak_kb <= idle_kb + 8 * MIB,
+        "RSS {idle_kb} kB idle, peak {peak_kb} kB during the recorded flood"
+    );
+}
+
 /// A client that opens the sensor link, starts a fast stream and never reads: the sonar link
 /// keeps being served, and status reports the dropped bytes.
 #[tokio::test]
@@ -164,7 +243,8 @@ async fn a_client_that_never_reads_does_not_stall_the_other_link() {
             "position_m = [3.0, 1.5, 0.5]",
         )],
     );
-    let daemon = DaemonProcess::start(
+    let record = dir.join("rec");
+    let mut daemon = DaemonProcess::start(
         dir,
         &[
             "--config",
@@ -173,6 +253,8 @@ async fn a_client_that_never_reads_does_not_stall_the_other_link() {
             "realtime",
             "--speed",
             "10",
+            "--record",
+            record.to_str().unwrap(),
         ],
     );
     let mut sensor = sensor_client(&daemon.link("sensor"));
@@ -212,6 +294,31 @@ async fn a_client_that_never_reads_does_not_stall_the_other_link() {
     assert!(
         link_status(&later, "sensor").dropped_tx > dropped,
         "dropping goes on while the client does not read"
+    );
+    // The recording says which released bytes never reached the client (regression: they
+    // were recorded as sent, with nothing to tell them apart).
+    let dropped_before_stop = link_status(&later, "sensor").dropped_tx;
+    daemon.signal(nix::sys::signal::Signal::SIGTERM);
+    assert!(
+        daemon
+            .wait(Duration::from_secs(5))
+            .expect("exits")
+            .success()
+    );
+    let drops = pty_tests::daemon::read_drops(&record);
+    let not_read: usize = drops
+        .iter()
+        .filter(|d| d.0 == "sensor" && d.1 == "not-read")
+        .map(|d| d.2.len())
+        .sum();
+    assert!(
+        not_read as u64 >= dropped_before_stop,
+        "drops.tsv holds {not_read} not-read bytes, status counted {dropped_before_stop}"
+    );
+    // Only the stuck link dropped anything.
+    assert!(
+        drops.iter().all(|d| d.0 == "sensor"),
+        "only the sensor link dropped"
     );
     drop(sensor);
 }

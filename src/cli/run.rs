@@ -2,7 +2,6 @@
 
 use std::io::Write as _;
 use std::path::PathBuf;
-use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 use tokio::sync::watch;
@@ -118,20 +117,22 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
         ),
         text.lines().map(|l| format!("# {l}\n")).collect::<String>()
     );
+    let leftovers = daemon::shutdown::Leftovers::default();
     let options = RunOptions {
         record: args.record,
         pid_file: args.pid_file,
         record_meta: meta,
+        leftovers: leftovers.clone(),
     };
 
     let runtime = super::runtime()?;
+    // Signals are watched on a thread of their own, which also enforces the shutdown limit
+    // (`daemon::shutdown`): it works even if this runtime is blocked.
+    let (stop_tx, stop_rx) = watch::channel(false);
+    if let Err(e) = daemon::shutdown::spawn_signal_guard(stop_tx, leftovers) {
+        tracing::error!(error = %e, "cannot install signal handlers; stop with kill -9");
+    }
     let summary = runtime.block_on(async move {
-        let (stop_tx, stop_rx) = watch::channel(false);
-        tokio::spawn(async move {
-            wait_for_signal().await;
-            tracing::info!("signal received, shutting down");
-            let _ = stop_tx.send(true);
-        });
         daemon::run(&config, model, board, mux, options, stop_rx, |event| {
             let mut out = std::io::stdout().lock();
             match event {
@@ -161,25 +162,3 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
     );
     Ok(())
 }
-
-async fn wait_for_signal() {
-    use tokio::signal::unix::{SignalKind, signal};
-    match (
-        signal(SignalKind::interrupt()),
-        signal(SignalKind::terminate()),
-    ) {
-        (Ok(mut int), Ok(mut term)) => {
-            tokio::select! {
-                _ = int.recv() => {}
-                _ = term.recv() => {}
-            }
-        }
-        _ => {
-            tracing::error!("cannot install signal handlers; stop with kill -9");
-            std::future::pending::<()>().await;
-        }
-    }
-}
-
-/// How long shutdown may take before the process exits anyway.
-pub const SHUTDOWN_LIMIT: Duration = Duration::from_secs(1);

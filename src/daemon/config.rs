@@ -37,6 +37,12 @@ struct RawRun {
     max_lag_ms: f64,
     run_dir: String,
     state_record_hz: f64,
+    #[serde(default = "default_release_quantum_ms")]
+    release_quantum_ms: f64,
+}
+
+fn default_release_quantum_ms() -> f64 {
+    1.0
 }
 
 #[derive(Debug, Deserialize)]
@@ -152,6 +158,9 @@ pub struct DaemonConfig {
     pub seed: u64,
     pub time_mode: TimeMode,
     pub max_lag: Duration,
+    /// Longest a byte that completed its wire time waits for its hand-over to the port
+    /// (`transport::pacer`): bytes leave in bursts of at most this long.
+    pub release_quantum: Duration,
     pub run_dir: PathBuf,
     pub state_record_hz: f64,
     pub start: Start,
@@ -187,6 +196,13 @@ impl DaemonConfig {
         };
         let max_lag_ms =
             doc.check_range("run.max_lag_ms", raw.run.max_lag_ms, 1.0, 10_000.0, "ms")?;
+        let release_quantum_ms = doc.check_range(
+            "run.release_quantum_ms",
+            raw.run.release_quantum_ms,
+            0.0,
+            10.0,
+            "ms",
+        )?;
         let state_record_hz = doc.check_range(
             "run.state_record_hz",
             raw.run.state_record_hz,
@@ -274,6 +290,7 @@ impl DaemonConfig {
             seed: raw.run.seed,
             time_mode,
             max_lag: Duration::from_secs_f64(max_lag_ms / 1000.0),
+            release_quantum: Duration::from_secs_f64(release_quantum_ms / 1000.0),
             run_dir: PathBuf::from(raw.run.run_dir),
             state_record_hz,
             start: Start {

@@ -20,7 +20,7 @@ use crate::devices::Plant;
 use crate::devices::multiplexer::{Multiplexer, MultiplexerCounters};
 use crate::devices::sensor_board::{Output, SensorBoard};
 use crate::physics::state::VehicleState;
-use crate::record::{Direction, Recorder};
+use crate::record::{Direction, DropReason, Recorder};
 use crate::transport::LineSettings;
 use crate::transport::pacer::WirePacer;
 
@@ -81,6 +81,8 @@ pub struct LineSpec {
     pub carries: Carries,
     pub settings: LineSettings,
     pub tx_queue_bytes: usize,
+    /// Longest a complete byte waits for its hand-over to the port (`transport::pacer`).
+    pub release_quantum_ns: u64,
 }
 
 /// The core.
@@ -119,7 +121,8 @@ impl<M: Model> Core<M> {
                 carries: spec.carries,
                 decoder: LineDecoder::new(),
                 inbox: BytesMut::new(),
-                pacer: WirePacer::new(&spec.settings, spec.tx_queue_bytes),
+                pacer: WirePacer::new(&spec.settings, spec.tx_queue_bytes)
+                    .with_quantum(spec.release_quantum_ns),
                 outbox: Vec::new(),
                 counters: LineCounters::default(),
                 last_rx_ns: 0,
@@ -503,11 +506,26 @@ impl<M: Model> Core<M> {
         Some(data)
     }
 
-    /// Counts bytes the endpoint could not take (the client is not reading).
-    pub fn note_dropped(&mut self, line: usize, bytes: usize) {
-        if let Some(l) = self.lines.get_mut(line) {
-            l.counters.dropped_tx += bytes as u64;
+    /// Counts (and records, in `drops.tsv`) released bytes the endpoint could not take.
+    pub fn note_dropped(&mut self, line: usize, data: &[u8], reason: DropReason) {
+        let Some(l) = self.lines.get_mut(line) else {
+            return;
+        };
+        l.counters.dropped_tx += data.len() as u64;
+        tracing::debug!(
+            line = l.name,
+            bytes = data.len(),
+            reason = reason.as_str(),
+            "dropped"
+        );
+        if let Some(rec) = &self.recorder {
+            rec.dropped(self.now as f64 * 1e-9, l.name, reason, data);
         }
+    }
+
+    /// A handle on the recorder for the link tasks, when recording.
+    pub fn recorder_handle(&self) -> Option<crate::record::RecordHandle> {
+        self.recorder.as_ref().map(Recorder::handle)
     }
 }
 
@@ -639,6 +657,7 @@ mod tests {
                 },
                 settings: LineSettings::n81(115_200),
                 tx_queue_bytes: 4096,
+                release_quantum_ns: MS,
             }]
         } else {
             vec![
@@ -650,6 +669,7 @@ mod tests {
                     },
                     settings: LineSettings::n81(4800),
                     tx_queue_bytes: 4096,
+                    release_quantum_ns: MS,
                 },
                 LineSpec {
                     name: "sensor",
@@ -659,6 +679,7 @@ mod tests {
                     },
                     settings: LineSettings::n81(115_200),
                     tx_queue_bytes: 4096,
+                    release_quantum_ns: MS,
                 },
             ]
         };

@@ -5,17 +5,26 @@
 //! parses anything. Faults stay inside the task: a serial device that vanishes is reopened
 //! with back-off, a TCP client that leaves is replaced by the next, and a client that does not
 //! read makes the core drop (and count) output instead of growing memory.
+//!
+//! Bytes the core handed over that never reach the endpoint (the device vanished, a write
+//! failed, the daemon stopped before the client took them) are counted in `dropped_tx` and,
+//! with `--record`, written to the recording's `drops.tsv` (docs/recording.md).
+//!
+//! A pty stays open on the bridge side, so the EyeBot side opening and closing it is not
+//! visible on the master; the link task watches the slave device with inotify instead and
+//! counts every open after the first as a reconnect.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use bytes::Bytes;
+use bytes::{Buf, Bytes};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::sync::{mpsc, watch};
 
 use super::config::{Endpoint, LinkConfig};
+use crate::record::{DropReason, RecordHandle};
 use crate::transport::pty::{PtyError, PtyMaster};
 use crate::transport::{LineSettings, serial};
 
@@ -25,6 +34,8 @@ pub const REOPEN_BACKOFF_MIN: Duration = Duration::from_millis(100);
 pub const REOPEN_BACKOFF_MAX: Duration = Duration::from_secs(2);
 /// At shutdown, input is read until the endpoint stays quiet this long.
 pub const SHUTDOWN_DRAIN: Duration = Duration::from_millis(10);
+/// At shutdown, bytes already handed over are still written for at most this long.
+pub const SHUTDOWN_FLUSH: Duration = Duration::from_millis(50);
 /// Chunks the core may have handed over but the endpoint has not yet written.
 pub const TX_CHANNEL_CHUNKS: usize = 64;
 
@@ -32,9 +43,50 @@ pub const TX_CHANNEL_CHUNKS: usize = 64;
 #[derive(Debug, Default)]
 pub struct LinkCounters {
     pub bytes_rx: AtomicU64,
+    /// Bytes written to the endpoint.
     pub bytes_tx: AtomicU64,
+    /// Serial device reopened, TCP client replaced, or the EyeBot side reopened its pty.
     pub reconnects: AtomicU64,
     pub io_errors: AtomicU64,
+    /// Bytes handed over by the core that never reached the endpoint.
+    pub dropped_tx: AtomicU64,
+}
+
+/// Bytes released by the core, with the simulated time of the hand-over.
+#[derive(Debug, Clone)]
+pub struct Outbound {
+    pub sim_s: f64,
+    pub data: Bytes,
+}
+
+/// What a link task needs besides its endpoint and channels.
+#[derive(Debug, Clone)]
+pub struct LineContext {
+    pub line: usize,
+    pub name: &'static str,
+    pub counters: Arc<LinkCounters>,
+    /// Where drops are recorded (`--record`).
+    pub recorder: Option<RecordHandle>,
+}
+
+impl LineContext {
+    fn dropped(&self, sim_s: f64, reason: DropReason, data: &[u8]) {
+        if data.is_empty() {
+            return;
+        }
+        self.counters
+            .dropped_tx
+            .fetch_add(data.len() as u64, Ordering::Relaxed);
+        tracing::warn!(
+            link = self.name,
+            bytes = data.len(),
+            reason = reason.as_str(),
+            "bytes put on the line did not reach the endpoint"
+        );
+        if let Some(rec) = &self.recorder {
+            rec.dropped(sim_s, self.name, reason, data);
+        }
+    }
 }
 
 /// Why an endpoint could not be opened at start-up.
@@ -63,7 +115,8 @@ pub enum EndpointError {
 
 /// An endpoint opened at start-up, before the readiness lines are printed.
 pub enum OpenEndpoint {
-    Pty(PtyMaster),
+    /// The pty and the watch on its slave device that sees the EyeBot side open it.
+    Pty(PtyMaster, Option<OpenWatch>),
     Serial {
         device: PathBuf,
         line: LineSettings,
@@ -75,7 +128,7 @@ pub enum OpenEndpoint {
 impl std::fmt::Debug for OpenEndpoint {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            OpenEndpoint::Pty(p) => write!(f, "Pty({})", p.client_path().display()),
+            OpenEndpoint::Pty(p, _) => write!(f, "Pty({})", p.client_path().display()),
             OpenEndpoint::Serial { device, .. } => write!(f, "Serial({})", device.display()),
             OpenEndpoint::Tcp(l) => write!(f, "Tcp({:?})", l.local_addr().ok()),
         }
@@ -93,7 +146,11 @@ impl OpenEndpoint {
             Endpoint::Pty { link: symlink } => {
                 let path = run_dir.join(symlink);
                 PtyMaster::open(Some(&path))
-                    .map(OpenEndpoint::Pty)
+                    .map(|pty| {
+                        // Watch before anyone can open it, so no early open is missed.
+                        let watch = OpenWatch::new(link, pty.slave_path());
+                        OpenEndpoint::Pty(pty, watch)
+                    })
                     .map_err(|source| EndpointError::Pty { link, source })
             }
             Endpoint::Serial { device } => {
@@ -117,10 +174,18 @@ impl OpenEndpoint {
         }
     }
 
+    /// Our symlink and what it points at, for a pty with one.
+    pub fn owned_link(&self) -> Option<(&Path, &Path)> {
+        match self {
+            OpenEndpoint::Pty(p, _) => p.link_path().map(|l| (l, p.slave_path())),
+            _ => None,
+        }
+    }
+
     /// Where the EyeBot side connects, for the readiness line and the status.
     pub fn describe(&self) -> String {
         match self {
-            OpenEndpoint::Pty(p) => match p.link_path() {
+            OpenEndpoint::Pty(p, _) => match p.link_path() {
                 Some(link) => format!("{} -> {}", link.display(), p.slave_path().display()),
                 None => p.slave_path().display().to_string(),
             },
@@ -141,26 +206,22 @@ pub struct Inbound {
 
 /// Runs the line until `shutdown` turns true.
 pub async fn run_line(
-    line: usize,
-    name: &'static str,
+    cx: LineContext,
     endpoint: OpenEndpoint,
     to_core: mpsc::Sender<Inbound>,
-    mut from_core: mpsc::Receiver<Bytes>,
-    counters: Arc<LinkCounters>,
+    mut from_core: mpsc::Receiver<Outbound>,
     mut shutdown: watch::Receiver<bool>,
 ) {
+    let name = cx.name;
     match endpoint {
-        OpenEndpoint::Pty(mut pty) => {
-            let _ = pump(
-                line,
-                name,
-                &mut pty,
-                &to_core,
-                &mut from_core,
-                &counters,
-                &mut shutdown,
-            )
-            .await;
+        OpenEndpoint::Pty(mut pty, watch) => {
+            let opens = watch_opens(&cx, watch);
+            tokio::pin!(opens);
+            let pumped = pump(&cx, &mut pty, &to_core, &mut from_core, &mut shutdown);
+            tokio::select! {
+                _ = pumped => {}
+                () = &mut opens => {}
+            }
         }
         OpenEndpoint::Serial {
             device,
@@ -171,35 +232,30 @@ pub async fn run_line(
             loop {
                 if let Some(mut open) = port.take() {
                     backoff = REOPEN_BACKOFF_MIN;
-                    if pump(
-                        line,
-                        name,
-                        &mut open,
-                        &to_core,
-                        &mut from_core,
-                        &counters,
-                        &mut shutdown,
-                    )
-                    .await
+                    if pump(&cx, &mut open, &to_core, &mut from_core, &mut shutdown).await
                         == Pumped::Shutdown
                     {
                         return;
                     }
                     tracing::warn!(link = name, device = %device.display(), "serial device lost; reopening");
                 }
-                // While the device is gone, drain the core's output so it never blocks.
+                // While the device is gone, drain the core's output so it never blocks; the
+                // bytes are lost, and recorded as such.
                 let reopen = tokio::time::sleep(backoff);
                 tokio::pin!(reopen);
                 loop {
                     tokio::select! {
                         _ = &mut reopen => break,
-                        chunk = from_core.recv() => if chunk.is_none() { return },
+                        chunk = from_core.recv() => match chunk {
+                            Some(o) => cx.dropped(o.sim_s, DropReason::EndpointGone, &o.data),
+                            None => return,
+                        },
                         _ = shutdown.changed() => return,
                     }
                 }
                 match serial::open(&device, &settings) {
                     Ok(p) => {
-                        counters.reconnects.fetch_add(1, Ordering::Relaxed);
+                        cx.counters.reconnects.fetch_add(1, Ordering::Relaxed);
                         tracing::info!(link = name, device = %device.display(), "serial device reopened");
                         port = Some(p);
                     }
@@ -219,25 +275,16 @@ pub async fn run_line(
                 Ok((mut stream, peer)) => {
                     tracing::info!(link = name, %peer, "client connected");
                     let _ = stream.set_nodelay(true);
-                    if pump(
-                        line,
-                        name,
-                        &mut stream,
-                        &to_core,
-                        &mut from_core,
-                        &counters,
-                        &mut shutdown,
-                    )
-                    .await
+                    if pump(&cx, &mut stream, &to_core, &mut from_core, &mut shutdown).await
                         == Pumped::Shutdown
                     {
                         return;
                     }
-                    counters.reconnects.fetch_add(1, Ordering::Relaxed);
+                    cx.counters.reconnects.fetch_add(1, Ordering::Relaxed);
                     tracing::info!(link = name, %peer, "client left");
                 }
                 Err(e) => {
-                    counters.io_errors.fetch_add(1, Ordering::Relaxed);
+                    cx.counters.io_errors.fetch_add(1, Ordering::Relaxed);
                     tracing::warn!(link = name, error = %e, "accept failed");
                     tokio::time::sleep(REOPEN_BACKOFF_MIN).await;
                 }
@@ -252,18 +299,100 @@ enum Pumped {
     EndpointLost,
 }
 
+/// An inotify watch for `IN_OPEN`/`IN_CLOSE` on a pty's slave device.
+pub struct OpenWatch(tokio::io::unix::AsyncFd<InotifyFd>);
+
+impl OpenWatch {
+    /// `None` (logged) if inotify is unavailable: reopens are then not counted.
+    fn new(link: &'static str, slave: &Path) -> Option<Self> {
+        use nix::sys::inotify::{AddWatchFlags, InitFlags, Inotify};
+        let inotify = Inotify::init(InitFlags::IN_NONBLOCK | InitFlags::IN_CLOEXEC).and_then(|i| {
+            i.add_watch(slave, AddWatchFlags::IN_OPEN | AddWatchFlags::IN_CLOSE)
+                .map(|_| i)
+        });
+        let fd = inotify.map_err(std::io::Error::from).and_then(|i| {
+            // SAFETY: the inotify descriptor is open and owned by `InotifyFd`, whose
+            // `as_raw_fd` returns that same descriptor for as long as the `AsyncFd` owns it.
+            unsafe {
+                tokio::io::unix::AsyncFd::register_with_interest(
+                    InotifyFd(i),
+                    tokio::io::Interest::READABLE,
+                )
+            }
+            .map_err(std::io::Error::from)
+        });
+        match fd {
+            Ok(fd) => Some(Self(fd)),
+            Err(error) => {
+                tracing::warn!(link, %error, "cannot watch the pty for reopens; they are not counted");
+                None
+            }
+        }
+    }
+}
+
+/// Counts the EyeBot side's opens of the pty slave (inotify `IN_OPEN` on the device): every
+/// open after the first is a reconnect. Never returns.
+async fn watch_opens(cx: &LineContext, watch: Option<OpenWatch>) {
+    use nix::sys::inotify::AddWatchFlags;
+    let Some(OpenWatch(fd)) = watch else {
+        return std::future::pending().await;
+    };
+    let mut opens = 0u64;
+    loop {
+        let Ok(mut guard) = fd.readable().await else {
+            return std::future::pending().await;
+        };
+        let events =
+            match guard.try_io(|f| f.get_ref().0.read_events().map_err(std::io::Error::from)) {
+                Ok(Ok(events)) => events,
+                Ok(Err(error)) => {
+                    tracing::debug!(link = cx.name, %error, "inotify read failed");
+                    continue;
+                }
+                Err(_would_block) => continue,
+            };
+        for event in events {
+            if event.mask.contains(AddWatchFlags::IN_OPEN) {
+                opens += 1;
+                if opens > 1 {
+                    cx.counters.reconnects.fetch_add(1, Ordering::Relaxed);
+                }
+                tracing::info!(
+                    link = cx.name,
+                    session = opens,
+                    "the EyeBot side opened the pty"
+                );
+            } else {
+                tracing::debug!(link = cx.name, "the EyeBot side closed the pty");
+            }
+        }
+    }
+}
+
+struct InotifyFd(nix::sys::inotify::Inotify);
+
+impl std::os::fd::AsRawFd for InotifyFd {
+    fn as_raw_fd(&self) -> std::os::fd::RawFd {
+        use std::os::fd::AsFd;
+        self.0.as_fd().as_raw_fd()
+    }
+}
+
 async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
-    line: usize,
-    name: &'static str,
+    cx: &LineContext,
     stream: &mut S,
     to_core: &mpsc::Sender<Inbound>,
-    from_core: &mut mpsc::Receiver<Bytes>,
-    counters: &LinkCounters,
+    from_core: &mut mpsc::Receiver<Outbound>,
     shutdown: &mut watch::Receiver<bool>,
 ) -> Pumped {
+    let (line, name, counters) = (cx.line, cx.name, &*cx.counters);
     // Reading and writing run concurrently: a client that never reads blocks the writer
     // only, and shutdown still ends both at once.
     let (mut rd, mut wr) = tokio::io::split(stream);
+    // The chunk being written (what is left of it), kept outside the writer so that what
+    // never left can be accounted for when the pump stops.
+    let mut current: Option<Outbound> = None;
     let reader = async {
         let mut buf = vec![0u8; 4096];
         loop {
@@ -287,19 +416,7 @@ async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
             }
         }
     };
-    let writer = async {
-        while let Some(chunk) = from_core.recv().await {
-            if let Err(e) = wr.write_all(&chunk).await {
-                counters.io_errors.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!(link = name, error = %e, "write failed");
-                return Pumped::EndpointLost;
-            }
-            counters
-                .bytes_tx
-                .fetch_add(chunk.len() as u64, Ordering::Relaxed);
-        }
-        Pumped::Shutdown
-    };
+    let writer = write_all_from(&mut wr, &mut current, from_core, counters, name);
     let outcome = tokio::select! {
         r = reader => r,
         w = writer => w,
@@ -322,8 +439,70 @@ async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
                 break;
             }
         }
+        // What the core released before it stopped is still written, briefly: the core
+        // closes the channel once it has handed over its last bytes.
+        let _ = tokio::time::timeout(
+            SHUTDOWN_FLUSH,
+            write_all_from(&mut wr, &mut current, from_core, counters, name),
+        )
+        .await;
+    }
+    let reason = match outcome {
+        Pumped::Shutdown => DropReason::Shutdown,
+        Pumped::EndpointLost => DropReason::EndpointGone,
+    };
+    if let Some(rest) = current.take() {
+        cx.dropped(rest.sim_s, reason, &rest.data);
+    }
+    if outcome == Pumped::Shutdown {
+        while let Ok(rest) = from_core.try_recv() {
+            cx.dropped(rest.sim_s, reason, &rest.data);
+        }
     }
     outcome
+}
+
+/// Writes `current` and then each chunk from the core until the channel closes
+/// ([`Pumped::Shutdown`]) or a write fails ([`Pumped::EndpointLost`], with the unwritten rest
+/// left in `current`).
+async fn write_all_from<W: AsyncWrite + Unpin>(
+    wr: &mut W,
+    current: &mut Option<Outbound>,
+    from_core: &mut mpsc::Receiver<Outbound>,
+    counters: &LinkCounters,
+    name: &'static str,
+) -> Pumped {
+    loop {
+        let chunk = match current {
+            Some(chunk) if !chunk.data.is_empty() => chunk,
+            _ => match from_core.recv().await {
+                Some(next) => current.insert(next),
+                None => {
+                    *current = None;
+                    return Pumped::Shutdown;
+                }
+            },
+        };
+        match wr.write(&chunk.data).await {
+            Ok(0) => {
+                counters.io_errors.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!(link = name, "write returned 0 bytes");
+                return Pumped::EndpointLost;
+            }
+            Ok(n) => {
+                counters.bytes_tx.fetch_add(n as u64, Ordering::Relaxed);
+                chunk.data.advance(n);
+                if chunk.data.is_empty() {
+                    *current = None;
+                }
+            }
+            Err(e) => {
+                counters.io_errors.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!(link = name, error = %e, "write failed");
+                return Pumped::EndpointLost;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -344,7 +523,8 @@ mod tests {
 
     struct Running {
         to_core: mpsc::Receiver<Inbound>,
-        from_core: mpsc::Sender<Bytes>,
+        from_core: mpsc::Sender<Outbound>,
+        counters: Arc<LinkCounters>,
         stop: watch::Sender<bool>,
         task: tokio::task::JoinHandle<()>,
         client_path: PathBuf,
@@ -367,12 +547,17 @@ mod tests {
         let (out_tx, out_rx) = mpsc::channel(TX_CHANNEL_CHUNKS);
         let (stop, stop_rx) = watch::channel(false);
         let counters = Arc::new(LinkCounters::default());
-        let task = tokio::spawn(run_line(
-            0, "sonar", endpoint, in_tx, out_rx, counters, stop_rx,
-        ));
+        let cx = LineContext {
+            line: 0,
+            name: "sonar",
+            counters: counters.clone(),
+            recorder: None,
+        };
+        let task = tokio::spawn(run_line(cx, endpoint, in_tx, out_rx, stop_rx));
         Running {
             to_core: in_rx,
             from_core: out_tx,
+            counters,
             stop,
             task,
             client_path,
@@ -393,7 +578,7 @@ mod tests {
         let got = run.to_core.recv().await.unwrap();
         assert_eq!(&got.data[..], b"#S1\r");
         run.from_core
-            .send(Bytes::from_static(b"$SDDBT,,f,2.0,M,,F*00\r\n"))
+            .send(outbound(b"$SDDBT,,f,2.0,M,,F*00\r\n"))
             .await
             .unwrap();
         let mut back = [0u8; 23];
@@ -446,7 +631,7 @@ mod tests {
             .write(true)
             .open(&run.client_path)
             .unwrap();
-        let chunk = Bytes::from(vec![b'x'; 4096]);
+        let chunk = outbound(&[b'x'; 4096]);
         let mut refused = 0;
         for _ in 0..1000 {
             if run.from_core.try_send(chunk.clone()).is_err() {
@@ -459,9 +644,56 @@ mod tests {
             "a bounded hand-over refuses chunks once the client stops reading"
         );
         run.stop.send(true).unwrap();
+        drop(run.from_core);
         tokio::time::timeout(Duration::from_secs(1), run.task)
             .await
             .expect("link task ends within 1 s of shutdown")
             .unwrap();
+        // What was handed over but never taken by the client is accounted for: written
+        // (into the pty's kernel buffer) or dropped at shutdown, nothing else.
+        let written = run.counters.bytes_tx.load(Ordering::Relaxed);
+        let dropped = run.counters.dropped_tx.load(Ordering::Relaxed);
+        assert_eq!(
+            written + dropped,
+            (1000 - refused) * 4096,
+            "written {written}, dropped {dropped}"
+        );
+        assert!(dropped > 0);
+    }
+
+    fn outbound(data: &[u8]) -> Outbound {
+        Outbound {
+            sim_s: 0.0,
+            data: Bytes::copy_from_slice(data),
+        }
+    }
+
+    /// Regression: the EyeBot side opening and closing its pty end was invisible (the bridge
+    /// keeps the slave open) and never counted in the link's reconnects.
+    #[tokio::test]
+    async fn reopening_the_pty_counts_as_a_reconnect() {
+        let run = start("reopen").await;
+        for _ in 0..5 {
+            drop(
+                std::fs::OpenOptions::new()
+                    .read(true)
+                    .write(true)
+                    .open(&run.client_path)
+                    .unwrap(),
+            );
+        }
+        let deadline = std::time::Instant::now() + Duration::from_secs(5);
+        while run.counters.reconnects.load(Ordering::Relaxed) < 4
+            && std::time::Instant::now() < deadline
+        {
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        assert_eq!(
+            run.counters.reconnects.load(Ordering::Relaxed),
+            4,
+            "five sessions: the first a connect, four reconnects"
+        );
+        run.stop.send(true).unwrap();
+        run.task.await.unwrap();
     }
 }

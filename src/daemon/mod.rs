@@ -13,6 +13,7 @@ pub mod core;
 pub mod feed;
 pub mod link;
 pub mod plant;
+pub mod shutdown;
 pub mod status;
 
 use std::path::{Path, PathBuf};
@@ -20,16 +21,15 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use bytes::Bytes;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 use self::clock::{RealtimeMap, TimeMode};
 use self::config::{DaemonConfig, Endpoint};
 use self::core::{Core, LineSpec, Model};
-use self::link::{EndpointError, Inbound, LinkCounters, OpenEndpoint};
+use self::link::{EndpointError, Inbound, LineContext, LinkCounters, OpenEndpoint, Outbound};
 use self::status::{LinkStatus, Pose, StatusServer, StatusSnapshot};
-use crate::record::{RecordError, Recorder};
+use crate::record::{DropReason, RecordError, Recorder};
 
 /// How often the realtime loop wakes when nothing is due (bounds the physics lag).
 pub const IDLE_WAKE: Duration = Duration::from_millis(20);
@@ -72,6 +72,9 @@ pub struct RunOptions {
     pub pid_file: Option<PathBuf>,
     /// Text of `meta.toml` in the recording.
     pub record_meta: String,
+    /// Filled with what the run creates (symlinks, sockets, pid file), for the process-level
+    /// shutdown guard ([`shutdown::spawn_signal_guard`]).
+    pub leftovers: shutdown::Leftovers,
 }
 
 /// What the daemon reports as it comes up.
@@ -94,7 +97,7 @@ pub struct RunSummary {
 struct LineRuntime {
     name: &'static str,
     describe: String,
-    to_link: mpsc::Sender<Bytes>,
+    to_link: mpsc::Sender<Outbound>,
     counters: Arc<LinkCounters>,
     /// Released bytes the link task has not taken yet, sent as one chunk when it has room.
     backlog: bytes::BytesMut,
@@ -129,6 +132,7 @@ where
         },
         settings: config.sonar.line,
         tx_queue_bytes: config.sonar.tx_queue_bytes,
+        release_quantum_ns: config.release_quantum.as_nanos() as u64,
     }];
     let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, &run_dir).await?];
     if !shared {
@@ -140,17 +144,27 @@ where
             },
             settings: config.sensor.line,
             tx_queue_bytes: config.sensor.tx_queue_bytes,
+            release_quantum_ns: config.release_quantum.as_nanos() as u64,
         });
         endpoints.push(OpenEndpoint::open("sensor", &config.sensor, &run_dir).await?);
     }
 
+    for endpoint in &endpoints {
+        if let Some((path, target)) = endpoint.owned_link() {
+            options.leftovers.symlink(path, target);
+        }
+    }
     let status_path = run_dir.join("status.sock");
     let status_server = StatusServer::bind(&status_path)?;
+    options.leftovers.socket(&status_path);
     let pid_guard = options
         .pid_file
         .as_deref()
         .map(PidFile::create)
         .transpose()?;
+    if let Some(pid) = &options.pid_file {
+        options.leftovers.pid_file(pid);
+    }
 
     let mut core = Core::new(model, board, mux, &specs, lockstep);
     if let Some(log) = &config.sonar_replay {
@@ -158,6 +172,7 @@ where
     }
     let feed_path = run_dir.join(feed::FEED_SOCKET);
     let feed_listener = feed::bind(&feed_path)?;
+    options.leftovers.socket(&feed_path);
     if let Some(dir) = &options.record {
         let recorder = Recorder::start(dir, &options.record_meta, crate::record::STATE_HEADER)?;
         core.set_recorder(recorder, (1e9 / config.state_record_hz) as u64);
@@ -175,13 +190,17 @@ where
         });
         let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
         let counters = Arc::new(LinkCounters::default());
-        tasks.push(tokio::spawn(link::run_line(
-            index,
+        let cx = LineContext {
+            line: index,
             name,
+            counters: counters.clone(),
+            recorder: core.recorder_handle(),
+        };
+        tasks.push(tokio::spawn(link::run_line(
+            cx,
             endpoint,
             in_tx.clone(),
             out_rx,
-            counters.clone(),
             shutdown.clone(),
         )));
         lines.push(LineRuntime {
@@ -295,8 +314,18 @@ where
     let sim_time_s = core.now() as f64 * 1e-9;
     let overruns = map.as_ref().map_or(0, RealtimeMap::overruns);
     drop(lines);
-    for task in tasks {
-        let _ = tokio::time::timeout(Duration::from_millis(500), task).await;
+    // Link tasks get `TASKS_BUDGET` between them; one that has not stopped by then is
+    // aborted, which drops its endpoint (and symlink). See `shutdown` for the whole bound.
+    let tasks_deadline = Instant::now() + shutdown::TASKS_BUDGET;
+    for mut task in tasks {
+        if tokio::time::timeout_at(tasks_deadline, &mut task)
+            .await
+            .is_err()
+        {
+            tracing::warn!("a link task did not stop in time; aborting it");
+            task.abort();
+            let _ = tokio::time::timeout(Duration::from_millis(20), task).await;
+        }
     }
     // Input that arrived before the shutdown but was not processed (the loop may stop with
     // chunks still queued, and the link tasks drain their endpoints as they stop) is
@@ -311,6 +340,7 @@ where
         None => None,
     };
     drop(pid_guard);
+    options.leftovers.remove_all();
     result?;
     Ok(RunSummary {
         sim_time_s,
@@ -419,27 +449,33 @@ fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonErro
 /// Hands released bytes to the link tasks. Paced bytes are released a few at a time, so the
 /// hand-over channel (counted in chunks) fills after a short stall of the link task even
 /// when the client reads: bytes that do not fit wait in the line's backlog and go as one
-/// chunk next time. Only a backlog beyond the line's `tx_queue_bytes` (a client that does
-/// not read, or is gone) is dropped and counted; the daemon never blocks on a client.
+/// chunk next time. Released bytes that would take the backlog beyond the line's
+/// `tx_queue_bytes` (a client that does not read, or is gone) are dropped, counted and
+/// recorded as drops; the daemon never blocks on a client.
 fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &mut [LineRuntime]) {
+    let sim_s = core.now() as f64 * 1e-9;
     for (index, line) in lines.iter_mut().enumerate() {
         while let Some(data) = core.take_output(index) {
-            line.backlog.extend_from_slice(&data);
+            if line.backlog.len() + data.len() > line.backlog_limit {
+                core.note_dropped(index, &data, DropReason::NotRead);
+            } else {
+                line.backlog.extend_from_slice(&data);
+            }
         }
         if line.backlog.is_empty() {
             continue;
         }
-        let chunk = line.backlog.split().freeze();
+        let chunk = Outbound {
+            sim_s,
+            data: line.backlog.split().freeze(),
+        };
         match line.to_link.try_send(chunk) {
             Ok(()) => {}
-            Err(mpsc::error::TrySendError::Full(chunk)) if chunk.len() <= line.backlog_limit => {
-                line.backlog.extend_from_slice(&chunk);
+            Err(mpsc::error::TrySendError::Full(chunk)) => {
+                line.backlog.extend_from_slice(&chunk.data);
             }
-            Err(e) => {
-                let chunk = match e {
-                    mpsc::error::TrySendError::Full(c) | mpsc::error::TrySendError::Closed(c) => c,
-                };
-                core.note_dropped(index, chunk.len());
+            Err(mpsc::error::TrySendError::Closed(chunk)) => {
+                core.note_dropped(index, &chunk.data, DropReason::EndpointGone);
             }
         }
     }
@@ -476,7 +512,7 @@ fn snapshot<M: Model>(
                     frames_rx: c.frames_rx,
                     frames_tx: c.frames_tx,
                     errors: c.errors + l.counters.io_errors.load(Ordering::Relaxed),
-                    dropped_tx: c.dropped_tx,
+                    dropped_tx: c.dropped_tx + l.counters.dropped_tx.load(Ordering::Relaxed),
                     reconnects: l.counters.reconnects.load(Ordering::Relaxed),
                 }
             })
@@ -612,6 +648,7 @@ mod tests {
             },
             settings: crate::transport::LineSettings::n81(baud),
             tx_queue_bytes: 4096,
+            release_quantum_ns: 1_000_000,
         };
         let specs = [spec("sonar", true, 4800), spec("sensor", false, 115_200)];
         let mut core = Core::new(FakeModel::default(), board, mux, &specs, false);
@@ -644,7 +681,7 @@ mod tests {
             if step % 25 == 0 {
                 // The link task catches up now and then.
                 while let Ok(chunk) = sensor_rx.try_recv() {
-                    delivered += chunk.len();
+                    delivered += chunk.data.len();
                     flush_outputs(&mut core, &mut lines);
                 }
             }
@@ -700,6 +737,7 @@ mod tests {
             record: Some(record.clone()),
             pid_file: Some(dir.join("pid")),
             record_meta: "seed = 1\n".into(),
+            ..RunOptions::default()
         };
         std::fs::create_dir_all(&dir).unwrap();
         let daemon = tokio::spawn(async move {

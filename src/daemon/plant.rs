@@ -248,15 +248,32 @@ impl Plant for MakoPlant {
                 // Until the first acknowledgement after a select, the master forwards
                 // nothing (PROTOCOL.md 1.2); after it, both controllers' sentences, which
                 // do not say which transducer they came from (thesis 4.8).
-                sensors::SonarEvent::Range { .. } if self.forwarding.is_none() => {
+                sensors::SonarEvent::Range { .. } | sensors::SonarEvent::NoEcho { .. }
+                    if self.forwarding.is_none() =>
+                {
                     continue;
                 }
-                sensors::SonarEvent::Range { range, source, .. } => (
+                sensors::SonarEvent::Range {
+                    range,
+                    source,
+                    p_detect,
+                    ..
+                } => (
                     at,
                     SonarEvent::Reading {
                         transducer: source as u8 + 1,
                         range_m: Some(f64::from(range.0) * self.resolution_m),
-                        quality_pct: 100,
+                        quality_pct: (p_detect * 100.0).round().clamp(0.0, 100.0) as u8,
+                    },
+                ),
+                // A ping without a valid echo: the multiplexer's `invalid_echo` setting
+                // decides whether the EyeBot hears of it (PROTOCOL.md 1.3, "Invalid echo").
+                sensors::SonarEvent::NoEcho { source, .. } => (
+                    at,
+                    SonarEvent::Reading {
+                        transducer: source as u8 + 1,
+                        range_m: None,
+                        quality_pct: 0,
                     },
                 ),
             });
@@ -345,6 +362,7 @@ mod tests {
             },
             settings: LineSettings::n81(4800),
             tx_queue_bytes: 4096,
+            release_quantum_ns: 1_000_000,
         }];
         let mut core = Core::new(plant, board, mux, &lines, false);
         core.receive(0, b"@S1\r").unwrap();

@@ -27,9 +27,11 @@ pub struct LinkStatus {
     pub frames_tx: u64,
     /// Malformed or unknown input (each also logged and answered per the protocol).
     pub errors: u64,
-    /// Bytes dropped because the EyeBot side did not read.
+    /// Bytes put on the line that never reached the endpoint (the EyeBot side did not read,
+    /// the endpoint was gone); with `--record` each drop is in `drops.tsv`.
     pub dropped_tx: u64,
-    /// Times the endpoint was lost and reopened.
+    /// Times the endpoint was lost and reopened: a serial device reopened, a TCP client
+    /// replaced, or the EyeBot side opening its pty again.
     pub reconnects: u64,
 }
 

@@ -20,6 +20,13 @@
 //!   acknowledgement, so the first range after an ack may still be the previous transducer's
 //!   (the "which transducer was that?" problem that made programs read T1, T2, T1).
 //!   [`SonarEvent::Range::source`] says which one it really was, for tests and logs only.
+//! - A ping of a connected transducer without a valid echo (nothing within the beam and
+//!   range, the detection draw of thesis table 4.7 failed, a reverberation beyond range, or
+//!   the transducer still re-acquiring after a switch) is a [`SonarEvent::NoEcho`], due
+//!   when its sentence would have been. The Navman sends nothing for it (thesis 3.3.2: "returns
+//!   only a distance value if the return value of the transducer was valid"); the device
+//!   emulator's `invalid_echo` setting decides what the master sends. A ping while the relays
+//!   move has no transducer at all and gives no event.
 
 use std::collections::VecDeque;
 
@@ -41,6 +48,14 @@ pub enum SonarEvent {
         range: RangeSteps,
         /// The transducer that produced it (not on the wire).
         source: usize,
+        /// The detection probability used for this ping, 0..=1 (for `$PEBHS`).
+        p_detect: f64,
+        t_s: f64,
+    },
+    /// A ping of `source` on `controller` gave no valid echo (module doc).
+    NoEcho {
+        controller: usize,
+        source: usize,
         t_s: f64,
     },
 }
@@ -48,7 +63,9 @@ pub enum SonarEvent {
 impl SonarEvent {
     pub fn t_s(&self) -> f64 {
         match self {
-            SonarEvent::Ack { t_s, .. } | SonarEvent::Range { t_s, .. } => *t_s,
+            SonarEvent::Ack { t_s, .. }
+            | SonarEvent::Range { t_s, .. }
+            | SonarEvent::NoEcho { t_s, .. } => *t_s,
         }
     }
 }
@@ -191,11 +208,17 @@ impl SonarSystem {
                 return None;
             }
         }
+        let source = ctl.connected;
+        let t_s = ping_s + self.s.timing.sentence_latency_s;
+        let no_echo = SonarEvent::NoEcho {
+            controller: c,
+            source,
+            t_s,
+        };
         if ctl.reacquire_left > 0 {
             ctl.reacquire_left -= 1;
-            return None;
+            return Some(no_echo);
         }
-        let source = ctl.connected;
         // Crosstalk: this controller hears the other controller's ping instead of its own.
         let crosstalk = self.s.crosstalk_probability > 0.0
             && self.rng.random_bool(self.s.crosstalk_probability);
@@ -203,13 +226,17 @@ impl SonarSystem {
         let (range_m, p) = if crosstalk {
             let me = &self.transducers[source];
             let them = &self.transducers[other];
-            let echo = them.echo(state, world, &self.s)?;
+            let Some(echo) = them.echo(state, world, &self.s) else {
+                return Some(no_echo);
+            };
             let path = echo.range_m + (echo.hit_m - me.origin_m(state)).norm();
             let r = path / 2.0;
             (r, super::sonar::table_probability(&self.s, r))
         } else {
             let tr = &self.transducers[source];
-            let echo = tr.echo(state, world, &self.s)?;
+            let Some(echo) = tr.echo(state, world, &self.s) else {
+                return Some(no_echo);
+            };
             let p = detection_probability(
                 &self.s,
                 echo.range_m,
@@ -218,12 +245,15 @@ impl SonarSystem {
             );
             (echo.range_m, p)
         };
-        let range = self.transducers[source].report(range_m, p, &self.s, ping_s)?;
+        let Some(range) = self.transducers[source].report(range_m, p, &self.s, ping_s) else {
+            return Some(no_echo);
+        };
         Some(SonarEvent::Range {
             controller: c,
             range,
             source,
-            t_s: ping_s + self.s.timing.sentence_latency_s,
+            p_detect: p,
+            t_s,
         })
     }
 
@@ -244,5 +274,76 @@ impl SonarSystem {
         self.controllers[0]
             .next_ping_s
             .min(self.controllers[1].next_ping_s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Unit, UnitQuaternion, Vector3};
+
+    use super::*;
+    use crate::config::Embedded;
+    use crate::sensors::SensorsConfig;
+    use crate::sensors::scene::{OpenWater, PlaneWall, at_rest};
+
+    fn events(world: &dyn RayCaster, seed: u64, seconds: f64) -> Vec<SonarEvent> {
+        let cfg = SensorsConfig::load(&Embedded, "sensors/mako-2008.toml").unwrap();
+        let mut mux = SonarSystem::new(&cfg.sonar, seed);
+        let mut out = Vec::new();
+        let mut t = 0.0;
+        while t < seconds {
+            t += 0.01;
+            let st = at_rest(t, Vector3::new(5.0, 5.0, 1.5), UnitQuaternion::identity());
+            mux.update(&st, world);
+            out.extend(mux.poll(t));
+        }
+        out
+    }
+
+    /// In open water every ping of both controllers is a ping without a valid echo, one per
+    /// controller per period: the multiplexer's `invalid_echo = "empty"` depends on it.
+    #[test]
+    fn pings_without_an_echo_are_reported() {
+        let events = events(&OpenWater, 3, 10.0);
+        let no_echo = |c| {
+            events
+                .iter()
+                .filter(|e| matches!(e, SonarEvent::NoEcho { controller, .. } if *controller == c))
+                .count()
+        };
+        assert!(
+            events
+                .iter()
+                .all(|e| matches!(e, SonarEvent::NoEcho { .. })),
+            "{events:?}"
+        );
+        // 1 Hz over 10 s less the sentence latency: 9 or 10 pings each.
+        assert!((9..=10).contains(&no_echo(0)), "{events:?}");
+        assert!((9..=10).contains(&no_echo(1)), "{events:?}");
+    }
+
+    /// At the edge of the detection table (3.9 m: about 15 %) a wall gives both valid ranges
+    /// and failed detections, and a run is a function of the seed, invalid pings included.
+    #[test]
+    fn a_wall_at_the_edge_of_the_table_gives_ranges_and_invalid_echoes_deterministically() {
+        // 3.9 m in front of transducer 0.
+        let st = at_rest(0.0, Vector3::new(5.0, 5.0, 1.5), UnitQuaternion::identity());
+        let cfg = SensorsConfig::load(&Embedded, "sensors/mako-2008.toml").unwrap();
+        let mux = SonarSystem::new(&cfg.sonar, 0);
+        let tr = &mux.transducers()[0];
+        let axis = tr.axis_world(&st).into_inner();
+        let wall = PlaneWall {
+            point_m: tr.origin_m(&st) + axis * 3.9,
+            normal: Unit::new_normalize(-axis),
+        };
+        let all = events(&wall, 11, 60.0);
+        let ranges: Vec<_> = all
+            .iter()
+            .filter(|e| matches!(e, SonarEvent::Range { .. }))
+            .collect();
+        let invalid = all.len() - ranges.len();
+        assert!(!ranges.is_empty() && invalid > ranges.len(), "{all:?}");
+        // Same seed again: identical, including the invalid ones' times.
+        assert_eq!(all, events(&wall, 11, 60.0));
     }
 }

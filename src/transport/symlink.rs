@@ -31,7 +31,6 @@ pub enum LinkError {
 pub struct OwnedLink {
     path: PathBuf,
     target: PathBuf,
-    owner_file: PathBuf,
 }
 
 fn owner_file_for(path: &Path) -> PathBuf {
@@ -116,7 +115,6 @@ impl OwnedLink {
         Ok(Self {
             path: path.to_path_buf(),
             target: target.to_path_buf(),
-            owner_file,
         })
     }
 
@@ -131,17 +129,23 @@ impl OwnedLink {
 
 impl Drop for OwnedLink {
     fn drop(&mut self) {
-        // Remove only what is still ours: another daemon may have taken the path over.
-        if fs::read_link(&self.path).is_ok_and(|t| t == self.target) {
-            let _ = fs::remove_file(&self.path);
-        }
-        let ours = fs::read_to_string(&self.owner_file)
-            .ok()
-            .and_then(|s| s.trim().parse::<u32>().ok())
-            == Some(std::process::id());
-        if ours {
-            let _ = fs::remove_file(&self.owner_file);
-        }
+        remove_if_ours(&self.path, &self.target);
+    }
+}
+
+/// Removes the symlink at `path` if it still points at `target`, and its owner file if it
+/// still names this process: another daemon may have taken the path over.
+pub fn remove_if_ours(path: &Path, target: &Path) {
+    if fs::read_link(path).is_ok_and(|t| t == target) {
+        let _ = fs::remove_file(path);
+    }
+    let owner_file = owner_file_for(path);
+    let ours = fs::read_to_string(&owner_file)
+        .ok()
+        .and_then(|s| s.trim().parse::<u32>().ok())
+        == Some(std::process::id());
+    if ours {
+        let _ = fs::remove_file(&owner_file);
     }
 }
 
