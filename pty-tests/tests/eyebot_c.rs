@@ -138,8 +138,6 @@ fn sonar_three_readings_see_the_port_wall() {
 /// of the two port transducers' perpendicular distances to the west or north wall (the wall
 /// on the port side before and after the corner).
 #[test]
-#[ignore = "unmet: passes the corner without contact, but the distance reaches 1.43 m (limit \
-            1.4 m) 30 s after the corner (seed 1); see docs/eyebot.md, Known gaps"]
 fn wall_follower_passes_the_first_corner() {
     let (rec, stdout) = run("wall_follower", "wall_follower", Some(WALL_START));
     let mut lo = f64::MAX;
