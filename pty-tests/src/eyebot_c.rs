@@ -85,6 +85,12 @@ pub fn m68k_tools_or_skip(test: &str) -> bool {
 /// `target/eyebot-c/<name>-<target>/`; returns that directory. `name` keeps test binaries
 /// that run at the same time out of each other's build directories.
 pub fn build(name: &str, target: Target, extra: &[&Path]) -> PathBuf {
+    build_with(name, target, extra, &[])
+}
+
+/// [`build`] with more `make` arguments (`VAR=value`), given after the target's own: for
+/// example `BACKEND=robios` with its `CFLAGS` and `LDLIBS`.
+pub fn build_with(name: &str, target: Target, extra: &[&Path], make_args: &[String]) -> PathBuf {
     let out = target_dir().join("eyebot-c").join(format!(
         "{name}-{}",
         match target {
@@ -111,6 +117,7 @@ pub fn build(name: &str, target: Target, extra: &[&Path]) -> PathBuf {
         let progs: Vec<String> = extra.iter().map(|p| p.display().to_string()).collect();
         make.arg(format!("PROG={}", progs.join(" ")));
     }
+    make.args(make_args);
     let output = make.output().expect("run make (is it installed?)");
     assert!(
         output.status.success(),
