@@ -16,6 +16,8 @@
 //! - [`fit`]: Levenberg-Marquardt fits, BIC ranking, greedy selection.
 //! - [`generate`]: hidden-effect data from a truth model (for tests and the benchmark).
 //! - [`report`]: the output files.
+//! - [`summary`]: summary observations (a quantity per experiment, with its uncertainty), the
+//!   form the thesis reports Mako's measurements in.
 
 pub mod effects;
 pub mod fit;
@@ -25,6 +27,7 @@ pub mod model;
 pub mod report;
 pub mod residuals;
 pub mod resim;
+pub mod summary;
 
 use std::path::{Path, PathBuf};
 
