@@ -4,6 +4,8 @@
 //!   show the gap shrink.
 //! - `gap generate --truth TRUTH.toml --schedule EXPERIMENT.toml --out DIR`: hidden-effect
 //!   data from a truth model.
+//! - `gap convert RECORD_DIR --out DIR`: a daemon recording as a measurement.
+//! - `gap --measured DIR_WITH_summary.toml --model MODEL.toml`: summary observations.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -38,6 +40,33 @@ pub struct GapArgs {
 pub enum GapCommand {
     /// Generate a measurement from a truth model (for hidden-effect tests).
     Generate(GenerateArgs),
+    /// Convert a daemon recording (`run --record DIR`) into a measurement directory.
+    Convert(ConvertArgs),
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct ConvertArgs {
+    /// The recording directory (meta.toml, bytes.tsv, state.csv).
+    pub record: PathBuf,
+    /// The measurement directory to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Vehicle config for the HDT tables (default: the recorded configuration's).
+    #[arg(long)]
+    pub vehicle: Option<String>,
+    /// Sensor config (default: the recorded configuration's).
+    #[arg(long)]
+    pub sensors: Option<String>,
+    /// World config (default: the recorded configuration's).
+    #[arg(long)]
+    pub world: Option<String>,
+    /// Also write an overhead-camera track (x_m, y_m): ground truth plus seeded Gaussian
+    /// noise of this size (m, 1 sigma). Off by default.
+    #[arg(long)]
+    pub camera_std_m: Option<f64>,
+    /// Seed of the camera noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -64,8 +93,10 @@ fn to_cli(e: GapError) -> CliError {
 }
 
 pub fn run(args: &GapArgs) -> Result<(), CliError> {
-    if let Some(GapCommand::Generate(g)) = &args.command {
-        return run_generate(g);
+    match &args.command {
+        Some(GapCommand::Generate(g)) => return run_generate(g),
+        Some(GapCommand::Convert(c)) => return run_convert(c),
+        None => {}
     }
     let (Some(measured), Some(model_path)) = (&args.measured, &args.model) else {
         return Err(CliError::Usage(
@@ -221,6 +252,35 @@ fn run_summary(
         }
     );
     println!("report in {}", out.display());
+    Ok(())
+}
+
+fn run_convert(c: &ConvertArgs) -> Result<(), CliError> {
+    let opts = gap::convert::ConvertOptions {
+        vehicle: c.vehicle.clone(),
+        sensors: c.sensors.clone(),
+        world: c.world.clone(),
+        camera_std_m: c.camera_std_m,
+        seed: c.seed,
+    };
+    let conv = gap::convert::convert(&c.record, &opts).map_err(to_cli)?;
+    for n in &conv.notices {
+        eprintln!("notice: {n}");
+    }
+    conv.measurement.write(&c.out).map_err(to_cli)?;
+    let m = &conv.measurement;
+    println!(
+        "{}: {:.1} s, {} command rows, channels {} -> {}",
+        c.record.display(),
+        m.experiment.duration_s,
+        m.commands.len(),
+        m.channels
+            .iter()
+            .map(|ch| format!("{} ({})", ch.name, ch.samples.len()))
+            .collect::<Vec<_>>()
+            .join(", "),
+        c.out.display()
+    );
     Ok(())
 }
 

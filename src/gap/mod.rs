@@ -8,6 +8,7 @@
 //!     ──report──▶ MODEL.fitted.toml, report.md, report.json, SVG plots
 //! ```
 //!
+//! - [`convert`]: a daemon recording (`--record`) turned into a measurement (`gap convert`).
 //! - [`format`]: `experiment.toml`, `commands.csv`, `measured.csv`.
 //! - [`model`]: the model file `gap` compares against (and writes back, fitted).
 //! - [`effects`]: the candidate library.
@@ -19,6 +20,7 @@
 //! - [`summary`]: summary observations (a quantity per experiment, with its uncertainty), the
 //!   form the thesis reports Mako's measurements in.
 
+pub mod convert;
 pub mod effects;
 pub mod fit;
 pub mod format;
