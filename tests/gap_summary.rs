@@ -161,3 +161,45 @@ fn hidden_thrust_gain_in_summary_numbers_is_found() {
     assert!((g - 0.25).abs() <= 0.025, "gain {g}");
     assert!(a.gap_reduction_pct >= 80.0, "{}", a.gap_reduction_pct);
 }
+
+/// configs/vehicles/subsim-2.4.toml derives its thrust from SubSim 2.4's reported 9 cm/s top
+/// speed and its yaw damping from the reported 38.5 s per circle (thesis 5.1); read the
+/// thesis's way, the model must give those numbers back (or the comments in the file lie).
+#[test]
+fn subsim_2_4_model_reproduces_subsim_s_own_reported_numbers() {
+    let s = mako_numbers();
+    let model = GapModel::load(&root().join("configs/models/subsim-2.4.toml")).expect("model");
+    let info = ExperimentInfo {
+        name: "subsim".into(),
+        description: String::new(),
+        duration_s: 0.0,
+        world: "worlds/pool.toml".into(),
+        sensors: "sensors/mako-2008.toml".into(),
+        initial: Initial {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: None,
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            surge_mps: 0.0,
+        },
+        camera_position_std_m: 0.0,
+        camera_speed_std_mps: 0.0,
+    };
+    let c = model.configs(&info, &model.base).expect("configs");
+    let values = summary::predict(&c, &s, None).expect("runs");
+    let get = |name: &str| {
+        s.observations
+            .iter()
+            .zip(&values)
+            .find(|(o, _)| o.name == name)
+            .and_then(|(_, v)| *v)
+            .expect("defined")
+    };
+    let top = get("top speed");
+    let turn = get("turn time anticlockwise");
+    println!("SubSim 2.4 model: top speed {top:.4} m/s, turn {turn:.2} s");
+    assert!((top - 0.09).abs() <= 0.005, "top speed {top}");
+    assert!((turn - 38.5).abs() <= 1.0, "turn time {turn}");
+}
