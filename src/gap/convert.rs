@@ -112,8 +112,11 @@ fn csv_err(origin: &Path, line: usize, column: &str, message: impl Into<String>)
     }
 }
 
-/// Ground-truth rows: (t_s, columns by name).
-fn read_state(path: &Path) -> Result<Vec<(f64, BTreeMap<String, f64>)>, GapError> {
+/// One ground-truth row: (t_s, columns by name).
+type StateRow = (f64, BTreeMap<String, f64>);
+
+/// Ground-truth rows of `state.csv`.
+fn read_state(path: &Path) -> Result<Vec<StateRow>, GapError> {
     let text = std::fs::read_to_string(path).map_err(|source| GapError::Io {
         path: path.to_path_buf(),
         source,
