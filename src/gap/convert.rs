@@ -218,7 +218,7 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
             continue;
         }
         let chunk = record::parse_chunk(line, i + 1)
-            .map_err(|e| csv_err(&bytes_path, i + 1, "", e.to_string()))?;
+            .map_err(|e| GapError::Data(format!("{}: {e}", bytes_path.display())))?;
         let t = chunk.sim_s - t0;
         let key = (chunk.link.clone(), chunk.dir.as_str());
         let (decoder, buf) = decoders.entry(key).or_default();
@@ -542,6 +542,197 @@ mod tests {
         assert!(v.len() >= 2, "{v:?}");
         for (_, s) in &v[1..] {
             assert!((s - 4.0 * step).abs() < 1e-9, "{v:?}");
+        }
+    }
+
+    mod recording {
+        use super::*;
+        use firmware_protocol::sensor_link::{
+            AdcChannel, AdcValue, CompassMode, Frame, Thruster, ThrusterCommand,
+        };
+        use firmware_protocol::{Dbt, EchoReport, HeadingWord, Talker, Transducer};
+
+        fn frame(m: Message) -> Vec<u8> {
+            let mut b = BytesMut::new();
+            Frame::new(1, m).encode(&mut b);
+            b.to_vec()
+        }
+
+        fn sentence(s: Sentence) -> Vec<u8> {
+            let mut b = BytesMut::new();
+            s.encode(&mut b).unwrap();
+            b.to_vec()
+        }
+
+        fn row(sim: f64, link: &str, dir: &str, bytes: &[u8]) -> String {
+            format!(
+                "{sim:.9}\t0.000000\t{link}\t{dir}\t{}\n",
+                hex::encode(bytes)
+            )
+        }
+
+        fn wire(percent: f64) -> ThrusterCommand {
+            let c = crate::physics::hdt_command(&MAKO_TABLE, percent);
+            ThrusterCommand {
+                duty: c.duty,
+                direction: match c.direction {
+                    crate::physics::Direction::Forward => WireDirection::Forward,
+                    crate::physics::Direction::Reverse => WireDirection::Reverse,
+                },
+            }
+        }
+
+        fn write(dir: &Path, bytes: &str) {
+            std::fs::create_dir_all(dir).unwrap();
+            std::fs::write(dir.join("meta.toml"), "seed = 1\n").unwrap();
+            std::fs::write(
+                dir.join("bytes.tsv"),
+                format!("{}\n{bytes}", record::BYTES_HEADER),
+            )
+            .unwrap();
+            std::fs::write(
+                dir.join("state.csv"),
+                format!(
+                    "{}\n0,1,2,0.3,0,0,0.5,0.1,0,0,0,0,0,0,0,0,0,0\n3,1.3,2,0.3,0,0,0.5,0.1,0,0,0,0,0,0,0,0,0,0\n",
+                    record::STATE_HEADER
+                ),
+            )
+            .unwrap();
+        }
+
+        /// Every decoded path of a hand-made recording: HELLO, COMPASS_MODE (BCD), both thruster
+        /// frames, ADC values by the analog table, a compass word split across two chunks, an
+        /// echo report and an unattributable DBT.
+        #[test]
+        fn a_hand_made_recording_converts_channel_by_channel() {
+            let dir =
+                std::env::temp_dir().join(format!("eyebot-hil-convert-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            let heading = frame(Message::CompassHeading {
+                word: HeadingWord::encode(124, HeadingFormat::Bcd).unwrap(),
+            });
+            let mut bytes = String::new();
+            bytes += &row(
+                0.0,
+                "sensor",
+                "rx",
+                &frame(Message::Hello { client_version: 1 }),
+            );
+            bytes += &row(
+                0.5,
+                "sensor",
+                "rx",
+                &frame(Message::CompassMode {
+                    mode: CompassMode::Poll,
+                    output: CompassOutput::Bcd,
+                }),
+            );
+            bytes += &row(
+                1.0,
+                "sensor",
+                "rx",
+                &frame(Message::ThrusterSetAll {
+                    commands: [wire(50.0), wire(50.0), wire(0.0), wire(0.0)],
+                }),
+            );
+            bytes += &row(
+                1.2,
+                "sensor",
+                "tx",
+                &frame(Message::CompassHeading {
+                    word: HeadingWord::encode(123, HeadingFormat::Bcd).unwrap(),
+                }),
+            );
+            let adc = |c: u8, v: u16| {
+                frame(Message::AdcValue {
+                    channel: AdcChannel::new(c).unwrap(),
+                    value: AdcValue::new(v).unwrap(),
+                })
+            };
+            bytes += &row(1.3, "sensor", "tx", &[adc(0, 200), adc(2, 512)].concat());
+            let t2 = Transducer::new(2).unwrap();
+            bytes += &row(
+                1.4,
+                "sonar",
+                "tx",
+                &[
+                    sentence(Sentence::Dbt(
+                        Dbt::from_depth_m(Talker::new("SD").unwrap(), 3.2).unwrap(),
+                    )),
+                    sentence(Sentence::Echo(EchoReport::new(t2, Some(3.2), 87).unwrap())),
+                ]
+                .concat(),
+            );
+            bytes += &row(1.5, "sensor", "tx", &heading[..4]);
+            bytes += &row(1.6, "sensor", "tx", &heading[4..]);
+            bytes += &row(
+                2.0,
+                "sensor",
+                "rx",
+                &frame(Message::ThrusterSet {
+                    thruster: Thruster::Stern,
+                    command: wire(-30.0),
+                }),
+            );
+            write(&dir, &bytes);
+            let c = convert(&dir, &ConvertOptions::default()).unwrap();
+            let m = &c.measurement;
+            let ch = |n: &str| m.channel(n).map(|c| c.samples.clone()).unwrap_or_default();
+            assert_eq!(ch("compass_deg"), vec![(1.2, 123.0), (1.6, 124.0)]);
+            assert_eq!(ch("depth_adc"), vec![(1.3, 200.0)]);
+            assert_eq!(ch("accel_x_adc"), vec![(1.3, 512.0)]);
+            assert_eq!(ch("sonar2_m"), vec![(1.4, 3.2)]);
+            assert!(m.channel("x_m").is_none(), "no camera track unless asked");
+            assert_eq!(m.commands.len(), 3, "{:?}", m.commands);
+            assert_eq!(m.commands[0].percent, [0.0; 4]);
+            assert_eq!(m.commands[1].t_s, 1.0);
+            assert!(
+                (m.commands[1].percent[0] - 50.0).abs() < 0.5,
+                "{:?}",
+                m.commands
+            );
+            assert_eq!(m.commands[2].t_s, 2.0);
+            assert!(
+                (m.commands[2].percent[3] + 30.0).abs() < 0.5,
+                "{:?}",
+                m.commands
+            );
+            assert!((m.experiment.initial.heading_deg - 0.5f64.to_degrees()).abs() < 1e-9);
+            assert_eq!(m.experiment.initial.z_m, Some(0.3));
+            assert_eq!(m.experiment.duration_s, 3.0);
+            assert!(
+                c.notices
+                    .iter()
+                    .any(|n| n.starts_with("1 sonar depth sentences")),
+                "{:?}",
+                c.notices
+            );
+
+            // With a camera track: ground truth plus noise, never exactly ground truth.
+            let opts = ConvertOptions {
+                camera_std_m: Some(0.01),
+                seed: 3,
+                ..Default::default()
+            };
+            let c = convert(&dir, &opts).unwrap();
+            let x = c.measurement.channel("x_m").unwrap();
+            assert!(
+                x.samples.iter().all(|(_, v)| *v != 1.0 && *v != 1.3),
+                "{:?}",
+                x.samples
+            );
+            assert_eq!(c.measurement.experiment.camera_position_std_m, 0.01);
+
+            // A malformed line is an error naming the file and the line, not a panic.
+            write(&dir, &format!("{bytes}0.5\tbad\n"));
+            let err = convert(&dir, &ConvertOptions::default())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains("bytes.tsv: bytes.tsv line 11: wall_unix_s"),
+                "{err}"
+            );
+            let _ = std::fs::remove_dir_all(&dir);
         }
     }
 }
