@@ -1191,12 +1191,15 @@ pub fn plot(a: &SummaryAnalysis, out: &Path) -> Result<(), GapError> {
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(220)
-        .build_cartesian_2d(-zmax..zmax, 0..n)
+        .build_cartesian_2d(-zmax..zmax, (0..n).into_segmented())
         .map_err(|e| plot_err(&path, e))?;
     let labels: Vec<String> = a.observations.iter().map(|o| o.name.clone()).collect();
     chart
         .configure_mesh()
-        .y_label_formatter(&|i| labels.get(*i).cloned().unwrap_or_default())
+        .y_label_formatter(&|v| match v {
+            SegmentValue::CenterOf(i) => labels.get(*i).cloned().unwrap_or_default(),
+            _ => String::new(),
+        })
         .y_labels(n)
         .x_desc("z (clamped to +-40)")
         .draw()
@@ -1205,7 +1208,10 @@ pub fn plot(a: &SummaryAnalysis, out: &Path) -> Result<(), GapError> {
         if let Some(z) = o.z_before {
             chart
                 .draw_series(std::iter::once(Rectangle::new(
-                    [(0.0, i), (clamp(z), i + 1)],
+                    [
+                        (0.0, SegmentValue::Exact(i)),
+                        (clamp(z), SegmentValue::Exact(i + 1)),
+                    ],
                     RED.mix(0.6).filled(),
                 )))
                 .map_err(|e| plot_err(&path, e))?;
@@ -1213,7 +1219,10 @@ pub fn plot(a: &SummaryAnalysis, out: &Path) -> Result<(), GapError> {
         if let Some(z) = o.z_after {
             chart
                 .draw_series(std::iter::once(Rectangle::new(
-                    [(0.0, i), (clamp(z), i + 1)],
+                    [
+                        (0.0, SegmentValue::Exact(i)),
+                        (clamp(z), SegmentValue::Exact(i + 1)),
+                    ],
                     BLUE.mix(0.8).filled(),
                 )))
                 .map_err(|e| plot_err(&path, e))?;
@@ -1221,7 +1230,10 @@ pub fn plot(a: &SummaryAnalysis, out: &Path) -> Result<(), GapError> {
     }
     for x in [-2.0, 2.0] {
         chart
-            .draw_series(LineSeries::new([(x, 0), (x, n)], BLACK))
+            .draw_series(LineSeries::new(
+                [(x, SegmentValue::Exact(0)), (x, SegmentValue::Exact(n))],
+                BLACK,
+            ))
             .map_err(|e| plot_err(&path, e))?;
     }
     root.present().map_err(|e| plot_err(&path, e))?;
