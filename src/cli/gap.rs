@@ -4,6 +4,8 @@
 //!   show the gap shrink.
 //! - `gap generate --truth TRUTH.toml --schedule EXPERIMENT.toml --out DIR`: hidden-effect
 //!   data from a truth model.
+//! - `gap convert RECORD_DIR --out DIR`: a daemon recording as a measurement.
+//! - `gap --measured DIR_WITH_summary.toml --model MODEL.toml`: summary observations.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -22,7 +24,8 @@ use crate::physics::experiment::Experiment;
 pub struct GapArgs {
     #[command(subcommand)]
     pub command: Option<GapCommand>,
-    /// The measurement directory (experiment.toml, commands.csv, measured.csv).
+    /// The measurement directory (experiment.toml, commands.csv, measured.csv), or summary
+    /// observations: a directory holding summary.toml, or a summary .toml file.
     #[arg(long)]
     pub measured: Option<PathBuf>,
     /// The model file (configs/models/*.toml format).
@@ -37,6 +40,33 @@ pub struct GapArgs {
 pub enum GapCommand {
     /// Generate a measurement from a truth model (for hidden-effect tests).
     Generate(GenerateArgs),
+    /// Convert a daemon recording (`run --record DIR`) into a measurement directory.
+    Convert(ConvertArgs),
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct ConvertArgs {
+    /// The recording directory (meta.toml, bytes.tsv, state.csv).
+    pub record: PathBuf,
+    /// The measurement directory to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Vehicle config for the HDT tables (default: the recorded configuration's).
+    #[arg(long)]
+    pub vehicle: Option<String>,
+    /// Sensor config (default: the recorded configuration's).
+    #[arg(long)]
+    pub sensors: Option<String>,
+    /// World config (default: the recorded configuration's).
+    #[arg(long)]
+    pub world: Option<String>,
+    /// Also write an overhead-camera track (x_m, y_m): ground truth plus seeded Gaussian
+    /// noise of this size (m, 1 sigma). Off by default.
+    #[arg(long)]
+    pub camera_std_m: Option<f64>,
+    /// Seed of the camera noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -63,14 +93,19 @@ fn to_cli(e: GapError) -> CliError {
 }
 
 pub fn run(args: &GapArgs) -> Result<(), CliError> {
-    if let Some(GapCommand::Generate(g)) = &args.command {
-        return run_generate(g);
+    match &args.command {
+        Some(GapCommand::Generate(g)) => return run_generate(g),
+        Some(GapCommand::Convert(c)) => return run_convert(c),
+        None => {}
     }
     let (Some(measured), Some(model_path)) = (&args.measured, &args.model) else {
         return Err(CliError::Usage(
             "gap needs --measured DIR and --model MODEL.toml (or a subcommand)".into(),
         ));
     };
+    if let Some(file) = gap::summary::summary_file(measured) {
+        return run_summary(&file, model_path, args.out.as_deref());
+    }
     let m = Measurement::load(measured).map_err(to_cli)?;
     for n in &m.notices {
         eprintln!("notice: {n}");
@@ -121,6 +156,130 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         analysis.excess_after,
         analysis.gap_reduction_pct,
         out.display()
+    );
+    Ok(())
+}
+
+/// The summary-observation workflow (`summary.toml`, docs/gap.md).
+fn run_summary(
+    file: &std::path::Path,
+    model_path: &std::path::Path,
+    out: Option<&std::path::Path>,
+) -> Result<(), CliError> {
+    let s = gap::summary::Summary::load(file).map_err(to_cli)?;
+    let model = GapModel::load(model_path).map_err(to_cli)?;
+    let total = (gap::fit::MAX_EFFECTS * effects::LIBRARY.len()) as u64;
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}") {
+        bar.set_style(style);
+    }
+    let a = gap::summary::analyse(&model, &s, &mut |round, name| {
+        bar.inc(1);
+        bar.set_message(format!("round {}: {name}", round + 1));
+    })
+    .map_err(to_cli)?;
+    bar.finish_and_clear();
+    let out = out.map_or_else(
+        || {
+            file.parent()
+                .unwrap_or(std::path::Path::new("."))
+                .join("gap-report")
+        },
+        std::path::Path::to_path_buf,
+    );
+    gap::summary::write_all(&a, &s, file, model_path, &out).map_err(to_cli)?;
+    println!(
+        "{} summary observations of `{}` against `{}`{}",
+        s.observations.len(),
+        s.name,
+        model.name,
+        if a.few_observations {
+            " (few numbers: a named effect is a lead, not a proof)"
+        } else {
+            ""
+        }
+    );
+    println!("| observation | measured | model before | z before | model after | z after |");
+    for o in &a.observations {
+        let f =
+            |v: Option<f64>, p: usize| v.map_or_else(|| "-".to_string(), |v| format!("{v:.p$}"));
+        println!(
+            "| {} | {:.3} {} | {} | {} | {} | {} |",
+            o.name,
+            o.measured,
+            o.unit,
+            f(o.simulated_before, 3),
+            f(o.z_before, 1),
+            f(o.simulated_after, 3),
+            f(o.z_after, 1)
+        );
+    }
+    if a.accepted.is_empty() {
+        println!("no significant missing effect");
+    }
+    // Final values: each accepted effect as refitted jointly with the ones after it.
+    for e in a.fitted.effects.iter().skip(model.effects.len()) {
+        let p: Vec<String> = e
+            .effect
+            .parameters
+            .iter()
+            .zip(&e.values)
+            .zip(&e.ci95)
+            .map(|((n, v), c)| format!("{n} = {v:.4} [{:.4}, {:.4}]", c[0], c[1]))
+            .collect();
+        println!(
+            "effect: {} ({}), delta BIC {:.1} when added",
+            e.effect.name,
+            p.join(", "),
+            e.delta_bic.unwrap_or(f64::NAN)
+        );
+    }
+    println!(
+        "gap (RMS of z): {:.2} -> {:.2} ({:.0} % smaller); chi2 after {:.1} vs 95 % point {:.1}: {}",
+        a.gap_before,
+        a.gap_after,
+        a.gap_reduction_pct,
+        a.chi2_after,
+        a.chi2_critical_after,
+        if a.consistent_after {
+            "consistent".to_string()
+        } else {
+            format!("still unexplained: {}", a.unexplained.join(", "))
+        }
+    );
+    println!("report in {}", out.display());
+    Ok(())
+}
+
+fn run_convert(c: &ConvertArgs) -> Result<(), CliError> {
+    let opts = gap::convert::ConvertOptions {
+        vehicle: c.vehicle.clone(),
+        sensors: c.sensors.clone(),
+        world: c.world.clone(),
+        camera_std_m: c.camera_std_m,
+        seed: c.seed,
+    };
+    let conv = gap::convert::convert(&c.record, &opts).map_err(to_cli)?;
+    for n in &conv.notices {
+        eprintln!("notice: {n}");
+    }
+    conv.measurement.write(&c.out).map_err(to_cli)?;
+    let m = &conv.measurement;
+    println!(
+        "{}: {:.1} s, {} command rows, channels {} -> {}",
+        c.record.display(),
+        m.experiment.duration_s,
+        m.commands.len(),
+        m.channels
+            .iter()
+            .map(|ch| format!("{} ({})", ch.name, ch.samples.len()))
+            .collect::<Vec<_>>()
+            .join(", "),
+        c.out.display()
     );
     Ok(())
 }

@@ -43,7 +43,7 @@ pub struct Effect {
 }
 
 /// The library, in the order of the issue's table.
-pub const LIBRARY: [Effect; 13] = [
+pub const LIBRARY: [Effect; 14] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -161,6 +161,17 @@ pub const LIBRARY: [Effect; 13] = [
         kind: Kind::Mean,
         physics: false,
     },
+    // Added for summary observations (issue 8 item 5): SubSim's lumped thrust constant alpha
+    // was wrong by a factor (thesis 5.1, 5.4), which no per-motor difference can express.
+    Effect {
+        name: "thrust_gain",
+        parameters: &["gain_scale"],
+        scales: &[0.2],
+        signature: "every motor stronger or weaker alike: speed and turn rate off in proportion to thrust at every heading",
+        channels: &["x_m", "y_m", "surge_mps", "paddle_speed_mps", "compass_deg"],
+        kind: Kind::Mean,
+        physics: true,
+    },
 ];
 
 /// Looks an effect up by name.
@@ -234,6 +245,10 @@ pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
         "sonar_incidence_dropout" => {
             c.sensors.sonar.max_incidence_deg =
                 (c.sensors.sonar.max_incidence_deg + p(0)).clamp(0.0, 90.0);
+        }
+        "thrust_gain" => {
+            c.vehicle.thruster_common.forward_max_n =
+                (c.vehicle.thruster_common.forward_max_n * (1.0 + p(0))).max(1e-3);
         }
         _ => {}
     }

@@ -8,6 +8,7 @@
 //!     ──report──▶ MODEL.fitted.toml, report.md, report.json, SVG plots
 //! ```
 //!
+//! - [`convert`]: a daemon recording (`--record`) turned into a measurement (`gap convert`).
 //! - [`format`]: `experiment.toml`, `commands.csv`, `measured.csv`.
 //! - [`model`]: the model file `gap` compares against (and writes back, fitted).
 //! - [`effects`]: the candidate library.
@@ -16,7 +17,10 @@
 //! - [`fit`]: Levenberg-Marquardt fits, BIC ranking, greedy selection.
 //! - [`generate`]: hidden-effect data from a truth model (for tests and the benchmark).
 //! - [`report`]: the output files.
+//! - [`summary`]: summary observations (a quantity per experiment, with its uncertainty), the
+//!   form the thesis reports Mako's measurements in.
 
+pub mod convert;
 pub mod effects;
 pub mod fit;
 pub mod format;
@@ -25,6 +29,7 @@ pub mod model;
 pub mod report;
 pub mod residuals;
 pub mod resim;
+pub mod summary;
 
 use std::path::{Path, PathBuf};
 

@@ -1,0 +1,182 @@
+//! `eyebot-hil gap convert`: a lockstep run of the real daemon (Mako plant, default sensors)
+//! is recorded, converted into a measurement and analysed with the same model. The data are
+//! the model's own, so `gap` must find no significant missing effect; and the conversion must
+//! give back the commands the EyeBot sent and the channels the bridge answered with, without
+//! copying ground truth.
+
+use std::time::Duration;
+
+use eyebot_hil::gap::convert::{ConvertOptions, convert};
+use eyebot_hil::gap::format::Measurement;
+use eyebot_hil::gap::model::GapModel;
+use eyebot_hil::gap::{self, Verdict};
+use eyebot_hil::physics::{Direction as PhysDirection, hdt_command};
+use eyebot_hil::probe::SensorClient;
+use firmware_protocol::sensor_link::{
+    CompassMode, CompassOutput, Direction, Message, ThrusterCommand,
+};
+use pty_tests::daemon::{
+    InProcessDaemon, TestDir, config_text, configs_dir, sensor_client, sonar_client,
+};
+
+/// Mako's HDT table (configs/vehicles/mako.toml, all four motors alike).
+const TABLE: [f64; 11] = [
+    255.0, 206.6, 183.6, 160.7, 137.7, 114.8, 91.8, 68.9, 45.9, 23.0, 0.0,
+];
+
+fn wire(percent: f64) -> ThrusterCommand {
+    let c = hdt_command(&TABLE, percent);
+    ThrusterCommand {
+        duty: c.duty,
+        direction: match c.direction {
+            PhysDirection::Forward => Direction::Forward,
+            PhysDirection::Reverse => Direction::Reverse,
+        },
+    }
+}
+
+async fn req(sensor: &mut SensorClient, m: Message) -> Message {
+    sensor
+        .request("gap-convert", m, Duration::ZERO)
+        .await
+        .unwrap()
+}
+
+/// An EyeBot program: depth and velocity streamed every 20 ms, compass pushes, 20 s straight
+/// at 50 %, then 20 s turning (port +60 %, starboard -60 %), time advanced tick by tick.
+async fn script(daemon: &InProcessDaemon) {
+    let mut sensor = sensor_client(&daemon.link("sensor"));
+    let sonar = sonar_client(&daemon.link("sonar"));
+    req(&mut sensor, Message::Hello { client_version: 1 }).await;
+    req(
+        &mut sensor,
+        Message::AdcStream {
+            channels: 0b0000_0011,
+            period_ms: 20,
+        },
+    )
+    .await;
+    req(
+        &mut sensor,
+        Message::CompassMode {
+            mode: CompassMode::Continuous,
+            output: CompassOutput::Binary,
+        },
+    )
+    .await;
+    for (commands, seconds) in [
+        ([wire(50.0), wire(50.0), wire(0.0), wire(0.0)], 20),
+        ([wire(60.0), wire(-60.0), wire(0.0), wire(0.0)], 20),
+    ] {
+        req(&mut sensor, Message::ThrusterSetAll { commands }).await;
+        // One tick per TIME_ADVANCE: in lockstep the recorder stamps pushed bytes when the
+        // bridge hands them to the port, at the end of the advance that produced them
+        // (docs/gap.md "gap convert"); single ticks keep compass pushes within 10 ms.
+        for _ in 0..seconds * 100 {
+            req(&mut sensor, Message::TimeAdvance { ticks: 1 }).await;
+        }
+    }
+    req(
+        &mut sensor,
+        Message::AdcStream {
+            channels: 0,
+            period_ms: 0,
+        },
+    )
+    .await;
+    drop(sonar);
+}
+
+#[test]
+fn a_recorded_lockstep_run_converts_and_gap_names_nothing() {
+    let dir = TestDir::new("gap-convert");
+    let record = dir.join("rec");
+    let out = dir.join("measured");
+    let report = dir.join("report");
+    let text = config_text(&[("time_mode = \"realtime\"", "time_mode = \"lockstep\"")]);
+    let mut daemon = InProcessDaemon::start(dir, &text, Some(record.clone()), |_| {});
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(script(&daemon));
+    daemon.stop();
+
+    let conv = convert(&record, &ConvertOptions::default()).expect("the recording converts");
+    for n in &conv.notices {
+        println!("notice: {n}");
+    }
+    let m = &conv.measurement;
+    let names: Vec<&str> = m.channels.iter().map(|c| c.name.as_str()).collect();
+    println!(
+        "{:.1} s, {} command rows, channels {names:?}",
+        m.experiment.duration_s,
+        m.commands.len()
+    );
+    for c in &m.channels {
+        println!("{}: {} samples", c.name, c.samples.len());
+    }
+    for name in ["compass_deg", "depth_adc", "paddle_speed_mps"] {
+        assert!(names.contains(&name), "{name} missing from {names:?}");
+    }
+    // No camera track unless asked for: nothing copied from ground truth.
+    assert!(
+        !names.contains(&"x_m") && !names.contains(&"y_m"),
+        "{names:?}"
+    );
+    // The commands the EyeBot sent come back as MOTORDrive percent.
+    let straight = m
+        .commands
+        .iter()
+        .find(|c| c.percent[0] > 0.0 && c.percent[1] > 0.0)
+        .expect("the straight leg");
+    assert!((straight.percent[0] - 50.0).abs() < 0.5, "{straight:?}");
+    let turn = m
+        .commands
+        .iter()
+        .find(|c| c.percent[1] < 0.0)
+        .expect("the turn");
+    assert!(
+        (turn.percent[0] - 60.0).abs() < 0.5 && (turn.percent[1] + 60.0).abs() < 0.5,
+        "{turn:?}"
+    );
+    assert!(
+        (turn.t_s - straight.t_s - 20.0).abs() < 0.1,
+        "{:?}",
+        m.commands
+    );
+
+    // Through the files, as a user would.
+    m.write(&out).expect("write the measurement");
+    let loaded = Measurement::load(&out).expect("the written measurement loads");
+    let model = GapModel::load(&configs_dir().join("models/mako.toml")).expect("model");
+    let a = gap::analyse(&model, &loaded, &out, &mut |_, _| {}).expect("gap runs");
+    gap::report::write_all(
+        &a,
+        &loaded,
+        &out,
+        &configs_dir().join("models/mako.toml"),
+        &report,
+    )
+    .expect("report");
+    for s in &a.before {
+        println!(
+            "{}: rms {:.4}, floor {:.4}, chi2/n {:.2}, significant {}",
+            s.channel, s.rms, s.noise_floor_rms, s.chi2_per_sample, s.significant
+        );
+    }
+    if let Some(r) = a.rounds.first() {
+        for c in r.iter().take(3) {
+            println!(
+                "{}: dBIC {:.1} sig {}",
+                c.name, c.delta_bic, c.signature_pass
+            );
+        }
+    }
+    assert_eq!(
+        a.verdict,
+        Verdict::None,
+        "named {:?}",
+        a.accepted.iter().map(|e| &e.name).collect::<Vec<_>>()
+    );
+}

@@ -1,0 +1,205 @@
+//! Summary observations (`summary.toml`, docs/gap.md): the thesis's own numbers as a test.
+//!
+//! - SubSim 2.4 (configs/models/subsim-2.4.toml, built from the thesis's fig 5.11 and eq 5.1/5.2)
+//!   against Mako's measurements (configs/measurements/mako-2008/): the workflow must name the
+//!   thrust as wrong and shrink the gap, and must say honestly what it could not explain.
+//! - The shipped Mako model against the same numbers: nothing significant is missing.
+//! - A thrust gain hidden in summary numbers computed from a truth model is found again.
+
+use std::path::{Path, PathBuf};
+
+use eyebot_hil::gap::effects;
+use eyebot_hil::gap::model::{EnabledEffect, GapModel};
+use eyebot_hil::gap::summary::{self, Summary, SummaryAnalysis};
+use eyebot_hil::gap::{Verdict, format::ExperimentInfo, format::Initial};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn mako_numbers() -> Summary {
+    Summary::load(&root().join("configs/measurements/mako-2008")).expect("summary loads")
+}
+
+fn analyse(model: &str, s: &Summary) -> SummaryAnalysis {
+    let model = GapModel::load(&root().join(model)).expect("model loads");
+    summary::analyse(&model, s, &mut |_, _| {}).expect("gap runs")
+}
+
+fn print(a: &SummaryAnalysis) {
+    for o in &a.observations {
+        println!(
+            "{}: measured {:.3}, before {:?} (z {:?}), after {:?} (z {:?})",
+            o.name, o.measured, o.simulated_before, o.z_before, o.simulated_after, o.z_after
+        );
+    }
+    for e in &a.fitted.effects {
+        println!("effect {} {:?} {:?}", e.effect.name, e.values, e.ci95);
+    }
+    println!(
+        "gap {:.2} -> {:.2} ({:.0} %), unexplained {:?}",
+        a.gap_before, a.gap_after, a.gap_reduction_pct, a.unexplained
+    );
+}
+
+/// SubSim 2.4 against Mako: the thrust is named first and found too weak (the thesis's own
+/// diagnosis of alpha, 5.1/5.4), the reverse thrust is named as too strong (Mako circles on a
+/// spot turn because its motors are weaker in reverse, 4.7), the gap shrinks by more than half,
+/// and the report still lists the top speed as unexplained (SubSim has no linear drag term for
+/// the library's drag scale to act on) instead of claiming a fit.
+#[test]
+fn subsim_2_4_against_mako_names_weak_thrust_and_shrinks_the_gap() {
+    let s = mako_numbers();
+    let a = analyse("configs/models/subsim-2.4.toml", &s);
+    print(&a);
+    assert_eq!(a.verdict, Verdict::Effect);
+    assert!(a.few_observations, "6 numbers must be flagged as few");
+    assert_eq!(a.accepted[0].name, "thrust_gain", "{:?}", a.rounds[0]);
+    let gain = a
+        .fitted
+        .effects
+        .iter()
+        .find(|e| e.effect.name == "thrust_gain")
+        .expect("thrust_gain fitted");
+    assert!(
+        gain.values[0] > 0.5,
+        "SubSim's thrust must come out too weak: {:?}",
+        gain.values
+    );
+    let reverse = a
+        .fitted
+        .effects
+        .iter()
+        .find(|e| e.effect.name == "reverse_thrust_asymmetry")
+        .expect("reverse thrust asymmetry named");
+    assert!(reverse.values[0] < 0.0, "{:?}", reverse.values);
+    // The gap shrinks, per observation where the effects act...
+    assert!(
+        a.gap_after < 0.5 * a.gap_before,
+        "{} -> {}",
+        a.gap_before,
+        a.gap_after
+    );
+    let by = summary::by_name(&a);
+    for name in [
+        "turn time anticlockwise",
+        "turn time clockwise",
+        "spot-turn circle",
+    ] {
+        let o = by[name];
+        let (b, af) = (o.z_before.expect("z"), o.z_after.expect("z"));
+        assert!(af.abs() < b.abs(), "{name}: |z| {b} -> {af}");
+    }
+    // ...and what the library cannot fix is reported, not hidden.
+    assert!(!a.consistent_after);
+    assert!(
+        a.unexplained.iter().any(|n| n == "top speed"),
+        "{:?}",
+        a.unexplained
+    );
+}
+
+/// The shipped Mako model against the same numbers: no significant missing effect, and the
+/// numbers agree within their uncertainties. (mako.toml was calibrated to these very numbers,
+/// docs/calibration.md, so this is a consistency check of the workflow, not new evidence.)
+#[test]
+fn mako_model_against_mako_numbers_has_no_significant_missing_effect() {
+    let s = mako_numbers();
+    let a = analyse("configs/models/mako.toml", &s);
+    print(&a);
+    assert_eq!(
+        a.verdict,
+        Verdict::None,
+        "named {:?}",
+        a.accepted.iter().map(|e| &e.name).collect::<Vec<_>>()
+    );
+    assert!(a.consistent_after, "chi2 {}", a.chi2_after);
+}
+
+/// Summary numbers computed from a truth model (Mako with 25 % more thrust), with the
+/// thesis's uncertainties: the hidden thrust gain is named and fitted within 10 % of 0.25.
+#[test]
+fn hidden_thrust_gain_in_summary_numbers_is_found() {
+    let mut s = mako_numbers();
+    let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model loads");
+    let mut truth = model.clone();
+    let effect = effects::by_name("thrust_gain").expect("in the library");
+    truth.effects.push(EnabledEffect {
+        effect,
+        values: vec![0.25],
+        ci95: vec![[0.25, 0.25]],
+        delta_bic: None,
+    });
+    let info = ExperimentInfo {
+        name: "truth".into(),
+        description: String::new(),
+        duration_s: 0.0,
+        world: "worlds/pool.toml".into(),
+        sensors: "sensors/mako-2008.toml".into(),
+        initial: Initial {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: None,
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            surge_mps: 0.0,
+        },
+        camera_position_std_m: 0.0,
+        camera_speed_std_mps: 0.0,
+    };
+    let c = truth.configs(&info, Path::new(".")).expect("configs");
+    let values = summary::predict(&c, &s, None).expect("truth runs");
+    for (o, v) in s.observations.iter_mut().zip(values) {
+        o.value = v.expect("truth defines every quantity");
+    }
+    let a = summary::analyse(&model, &s, &mut |_, _| {}).expect("gap runs");
+    print(&a);
+    assert_eq!(a.verdict, Verdict::Effect);
+    assert_eq!(a.accepted[0].name, "thrust_gain", "{:?}", a.rounds[0]);
+    let g = a.fitted.effects[0].values[0];
+    assert!((g - 0.25).abs() <= 0.025, "gain {g}");
+    assert!(a.gap_reduction_pct >= 80.0, "{}", a.gap_reduction_pct);
+}
+
+/// configs/vehicles/subsim-2.4.toml derives its thrust from SubSim 2.4's reported 9 cm/s top
+/// speed and its yaw damping from the reported 38.5 s per circle (thesis 5.1); read the
+/// thesis's way, the model must give those numbers back (or the comments in the file lie).
+#[test]
+fn subsim_2_4_model_reproduces_subsim_s_own_reported_numbers() {
+    let s = mako_numbers();
+    let model = GapModel::load(&root().join("configs/models/subsim-2.4.toml")).expect("model");
+    let info = ExperimentInfo {
+        name: "subsim".into(),
+        description: String::new(),
+        duration_s: 0.0,
+        world: "worlds/pool.toml".into(),
+        sensors: "sensors/mako-2008.toml".into(),
+        initial: Initial {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: None,
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            surge_mps: 0.0,
+        },
+        camera_position_std_m: 0.0,
+        camera_speed_std_mps: 0.0,
+    };
+    let c = model.configs(&info, &model.base).expect("configs");
+    let values = summary::predict(&c, &s, None).expect("runs");
+    let get = |name: &str| {
+        s.observations
+            .iter()
+            .zip(&values)
+            .find(|(o, _)| o.name == name)
+            .and_then(|(_, v)| *v)
+            .expect("defined")
+    };
+    let top = get("top speed");
+    let turn = get("turn time anticlockwise");
+    println!("SubSim 2.4 model: top speed {top:.4} m/s, turn {turn:.2} s");
+    assert!((top - 0.09).abs() <= 0.005, "top speed {top}");
+    assert!((turn - 38.5).abs() <= 1.0, "turn time {turn}");
+}
