@@ -16,7 +16,9 @@
 //! - [`fit`]: Levenberg-Marquardt fits, BIC ranking, greedy selection.
 //! - [`generate`]: hidden-effect data from a truth model (for tests and the benchmark).
 //! - [`report`]: the output files.
+//! - [`bench`]: the hidden-effect benchmark (`eyebot-hil gap-bench`).
 
+pub mod bench;
 pub mod effects;
 pub mod fit;
 pub mod format;
