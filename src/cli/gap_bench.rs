@@ -71,11 +71,11 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
     if let Some(path) = &args.out {
         let mut text = table.clone();
         text.push_str(
-            "\neffect,seed,size_sigma,named,truth,fitted,ci95,parameter_error,ci_covers,held_out_reduction_pct,seconds\n",
+            "\neffect,seed,size_sigma,named,truth,fitted,ci95,parameter_error,ci_covers,held_out_reduction_pct,held_out_truth_reduction_pct,seconds\n",
         );
         for r in &results {
             text.push_str(&format!(
-                "{},{},{:.2},{},{:?},{:?},{:?},{:?},{:?},{:?},{:.2}\n",
+                "{},{},{:.2},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:.2}\n",
                 r.effect.unwrap_or("null"),
                 r.seed,
                 r.size_sigma,
@@ -86,6 +86,7 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
                 r.parameter_error,
                 r.ci_covers,
                 r.held_out_reduction_pct,
+                r.held_out_truth_reduction_pct,
                 r.seconds
             ));
         }

@@ -208,7 +208,13 @@ pub fn analyse(
         accepted.push(win);
     }
     let clean1 = resim::simulate(&configs, m, None)?;
-    let after = stats_for(m, &configs, &clean1, &floors);
+    // A fitted noise source (depth EMI) changes the floor the "after" residuals are judged by.
+    let floors_after = if configs == start {
+        floors.clone()
+    } else {
+        resim::noise_floor(&configs, m, &clean1)?
+    };
+    let after = stats_for(m, &configs, &clean1, &floors_after);
     let (eb, ea) = (excess(&before), excess(&after));
     Ok(Analysis {
         verdict: if accepted.is_empty() {
