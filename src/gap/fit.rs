@@ -29,6 +29,9 @@ pub const SIGNATURE_MIN_CORRELATION: f64 = 0.2;
 /// ...and at least this share of the chi-square reduction must come from those channels.
 pub const SIGNATURE_MIN_SHARE: f64 = 0.5;
 
+/// Starting points scanned along each parameter axis, in units of the effect's scale.
+pub const START_SCAN: [f64; 7] = [-4.0, -2.0, -1.0, 1.0, 2.0, 4.0, 8.0];
+
 /// What fitting one candidate gave.
 #[derive(Debug, Clone, Serialize)]
 pub struct CandidateResult {
@@ -267,12 +270,36 @@ fn fit_mean(
         r: None,
         evaluations: 0,
     };
-    problem.set_params(&DVector::zeros(k));
-    let (problem, _report) = LevenbergMarquardt::new()
-        .with_patience(12)
+    // Start from the best of a coarse scan along each parameter axis: the chi-square of a
+    // dynamic effect (a lag) can hold a shallow local minimum between zero and the truth.
+    let mut start = DVector::zeros(k);
+    let mut best = chi2(r0);
+    for i in 0..k {
+        for step in START_SCAN {
+            let mut x = DVector::zeros(k);
+            x[i] = step;
+            if let Some(r) = problem.residuals_at(&x) {
+                let c = chi2(r.as_slice());
+                if c < best {
+                    best = c;
+                    start = x;
+                }
+            }
+        }
+    }
+    problem.set_params(&start);
+    let (problem, report) = LevenbergMarquardt::new()
+        .with_patience(40)
         .with_stepbound(5.0)
         .minimize(problem);
-    let evaluations = problem.evaluations + 2 * k * 12;
+    tracing::debug!(
+        effect = effect.name,
+        termination = ?report.termination,
+        evaluations = report.number_of_evaluations,
+        objective = report.objective_function,
+        "fit finished"
+    );
+    let evaluations = problem.evaluations + report.number_of_evaluations * k;
     let chi2_before = chi2(r0);
     let Some(r1) = problem.r.clone() else {
         return failed(effect, chi2_before, "the fit left the model's valid range");
