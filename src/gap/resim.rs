@@ -38,7 +38,7 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
 
 /// Ensemble size for the process-noise floor (and the null deviations each candidate's
 /// significance is calibrated on, `fit`).
-pub const ENSEMBLE: u64 = 8;
+pub const ENSEMBLE: u64 = 24;
 
 /// One re-simulated run: the state after every step (index 0 = start) and the commands.
 #[derive(Debug, Clone)]
