@@ -1,7 +1,12 @@
 //! Hidden-effect and null fixtures for `eyebot-hil gap`: the data in tests/fixtures/gap/<case>/
 //! were written by `eyebot-hil gap generate` from the truth models in
-//! tests/fixtures/gap/truth/ (which `gap` never reads). Each test runs the whole workflow
-//! against the shipped model and checks the named effect, its parameters and the gap.
+//! tests/fixtures/gap/truth/ (which `gap` never reads) running tests/fixtures/gap/schedule.toml.
+//! Each test runs the whole workflow against the shipped model and checks the named effect,
+//! its parameters and the gap.
+//!
+//! Regenerate (only on purpose), for each case:
+//! `eyebot-hil gap generate --truth tests/fixtures/gap/truth/CASE.toml
+//!  --schedule tests/fixtures/gap/schedule.toml --seed 7 --out tests/fixtures/gap/CASE`
 
 use std::path::Path;
 
@@ -15,23 +20,74 @@ fn analyse(case: &str) -> gap::Analysis {
     gap::analyse(&model, &m, &dir, &mut |_, _| {}).expect("gap runs")
 }
 
-/// A steady current (0.03 m/s north, -0.02 m/s east) hidden in the data is named, fitted
-/// within 10 % and removes at least 80 % of the gap.
-#[test]
-fn hidden_water_current_is_named_and_fitted() {
-    let a = analyse("water-current");
-    assert_eq!(a.verdict, Verdict::Effect);
+/// How a fitted parameter vector is judged against the truth.
+#[derive(Clone, Copy)]
+enum Tolerance {
+    /// |fitted - truth| / |truth| (Euclidean over the parameters) at most this.
+    Relative(f64),
+    /// The truth inside every reported 95 % interval: for effects the manoeuvre identifies
+    /// only weakly (the intervals say how weakly).
+    WithinCi95,
+}
+
+/// Runs `case`, whose truth hides `effect` with `truth` (the values in
+/// tests/fixtures/gap/truth/CASE.toml), and checks: `effect` is named first, its parameters
+/// meet `tolerance` and the gap shrinks by at least 80 %.
+fn check(case: &str, effect: &str, truth: &[f64], tolerance: Tolerance) {
+    let a = analyse(case);
+    assert_eq!(a.verdict, Verdict::Effect, "{case}: nothing named");
     let first = &a.accepted[0];
-    assert_eq!(first.name, "water_current", "{:?}", a.rounds[0]);
-    let north = first.parameters[0].1;
-    let east = first.parameters[1].1;
+    assert_eq!(
+        first.name,
+        effect,
+        "{case}: ranking {:?}",
+        a.rounds[0]
+            .iter()
+            .map(|c| (&c.name, c.delta_bic))
+            .collect::<Vec<_>>()
+    );
+    let fitted: Vec<f64> = first.parameters.iter().map(|(_, v)| *v).collect();
+    let norm = truth.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let err = truth
+        .iter()
+        .zip(&fitted)
+        .map(|(t, f)| (t - f).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / norm;
     println!(
-        "water_current: north {north:.4} (truth 0.03), east {east:.4} (truth -0.02), gap reduction {:.1} %",
+        "{case}: fitted {fitted:?} (truth {truth:?}), error {:.1} %, gap reduction {:.1} %",
+        100.0 * err,
         a.gap_reduction_pct
     );
-    assert!((north - 0.03).abs() <= 0.003, "north {north}");
-    assert!((east + 0.02).abs() <= 0.002, "east {east}");
-    assert!(a.gap_reduction_pct >= 80.0, "{}", a.gap_reduction_pct);
+    let ci: Vec<[f64; 2]> = first.ci95.iter().map(|(_, c)| *c).collect();
+    match tolerance {
+        Tolerance::Relative(tol) => {
+            assert!(err <= tol, "{case}: fitted {fitted:?}, truth {truth:?}")
+        }
+        Tolerance::WithinCi95 => assert!(
+            truth.iter().zip(&ci).all(|(t, c)| c[0] <= *t && *t <= c[1]),
+            "{case}: truth {truth:?} outside {ci:?}"
+        ),
+    }
+    assert!(
+        a.gap_reduction_pct >= 80.0,
+        "{case}: {}",
+        a.gap_reduction_pct
+    );
+}
+
+/// A steady current (0.03 m/s north, -0.02 m/s east) is named, fitted within 10 % and removes
+/// the gap; the track distance at matched times halves at least.
+#[test]
+fn hidden_water_current_is_named_and_fitted() {
+    check(
+        "water-current",
+        "water_current",
+        &[0.03, -0.02],
+        Tolerance::Relative(0.10),
+    );
+    let a = analyse("water-current");
     let (b, af) = (
         a.track_distance_before_m.expect("track"),
         a.track_distance_after_m.expect("track"),
@@ -48,5 +104,123 @@ fn null_data_name_no_effect() {
         Verdict::None,
         "named {:?}",
         a.accepted.iter().map(|e| &e.name).collect::<Vec<_>>()
+    );
+}
+
+// One test per effect of the library (sonar_incidence_dropout aside: sonar is not generated
+// or re-simulated yet, docs/gap.md "Missing"). Gains, offsets and the current are held to the
+// issue's 10 %; so are the others where the manoeuvre identifies them well.
+
+#[test]
+fn hidden_thruster_imbalance_is_named_and_fitted() {
+    check(
+        "thruster-imbalance",
+        "thruster_imbalance",
+        &[0.02],
+        Tolerance::Relative(0.10),
+    );
+}
+
+#[test]
+fn hidden_reverse_thrust_asymmetry_is_named_and_fitted() {
+    check(
+        "reverse-thrust-asymmetry",
+        "reverse_thrust_asymmetry",
+        &[0.15],
+        Tolerance::Relative(0.10),
+    );
+}
+
+/// The linear and quadratic drag scales trade off against each other over the speeds the
+/// manoeuvre reaches; the intervals are wide and must hold the truth.
+#[test]
+fn hidden_drag_mismatch_is_named_and_fitted() {
+    check(
+        "drag-mismatch",
+        "drag_mismatch",
+        &[-0.08, -0.04],
+        Tolerance::WithinCi95,
+    );
+}
+
+#[test]
+fn hidden_added_mass_is_named_and_fitted() {
+    check(
+        "added-mass",
+        "added_mass",
+        &[2.5],
+        Tolerance::Relative(0.10),
+    );
+}
+
+#[test]
+fn hidden_thruster_lag_is_named_and_fitted() {
+    check(
+        "thruster-lag",
+        "thruster_lag",
+        &[0.5],
+        Tolerance::Relative(0.10),
+    );
+}
+
+#[test]
+fn hidden_compass_hard_iron_is_named_and_fitted() {
+    check(
+        "compass-hard-iron",
+        "compass_hard_iron",
+        &[-4.0, 2.0],
+        Tolerance::Relative(0.10),
+    );
+}
+
+#[test]
+fn hidden_compass_soft_iron_is_named_and_fitted() {
+    check(
+        "compass-soft-iron",
+        "compass_soft_iron",
+        &[0.08, -0.1],
+        Tolerance::Relative(0.10),
+    );
+}
+
+/// The tilt error shows only during the 10 s tilted run; the interval is wide and must hold
+/// the truth.
+#[test]
+fn hidden_compass_tilt_is_named_and_fitted() {
+    check(
+        "compass-tilt",
+        "compass_tilt",
+        &[30.0],
+        Tolerance::WithinCi95,
+    );
+}
+
+#[test]
+fn hidden_sensor_latency_is_named_and_fitted() {
+    check(
+        "sensor-latency",
+        "sensor_latency",
+        &[0.6],
+        Tolerance::Relative(0.10),
+    );
+}
+
+#[test]
+fn hidden_depth_pwm_emi_is_named_and_fitted() {
+    check(
+        "depth-pwm-emi",
+        "depth_pwm_emi",
+        &[1.0],
+        Tolerance::Relative(0.10),
+    );
+}
+
+#[test]
+fn hidden_velocity_sensor_scale_is_named_and_fitted() {
+    check(
+        "velocity-sensor-scale",
+        "velocity_sensor_scale",
+        &[0.3],
+        Tolerance::Relative(0.10),
     );
 }

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand, ValueEnum};
 
 pub mod gap;
+pub mod gap_bench;
 pub mod probe;
 pub mod replay;
 pub mod run;
@@ -48,6 +49,8 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Reality gap: compare measured data with a model, name and fit the missing effect.
     Gap(gap::GapArgs),
+    /// Benchmark the reality-gap workflow on generated hidden-effect and null cases.
+    GapBench(gap_bench::GapBenchArgs),
 }
 
 /// Errors that end a CLI command.
@@ -103,5 +106,6 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
         Command::Validate(args) => validate::run(&args),
         Command::Replay(args) => Ok(replay::main(args)?),
         Command::Gap(args) => gap::run(&args),
+        Command::GapBench(args) => gap_bench::run(&args),
     }
 }

@@ -29,6 +29,9 @@ pub const SIGNATURE_MIN_CORRELATION: f64 = 0.2;
 /// ...and at least this share of the chi-square reduction must come from those channels.
 pub const SIGNATURE_MIN_SHARE: f64 = 0.5;
 
+/// Starting points scanned along each parameter axis, in units of the effect's scale.
+pub const START_SCAN: [f64; 7] = [-4.0, -2.0, -1.0, 1.0, 2.0, 4.0, 8.0];
+
 /// What fitting one candidate gave.
 #[derive(Debug, Clone, Serialize)]
 pub struct CandidateResult {
@@ -38,13 +41,21 @@ pub struct CandidateResult {
     pub ci95: Vec<(String, [f64; 2])>,
     pub chi2_before: f64,
     pub chi2_after: f64,
+    /// BIC gain over "no effect" with the chi-square gain divided by `noise_factor`: what
+    /// the significance margin is applied to.
     pub delta_bic: f64,
+    /// BIC gain without that calibration (the likelihood itself): what candidates that pass
+    /// are ranked by, since all are fitted to the same data.
+    pub delta_bic_uncalibrated: f64,
     pub signature_pass: bool,
     pub signature: String,
     /// False when the data hold none of the channels the effect shows in.
     pub testable: bool,
     /// Re-simulations the fit needed (an estimate for the Jacobian's share).
     pub evaluations: usize,
+    /// How much more chi-square a fit of this effect gains on the model's own noise than
+    /// independent noise would (>= 1); the gain in `delta_bic` is divided by it.
+    pub noise_factor: f64,
 }
 
 /// The re-simulation context one greedy round fits against.
@@ -74,6 +85,38 @@ impl Setup<'_> {
             })
             .sum::<f64>()
             .max(1.0)
+    }
+
+    /// The model's own null residuals, normalised as [`Setup::residual_vector`]: one vector
+    /// per ensemble run (process noise only), and the per-element variance the white
+    /// measurement noise adds.
+    pub fn null_vectors(&self) -> (Vec<Vec<f64>>, Vec<f64>) {
+        let members = self
+            .modelled()
+            .iter()
+            .filter_map(|&i| self.floors[i].as_ref().map(|f| f.null.len()))
+            .min()
+            .unwrap_or(0);
+        let mut null = vec![Vec::new(); members];
+        let mut white = Vec::new();
+        for i in self.modelled() {
+            let ch = &self.m.channels[i];
+            let Some(f) = &self.floors[i] else { continue };
+            if resim::predict(&self.base, &self.clean, ch, 0.0).is_none() {
+                continue;
+            }
+            let k = f.tau.sqrt();
+            for (m, v) in null.iter_mut().enumerate() {
+                v.extend(f.null[m].iter().zip(&f.sigma).map(|(d, s)| d / (s * k)));
+            }
+            white.extend(
+                f.measurement_std
+                    .iter()
+                    .zip(&f.sigma)
+                    .map(|(m, s)| (m / (s * k)).powi(2)),
+            );
+        }
+        (null, white)
     }
 
     /// Normalised residuals of all modelled channels for configs `c` and run `run`, with the
@@ -180,6 +223,32 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
     }
 }
 
+/// The mean chi-square gain of a linearised fit along Jacobian `j` (covariance `ainv`) on
+/// the null residuals, over its expectation `k` for independent noise; at least 1.
+fn null_factor(j: &DMatrix<f64>, ainv: &DMatrix<f64>, null: &[Vec<f64>], white: &[f64]) -> f64 {
+    let k = j.ncols();
+    if null.is_empty() || k == 0 {
+        return 1.0;
+    }
+    let mut process = 0.0;
+    for v in null {
+        if v.len() != j.nrows() {
+            return 1.0;
+        }
+        let jt = j.transpose() * DVector::from_column_slice(v);
+        process += (jt.transpose() * ainv * &jt)[(0, 0)];
+    }
+    process /= null.len() as f64;
+    // White part: sum_i w_i P_ii with P = J A^-1 J^T.
+    let measurement: f64 = (0..j.nrows().min(white.len()))
+        .map(|i| {
+            let row = j.row(i);
+            white[i] * (row * ainv * row.transpose())[(0, 0)]
+        })
+        .sum();
+    ((process + measurement) / k as f64).max(1.0)
+}
+
 fn chi2(r: &[f64]) -> f64 {
     r.iter().map(|v| v * v).sum()
 }
@@ -190,6 +259,8 @@ fn fit_mean(
     effect: &'static Effect,
     r0: &[f64],
     owner0: &[usize],
+    null: &[Vec<f64>],
+    white: &[f64],
 ) -> CandidateResult {
     let k = effect.parameters.len();
     let mut problem = Problem {
@@ -199,33 +270,70 @@ fn fit_mean(
         r: None,
         evaluations: 0,
     };
-    problem.set_params(&DVector::zeros(k));
-    let (problem, _report) = LevenbergMarquardt::new()
-        .with_patience(12)
+    // Start from the best of a coarse scan along each parameter axis: the chi-square of a
+    // dynamic effect (a lag) can hold a shallow local minimum between zero and the truth.
+    let mut start = DVector::zeros(k);
+    let mut best = chi2(r0);
+    for i in 0..k {
+        for step in START_SCAN {
+            let mut x = DVector::zeros(k);
+            x[i] = step;
+            if let Some(r) = problem.residuals_at(&x) {
+                let c = chi2(r.as_slice());
+                if c < best {
+                    best = c;
+                    start = x;
+                }
+            }
+        }
+    }
+    problem.set_params(&start);
+    let (problem, report) = LevenbergMarquardt::new()
+        .with_patience(40)
         .with_stepbound(5.0)
         .minimize(problem);
-    let evaluations = problem.evaluations + 2 * k * 12;
+    tracing::debug!(
+        effect = effect.name,
+        termination = ?report.termination,
+        evaluations = report.number_of_evaluations,
+        objective = report.objective_function,
+        "fit finished"
+    );
+    let evaluations = problem.evaluations + report.number_of_evaluations * k;
     let chi2_before = chi2(r0);
     let Some(r1) = problem.r.clone() else {
         return failed(effect, chi2_before, "the fit left the model's valid range");
     };
     let chi2_after = chi2(r1.as_slice());
     let params = problem.params(&problem.x);
-    // Covariance from the Jacobian at the solution (residuals are already normalised).
-    let ci = problem
-        .jacobian()
-        .and_then(|j| (j.transpose() * &j).try_inverse())
+    let n_eff = setup.n_eff();
+    let jac = problem.jacobian();
+    let ainv = jac.as_ref().and_then(|j| (j.transpose() * j).try_inverse());
+    // Null calibration: how much chi-square a fit of this effect gains on the model's own
+    // noise (the ensemble's process-noise residuals plus the white measurement noise),
+    // projected on the effect's Jacobian. Properly independent noise gains k on average;
+    // correlated noise along the effect's signature gains more, and the factor scales the
+    // gain down by as much (never up).
+    let noise_factor = match (&jac, &ainv) {
+        (Some(j), Some(ai)) => null_factor(j, ai, null, white),
+        _ => 1.0,
+    };
+    // Residual variance beyond what the floor expects (reduced chi-square), never below 1.
+    let reduced = (chi2_after / (n_eff - k as f64).max(1.0)).max(1.0);
+    let ci = ainv
+        .as_ref()
         .map(|cov| {
             (0..k)
                 .map(|i| {
-                    let sd = cov[(i, i)].max(0.0).sqrt() * effect.scales[i];
+                    let sd =
+                        (cov[(i, i)].max(0.0) * noise_factor * reduced).sqrt() * effect.scales[i];
                     [params[i] - 1.96 * sd, params[i] + 1.96 * sd]
                 })
                 .collect::<Vec<_>>()
         })
         .unwrap_or_else(|| vec![[f64::NEG_INFINITY, f64::INFINITY]; k]);
-    let n_eff = setup.n_eff();
-    let delta_bic = chi2_before - chi2_after - k as f64 * n_eff.ln();
+    let delta_bic = (chi2_before - chi2_after) / noise_factor - k as f64 * n_eff.ln();
+    let delta_bic_uncalibrated = chi2_before - chi2_after - k as f64 * n_eff.ln();
     // Signature: does the change the effect makes line up with the residual where the
     // signature says it should, and does the improvement come from there?
     let in_sig = |i: usize| effect.channels.contains(&setup.m.channels[i].name.as_str());
@@ -259,6 +367,7 @@ fn fit_mean(
         chi2_before,
         chi2_after,
         delta_bic,
+        delta_bic_uncalibrated,
         signature_pass,
         signature: format!(
             "{}: correlation with the residual in {} = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}), \
@@ -270,6 +379,7 @@ fn fit_mean(
         ),
         testable: true,
         evaluations,
+        noise_factor,
     }
 }
 
@@ -285,10 +395,12 @@ fn failed(effect: &Effect, chi2_before: f64, why: &str) -> CandidateResult {
         chi2_before,
         chi2_after: chi2_before,
         delta_bic: f64::NEG_INFINITY,
+        delta_bic_uncalibrated: f64::NEG_INFINITY,
         signature_pass: false,
         signature: why.to_string(),
         testable: false,
         evaluations: 0,
+        noise_factor: 1.0,
     }
 }
 
@@ -387,17 +499,23 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
         .iter()
         .map(|(t, _)| setup.clean.at(*t).thruster_effort[STERN].abs().min(1.0))
         .collect();
+    let g: Vec<f64> = duty.iter().map(|u| (u * att / lsb).powi(2)).collect();
+    let w: Vec<f64> = floor.measurement_std.iter().map(|s| s * s).collect();
+    // Successive differences: a mean error that varies slowly (a missing dynamic effect, the
+    // process noise) cancels, the white sensor noise and EMI add up. So the fit sees only
+    // the spread, and a mean-type effect cannot pose as EMI.
+    let idx: Vec<usize> = (1..r.len()).collect();
     let mut bins: Vec<Vec<usize>> = vec![Vec::new(); 5];
-    for (k, u) in duty.iter().enumerate() {
-        bins[((u * 5.0) as usize).min(4)].push(k);
+    for (k, &i) in idx.iter().enumerate() {
+        bins[((duty[i].max(duty[i - 1]) * 5.0) as usize).min(4)].push(k);
     }
     bins.retain(|b| b.len() >= 5);
     let data = EmiData {
-        r2: r.iter().map(|v| v * v).collect(),
-        base_var: floor.sigma.iter().map(|s| s * s).collect(),
-        gain: duty.iter().map(|u| (u * att / lsb).powi(2)).collect(),
+        r2: idx.iter().map(|&i| (r[i] - r[i - 1]).powi(2)).collect(),
+        base_var: idx.iter().map(|&i| w[i] + w[i - 1]).collect(),
+        gain: idx.iter().map(|&i| g[i] + g[i - 1]).collect(),
         emi0: d.emi_v_rms_full_duty,
-        tau: floor.tau,
+        tau: 1.0,
         bins,
     };
     let scale = effect.scales[0];
@@ -414,8 +532,8 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
         .map_or(f64::INFINITY, |c| c[(0, 0)].max(0.0).sqrt() * scale);
     let before = data.minus2_log_l(0.0);
     let after = data.minus2_log_l(e);
-    let n_eff = setup.n_eff();
-    let delta_bic = before - after - n_eff.ln();
+    // One parameter; the sample size is that of the differences the likelihood uses.
+    let delta_bic = before - after - (data.r2.len().max(2) as f64).ln();
     // Signature: squared residuals grow with the stern duty.
     let r2: Vec<f64> = data.r2.clone();
     let g: Vec<f64> = data.gain.clone();
@@ -444,6 +562,7 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
         chi2_before: before,
         chi2_after: after,
         delta_bic,
+        delta_bic_uncalibrated: delta_bic,
         signature_pass: e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION,
         signature: format!(
             "{}: correlation of squared depth residuals with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION})",
@@ -451,6 +570,7 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
         ),
         testable: true,
         evaluations: 0, // a variance fit needs no re-simulation
+        noise_factor: 1.0,
     })
 }
 
@@ -461,6 +581,7 @@ pub fn fit_candidates(
     progress: &mut dyn FnMut(&str),
 ) -> Vec<CandidateResult> {
     let (r0, owner0) = setup.residual_vector(&setup.base, &setup.clean);
+    let (null, white) = setup.null_vectors();
     let measured: Vec<&str> = setup
         .modelled()
         .iter()
@@ -484,7 +605,7 @@ pub fn fit_candidates(
             continue;
         }
         let result = match effect.kind {
-            Kind::Mean => fit_mean(setup, effect, &r0, &owner0),
+            Kind::Mean => fit_mean(setup, effect, &r0, &owner0, &null, &white),
             Kind::Variance => {
                 fit_emi(setup, effect).unwrap_or_else(|| failed(effect, chi2(&r0), "no depth data"))
             }
@@ -496,11 +617,16 @@ pub fn fit_candidates(
         );
         out.push(result);
     }
-    out.sort_by(|a, b| b.delta_bic.total_cmp(&a.delta_bic));
+    out.sort_by(|a, b| {
+        b.delta_bic_uncalibrated
+            .total_cmp(&a.delta_bic_uncalibrated)
+    });
     out
 }
 
-/// The winner of a round, if one beats "no effect" by the margin and passes its signature.
+/// The winner of a round: the best-ranked candidate (by the likelihood, see
+/// [`CandidateResult::delta_bic_uncalibrated`]) that beats "no effect" by the margin after
+/// the noise calibration and passes its signature test.
 pub fn winner(results: &[CandidateResult]) -> Option<&CandidateResult> {
     results
         .iter()

@@ -6,7 +6,9 @@
 //! Instruments: overhead camera (`x_m`, `y_m` at 5 Hz, Gaussian position noise), the compass
 //! sensor model (`compass_deg`, every completed conversion, rounded to 1 deg), the depth
 //! sensor through the ADC (`depth_adc` at 10 Hz), the paddle wheel counted over the
-//! firmware's window (`paddle_speed_mps`).
+//! firmware's window (`paddle_speed_mps`), the accelerometer through the ADC
+//! (`accel_x_adc`, `accel_y_adc`, `accel_z_adc` at 10 Hz). Each ADC channel is read as if
+//! alone (no cross-channel retention), as the model predicts it.
 
 use rand::RngExt;
 use rand_distr::StandardNormal;
@@ -16,7 +18,9 @@ use crate::gap::effects::Configs;
 use crate::gap::format::{Channel, CommandRow, ExperimentInfo, Initial, Measurement};
 use crate::gap::resim;
 use crate::physics::experiment::Experiment;
-use crate::sensors::{AdcBoard, AdcSource, Compass, DepthSensor, PaddleWheel, rng};
+use crate::sensors::{
+    AdcBoard, AdcSource, Compass, DepthSensor, PaddleWheel, accelerometer::Accelerometer, rng,
+};
 
 /// Camera sampling period (s): the thesis's pool-side camera read progress every 200 ms.
 pub const CAMERA_PERIOD_S: f64 = 0.2;
@@ -72,6 +76,13 @@ pub fn generate(
     let mut adc = AdcBoard::new(&truth.sensors.adc, seed);
     let mut paddle = PaddleWheel::new(&truth.sensors.velocity, seed);
     let depth_channel = adc.channel_of(AdcSource::Depth);
+    let mut accel = Accelerometer::new(&truth.sensors.accelerometer, seed);
+    let accel_sources = [AdcSource::AccelX, AdcSource::AccelY, AdcSource::AccelZ];
+    // One converter per axis (seeded apart) so no channel switch happens between reads.
+    let mut accel_adc: Vec<AdcBoard> = (0..3u64)
+        .map(|k| AdcBoard::new(&truth.sensors.adc, seed ^ (0xacce_1000 + k)))
+        .collect();
+    let mut accel_codes: [Vec<(f64, f64)>; 3] = Default::default();
     let v = &truth.sensors.velocity;
     let (mut xs, mut ys, mut hs, mut ds, mut ps) = (vec![], vec![], vec![], vec![], vec![]);
     let cam_every = (CAMERA_PERIOD_S / run.dt_s).round() as usize;
@@ -83,6 +94,7 @@ pub fn generate(
         compass.update(state);
         depth.update(state);
         paddle.update(state);
+        accel.update(state);
         if k % cam_every.max(1) == 0 {
             let nx: f64 = cam.sample(StandardNormal);
             let ny: f64 = cam.sample(StandardNormal);
@@ -101,6 +113,14 @@ pub fn generate(
             if let Ok(code) = adc.convert(ch, volts, 0.0) {
                 ds.push((t, f64::from(code)));
             }
+            for axis in 0..3 {
+                if let Some(ch) = accel_adc[axis].channel_of(accel_sources[axis]) {
+                    let volts = accel.voltage(axis, t);
+                    if let Ok(code) = accel_adc[axis].convert(ch, volts, 0.0) {
+                        accel_codes[axis].push((t, f64::from(code)));
+                    }
+                }
+            }
         }
         if k > 0 && k % window_every.max(1) == 0 {
             let h = paddle.half_turns();
@@ -112,11 +132,15 @@ pub fn generate(
             ));
         }
     }
+    let [ax, ay, az] = accel_codes;
     for (name, samples) in [
         ("x_m", xs),
         ("y_m", ys),
         ("compass_deg", hs),
         ("depth_adc", ds),
+        ("accel_x_adc", ax),
+        ("accel_y_adc", ay),
+        ("accel_z_adc", az),
         ("paddle_speed_mps", ps),
     ] {
         m.channels.push(Channel {

@@ -42,6 +42,8 @@ pub fn json(a: &Analysis) -> Value {
             "name": c.name, "delta_bic": if c.delta_bic.is_finite() { json!(c.delta_bic) } else { Value::Null },
             "parameters": c.parameters, "signature_pass": c.signature_pass,
             "signature": c.signature, "testable": c.testable,
+            "chi2_before": c.chi2_before, "chi2_after": c.chi2_after, "noise_factor": c.noise_factor,
+            "delta_bic_uncalibrated": if c.delta_bic_uncalibrated.is_finite() { json!(c.delta_bic_uncalibrated) } else { Value::Null },
         })).collect::<Vec<_>>()).collect::<Vec<_>>(),
     })
 }

@@ -10,20 +10,35 @@ use crate::gap::effects::Configs;
 use crate::gap::format::{Channel, Measurement};
 use crate::physics::state::{STERN, VehicleState};
 use crate::physics::{InitialState, Model, ThrusterCommand, hdt_command};
+use crate::sensors::accelerometer::G0_MPS2;
 use crate::sensors::{AdcBoard, Compass};
 
 /// Channels `gap` can re-simulate; the others are loaded and reported as not modelled.
-pub const MODELLED: [&str; 6] = [
+pub const MODELLED: [&str; 9] = [
     "x_m",
     "y_m",
     "surge_mps",
     "compass_deg",
     "depth_adc",
+    "accel_x_adc",
+    "accel_y_adc",
+    "accel_z_adc",
     "paddle_speed_mps",
 ];
 
-/// Ensemble size for the process-noise floor.
-pub const ENSEMBLE: u64 = 4;
+/// The accelerometer axis (0 = x, 1 = y, 2 = z) of an `accel_*_adc` channel.
+pub fn accel_axis(channel: &str) -> Option<usize> {
+    match channel {
+        "accel_x_adc" => Some(0),
+        "accel_y_adc" => Some(1),
+        "accel_z_adc" => Some(2),
+        _ => None,
+    }
+}
+
+/// Ensemble size for the process-noise floor (and the null deviations each candidate's
+/// significance is calibrated on, `fit`).
+pub const ENSEMBLE: u64 = 24;
 
 /// One re-simulated run: the state after every step (index 0 = start) and the commands.
 #[derive(Debug, Clone)]
@@ -118,6 +133,22 @@ pub fn compass_heading_deg(c: &Configs, earth_ned_ut: &Vector3<f64>, s: &Vehicle
     ((-m.y).atan2(m.x).to_degrees() + k.errors.bias).rem_euclid(360.0)
 }
 
+/// The compass heading at `t_s`, linearly interpolated between physics steps (so a latency
+/// shorter than a step still changes the prediction, and the fit has a gradient).
+pub fn compass_at(c: &Configs, earth_ned_ut: &Vector3<f64>, run: &Run, t_s: f64) -> f64 {
+    let x = (t_s / run.dt_s).max(0.0);
+    let last = run.states.len() - 1;
+    let i = (x.floor() as usize).min(last);
+    let j = (i + 1).min(last);
+    let a = (x - i as f64).clamp(0.0, 1.0);
+    let h0 = compass_heading_deg(c, earth_ned_ut, &run.states[i]);
+    if a < 1e-9 || i == j {
+        return h0;
+    }
+    let h1 = compass_heading_deg(c, earth_ned_ut, &run.states[j]);
+    (h0 + a * wrap_deg(h1 - h0)).rem_euclid(360.0)
+}
+
 fn earth_field(c: &Configs) -> Vector3<f64> {
     Compass::new(&c.sensors.compass, 0).earth_field_ned_ut()
 }
@@ -133,7 +164,7 @@ pub fn predict(c: &Configs, run: &Run, channel: &Channel, lag_s: f64) -> Option<
         "compass_deg" => {
             let earth = earth_field(c);
             let lat = c.sensors.compass.errors.latency_s;
-            ts.map(|t| compass_heading_deg(c, &earth, run.at(t - lag_s - lat)))
+            ts.map(|t| compass_at(c, &earth, run, t - lag_s - lat))
                 .collect()
         }
         "depth_adc" => {
@@ -144,6 +175,18 @@ pub fn predict(c: &Configs, run: &Run, channel: &Channel, lag_s: f64) -> Option<
                 let s = run.at(t - lag_s - d.errors.latency_s);
                 let depth = s.depth_of_m(&pos).max(0.0) + d.errors.bias;
                 depth * d.volts_per_m / lsb + c.sensors.adc.offset_lsb
+            })
+            .collect()
+        }
+        "accel_x_adc" | "accel_y_adc" | "accel_z_adc" => {
+            let axis = accel_axis(&channel.name)?;
+            let a = &c.sensors.accelerometer;
+            let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
+            let lat = a.errors.latency_s;
+            ts.map(|t| {
+                let f = run.at(t - lag_s - lat).specific_force_body_mps2[axis];
+                let v = (a.zero_g_v + a.sensitivity_v_per_g * f / G0_MPS2).clamp(a.min_v, a.max_v);
+                v / lsb + c.sensors.adc.offset_lsb
             })
             .collect()
         }
@@ -219,6 +262,13 @@ pub fn measurement_std(c: &Configs, m: &Measurement, run: &Run, channel: &Channe
                 })
                 .collect()
         }
+        "accel_x_adc" | "accel_y_adc" | "accel_z_adc" => {
+            let a = &c.sensors.accelerometer;
+            let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
+            let f = a.errors.gaussian_std * a.sensitivity_v_per_g / G0_MPS2;
+            let v = a.noise_v_rms.powi(2) + c.sensors.adc.noise_v_rms.powi(2) + f * f;
+            vec![(v / (lsb * lsb) + 1.0 / 12.0).sqrt(); n]
+        }
         "paddle_speed_mps" => {
             let v = &c.sensors.velocity;
             let step = v.firmware_scale / (v.pulses_per_metre * v.window_s);
@@ -235,6 +285,11 @@ pub struct Floor {
     pub sigma: Vec<f64>,
     /// Integrated autocorrelation time in samples: `n / tau` samples are independent.
     pub tau: f64,
+    /// White measurement noise (1 sigma) per sample.
+    pub measurement_std: Vec<f64>,
+    /// Process-noise deviations of each ensemble run from the noise-free prediction: null
+    /// residuals the model itself produces (without measurement noise).
+    pub null: Vec<Vec<f64>>,
 }
 
 /// Noise floors of every modelled channel: measurement noise from the settings plus the
@@ -299,7 +354,12 @@ pub fn noise_floor(
                     tau += 2.0 * rho;
                 }
             }
-            Some(Floor { sigma, tau })
+            Some(Floor {
+                sigma,
+                tau,
+                measurement_std: meas,
+                null: devs,
+            })
         })
         .collect())
 }

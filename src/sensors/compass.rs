@@ -75,6 +75,9 @@ pub struct Compass {
     first_cal_ut: Vector2<f64>,
     latest: Option<(f64, CompassReading)>,
     delivered: bool,
+    /// Recent (t_s, field) pairs when the settings give a latency: a conversion at `t`
+    /// senses the field of `t - latency_s`, interpolated between physics steps.
+    history: std::collections::VecDeque<(f64, Vector2<f64>)>,
 }
 
 impl Compass {
@@ -92,7 +95,12 @@ impl Compass {
                 s.soft_iron[1][1],
             ),
             hard: Vector2::from(s.hard_iron_ut),
-            errors: ErrorModel::new(&s.errors),
+            // The latency delays the sensed field (see `history`), not the finished reading,
+            // so a delay shorter than the conversion period still shows.
+            errors: ErrorModel::new(&crate::sensors::noise::NoiseSettings {
+                latency_s: 0.0,
+                ..s.errors.clone()
+            }),
             rng: rng::stream(master_seed, "compass"),
             field_ut: Vector2::zeros(),
             t_s: 0.0,
@@ -102,6 +110,7 @@ impl Compass {
             first_cal_ut: Vector2::zeros(),
             latest: None,
             delivered: true,
+            history: std::collections::VecDeque::new(),
             s: s.clone(),
         }
     }
@@ -142,6 +151,13 @@ impl Compass {
         let b_body = state.attitude.inverse_transform_vector(&self.earth_ned_ut);
         self.field_ut = self.soft * Vector2::new(b_body.x, b_body.y) + self.hard;
         self.t_s = state.t_s;
+        let latency_s = self.s.errors.latency_s;
+        if latency_s > 0.0 {
+            self.history.push_back((state.t_s, self.field_ut));
+            while self.history.len() > 2 && self.history[1].0 <= state.t_s - latency_s - 1.0 {
+                self.history.pop_front();
+            }
+        }
         while let Some(due) = self.next_conversion_s
             && due <= state.t_s
         {
@@ -174,8 +190,32 @@ impl Compass {
         self.convert(self.t_s)
     }
 
-    fn noisy_field(&mut self) -> Vector2<f64> {
-        let mut m = self.field_ut;
+    /// The field the sensor sees at `t_s`: the current one, or with a latency the field of
+    /// `t_s - latency_s`, linearly interpolated between the recorded steps.
+    fn sensed_field(&self, t_s: f64) -> Vector2<f64> {
+        let latency_s = self.s.errors.latency_s;
+        if latency_s <= 0.0 {
+            return self.field_ut;
+        }
+        let due = t_s - latency_s;
+        let Some(&(t0, f0)) = self.history.front() else {
+            return self.field_ut;
+        };
+        if due <= t0 {
+            return f0;
+        }
+        for w in self.history.iter().zip(self.history.iter().skip(1)) {
+            let ((ta, fa), (tb, fb)) = (*w.0, *w.1);
+            if due <= tb {
+                let a = if tb > ta { (due - ta) / (tb - ta) } else { 1.0 };
+                return fa + (fb - fa) * a;
+            }
+        }
+        self.field_ut
+    }
+
+    fn noisy_field(&mut self, t_s: f64) -> Vector2<f64> {
+        let mut m = self.sensed_field(t_s);
         if self.s.field_noise_ut > 0.0 {
             let nx: f64 = self.rng.sample(StandardNormal);
             let ny: f64 = self.rng.sample(StandardNormal);
@@ -185,7 +225,7 @@ impl Compass {
     }
 
     fn convert(&mut self, t_s: f64) -> CompassReading {
-        let m = self.noisy_field();
+        let m = self.noisy_field(t_s);
         let counts = |x: f64| {
             (x * self.s.raw_counts_per_ut)
                 .round()
@@ -214,7 +254,7 @@ impl Compass {
     /// `COMPASSCalibrate(1)`: takes one calibration reading of the current field. The second
     /// call (after turning 180 deg) completes the calibration.
     pub fn calibration_reading(&mut self) -> Calibration {
-        let m = self.noisy_field();
+        let m = self.noisy_field(self.t_s);
         self.calibration = match self.calibration {
             Calibration::FirstTaken => {
                 let offset = (self.first_cal_ut + m) / 2.0;

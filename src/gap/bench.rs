@@ -1,0 +1,487 @@
+//! The hidden-effect benchmark (`eyebot-hil gap-bench`, issue 8 item 4): for each effect of
+//! the library, N randomised cases in which the effect is hidden in generated data, sized at
+//! random from 1 to 10 times the noise floor and generated with random seeds, plus N null
+//! cases with nothing hidden. Each case runs the whole workflow ([`crate::gap::analyse`]) on
+//! the generated measurement only: the truth stays in this module and is used only to score.
+//!
+//! **Size.** A case's size in noise-floor units is the RMS, over the samples of the effect's
+//! signature channels, of the change the effect makes to the noise-free prediction divided by
+//! the model's noise floor at that sample (for the variance effect, depth EMI: the RMS of the
+//! extra standard deviation over the floor). The parameter is first set from a one-point
+//! calibration (the effect's size at one typical step, assumed linear), then the case's real
+//! size is measured and reported, so the ">= 3 sigma" split uses measured sizes.
+//!
+//! **Held out.** The fitted model is scored on a second measurement of the same truth that the
+//! fit never saw: another seed and another manoeuvre (the training schedule mirrored: the
+//! turns go the other way, started from the mirrored point across the pool). The figure is the
+//! reduction of the excess of the normalised residual over the noise floor (the same measure
+//! as `gap_reduction_pct`), from the shipped model to the fitted one.
+
+use std::time::Instant;
+
+use rand::RngExt;
+
+use crate::config::{ConfigSource, Document, Embedded};
+use crate::gap::effects::{self, Configs, Effect, Kind};
+use crate::gap::format::Measurement;
+use crate::gap::model::GapModel;
+use crate::gap::resim::{self, Floor};
+use crate::gap::{GapError, generate};
+use crate::physics::experiment::Experiment;
+
+/// The model the benchmark hides effects from (embedded `configs/models/mako.toml`).
+pub const MODEL: &str = "models/mako.toml";
+/// The training manoeuvre (embedded `configs/experiments/gap-manoeuvres.toml`).
+pub const SCHEDULE: &str = "experiments/gap-manoeuvres.toml";
+/// Camera position noise of the generated measurements (m, 1 sigma).
+pub const CAMERA_STD_M: f64 = 0.01;
+/// Case sizes are drawn uniformly from this range (noise-floor units).
+pub const SIZE_RANGE: (f64, f64) = (1.0, 10.0);
+
+/// What the benchmark runs.
+#[derive(Debug, Clone)]
+pub struct BenchOptions {
+    /// Cases per effect, and null cases.
+    pub cases: usize,
+    pub seed: u64,
+    pub effects: Vec<&'static Effect>,
+}
+
+/// One case and how the workflow did on it.
+#[derive(Debug, Clone)]
+pub struct CaseResult {
+    /// The hidden effect (`None`: a null case).
+    pub effect: Option<&'static str>,
+    pub seed: u64,
+    pub truth: Vec<f64>,
+    /// Measured size in noise-floor units.
+    pub size_sigma: f64,
+    /// The first effect the workflow named, if any.
+    pub named: Option<String>,
+    pub fitted: Vec<f64>,
+    pub ci95: Vec<[f64; 2]>,
+    /// |fitted - truth| / |truth| (Euclidean over the parameters), when named correctly.
+    pub parameter_error: Option<f64>,
+    /// Every truth value inside its 95 % interval, when named correctly.
+    pub ci_covers: Option<bool>,
+    /// Held-out reduction of the gap (%) measured on the held-out data, for hidden-effect
+    /// cases.
+    pub held_out_reduction_pct: Option<f64>,
+    /// Held-out reduction of the gap (%) against the truth's noise-free prediction on the
+    /// held-out manoeuvre (no noise realisation in the way), for hidden-effect cases.
+    pub held_out_truth_reduction_pct: Option<f64>,
+    /// Wall time of the workflow on the training data (s).
+    pub seconds: f64,
+}
+
+impl CaseResult {
+    pub fn correct(&self) -> bool {
+        self.effect.is_some() && self.named.as_deref() == self.effect
+    }
+}
+
+fn embedded_schedule() -> Result<Experiment, GapError> {
+    let text = Embedded.read(SCHEDULE)?;
+    Ok(Experiment::from_document(&Document::new(
+        Embedded.describe(SCHEDULE),
+        &text,
+    ))?)
+}
+
+/// Where the benchmark starts the training manoeuvre: the file's schedule turned to start
+/// heading east from the pool's north-west quarter, which keeps the whole track (and the
+/// drift of the largest currents) about 3 m clear of every wall. Contact with a wall would
+/// hide a drift. `tests/fixtures/gap/schedule.toml` is the same schedule written out.
+pub const START: (f64, f64, f64) = (18.0, 3.0, 90.0);
+
+/// The training manoeuvre: the file's commands from [`START`].
+pub fn training(s: &Experiment) -> Experiment {
+    let mut m = s.clone();
+    m.start.north_m = START.0;
+    m.start.east_m = START.1;
+    m.start.heading_rad = START.2.to_radians();
+    m
+}
+
+/// The held-out manoeuvre: the training schedule mirrored across the pool's long axis.
+pub fn mirrored(s: &Experiment, pool_width_m: f64) -> Experiment {
+    let mut m = s.clone();
+    m.name = format!("{}-mirrored", s.name);
+    m.start.east_m = pool_width_m - s.start.east_m;
+    m.start.heading_rad = -s.start.heading_rad;
+    for c in &mut m.schedule {
+        c.percent.swap(0, 1);
+    }
+    m
+}
+
+/// Excess of the normalised residual over the noise floor (as `Analysis::excess_*`).
+pub fn excess(c: &Configs, m: &Measurement, floors: &[Option<Floor>]) -> Result<f64, GapError> {
+    let run = resim::simulate(c, m, None)?;
+    let mut chi2 = Vec::new();
+    for (ch, f) in m.channels.iter().zip(floors) {
+        let (Some(f), Some(p)) = (f, resim::predict(c, &run, ch, 0.0)) else {
+            continue;
+        };
+        let r = resim::residuals(ch, &p);
+        let n = r.len().max(1) as f64;
+        chi2.push(
+            r.iter()
+                .zip(&f.sigma)
+                .map(|(a, s)| (a / s).powi(2))
+                .sum::<f64>()
+                / n,
+        );
+    }
+    if chi2.is_empty() {
+        return Ok(0.0);
+    }
+    let mean = chi2.iter().sum::<f64>() / chi2.len() as f64;
+    Ok((mean - 1.0).max(0.0).sqrt())
+}
+
+/// Distance of model `c` from the truth `t` on measurement `m`, in noise-floor units: the RMS
+/// over each channel's samples of the difference of the noise-free predictions and of the
+/// predicted white-noise spreads, divided by the floor; averaged over channels.
+pub fn truth_gap(
+    c: &Configs,
+    t: &Configs,
+    m: &Measurement,
+    floors: &[Option<Floor>],
+) -> Result<f64, GapError> {
+    let (rc, rt) = (resim::simulate(c, m, None)?, resim::simulate(t, m, None)?);
+    let mut per_channel = Vec::new();
+    for (ch, f) in m.channels.iter().zip(floors) {
+        let Some(f) = f else { continue };
+        let (Some(pc), Some(pt)) = (
+            resim::predict(c, &rc, ch, 0.0),
+            resim::predict(t, &rt, ch, 0.0),
+        ) else {
+            continue;
+        };
+        let sc = resim::measurement_std(c, m, &rc, ch);
+        let st = resim::measurement_std(t, m, &rt, ch);
+        let mut sum = 0.0;
+        for i in 0..pc.len() {
+            let d = if ch.name == "compass_deg" {
+                resim::wrap_deg(pc[i] - pt[i])
+            } else {
+                pc[i] - pt[i]
+            };
+            sum += (d / f.sigma[i]).powi(2) + ((sc[i] - st[i]) / f.sigma[i]).powi(2);
+        }
+        per_channel.push(sum / pc.len().max(1) as f64);
+    }
+    if per_channel.is_empty() {
+        return Ok(0.0);
+    }
+    Ok((per_channel.iter().sum::<f64>() / per_channel.len() as f64).sqrt())
+}
+
+/// Size of `effect` at `params` in noise-floor units on measurement `m` (see the module doc).
+pub fn size_sigma(
+    base: &Configs,
+    effect: &Effect,
+    params: &[f64],
+    m: &Measurement,
+    floors: &[Option<Floor>],
+    base_run: &resim::Run,
+) -> Result<f64, GapError> {
+    let mut truth = base.clone();
+    effects::apply(effect, params, &mut truth);
+    let run = if effect.physics {
+        resim::simulate(&truth, m, None)?
+    } else {
+        base_run.clone()
+    };
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (ch, f) in m.channels.iter().zip(floors) {
+        let Some(f) = f else { continue };
+        if !effect.channels.contains(&ch.name.as_str()) {
+            continue;
+        }
+        if effect.kind == Kind::Variance {
+            let a = resim::measurement_std(base, m, base_run, ch);
+            let b = resim::measurement_std(&truth, m, base_run, ch);
+            for ((sa, sb), s) in a.iter().zip(&b).zip(&f.sigma) {
+                sum += (sb * sb - sa * sa).max(0.0) / (s * s);
+                n += 1;
+            }
+            continue;
+        }
+        let (Some(p0), Some(p1)) = (
+            resim::predict(base, base_run, ch, 0.0),
+            resim::predict(&truth, &run, ch, 0.0),
+        ) else {
+            continue;
+        };
+        for ((a, b), s) in p0.iter().zip(&p1).zip(&f.sigma) {
+            let d = if ch.name == "compass_deg" {
+                resim::wrap_deg(b - a)
+            } else {
+                b - a
+            };
+            sum += (d / s).powi(2);
+            n += 1;
+        }
+    }
+    Ok(if n == 0 { 0.0 } else { (sum / n as f64).sqrt() })
+}
+
+/// Parameters that only make sense with one sign (a delay, an amplitude).
+fn positive_only(effect: &Effect) -> bool {
+    matches!(
+        effect.name,
+        "thruster_lag" | "sensor_latency" | "depth_pwm_emi" | "compass_tilt"
+    )
+}
+
+/// Runs the benchmark; `progress(done, total, label)` after each case.
+pub fn run(
+    opts: &BenchOptions,
+    progress: &mut dyn FnMut(usize, usize, &str),
+) -> Result<Vec<CaseResult>, GapError> {
+    let model_text = Embedded.read(MODEL)?;
+    let model = GapModel::from_text(&Embedded.describe(MODEL), &model_text, ".".into())?;
+    let train = training(&embedded_schedule()?);
+    let exp_dir = std::path::Path::new(".");
+    let mut rng = crate::sensors::rng::stream(opts.seed, "gap-bench");
+    let world = model
+        .world_ref
+        .clone()
+        .unwrap_or_else(|| crate::physics::DEFAULT_WORLD.to_string());
+    let sensors = model
+        .sensors_ref
+        .clone()
+        .unwrap_or_else(|| "sensors/mako-2008.toml".to_string());
+    // A null measurement fixes the channel sample times for the size calibration.
+    let info = crate::gap::format::ExperimentInfo {
+        name: train.name.clone(),
+        description: String::new(),
+        duration_s: train.duration_s,
+        world: world.clone(),
+        sensors: sensors.clone(),
+        initial: crate::gap::format::Initial {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: None,
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            surge_mps: 0.0,
+        },
+        camera_position_std_m: CAMERA_STD_M,
+        camera_speed_std_mps: 0.02,
+    };
+    let probe = generate::generate(
+        &model.configs(&info, exp_dir)?,
+        &train,
+        &world,
+        &sensors,
+        CAMERA_STD_M,
+        opts.seed,
+    )?;
+    let base = model.configs(&probe.experiment, exp_dir)?;
+    let hold = mirrored(&train, base.world.pool_m.y);
+    let base_run = resim::simulate(&base, &probe, None)?;
+    let floors = resim::noise_floor(&base, &probe, &base_run)?;
+
+    let total = opts.cases * (opts.effects.len() + 1);
+    let mut done = 0;
+    let mut out = Vec::new();
+    let mut kinds: Vec<Option<&'static Effect>> = opts.effects.iter().map(|e| Some(*e)).collect();
+    kinds.push(None);
+    for kind in kinds {
+        for _ in 0..opts.cases {
+            let seed: u64 = rng.random();
+            let hold_seed: u64 = rng.random();
+            let mut truth_cfg = base.clone();
+            let mut truth = Vec::new();
+            let mut size = 0.0;
+            if let Some(effect) = kind {
+                let k = effect.parameters.len();
+                let dir: Vec<f64> = if k == 1 {
+                    vec![if positive_only(effect) || rng.random::<bool>() {
+                        1.0
+                    } else {
+                        -1.0
+                    }]
+                } else {
+                    let a = rng.random_range(0.0..std::f64::consts::TAU);
+                    vec![a.cos(), a.sin()]
+                };
+                // One-point calibration: the size of one typical step along `dir`.
+                let unit: Vec<f64> = dir.iter().zip(effect.scales).map(|(d, s)| d * s).collect();
+                let s1 = size_sigma(&base, effect, &unit, &probe, &floors, &base_run)?;
+                let target = rng.random_range(SIZE_RANGE.0..SIZE_RANGE.1);
+                let factor = if s1 > 0.0 { target / s1 } else { 1.0 };
+                truth = unit.iter().map(|u| u * factor).collect();
+                size = size_sigma(&base, effect, &truth, &probe, &floors, &base_run)?;
+                effects::apply(effect, &truth, &mut truth_cfg);
+            }
+            let m = generate::generate(&truth_cfg, &train, &world, &sensors, CAMERA_STD_M, seed)?;
+            let t0 = Instant::now();
+            let a = crate::gap::analyse(&model, &m, exp_dir, &mut |_, _| {})?;
+            let seconds = t0.elapsed().as_secs_f64();
+            let first = a.accepted.first();
+            let named = first.map(|w| w.name.clone());
+            let fitted: Vec<f64> = first
+                .map(|w| w.parameters.iter().map(|(_, v)| *v).collect())
+                .unwrap_or_default();
+            let ci95: Vec<[f64; 2]> = first
+                .map(|w| w.ci95.iter().map(|(_, c)| *c).collect())
+                .unwrap_or_default();
+            let correct = kind.is_some() && named.as_deref() == kind.map(|e| e.name);
+            let (parameter_error, ci_covers) = if correct {
+                let norm = truth.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let err = truth
+                    .iter()
+                    .zip(&fitted)
+                    .map(|(t, f)| (t - f).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                let covers = truth
+                    .iter()
+                    .zip(&ci95)
+                    .all(|(t, c)| c[0] <= *t && *t <= c[1]);
+                ((norm > 0.0).then(|| err / norm), Some(covers))
+            } else {
+                (None, None)
+            };
+            let mut held_out_truth_reduction_pct = None;
+            let held_out_reduction_pct = if kind.is_some() {
+                let h = generate::generate(
+                    &truth_cfg,
+                    &hold,
+                    &world,
+                    &sensors,
+                    CAMERA_STD_M,
+                    hold_seed,
+                )?;
+                let hb = resim::simulate(&base, &h, None)?;
+                let hf = resim::noise_floor(&base, &h, &hb)?;
+                let before = excess(&base, &h, &hf)?;
+                // The fitted model's own floor: a fitted noise source (depth EMI) is judged
+                // by the spread it predicts.
+                let ha = resim::simulate(&a.configs_after, &h, None)?;
+                let hfa = resim::noise_floor(&a.configs_after, &h, &ha)?;
+                let after = excess(&a.configs_after, &h, &hfa)?;
+                let tb = truth_gap(&base, &truth_cfg, &h, &hf)?;
+                let ta = truth_gap(&a.configs_after, &truth_cfg, &h, &hf)?;
+                held_out_truth_reduction_pct = (tb > 0.0).then(|| 100.0 * (1.0 - ta / tb));
+                Some(if before > 0.0 {
+                    100.0 * (1.0 - after / before)
+                } else {
+                    0.0
+                })
+            } else {
+                None
+            };
+            out.push(CaseResult {
+                effect: kind.map(|e| e.name),
+                seed,
+                truth,
+                size_sigma: size,
+                named,
+                fitted,
+                ci95,
+                parameter_error,
+                ci_covers,
+                held_out_reduction_pct,
+                held_out_truth_reduction_pct,
+                seconds,
+            });
+            done += 1;
+            progress(done, total, kind.map_or("null", |e| e.name));
+        }
+    }
+    Ok(out)
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    })
+}
+
+fn pct(num: usize, den: usize) -> String {
+    if den == 0 {
+        "-".to_string()
+    } else {
+        format!("{:.0} % ({num}/{den})", 100.0 * num as f64 / den as f64)
+    }
+}
+
+fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
+    v.map_or("-".to_string(), f)
+}
+
+fn row(label: &str, cases: &[&CaseResult]) -> String {
+    let hidden: Vec<&&CaseResult> = cases.iter().filter(|c| c.effect.is_some()).collect();
+    let nulls: Vec<&&CaseResult> = cases.iter().filter(|c| c.effect.is_none()).collect();
+    let big: Vec<&&&CaseResult> = hidden.iter().filter(|c| c.size_sigma >= 3.0).collect();
+    let perr = median(hidden.iter().filter_map(|c| c.parameter_error).collect());
+    let cover: Vec<bool> = hidden.iter().filter_map(|c| c.ci_covers).collect();
+    let held = median(
+        hidden
+            .iter()
+            .filter_map(|c| c.held_out_reduction_pct)
+            .collect(),
+    );
+    let held_truth = median(
+        hidden
+            .iter()
+            .filter_map(|c| c.held_out_truth_reduction_pct)
+            .collect(),
+    );
+    let secs = median(cases.iter().map(|c| c.seconds).collect());
+    format!(
+        "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        cases.len(),
+        pct(hidden.iter().filter(|c| c.correct()).count(), hidden.len()),
+        pct(big.iter().filter(|c| c.correct()).count(), big.len()),
+        pct(
+            nulls.iter().filter(|c| c.named.is_some()).count(),
+            nulls.len()
+        ),
+        opt(perr, |v| format!("{:.1} %", 100.0 * v)),
+        pct(cover.iter().filter(|c| **c).count(), cover.len()),
+        opt(held, |v| format!("{v:.0} %")),
+        opt(held_truth, |v| format!("{v:.0} %")),
+        opt(secs, |v| format!("{v:.2}")),
+    )
+}
+
+/// The benchmark table (markdown), per effect, nulls and overall.
+pub fn table(results: &[CaseResult]) -> String {
+    let mut s = String::from(
+        "| effect | cases | correct name | correct name >= 3 sigma | false alarm | median param error | CI95 covers truth | held-out reduction (data) | held-out reduction (vs truth) | s/case |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut names: Vec<&str> = Vec::new();
+    for r in results {
+        let n = r.effect.unwrap_or("null");
+        if !names.contains(&n) {
+            names.push(n);
+        }
+    }
+    for n in names {
+        let cases: Vec<&CaseResult> = results
+            .iter()
+            .filter(|r| r.effect.unwrap_or("null") == n)
+            .collect();
+        s.push_str(&row(n, &cases));
+        s.push('\n');
+    }
+    let all: Vec<&CaseResult> = results.iter().collect();
+    s.push_str(&row("overall", &all));
+    s.push('\n');
+    s
+}
