@@ -19,7 +19,6 @@
 //! - [`report`]: the output files.
 //! - [`summary`]: summary observations (a quantity per experiment, with its uncertainty), the
 //!   form the thesis reports Mako's measurements in.
-//! - [`convert`]: a daemon `--record` directory to a measurement (`eyebot-hil gap convert`).
 //! - [`bench`]: the hidden-effect benchmark (`eyebot-hil gap-bench`).
 
 pub mod bench;
