@@ -126,7 +126,6 @@ static double fuzzy(double distance, double rate) {
 static struct {
     int selected;   /* last transducer selected */
     int port_t;     /* the port transducer in use (1 or 2) */
-    int bow_t;      /* the bow transducer in use (3 or 4) */
     int acked;      /* its acknowledgement came */
     double sent_s;  /* when it was selected */
     char line[100];
@@ -136,7 +135,6 @@ static struct {
 static void sonar_select(int t) {
     sonar.selected = t;
     if (t <= 2) sonar.port_t = t;
-    else sonar.bow_t = t;
     sonar.acked = 0;
     sonar.sent_s = seconds();
     OSSendCharRS232('@', SONAR);
@@ -149,19 +147,21 @@ static void sonar_select(int t) {
 static int sonar_poll(double *range_m) {
     while (OSCheckInRS232(SONAR) > 0) {
         char c;
+        int len;
         if (OSRecvRS232(&c, SONAR) != 0) break;
         if (c != '\n') {
             if (sonar.len < (int)sizeof sonar.line - 1) sonar.line[sonar.len++] = c;
             continue;
         }
         sonar.line[sonar.len] = '\0';
+        len = sonar.len;
         sonar.len = 0;
-        if (sonar.line[0] == '@' && sonar.line[1] == 'A') {
+        if (len >= 3 && sonar.line[0] == '@' && sonar.line[1] == 'A') {
             if (sonar.line[2] == '0' + sonar.selected) {
                 sonar.acked = 1;
                 return 2;
             }
-        } else if (strncmp(sonar.line + 3, "DBT,", 4) == 0) {
+        } else if (len > 7 && strncmp(sonar.line + 3, "DBT,", 4) == 0) {
             char *p = strchr(sonar.line + 7, ','); /* after the feet field */
             if (p && p[1] == 'f' && p[2] == ',' && p[3] != ',') {
                 *range_m = atof(p + 3);
