@@ -208,8 +208,13 @@ fn run_summary(
         let f =
             |v: Option<f64>, p: usize| v.map_or_else(|| "-".to_string(), |v| format!("{v:.p$}"));
         println!(
-            "| {} | {:.3} {} | {} | {} | {} | {} |",
+            "| {} | {}{:.3} {} | {} | {} | {} | {} |",
             o.name,
+            match o.bound {
+                gap::summary::Bound::Value => "",
+                gap::summary::Bound::Upper => "<= ",
+                gap::summary::Bound::Lower => ">= ",
+            },
             o.measured,
             o.unit,
             f(o.simulated_before, 3),

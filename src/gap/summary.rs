@@ -80,6 +80,20 @@ pub enum Quantity {
     TurnDiameterM,
     /// Spot turn: mean time per 360 degrees over the full turns after the first, s.
     TurnPeriodS,
+    /// Largest increase between consecutive 200 ms samples per sample period in
+    /// `from_s..until_s`, m/s^2 (thesis 4.6 reads its bound this way).
+    PeakAccelerationMps2,
+}
+
+/// Whether a value is a measurement or only a bound (thesis 4.6: the peak acceleration "can be
+/// regarded as an upper bound"). A bound is met at no cost; beyond it the miss counts as
+/// `(sim - value) / sigma`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Bound {
+    Value,
+    Upper,
+    Lower,
 }
 
 /// Which physical behaviour a quantity shows: straight-line speed or turning.
@@ -91,12 +105,13 @@ pub enum Behaviour {
 }
 
 impl Quantity {
-    pub const ALL: [Quantity; 5] = [
+    pub const ALL: [Quantity; 6] = [
         Quantity::TopSpeedMps,
         Quantity::TimeToTopSpeedS,
         Quantity::TimeToRestS,
         Quantity::TurnDiameterM,
         Quantity::TurnPeriodS,
+        Quantity::PeakAccelerationMps2,
     ];
 
     pub fn name(self) -> &'static str {
@@ -106,6 +121,7 @@ impl Quantity {
             Quantity::TimeToRestS => "time_to_rest_s",
             Quantity::TurnDiameterM => "turn_diameter_m",
             Quantity::TurnPeriodS => "turn_period_s",
+            Quantity::PeakAccelerationMps2 => "peak_acceleration_mps2",
         }
     }
 
@@ -113,15 +129,17 @@ impl Quantity {
         match self {
             Quantity::TopSpeedMps => "m/s",
             Quantity::TurnDiameterM => "m",
+            Quantity::PeakAccelerationMps2 => "m/s^2",
             _ => "s",
         }
     }
 
     pub fn behaviour(self) -> Behaviour {
         match self {
-            Quantity::TopSpeedMps | Quantity::TimeToTopSpeedS | Quantity::TimeToRestS => {
-                Behaviour::Speed
-            }
+            Quantity::TopSpeedMps
+            | Quantity::TimeToTopSpeedS
+            | Quantity::TimeToRestS
+            | Quantity::PeakAccelerationMps2 => Behaviour::Speed,
             Quantity::TurnDiameterM | Quantity::TurnPeriodS => Behaviour::Turn,
         }
     }
@@ -166,6 +184,8 @@ struct RawObservation {
     source: String,
     from_s: Option<f64>,
     until_s: Option<f64>,
+    #[serde(default)]
+    bound: Option<String>,
 }
 
 /// One observation, resolved.
@@ -183,6 +203,19 @@ pub struct Observation {
     pub source: String,
     pub from_s: f64,
     pub until_s: Option<f64>,
+    pub bound: Bound,
+}
+
+impl Observation {
+    /// The normalised miss of a simulated value `v` (see [`Bound`]).
+    pub fn z(&self, v: f64, sigma: f64) -> f64 {
+        let d = v - self.value;
+        match self.bound {
+            Bound::Value => d / sigma,
+            Bound::Upper => d.max(0.0) / sigma,
+            Bound::Lower => d.min(0.0) / sigma,
+        }
+    }
 }
 
 /// A summary file, resolved: the experiments it refers to (each loaded once) and the
@@ -254,6 +287,19 @@ impl Summary {
                 None if quantity == Quantity::TopSpeedMps => TOP_SPEED_FROM_S.min(duration),
                 None => 0.0,
             };
+            let bound = match o.bound.as_deref() {
+                None | Some("value") => Bound::Value,
+                Some("upper") => Bound::Upper,
+                Some("lower") => Bound::Lower,
+                Some(other) => {
+                    return Err(doc
+                        .invalid(
+                            &format!("{key}.bound"),
+                            format!("unknown bound `{other}`; known: value, upper, lower"),
+                        )
+                        .into());
+                }
+            };
             let until_s = match o.until_s {
                 Some(u) => {
                     Some(doc.check_range(&format!("{key}.until_s"), u, from_s, duration, "s")?)
@@ -270,6 +316,7 @@ impl Summary {
                 source: o.source.clone(),
                 from_s,
                 until_s,
+                bound,
             });
         }
         Ok(Self {
@@ -344,6 +391,14 @@ pub fn quantity(o: &Observation, exp: &Experiment, trace: &[VehicleState]) -> Op
             // Never at rest within the run: censored at its end.
             Some(last - o.from_s)
         }
+        Quantity::PeakAccelerationMps2 => {
+            let v = measure::camera_velocities(trace, &axis, CAMERA_PERIOD_S);
+            let w: Vec<(f64, f64)> = v
+                .into_iter()
+                .filter(|(t, _)| *t >= o.from_s && *t <= until)
+                .collect();
+            measure::peak_acceleration(&w)
+        }
         Quantity::TurnDiameterM | Quantity::TurnPeriodS => {
             let end = trace.partition_point(|s| s.t_s <= until);
             let turn = measure::spot_turn(&trace[..end.max(1)])?;
@@ -394,6 +449,7 @@ pub struct ObservationResult {
     pub experiment: String,
     pub source: String,
     pub measured: f64,
+    pub bound: Bound,
     pub sigma_measured: f64,
     /// The model's own spread (thrust fluctuation), 1 sigma.
     pub sigma_model: f64,
@@ -462,7 +518,7 @@ impl Context<'_> {
         p.iter()
             .zip(&self.s.observations)
             .zip(self.sigma)
-            .map(|((v, o), s)| v.map(|v| (v - o.value) / s))
+            .map(|((v, o), s)| v.map(|v| o.z(v, *s)))
             .collect()
     }
 }
@@ -883,7 +939,7 @@ pub fn analyse(
         });
     }
     let mean1 = predict(&configs, s, None)?;
-    let z = |v: &Option<f64>, o: &Observation, sg: f64| v.map(|v| (v - o.value) / sg);
+    let z = |v: &Option<f64>, o: &Observation, sg: f64| v.map(|v| o.z(v, sg));
     let observations: Vec<ObservationResult> = s
         .observations
         .iter()
@@ -895,6 +951,7 @@ pub fn analyse(
             experiment: o.experiment_ref.clone(),
             source: o.source.clone(),
             measured: o.value,
+            bound: o.bound,
             sigma_measured: o.sigma,
             sigma_model: sigma_model[i],
             simulated_before: mean0[i],
@@ -1107,10 +1164,15 @@ pub fn markdown(a: &SummaryAnalysis, s: &Summary) -> String {
     for o in &a.observations {
         let _ = writeln!(
             out,
-            "| {} ({}) | {} | {:.3} {} | {:.3}, {:.3} | {} | {} | {} | {} | {} |",
+            "| {} ({}) | {} | {}{:.3} {} | {:.3}, {:.3} | {} | {} | {} | {} | {} |",
             o.name,
             o.quantity.name(),
             o.experiment,
+            match o.bound {
+                Bound::Value => "",
+                Bound::Upper => "<= ",
+                Bound::Lower => ">= ",
+            },
             o.measured,
             o.unit,
             o.sigma_measured,
@@ -1337,6 +1399,21 @@ source = "thesis 4.5"
     fn an_unknown_experiment_is_an_error_not_a_panic() {
         let text = ONE.replace("experiments/acceleration.toml", "experiments/nope.toml");
         assert!(Summary::from_text("s.toml", &text, Path::new("/nonexistent")).is_err());
+    }
+
+    #[test]
+    fn an_upper_bound_costs_nothing_inside_and_counts_beyond() {
+        let text = ONE.replace("source =", "bound = \"upper\"\nsource =");
+        let s = Summary::from_text("s.toml", &text, Path::new("/nonexistent")).unwrap();
+        let o = &s.observations[0];
+        assert_eq!(o.bound, Bound::Upper);
+        assert_eq!(o.z(0.30, 0.02), 0.0);
+        assert!((o.z(0.48, 0.02) - 2.0).abs() < 1e-9);
+        let bad = ONE.replace("source =", "bound = \"above\"\nsource =");
+        let err = Summary::from_text("s.toml", &bad, Path::new("/nonexistent"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("unknown bound `above`"), "{err}");
     }
 
     #[test]
