@@ -414,6 +414,9 @@ impl<M: Model> Core<M> {
             self.flush_idle_lines()?;
             self.poll_devices();
             self.record_state();
+            // What is complete leaves the pacer as time passes, so a long lockstep advance
+            // does not count a stream's earlier samples against the transmit queue.
+            self.release_due();
         }
         self.poll_devices();
         self.release_due();
@@ -762,6 +765,36 @@ mod tests {
             ]
         );
         assert_eq!(c.now(), 50 * MS);
+    }
+
+    /// Regression: within one advance nothing left the pacer until the end, so a lockstep
+    /// TIME_ADVANCE of 4 s with a 100 Hz stream queued 400 samples against the 4 KiB
+    /// transmit queue and dropped most of them, although the line had time for all.
+    #[test]
+    fn a_long_lockstep_advance_delivers_every_stream_sample() {
+        let mut c = core(true, false);
+        c.receive(
+            1,
+            &frame_bytes(
+                1,
+                Message::AdcStream {
+                    channels: 0xFF,
+                    period_ms: 10,
+                },
+            ),
+        )
+        .unwrap();
+        let _ack = c.take_output(1);
+        c.receive(1, &frame_bytes(2, Message::TimeAdvance { ticks: 400 }))
+            .unwrap();
+        let items = decode(&c.take_output(1).unwrap());
+        let samples = items
+            .iter()
+            .filter(|i| matches!(i, LineItem::Frame(f) if f.message.msg_type() == firmware_protocol::sensor_link::msg_type::ADC_SAMPLES))
+            .count();
+        // Samples at 10..=4000 ms (the last one goes out ahead of the TIME reply).
+        assert_eq!(samples, 400, "{} items", items.len());
+        assert_eq!(c.line_counters(1).dropped_tx, 0);
     }
 
     /// The same client bytes give the same output bytes, however the input is chunked.

@@ -449,18 +449,16 @@ fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonErro
 /// Hands released bytes to the link tasks. Paced bytes are released a few at a time, so the
 /// hand-over channel (counted in chunks) fills after a short stall of the link task even
 /// when the client reads: bytes that do not fit wait in the line's backlog and go as one
-/// chunk next time. Released bytes that would take the backlog beyond the line's
-/// `tx_queue_bytes` (a client that does not read, or is gone) are dropped, counted and
-/// recorded as drops; the daemon never blocks on a client.
+/// chunk next time. Only when the channel is full and the backlog would exceed the line's
+/// `tx_queue_bytes` (a client that does not read, or is gone) are the newly released bytes
+/// dropped, counted and recorded as drops (the older ones keep their place, as in a UART
+/// overrun); the daemon never blocks on a client.
 fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &mut [LineRuntime]) {
     let sim_s = core.now() as f64 * 1e-9;
     for (index, line) in lines.iter_mut().enumerate() {
+        let waiting = line.backlog.len();
         while let Some(data) = core.take_output(index) {
-            if line.backlog.len() + data.len() > line.backlog_limit {
-                core.note_dropped(index, &data, DropReason::NotRead);
-            } else {
-                line.backlog.extend_from_slice(&data);
-            }
+            line.backlog.extend_from_slice(&data);
         }
         if line.backlog.is_empty() {
             continue;
@@ -471,8 +469,14 @@ fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &mut [LineRuntime]) {
         };
         match line.to_link.try_send(chunk) {
             Ok(()) => {}
-            Err(mpsc::error::TrySendError::Full(chunk)) => {
+            Err(mpsc::error::TrySendError::Full(chunk))
+                if chunk.data.len() <= line.backlog_limit =>
+            {
                 line.backlog.extend_from_slice(&chunk.data);
+            }
+            Err(mpsc::error::TrySendError::Full(chunk)) => {
+                line.backlog.extend_from_slice(&chunk.data[..waiting]);
+                core.note_dropped(index, &chunk.data[waiting..], DropReason::NotRead);
             }
             Err(mpsc::error::TrySendError::Closed(chunk)) => {
                 core.note_dropped(index, &chunk.data, DropReason::EndpointGone);
