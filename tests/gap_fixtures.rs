@@ -95,10 +95,19 @@ fn hidden_water_current_is_named_and_fitted() {
     assert!(af < 0.5 * b, "track distance {b} -> {af}");
 }
 
-/// Data from the model itself: nothing may be named.
+/// Data from the model itself: nothing may be named, and the margin itself rejects every
+/// candidate (the signature test is not needed to keep the null clean).
 #[test]
 fn null_data_name_no_effect() {
     let a = analyse("null");
+    for c in &a.rounds[0] {
+        assert!(
+            c.delta_bic <= gap::fit::BIC_MARGIN,
+            "{} reaches delta BIC {} on the null",
+            c.name,
+            c.delta_bic
+        );
+    }
     assert_eq!(
         a.verdict,
         Verdict::None,
