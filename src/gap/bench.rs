@@ -91,7 +91,7 @@ fn embedded_schedule() -> Result<Experiment, GapError> {
 /// Where the benchmark starts the training manoeuvre: the file's schedule turned to start
 /// heading east from the pool's north-west quarter, which keeps the whole track (and the
 /// drift of the largest currents) about 3 m clear of every wall. Contact with a wall would
-/// hide a drift. `tests/fixtures/gap/schedule.toml` is the same schedule written out.
+/// hide a drift. `pty-tests/fixtures/gap/schedule.toml` is the same schedule written out.
 pub const START: (f64, f64, f64) = (18.0, 3.0, 90.0);
 
 /// The training manoeuvre: the file's commands from [`START`].

@@ -14,7 +14,7 @@ use eyebot_hil::gap::summary::{self, Summary, SummaryAnalysis};
 use eyebot_hil::gap::{Verdict, format::ExperimentInfo, format::Initial};
 
 fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
 fn mako_numbers() -> Summary {

@@ -1,12 +1,12 @@
-//! Hidden-effect and null fixtures for `eyebot-hil gap`: the data in tests/fixtures/gap/<case>/
+//! Hidden-effect and null fixtures for `eyebot-hil gap`: the data in pty-tests/fixtures/gap/<case>/
 //! were written by `eyebot-hil gap generate` from the truth models in
-//! tests/fixtures/gap/truth/ (which `gap` never reads) running tests/fixtures/gap/schedule.toml.
+//! pty-tests/fixtures/gap/truth/ (which `gap` never reads) running pty-tests/fixtures/gap/schedule.toml.
 //! Each test runs the whole workflow against the shipped model and checks the named effect,
 //! its parameters and the gap.
 //!
 //! Regenerate (only on purpose), for each case:
-//! `eyebot-hil gap generate --truth tests/fixtures/gap/truth/CASE.toml
-//!  --schedule tests/fixtures/gap/schedule.toml --seed 7 --out tests/fixtures/gap/CASE`
+//! `eyebot-hil gap generate --truth pty-tests/fixtures/gap/truth/CASE.toml
+//!  --schedule pty-tests/fixtures/gap/schedule.toml --seed 7 --out pty-tests/fixtures/gap/CASE`
 
 use std::path::Path;
 
@@ -14,9 +14,9 @@ use eyebot_hil::gap::{self, Verdict, format::Measurement, model::GapModel};
 
 fn analyse(case: &str) -> gap::Analysis {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let dir = root.join("tests/fixtures/gap").join(case);
+    let dir = root.join("fixtures/gap").join(case);
     let m = Measurement::load(&dir).expect("fixture loads");
-    let model = GapModel::load(&root.join("configs/models/mako.toml")).expect("model loads");
+    let model = GapModel::load(&root.join("../configs/models/mako.toml")).expect("model loads");
     gap::analyse(&model, &m, &dir, &mut |_, _| {}).expect("gap runs")
 }
 
@@ -31,7 +31,7 @@ enum Tolerance {
 }
 
 /// Runs `case`, whose truth hides `effect` with `truth` (the values in
-/// tests/fixtures/gap/truth/CASE.toml), and checks: `effect` is named first, its parameters
+/// pty-tests/fixtures/gap/truth/CASE.toml), and checks: `effect` is named first, its parameters
 /// meet `tolerance` and the gap shrinks by at least 80 %.
 fn check(case: &str, effect: &str, truth: &[f64], tolerance: Tolerance) {
     let a = analyse(case);
