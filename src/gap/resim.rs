@@ -11,7 +11,7 @@ use crate::gap::format::{Channel, Measurement};
 use crate::physics::state::{STERN, VehicleState};
 use crate::physics::{InitialState, Model, ThrusterCommand, hdt_command};
 use crate::sensors::accelerometer::G0_MPS2;
-use crate::sensors::{AdcBoard, Compass};
+use crate::sensors::{AdcBoard, Compass, DepthSensor};
 
 /// Channels `gap` can re-simulate; the others are loaded and reported as not modelled.
 pub const MODELLED: [&str; 9] = [
@@ -170,11 +170,16 @@ pub fn predict(c: &Configs, run: &Run, channel: &Channel, lag_s: f64) -> Option<
         "depth_adc" => {
             let d = &c.sensors.depth;
             let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
-            let pos = Vector3::from(d.position_body_m);
+            // The sensor's hysteresis (0.1 % of full scale on Mako, about 1 LSB wide) and
+            // low-pass act on the whole trajectory, so the prediction runs them over every
+            // step: without them a real recording's depth residual carried a +-0.5 LSB
+            // direction-dependent error that thruster_lag fitted as a lag.
+            let mut sensor = DepthSensor::new(d, 0);
+            let sensed: Vec<f64> = run.states.iter().map(|s| sensor.front_end_m(s)).collect();
             ts.map(|t| {
-                let s = run.at(t - lag_s - d.errors.latency_s);
-                let depth = s.depth_of_m(&pos).max(0.0) + d.errors.bias;
-                depth * d.volts_per_m / lsb + c.sensors.adc.offset_lsb
+                let x = (t - lag_s - d.errors.latency_s) / run.dt_s;
+                let i = (x.round().max(0.0) as usize).min(sensed.len() - 1);
+                (sensed[i] + d.errors.bias) * d.volts_per_m / lsb + c.sensors.adc.offset_lsb
             })
             .collect()
         }

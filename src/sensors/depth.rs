@@ -51,8 +51,11 @@ impl DepthSensor {
         })
     }
 
-    /// Follows the vehicle after a physics step.
-    pub fn update(&mut self, state: &VehicleState) {
+    /// The deterministic front of the chain after a physics step: the mounting point's depth,
+    /// clamped at the surface, through the hysteresis and the low-pass (m), before the noise
+    /// package. Stateful (backlash, filter): call once per step, in order. `update` uses it,
+    /// and so does `gap`'s re-simulation, so its prediction follows the same chain.
+    pub fn front_end_m(&mut self, state: &VehicleState) -> f64 {
         let mut d = state.depth_of_m(&self.position).max(0.0);
         if let Some(h) = &mut self.hysteresis {
             d = h.update(d);
@@ -60,6 +63,12 @@ impl DepthSensor {
         if let Some(f) = &mut self.low_pass {
             d = f.update(state.t_s, d);
         }
+        d
+    }
+
+    /// Follows the vehicle after a physics step.
+    pub fn update(&mut self, state: &VehicleState) {
+        let d = self.front_end_m(state);
         self.errors.push(state.t_s, d);
         let duty = state.thruster_effort[STERN].abs().min(1.0);
         self.emi_std_v = self.s.emi_v_rms_full_duty * duty * self.emi_attenuation();
