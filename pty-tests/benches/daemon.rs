@@ -86,20 +86,30 @@ fn pty_echo_baseline() -> Vec<f64> {
     out
 }
 
-/// `--config` arguments for a run with `release_quantum_ms = quantum_ms` (None: the default).
+/// `--config` arguments for a run with `release_quantum_ms = quantum_ms` (None: the default),
+/// and `run.cpu_latency_us` from `EYEBOT_BENCH_CPU_LATENCY_US` when that is set.
 fn quantum_args(dir: &TestDir, quantum_ms: Option<f64>) -> Vec<String> {
     let mut args = vec!["--time-mode".to_string(), "realtime".to_string()];
-    if let Some(q) = quantum_ms {
-        let config = dir.write_config(
-            "quantum.toml",
-            &[(
-                "release_quantum_ms = 1.0",
-                &format!("release_quantum_ms = {q:.1}"),
-            )],
-        );
+    let latency = cpu_latency_us();
+    if quantum_ms.is_some() || latency.is_some() {
+        let mut line = format!("release_quantum_ms = {:.1}", quantum_ms.unwrap_or(1.0));
+        if let Some(us) = latency {
+            line.push_str(&format!("\ncpu_latency_us = {us}"));
+        }
+        let config = dir.write_config("quantum.toml", &[("release_quantum_ms = 1.0", &line)]);
         args.extend(["--config".to_string(), config.display().to_string()]);
     }
     args
+}
+
+/// The CPU latency request the daemon is asked to hold (`EYEBOT_BENCH_CPU_LATENCY_US`).
+fn cpu_latency_us() -> Option<u32> {
+    let value = std::env::var("EYEBOT_BENCH_CPU_LATENCY_US").ok()?;
+    Some(
+        value
+            .parse()
+            .expect("EYEBOT_BENCH_CPU_LATENCY_US is a number of microseconds"),
+    )
 }
 
 fn adc() {
@@ -387,6 +397,12 @@ fn rss() {
 }
 
 fn main() {
+    match cpu_latency_us() {
+        Some(us) => {
+            println!("daemon runs hold a CPU latency request of {us} us (run.cpu_latency_us)")
+        }
+        None => println!("no CPU latency request (set EYEBOT_BENCH_CPU_LATENCY_US to ask for one)"),
+    }
     // `cargo bench` passes `--bench`; any other argument picks sections.
     let picked: Vec<String> = std::env::args()
         .skip(1)

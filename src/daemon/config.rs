@@ -39,6 +39,8 @@ struct RawRun {
     state_record_hz: f64,
     #[serde(default = "default_release_quantum_ms")]
     release_quantum_ms: f64,
+    #[serde(default)]
+    cpu_latency_us: Option<i64>,
 }
 
 fn default_release_quantum_ms() -> f64 {
@@ -161,6 +163,9 @@ pub struct DaemonConfig {
     /// Longest a byte that completed its wire time waits for its hand-over to the port
     /// (`transport::pacer`): bytes leave in bursts of at most this long.
     pub release_quantum: Duration,
+    /// In realtime mode, hold a CPU latency QoS request of this many µs
+    /// ([`crate::transport::CpuLatencyRequest`]); `None` = do not ask.
+    pub cpu_latency_us: Option<u32>,
     pub run_dir: PathBuf,
     pub state_record_hz: f64,
     pub start: Start,
@@ -203,6 +208,20 @@ impl DaemonConfig {
             10.0,
             "ms",
         )?;
+        let cpu_latency_us = match raw.run.cpu_latency_us {
+            None => None,
+            Some(us) => Some(
+                u32::try_from(us)
+                    .ok()
+                    .filter(|us| *us <= 1_000_000)
+                    .ok_or_else(|| {
+                        doc.invalid(
+                            "run.cpu_latency_us",
+                            format!("{us} is out of range; expected 0 to 1000000 µs"),
+                        )
+                    })?,
+            ),
+        };
         let state_record_hz = doc.check_range(
             "run.state_record_hz",
             raw.run.state_record_hz,
@@ -291,6 +310,7 @@ impl DaemonConfig {
             time_mode,
             max_lag: Duration::from_secs_f64(max_lag_ms / 1000.0),
             release_quantum: Duration::from_secs_f64(release_quantum_ms / 1000.0),
+            cpu_latency_us,
             run_dir: PathBuf::from(raw.run.run_dir),
             state_record_hz,
             start: Start {

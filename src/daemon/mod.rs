@@ -121,6 +121,23 @@ where
     let run_dir = config.run_dir.clone();
     create_run_dir(&run_dir)?;
     let lockstep = config.time_mode == TimeMode::Lockstep;
+    // Held until `run` returns; lockstep has no wall-clock deadlines to protect.
+    let _cpu_latency = match config.cpu_latency_us {
+        Some(us) if !lockstep => match crate::transport::CpuLatencyRequest::hold(us) {
+            Ok(request) => {
+                tracing::info!(latency_us = us, "holding a CPU latency request");
+                Some(request)
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "no CPU latency request ({}: {e}): wake-ups may be delayed by idle CPUs",
+                    crate::transport::CPU_LATENCY_QOS
+                );
+                None
+            }
+        },
+        _ => None,
+    };
 
     // Endpoints first, so the readiness lines can name them.
     let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;

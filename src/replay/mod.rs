@@ -69,7 +69,7 @@ pub struct Options {
     /// system refuses, the replay goes on without it and says so.
     pub realtime_priority: Option<i32>,
     /// Hold a CPU latency QoS request of this many µs while timed pacing runs
-    /// ([`output::CpuLatencyRequest`]); if the system refuses, the replay goes on and says so.
+    /// ([`crate::transport::CpuLatencyRequest`]); if the system refuses, the replay goes on and says so.
     pub cpu_latency_us: Option<u32>,
 }
 
@@ -310,11 +310,11 @@ impl Replay {
         if let Some(latency_us) = opts.cpu_latency_us
             && self.pacing != Pacing::Fast
         {
-            match output::CpuLatencyRequest::hold(latency_us) {
+            match crate::transport::CpuLatencyRequest::hold(latency_us) {
                 Ok(request) => qos = Some(request),
                 Err(e) => observer.note(&format!(
                     "no CPU latency request ({}: {e}): an idle CPU may be slow to wake",
-                    output::CPU_LATENCY_QOS
+                    crate::transport::CPU_LATENCY_QOS
                 )),
             }
         }
