@@ -31,6 +31,7 @@ pub mod model;
 pub mod report;
 pub mod residuals;
 pub mod resim;
+pub mod sonar;
 pub mod summary;
 
 use std::path::{Path, PathBuf};
