@@ -23,7 +23,7 @@
 
 use crate::gap::effects::Configs;
 use crate::gap::format::Channel;
-use crate::gap::resim::Run;
+use crate::gap::resim::{Floor, Run};
 use crate::physics::state::RayCaster;
 use crate::physics::world::Pool;
 use crate::sensors::config::SonarSettings;
@@ -174,4 +174,53 @@ pub fn residuals(c: &Configs, run: &Run, duration_s: f64, channel: &Channel) -> 
         });
     }
     Some(out)
+}
+
+/// Residuals for the per-channel statistics (`gap`'s localisation and the before/after gap):
+/// the Pearson residual `(y - p) / sqrt(p (1 - p))` of each ping (mean square 1 under the
+/// model whatever `p`, unlike the deviance), `p` clamped into `[1e-3, 1 - 1e-3]`, then the
+/// range residual over its noise where both the data and the model have an echo. Returns
+/// `(times, residuals)`.
+pub fn stats_residuals(
+    c: &Configs,
+    run: &Run,
+    duration_s: f64,
+    channel: &Channel,
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    let k = index(&channel.name)?;
+    let s = &c.sensors.sonar;
+    let t = s.transducers.get(k)?;
+    let tr = Transducer::new(t, s, 0);
+    let world = Pool::new(&c.world);
+    let times = ping_times(s, duration_s);
+    let measured = slots(channel, &times, s.timing.period_s);
+    let sigma = range_std_m(s);
+    let (mut ts, mut out) = (Vec::new(), Vec::new());
+    for (t, y) in times.iter().zip(measured) {
+        let e = expected(s, &world, &tr, run.at(*t));
+        let p = e.p.clamp(1e-3, 1.0 - 1e-3);
+        let ind = if y.is_some() { 1.0 } else { 0.0 };
+        ts.push(*t);
+        out.push((ind - p) / (p * (1.0 - p)).sqrt());
+        if let (Some(m), Some(r)) = (y, e.range_m) {
+            ts.push(*t);
+            out.push((m - r) / sigma);
+        }
+    }
+    Some((ts, out))
+}
+
+/// The noise floor of a sonar channel: its residuals are already normalised (unit sigma,
+/// independent pings); process noise is not propagated into the sonar (zero null deviations,
+/// one per ensemble member, so the other channels' null calibration keeps its members).
+pub fn floor(c: &Configs, duration_s: f64, channel: &Channel) -> Option<Floor> {
+    let k = index(&channel.name)?;
+    c.sensors.sonar.transducers.get(k)?;
+    let n = 2 * ping_times(&c.sensors.sonar, duration_s).len();
+    Some(Floor {
+        sigma: vec![1.0; n],
+        tau: 1.0,
+        measurement_std: vec![1.0; n],
+        null: vec![vec![0.0; n]; crate::gap::resim::ENSEMBLE as usize],
+    })
 }
