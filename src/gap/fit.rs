@@ -130,8 +130,7 @@ impl Setup<'_> {
             let ch = &self.m.channels[i];
             let Some(f) = &self.floors[i] else { continue };
             // Sonar: presence deviance and range residuals, already normalised.
-            if let Some(r) =
-                crate::gap::sonar::residuals(c, run, self.m.experiment.duration_s, ch)
+            if let Some(r) = crate::gap::sonar::residuals(c, run, self.m.experiment.duration_s, ch)
             {
                 owner.extend(std::iter::repeat_n(i, r.len()));
                 out.extend(r);

@@ -37,7 +37,15 @@ pub fn generate(
     camera_position_std_m: f64,
     seed: u64,
 ) -> Result<Measurement, GapError> {
-    generate_with(truth, schedule, world, sensors, camera_position_std_m, seed, false)
+    generate_with(
+        truth,
+        schedule,
+        world,
+        sensors,
+        camera_position_std_m,
+        seed,
+        false,
+    )
 }
 
 /// As [`generate`]; with `sonar` the four transducers are pinged too (`sonar1_m`..`sonar4_m`,

@@ -124,7 +124,14 @@ fn stats_for(
                 null: Vec::new(),
             };
             let rms = (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
-            out.push(residuals::channel_stats(&ch.name, &t, &r, &unit, run, (0.0, rms)));
+            out.push(residuals::channel_stats(
+                &ch.name,
+                &t,
+                &r,
+                &unit,
+                run,
+                (0.0, rms),
+            ));
             continue;
         }
         let Some(p) = resim::predict(c, run, ch, 0.0) else {

@@ -166,7 +166,11 @@ pub fn residuals(c: &Configs, run: &Run, duration_s: f64, channel: &Channel) -> 
     for (t, y) in times.iter().zip(measured) {
         let e = expected(s, &world, &tr, run.at(*t));
         let p = e.p.clamp(P_MIN, 1.0 - P_MIN);
-        let (ind, l) = if y.is_some() { (1.0, p) } else { (0.0, 1.0 - p) };
+        let (ind, l) = if y.is_some() {
+            (1.0, p)
+        } else {
+            (0.0, 1.0 - p)
+        };
         out.push((ind - p).signum() * (-2.0 * l.ln()).max(0.0).sqrt());
         out.push(match (y, e.range_m) {
             (Some(m), Some(r)) => (m - r) / sigma,
