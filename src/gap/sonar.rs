@@ -228,3 +228,99 @@ pub fn floor(c: &Configs, duration_s: f64, channel: &Channel) -> Option<Floor> {
         null: vec![vec![0.0; n]; crate::gap::resim::ENSEMBLE as usize],
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{UnitQuaternion, Vector3};
+
+    use super::*;
+    use crate::config::Document;
+    use crate::physics::WorldConfig;
+    use crate::physics::state::VehicleState;
+    use crate::sensors::SensorsConfig;
+    use crate::sensors::scene::at_rest;
+
+    fn settings() -> (SonarSettings, Pool) {
+        let s = SensorsConfig::from_text(
+            "mako-2008.toml",
+            include_str!("../../configs/sensors/mako-2008.toml"),
+        )
+        .unwrap();
+        let w = WorldConfig::from_document(&Document::new(
+            "pool.toml",
+            include_str!("../../configs/worlds/pool.toml"),
+        ))
+        .unwrap();
+        (s.sonar, Pool::new(&w))
+    }
+
+    /// Still, 2.5 m off the west wall (y = 0), heading `deg` (0 = north, wall to port).
+    fn beside_wall(deg: f64) -> VehicleState {
+        at_rest(
+            0.0,
+            Vector3::new(12.0, 2.5, 0.5),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, deg.to_radians()),
+        )
+    }
+
+    /// The prediction's probability is the rate at which the sonar model itself returns
+    /// echoes (port-fore, 15 deg off the wall normal, well inside the incidence cut).
+    #[test]
+    fn predicted_probability_matches_the_sonar_models_echo_rate() {
+        let (s, pool) = settings();
+        let state = beside_wall(0.0);
+        let mut tr = Transducer::new(&s.transducers[0], &s, 3);
+        let e = expected(&s, &pool, &tr, &state);
+        assert!(e.p > 0.2 && e.p < 0.5, "p = {}", e.p);
+        let r = e.range_m.unwrap();
+        assert!((r - 2.2).abs() < 0.2, "range {r}");
+        let n = 4000;
+        let hits = (0..n)
+            .filter(|k| tr.ping(&state, &pool, &s, f64::from(*k)).is_some())
+            .count();
+        let rate = hits as f64 / f64::from(n);
+        let sd = (e.p * (1.0 - e.p) / f64::from(n)).sqrt();
+        assert!(
+            (rate - e.p).abs() < 4.0 * sd,
+            "rate {rate}, predicted {}",
+            e.p
+        );
+    }
+
+    /// A cut below the smallest ray incidence removes the echo in the model and the
+    /// prediction alike; the prediction moves continuously with the cut in between.
+    #[test]
+    fn incidence_cut_removes_the_echo_and_the_prediction_is_continuous() {
+        let (mut s, pool) = settings();
+        let state = beside_wall(0.0);
+        s.max_incidence_deg = 8.0; // rays reach 10 deg at best (15 deg axis, 5 deg half beam)
+        let mut tr = Transducer::new(&s.transducers[0], &s, 3);
+        assert_eq!(expected(&s, &pool, &tr, &state).p, 0.0);
+        assert!((0..500).all(|k| tr.ping(&state, &pool, &s, f64::from(k)).is_none()));
+        let p: Vec<f64> = [8.0, 9.5, 10.0, 10.5, 12.0]
+            .iter()
+            .map(|c| {
+                s.max_incidence_deg = *c;
+                expected(&s, &pool, &tr, &state).p
+            })
+            .collect();
+        assert!(p.windows(2).all(|w| w[1] >= w[0]), "{p:?}");
+        assert!(p[1] > 0.0 && p[3] < p[4], "{p:?}");
+    }
+
+    /// A ping slot takes the sample within half a period of its time; a slot without one is
+    /// a ping without an echo.
+    #[test]
+    fn slots_read_empty_cells_as_missing_echoes() {
+        let ch = Channel {
+            name: "sonar1_m".into(),
+            samples: vec![(1.02, 2.3), (3.0, 2.4)],
+        };
+        assert_eq!(
+            slots(&ch, &[1.0, 2.0, 3.0], 1.0),
+            vec![Some(2.3), None, Some(2.4)]
+        );
+        assert_eq!(index("sonar3_m"), Some(2));
+        assert_eq!(index("depth_adc"), None);
+    }
+}
