@@ -43,7 +43,7 @@ pub fn index(channel: &str) -> Option<usize> {
 /// Ping times of every transducer over `duration_s` (module doc).
 pub fn ping_times(s: &SonarSettings, duration_s: f64) -> Vec<f64> {
     let p = s.timing.period_s;
-    if !(p > 0.0) || !duration_s.is_finite() {
+    if p.is_nan() || p <= 0.0 || !duration_s.is_finite() {
         return Vec::new();
     }
     (1..)
