@@ -86,6 +86,9 @@ pub struct GenerateArgs {
     /// The measurement directory to write.
     #[arg(long)]
     pub out: PathBuf,
+    /// Also ping the four sonar transducers (`sonar1_m`..`sonar4_m`, empty cell = no echo).
+    #[arg(long)]
+    pub sonar: bool,
 }
 
 fn to_cli(e: GapError) -> CliError {
@@ -321,13 +324,14 @@ fn run_generate(g: &GenerateArgs) -> Result<(), CliError> {
         camera_speed_std_mps: 0.02,
     };
     let configs = truth.configs(&info, &truth.base).map_err(to_cli)?;
-    let m = generate::generate(
+    let m = generate::generate_with(
         &configs,
         &schedule,
         &world,
         &sensors,
         g.camera_std_m,
         g.seed,
+        g.sonar,
     )
     .map_err(to_cli)?;
     m.write(&g.out).map_err(to_cli)?;

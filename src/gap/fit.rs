@@ -102,7 +102,9 @@ impl Setup<'_> {
         for i in self.modelled() {
             let ch = &self.m.channels[i];
             let Some(f) = &self.floors[i] else { continue };
-            if resim::predict(&self.base, &self.clean, ch, 0.0).is_none() {
+            if resim::predict(&self.base, &self.clean, ch, 0.0).is_none()
+                && crate::gap::sonar::index(&ch.name).is_none()
+            {
                 continue;
             }
             let k = f.tau.sqrt();
@@ -127,6 +129,13 @@ impl Setup<'_> {
         for i in self.modelled() {
             let ch = &self.m.channels[i];
             let Some(f) = &self.floors[i] else { continue };
+            // Sonar: presence deviance and range residuals, already normalised.
+            if let Some(r) = crate::gap::sonar::residuals(c, run, self.m.experiment.duration_s, ch)
+            {
+                owner.extend(std::iter::repeat_n(i, r.len()));
+                out.extend(r);
+                continue;
+            }
             let Some(p) = resim::predict(c, run, ch, 0.0) else {
                 continue;
             };

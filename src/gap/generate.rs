@@ -37,6 +37,29 @@ pub fn generate(
     camera_position_std_m: f64,
     seed: u64,
 ) -> Result<Measurement, GapError> {
+    generate_with(
+        truth,
+        schedule,
+        world,
+        sensors,
+        camera_position_std_m,
+        seed,
+        false,
+    )
+}
+
+/// As [`generate`]; with `sonar` the four transducers are pinged too (`sonar1_m`..`sonar4_m`,
+/// [`crate::gap::sonar`]), from the truth's sonar model in the truth's world. Without it the
+/// output is exactly [`generate`]'s.
+pub fn generate_with(
+    truth: &Configs,
+    schedule: &Experiment,
+    world: &str,
+    sensors: &str,
+    camera_position_std_m: f64,
+    seed: u64,
+    sonar: bool,
+) -> Result<Measurement, GapError> {
     let commands: Vec<CommandRow> = schedule
         .schedule
         .iter()
@@ -147,6 +170,15 @@ pub fn generate(
             name: name.to_string(),
             samples,
         });
+    }
+    if sonar {
+        let duration = m.experiment.duration_s;
+        m.channels.extend(crate::gap::sonar::generate(
+            truth,
+            &run,
+            duration,
+            seed ^ 0x50_4e41_5200,
+        ));
     }
     Ok(m)
 }

@@ -31,6 +31,7 @@ pub mod model;
 pub mod report;
 pub mod residuals;
 pub mod resim;
+pub mod sonar;
 pub mod summary;
 
 use std::path::{Path, PathBuf};
@@ -115,6 +116,24 @@ fn stats_for(
     let mut out = Vec::new();
     for (i, ch) in m.channels.iter().enumerate() {
         let Some(floor) = &floors[i] else { continue };
+        if let Some((t, r)) = sonar::stats_residuals(c, run, m.experiment.duration_s, ch) {
+            let unit = resim::Floor {
+                sigma: vec![1.0; r.len()],
+                tau: 1.0,
+                measurement_std: vec![1.0; r.len()],
+                null: Vec::new(),
+            };
+            let rms = (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
+            out.push(residuals::channel_stats(
+                &ch.name,
+                &t,
+                &r,
+                &unit,
+                run,
+                (0.0, rms),
+            ));
+            continue;
+        }
         let Some(p) = resim::predict(c, run, ch, 0.0) else {
             continue;
         };

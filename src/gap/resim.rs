@@ -311,6 +311,9 @@ pub fn noise_floor(
     Ok(m.channels
         .iter()
         .map(|ch| {
+            if crate::gap::sonar::index(&ch.name).is_some() {
+                return crate::gap::sonar::floor(c, m.experiment.duration_s, ch);
+            }
             let base = predict(c, clean, ch, 0.0)?;
             let meas = measurement_std(c, m, clean, ch);
             let n = base.len();

@@ -138,6 +138,33 @@ impl Transducer {
         best
     }
 
+    /// Every ray of the cone that meets a surface within `max_range_m`, without the incidence
+    /// cut: `(distance m, angle between the ray and the surface normal deg, angle between the
+    /// beam axis and that normal deg)`. For a prediction of how the echo depends on
+    /// `max_incidence_deg` (the reality-gap re-simulation).
+    pub fn ray_hits(
+        &self,
+        state: &VehicleState,
+        world: &dyn RayCaster,
+        max_range_m: f64,
+    ) -> Vec<(f64, f64, f64)> {
+        let origin = self.origin_m(state);
+        let axis = self.axis_world(state);
+        self.rays_body
+            .iter()
+            .filter_map(|ray| {
+                let dir = Unit::new_unchecked(state.attitude * ray.into_inner());
+                let hit = world.cast_ray(&origin, &dir, max_range_m)?;
+                let inc = (-dir.dot(&hit.normal)).clamp(-1.0, 1.0).acos().to_degrees();
+                let beta = (-axis.dot(&hit.normal))
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees();
+                Some((hit.distance_m, inc, beta))
+            })
+            .collect()
+    }
+
     /// Speed of the transducer through the world (m/s).
     pub fn speed_mps(&self, state: &VehicleState) -> f64 {
         (state.velocity_body_mps
