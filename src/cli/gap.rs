@@ -297,32 +297,8 @@ fn run_generate(g: &GenerateArgs) -> Result<(), CliError> {
     let (dir, name) = Directory::for_file(&g.schedule);
     let text = dir.read(&name)?;
     let schedule = Experiment::from_document(&Document::new(dir.describe(&name), &text))?;
-    let world = truth
-        .world_ref
-        .clone()
-        .unwrap_or_else(|| crate::physics::DEFAULT_WORLD.to_string());
-    let sensors = truth
-        .sensors_ref
-        .clone()
-        .unwrap_or_else(|| "sensors/mako-2008.toml".to_string());
-    let info = crate::gap::format::ExperimentInfo {
-        name: schedule.name.clone(),
-        description: String::new(),
-        duration_s: schedule.duration_s,
-        world: world.clone(),
-        sensors: sensors.clone(),
-        initial: crate::gap::format::Initial {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: None,
-            heading_deg: 0.0,
-            roll_deg: 0.0,
-            pitch_deg: 0.0,
-            surge_mps: 0.0,
-        },
-        camera_position_std_m: g.camera_std_m,
-        camera_speed_std_mps: 0.02,
-    };
+    let info = generate::setup(&truth, &schedule, g.camera_std_m);
+    let (world, sensors) = (info.world.clone(), info.sensors.clone());
     let configs = truth.configs(&info, &truth.base).map_err(to_cli)?;
     let m = generate::generate_with(
         &configs,

@@ -246,33 +246,9 @@ pub fn run(
     let train = training(&embedded_schedule()?);
     let exp_dir = std::path::Path::new(".");
     let mut rng = crate::sensors::rng::stream(opts.seed, "gap-bench");
-    let world = model
-        .world_ref
-        .clone()
-        .unwrap_or_else(|| crate::physics::DEFAULT_WORLD.to_string());
-    let sensors = model
-        .sensors_ref
-        .clone()
-        .unwrap_or_else(|| "sensors/mako-2008.toml".to_string());
     // A null measurement fixes the channel sample times for the size calibration.
-    let info = crate::gap::format::ExperimentInfo {
-        name: train.name.clone(),
-        description: String::new(),
-        duration_s: train.duration_s,
-        world: world.clone(),
-        sensors: sensors.clone(),
-        initial: crate::gap::format::Initial {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: None,
-            heading_deg: 0.0,
-            roll_deg: 0.0,
-            pitch_deg: 0.0,
-            surge_mps: 0.0,
-        },
-        camera_position_std_m: CAMERA_STD_M,
-        camera_speed_std_mps: 0.02,
-    };
+    let info = generate::setup(&model, &train, CAMERA_STD_M);
+    let (world, sensors) = (info.world.clone(), info.sensors.clone());
     let probe = generate::generate(
         &model.configs(&info, exp_dir)?,
         &train,

@@ -16,6 +16,7 @@ use rand_distr::StandardNormal;
 use crate::gap::GapError;
 use crate::gap::effects::Configs;
 use crate::gap::format::{Channel, CommandRow, ExperimentInfo, Initial, Measurement};
+use crate::gap::model::GapModel;
 use crate::gap::resim;
 use crate::physics::experiment::Experiment;
 use crate::sensors::{
@@ -26,6 +27,40 @@ use crate::sensors::{
 pub const CAMERA_PERIOD_S: f64 = 0.2;
 /// Depth sampling period (s).
 pub const DEPTH_PERIOD_S: f64 = 0.1;
+
+/// The set-up of a generated run of `schedule` under `model`: the model's world and sensors
+/// (by default the pool and the 2008 sensor set), the schedule's name and duration, a zero
+/// initial state (the schedule's own start is applied when generating) and the camera noise.
+pub fn setup(
+    model: &GapModel,
+    schedule: &Experiment,
+    camera_position_std_m: f64,
+) -> ExperimentInfo {
+    ExperimentInfo {
+        name: schedule.name.clone(),
+        description: String::new(),
+        duration_s: schedule.duration_s,
+        world: model
+            .world_ref
+            .clone()
+            .unwrap_or_else(|| crate::physics::DEFAULT_WORLD.to_string()),
+        sensors: model
+            .sensors_ref
+            .clone()
+            .unwrap_or_else(|| "sensors/mako-2008.toml".to_string()),
+        initial: Initial {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: None,
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            surge_mps: 0.0,
+        },
+        camera_position_std_m,
+        camera_speed_std_mps: 0.02,
+    }
+}
 
 /// Generates a measurement of `truth` running `schedule`. `world`/`sensors` are the names the
 /// experiment file will reference (the model's base configurations, never the truth's).
