@@ -358,6 +358,20 @@ pub fn plots(a: &Analysis, m: &Measurement, out: &Path) -> Result<(), GapError> 
     Ok(())
 }
 
+/// Creates the output directory `out` and returns a writer of named text files inside it.
+pub(crate) fn output_dir(
+    out: &Path,
+) -> Result<impl Fn(&str, String) -> Result<(), GapError> + '_, GapError> {
+    std::fs::create_dir_all(out).map_err(|source| GapError::Io {
+        path: out.to_path_buf(),
+        source,
+    })?;
+    Ok(move |name: &str, text: String| {
+        let path = out.join(name);
+        std::fs::write(&path, text).map_err(|source| GapError::Io { path, source })
+    })
+}
+
 /// Writes every output file into `out`; `model_stem` names `MODEL.fitted.toml`.
 pub fn write_all(
     a: &Analysis,
@@ -366,14 +380,7 @@ pub fn write_all(
     model_path: &Path,
     out: &Path,
 ) -> Result<(), GapError> {
-    std::fs::create_dir_all(out).map_err(|source| GapError::Io {
-        path: out.to_path_buf(),
-        source,
-    })?;
-    let write = |name: &str, text: String| {
-        let path = out.join(name);
-        std::fs::write(&path, text).map_err(|source| GapError::Io { path, source })
-    };
+    let write = output_dir(out)?;
     let text = serde_json::to_string_pretty(&json(a)).map_err(|e| GapError::Data(e.to_string()))?;
     write("report.json", text)?;
     write("report.md", markdown(a, m))?;

@@ -1310,14 +1310,7 @@ pub fn write_all(
     model_path: &Path,
     out: &Path,
 ) -> Result<(), GapError> {
-    std::fs::create_dir_all(out).map_err(|source| GapError::Io {
-        path: out.to_path_buf(),
-        source,
-    })?;
-    let write = |name: &str, text: String| {
-        let path = out.join(name);
-        std::fs::write(&path, text).map_err(|source| GapError::Io { path, source })
-    };
+    let write = crate::gap::report::output_dir(out)?;
     let text =
         serde_json::to_string_pretty(&json(a, s)).map_err(|e| GapError::Data(e.to_string()))?;
     write("report.json", text)?;
