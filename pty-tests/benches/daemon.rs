@@ -86,20 +86,33 @@ fn pty_echo_baseline() -> Vec<f64> {
     out
 }
 
-/// `--config` arguments for a run with `release_quantum_ms = quantum_ms` (None: the default),
-/// and `run.cpu_latency_us` from `EYEBOT_BENCH_CPU_LATENCY_US` when that is set.
+/// `--config` arguments for a run with `release_quantum_ms = quantum_ms` (None: the default)
+/// and the scheduler requests of [`scheduler_lines`].
 fn quantum_args(dir: &TestDir, quantum_ms: Option<f64>) -> Vec<String> {
     let mut args = vec!["--time-mode".to_string(), "realtime".to_string()];
-    let latency = cpu_latency_us();
-    if quantum_ms.is_some() || latency.is_some() {
-        let mut line = format!("release_quantum_ms = {:.1}", quantum_ms.unwrap_or(1.0));
-        if let Some(us) = latency {
-            line.push_str(&format!("\ncpu_latency_us = {us}"));
-        }
+    let extra = scheduler_lines();
+    if quantum_ms.is_some() || !extra.is_empty() {
+        let line = format!(
+            "release_quantum_ms = {:.1}{extra}",
+            quantum_ms.unwrap_or(1.0)
+        );
         let config = dir.write_config("quantum.toml", &[("release_quantum_ms = 1.0", &line)]);
         args.extend(["--config".to_string(), config.display().to_string()]);
     }
     args
+}
+
+/// `run.cpu_latency_us` from `EYEBOT_BENCH_CPU_LATENCY_US` and `run.rt_priority` from
+/// `EYEBOT_BENCH_RT_PRIORITY`, when set, as lines to add to the `[run]` table.
+fn scheduler_lines() -> String {
+    let mut lines = String::new();
+    if let Some(us) = cpu_latency_us() {
+        lines.push_str(&format!("\ncpu_latency_us = {us}"));
+    }
+    if let Some(priority) = rt_priority() {
+        lines.push_str(&format!("\nrt_priority = {priority}"));
+    }
+    lines
 }
 
 /// The CPU latency request the daemon is asked to hold (`EYEBOT_BENCH_CPU_LATENCY_US`).
@@ -109,6 +122,16 @@ fn cpu_latency_us() -> Option<u32> {
         value
             .parse()
             .expect("EYEBOT_BENCH_CPU_LATENCY_US is a number of microseconds"),
+    )
+}
+
+/// The SCHED_FIFO priority the daemon is asked to run at (`EYEBOT_BENCH_RT_PRIORITY`).
+fn rt_priority() -> Option<u8> {
+    let value = std::env::var("EYEBOT_BENCH_RT_PRIORITY").ok()?;
+    Some(
+        value
+            .parse()
+            .expect("EYEBOT_BENCH_RT_PRIORITY is a SCHED_FIFO priority 1-99"),
     )
 }
 
@@ -186,10 +209,19 @@ fn nmea_at(speed: f64, wall_s: f64) {
     let dir = TestDir::new("bench-nmea");
     let config = dir.write_config(
         "near-wall.toml",
-        &[(
-            "position_m = [3.0, 6.25, 0.3]",
-            "position_m = [3.0, 1.5, 0.5]",
-        )],
+        &[
+            (
+                "position_m = [3.0, 6.25, 0.3]",
+                "position_m = [3.0, 1.5, 0.5]",
+            ),
+            // Every ping gives a sentence (empty fields without a valid echo), so the
+            // jitter is measured over all pings, not only the few with an echo.
+            ("invalid_echo = \"omit\"", "invalid_echo = \"empty\""),
+            (
+                "release_quantum_ms = 1.0",
+                &format!("release_quantum_ms = 1.0{}", scheduler_lines()),
+            ),
+        ],
     );
     let daemon = DaemonProcess::start(
         dir,
@@ -402,6 +434,10 @@ fn main() {
             println!("daemon runs hold a CPU latency request of {us} us (run.cpu_latency_us)")
         }
         None => println!("no CPU latency request (set EYEBOT_BENCH_CPU_LATENCY_US to ask for one)"),
+    }
+    match rt_priority() {
+        Some(p) => println!("daemon runs its bridge thread under SCHED_FIFO {p} (run.rt_priority)"),
+        None => println!("default scheduler (set EYEBOT_BENCH_RT_PRIORITY to ask for SCHED_FIFO)"),
     }
     // `cargo bench` passes `--bench`; any other argument picks sections.
     let picked: Vec<String> = std::env::args()

@@ -365,3 +365,82 @@ fn shutdown_is_bounded_when_the_recorder_hangs() {
     }
     assert!(!pid_file.exists(), "pid file left behind");
 }
+
+/// `(policy, rt_priority)` of one thread, from `/proc/PID/task/TID/stat` (fields 41 and 40;
+/// counted after the parenthesised command name, which may hold spaces).
+fn scheduling(pid: u32, tid: &str) -> (u32, u32) {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/task/{tid}/stat")).unwrap();
+    let fields: Vec<&str> = stat[stat.rfind(')').unwrap() + 2..].split(' ').collect();
+    // `fields[0]` is field 3 (state).
+    (
+        fields[41 - 3].parse().unwrap(),
+        fields[40 - 3].parse().unwrap(),
+    )
+}
+
+#[test]
+fn rt_priority_runs_the_bridge_thread_under_sched_fifo() {
+    let dir = TestDir::new("rt-priority");
+    let config = dir.write_config(
+        "rt.toml",
+        &[(
+            "release_quantum_ms = 1.0",
+            "release_quantum_ms = 1.0\nrt_priority = 7",
+        )],
+    );
+    let daemon = DaemonProcess::start(
+        dir,
+        &[
+            "--config",
+            config.to_str().unwrap(),
+            "--time-mode",
+            "realtime",
+        ],
+    );
+    let pid = daemon.pid();
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    if unsafe { libc::geteuid() } != 0 {
+        // Without the privilege the daemon must say so and run on.
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while !daemon.log().contains("no SCHED_FIFO") {
+            assert!(Instant::now() < deadline, "no warning: {}", daemon.log());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        eprintln!(
+            "NOT ROOT: checked the warning only; SCHED_FIFO itself needs root or CAP_SYS_NICE"
+        );
+        return;
+    }
+    // The bridge thread (the main thread, which runs the runtime) switches right after the
+    // `ready` line.
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while scheduling(pid, &pid.to_string()) != (libc::SCHED_FIFO as u32, 7) {
+        assert!(
+            Instant::now() < deadline,
+            "main thread scheduling {:?}; log:\n{}",
+            scheduling(pid, &pid.to_string()),
+            daemon.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // The helper threads keep the default scheduler.
+    let mut others = 0;
+    for task in std::fs::read_dir(format!("/proc/{pid}/task")).unwrap() {
+        let tid = task.unwrap().file_name().into_string().unwrap();
+        if tid != pid.to_string() {
+            assert_eq!(
+                scheduling(pid, &tid).0,
+                libc::SCHED_OTHER as u32,
+                "thread {tid}"
+            );
+            others += 1;
+        }
+    }
+    assert!(others >= 1, "the signal thread exists");
+    // Still a working bridge.
+    let mut sensor = open_raw(&daemon.link("sensor"));
+    sensor.write_all(&adc_read(3)).unwrap();
+    let mut reply = [0u8; 10];
+    sensor.read_exact(&mut reply).unwrap();
+    assert_eq!(&reply[..3], &[0xEB, 0x90, 0x90], "an ADC_VALUE reply");
+}

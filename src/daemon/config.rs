@@ -41,6 +41,8 @@ struct RawRun {
     release_quantum_ms: f64,
     #[serde(default)]
     cpu_latency_us: Option<i64>,
+    #[serde(default)]
+    rt_priority: Option<i64>,
 }
 
 fn default_release_quantum_ms() -> f64 {
@@ -166,6 +168,9 @@ pub struct DaemonConfig {
     /// In realtime mode, hold a CPU latency QoS request of this many µs
     /// ([`crate::transport::CpuLatencyRequest`]); `None` = do not ask.
     pub cpu_latency_us: Option<u32>,
+    /// In realtime mode, run the bridge's thread under `SCHED_FIFO` at this priority (1-99,
+    /// [`crate::transport::set_realtime_priority`]); `None` = the default scheduler.
+    pub rt_priority: Option<i32>,
     pub run_dir: PathBuf,
     pub state_record_hz: f64,
     pub start: Start,
@@ -218,6 +223,20 @@ impl DaemonConfig {
                         doc.invalid(
                             "run.cpu_latency_us",
                             format!("{us} is out of range; expected 0 to 1000000 µs"),
+                        )
+                    })?,
+            ),
+        };
+        let rt_priority = match raw.run.rt_priority {
+            None => None,
+            Some(p) => Some(
+                i32::try_from(p)
+                    .ok()
+                    .filter(|p| (1..=99).contains(p))
+                    .ok_or_else(|| {
+                        doc.invalid(
+                            "run.rt_priority",
+                            format!("{p} is out of range; expected a SCHED_FIFO priority 1 to 99"),
                         )
                     })?,
             ),
@@ -311,6 +330,7 @@ impl DaemonConfig {
             max_lag: Duration::from_secs_f64(max_lag_ms / 1000.0),
             release_quantum: Duration::from_secs_f64(release_quantum_ms / 1000.0),
             cpu_latency_us,
+            rt_priority,
             run_dir: PathBuf::from(raw.run.run_dir),
             state_record_hz,
             start: Start {
@@ -462,6 +482,26 @@ mod tests {
         assert!(err.to_string().contains("run.speed"), "{err}");
         let err = with(&[("line = \"4800 8N1\"", "line = \"4800 8Q1\"")]).unwrap_err();
         assert!(err.to_string().contains("links.sonar.line"), "{err}");
+    }
+
+    #[test]
+    fn scheduler_requests_are_range_checked() {
+        let at = |value: &str| {
+            with(&[(
+                "release_quantum_ms = 1.0",
+                &format!("release_quantum_ms = 1.0\nrt_priority = {value}\ncpu_latency_us = 0"),
+            )])
+        };
+        let ok = at("10").unwrap();
+        assert_eq!((ok.rt_priority, ok.cpu_latency_us), (Some(10), Some(0)));
+        assert_eq!(with(&[]).unwrap().rt_priority, None, "off unless set");
+        for bad in ["0", "100", "-1"] {
+            let err = at(bad).unwrap_err();
+            assert!(
+                err.to_string().contains("run.rt_priority") && err.to_string().contains("1 to 99"),
+                "{err}"
+            );
+        }
     }
 
     #[test]

@@ -247,6 +247,25 @@ where
         status_socket: status_path.clone(),
     });
 
+    // From here on this thread only waits for deadlines and bytes; under SCHED_FIFO those
+    // wake-ups are not queued behind other processes' CPU time. The recorder and signal
+    // threads were started above and keep the default scheduler.
+    let realtime_policy = match config.rt_priority {
+        Some(priority) if !lockstep => match crate::transport::set_realtime_priority(priority) {
+            Ok(()) => {
+                tracing::info!(priority, "bridge thread runs under SCHED_FIFO");
+                true
+            }
+            Err(e) => {
+                tracing::warn!(
+                    priority,
+                    "no SCHED_FIFO ({e}): wake-ups may wait behind other processes"
+                );
+                false
+            }
+        },
+        _ => false,
+    };
     let started = Instant::now();
     let mut map = match config.time_mode {
         TimeMode::Realtime { speed } => Some(RealtimeMap::new(speed, config.max_lag)),
@@ -324,6 +343,11 @@ where
         }
     }
     .await;
+    if realtime_policy {
+        // `run` may be called on a caller's thread (the in-process tests): hand it back as
+        // it came.
+        crate::transport::clear_realtime_priority();
+    }
 
     // Shut down: flush what is due, stop the link tasks (they remove their symlinks), finish
     // the recording, remove the pid file.

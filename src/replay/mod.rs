@@ -299,7 +299,7 @@ impl Replay {
         if let Some(priority) = opts.realtime_priority
             && self.pacing != Pacing::Fast
         {
-            match output::set_realtime_priority(priority) {
+            match crate::transport::set_realtime_priority(priority) {
                 Ok(()) => realtime = true,
                 Err(e) => observer.note(&format!(
                     "no real-time priority ({e}): byte timing is subject to CPU load"
@@ -321,7 +321,7 @@ impl Replay {
         let result = self.run_inner(sink, observer, stop);
         let cpu_latency_us = qos.take().map(|q| q.latency_us);
         if realtime {
-            output::clear_realtime_priority();
+            crate::transport::clear_realtime_priority();
         }
         result.map(|mut s| {
             s.realtime = realtime;

@@ -176,30 +176,6 @@ pub fn sleep_until(deadline: Instant, stop: &Shutdown) -> bool {
     }
 }
 
-/// Asks for `SCHED_FIFO` at `priority` (1-99) for the calling thread, so its wake-ups are
-/// not queued behind other processes' CPU time: on a loaded machine the default scheduler
-/// can wake a sleeper one or more scheduler ticks (4 ms at 250 Hz) late. Needs root or
-/// `CAP_SYS_NICE` or an `rtprio` limit. Linux's real-time throttling still reserves 5 % of
-/// each second for other tasks.
-pub fn set_realtime_priority(priority: i32) -> io::Result<()> {
-    let param = libc::sched_param {
-        sched_priority: priority,
-    };
-    // SAFETY: a plain syscall on the calling thread (pid 0) with a valid parameter struct.
-    if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0 {
-        Ok(())
-    } else {
-        Err(io::Error::last_os_error())
-    }
-}
-
-/// Returns the calling thread to the default scheduler.
-pub fn clear_realtime_priority() {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: as above; failure leaves the thread as it was, which is harmless.
-    let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
-}
-
 /// Bytes to a [`Port`], each released at its completion time on the line.
 #[derive(Debug)]
 pub struct ByteSink {

@@ -8,5 +8,7 @@ pub mod pty;
 pub mod serial;
 pub mod symlink;
 
-pub use latency::{CPU_LATENCY_QOS, CpuLatencyRequest};
+pub use latency::{
+    CPU_LATENCY_QOS, CpuLatencyRequest, clear_realtime_priority, set_realtime_priority,
+};
 pub use line::{FlowControl, LineSettings, Parity};
