@@ -8,6 +8,9 @@ an ordinary-priority kworker, which waits behind other processes when the CPUs a
 
     python3 pty-tests/diagnostics/pty_delivery_latency.py fifo
     python3 pty-tests/diagnostics/pty_delivery_latency.py cfs
+
+`--outliers MS` also prints each byte slower than MS with its write time on the monotonic
+clock (what `trace_pty_delivery.py` matches against the kernel trace).
 """
 import os
 import pty
@@ -18,6 +21,7 @@ import tty
 
 N = 2000
 fifo = len(sys.argv) > 1 and sys.argv[1] == "fifo"
+outlier_ms = float(sys.argv[sys.argv.index("--outliers") + 1]) if "--outliers" in sys.argv else None
 master, slave = pty.openpty()
 tty.setraw(slave)
 sent, delivery, write_call = [], [], []
@@ -46,6 +50,10 @@ for _ in range(N):
     os.write(master, b"x")
     write_call.append(time.monotonic_ns() - t0)
 thread.join()
+if outlier_ms is not None:
+    for i, d in enumerate(delivery):
+        if d > outlier_ms * 1e6:
+            print("OUTLIER sent_mono %.6f delay %.3f ms" % (sent[i] / 1e9, d / 1e6))
 for name, v in (("write->read", delivery), ("write() call", write_call)):
     v.sort()
     n = len(v)
