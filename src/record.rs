@@ -319,6 +319,27 @@ impl Drop for Recorder {
     }
 }
 
+/// One row of `bytes.tsv` or `drops.tsv` (the two share their layout, `docs/recording.md`):
+/// simulated time, wall time, link, direction or drop reason, hex bytes.
+fn write_chunk_row(
+    line: &mut String,
+    (sim_s, wall_unix_s, link, what, data): (f64, f64, &str, &str, &[u8]),
+    file: &mut impl Write,
+    path: &Path,
+) -> Result<(), RecordError> {
+    line.clear();
+    let _ = writeln!(
+        line,
+        "{sim_s:.9}\t{wall_unix_s:.6}\t{link}\t{what}\t{}",
+        hex::encode(data)
+    );
+    file.write_all(line.as_bytes())
+        .map_err(|source| RecordError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
 fn write_loop(rx: mpsc::Receiver<Message>, mut files: Files) -> Result<Stats, RecordError> {
     let mut stats = Stats::default();
     let mut last_flush = Instant::now();
@@ -338,20 +359,12 @@ fn write_loop(rx: mpsc::Receiver<Message>, mut files: Files) -> Result<Stats, Re
                 dir,
                 data,
             }) => {
-                line.clear();
-                let _ = writeln!(
-                    line,
-                    "{sim_s:.9}\t{wall_unix_s:.6}\t{link}\t{}\t{}",
-                    dir.as_str(),
-                    hex::encode(&data)
-                );
-                files
-                    .bytes
-                    .write_all(line.as_bytes())
-                    .map_err(|source| RecordError::Io {
-                        path: files.bytes_path.clone(),
-                        source,
-                    })?;
+                write_chunk_row(
+                    &mut line,
+                    (sim_s, wall_unix_s, link, dir.as_str(), &data),
+                    &mut files.bytes,
+                    &files.bytes_path,
+                )?;
                 stats.chunks += 1;
                 stats.bytes += data.len() as u64;
             }
@@ -362,20 +375,12 @@ fn write_loop(rx: mpsc::Receiver<Message>, mut files: Files) -> Result<Stats, Re
                 reason,
                 data,
             }) => {
-                line.clear();
-                let _ = writeln!(
-                    line,
-                    "{sim_s:.9}\t{wall_unix_s:.6}\t{link}\t{}\t{}",
-                    reason.as_str(),
-                    hex::encode(&data)
-                );
-                files
-                    .drops
-                    .write_all(line.as_bytes())
-                    .map_err(|source| RecordError::Io {
-                        path: files.drops_path.clone(),
-                        source,
-                    })?;
+                write_chunk_row(
+                    &mut line,
+                    (sim_s, wall_unix_s, link, reason.as_str(), &data),
+                    &mut files.drops,
+                    &files.drops_path,
+                )?;
                 stats.drops += 1;
                 stats.dropped_bytes += data.len() as u64;
             }

@@ -14,22 +14,13 @@
 
 use std::io::{Read, Write};
 use std::os::fd::AsFd;
-use std::path::Path;
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
 use firmware_protocol::Frame;
 use firmware_protocol::sensor_link::{AdcChannel, Message};
 use nix::sys::termios;
-use pty_tests::daemon::{DaemonProcess, TestDir, link_status};
-
-fn open_raw(path: &Path) -> std::fs::File {
-    std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(path)
-        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
-}
+use pty_tests::daemon::{DaemonProcess, TestDir, link_status, open_raw};
 
 fn frame(seq: u8, message: Message) -> Vec<u8> {
     let mut b = BytesMut::new();

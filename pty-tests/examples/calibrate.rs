@@ -229,6 +229,27 @@ fn docs(name: &str) -> PathBuf {
         .join(name)
 }
 
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// Draws `points` as a line in `style` with a legend entry: a plain `colour` line and `label`.
+fn labelled_line(
+    chart: &mut Chart<'_, '_>,
+    points: impl IntoIterator<Item = (f64, f64)>,
+    style: impl Into<ShapeStyle>,
+    colour: RGBColor,
+    label: impl Into<String>,
+) -> Result<(), Box<dyn std::error::Error>> {
+    chart
+        .draw_series(LineSeries::new(points, style))?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
+    Ok(())
+}
+
 fn plot_speed_runs(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::error::Error>> {
     let axis = Vector3::x();
     let acc = measure::camera_velocities(&trace(model, &e.acc), &axis, CAMERA_PERIOD_S);
@@ -254,44 +275,44 @@ fn plot_speed_runs(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::er
         .x_desc("time (s)")
         .y_desc("surge speed (m/s)")
         .draw()?;
-    chart
-        .draw_series(LineSeries::new(
-            acc.iter().copied().filter(|(t, _)| *t <= 20.0),
-            &BLUE,
-        ))?
-        .label("eyebot-hil")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
-    chart
-        .draw_series(LineSeries::new(
-            vec![(0.0, 0.44), (20.0, 0.44)],
-            RED.stroke_width(2),
-        ))?
-        .label("Mako top speed 0.44 m/s (thesis 4.5)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-    chart
-        .draw_series(LineSeries::new(
-            vec![
-                (0.0, TOP_SPEED_FRACTION * top),
-                (20.0, TOP_SPEED_FRACTION * top),
-            ],
-            BLACK.stroke_width(1),
-        ))?
-        .label("85 % of simulated top speed (\"reached\")")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
-    chart
-        .draw_series(LineSeries::new(
-            vec![(6.0, 0.0), (6.0, 0.5)],
-            RED.stroke_width(2),
-        ))?
-        .label("Mako reaches top speed after 6 s (thesis 4.5)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-    chart
-        .draw_series(LineSeries::new(
-            vec![(0.0, 0.0), (4.63, 0.44)],
-            GREEN.stroke_width(1),
-        ))?
-        .label("9.5 cm/s^2 from rest (thesis 4.6, upper bound)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], GREEN));
+    labelled_line(
+        &mut chart,
+        acc.iter().copied().filter(|(t, _)| *t <= 20.0),
+        BLUE,
+        BLUE,
+        "eyebot-hil",
+    )?;
+    labelled_line(
+        &mut chart,
+        vec![(0.0, 0.44), (20.0, 0.44)],
+        RED.stroke_width(2),
+        RED,
+        "Mako top speed 0.44 m/s (thesis 4.5)",
+    )?;
+    labelled_line(
+        &mut chart,
+        vec![
+            (0.0, TOP_SPEED_FRACTION * top),
+            (20.0, TOP_SPEED_FRACTION * top),
+        ],
+        BLACK.stroke_width(1),
+        BLACK,
+        "85 % of simulated top speed (\"reached\")",
+    )?;
+    labelled_line(
+        &mut chart,
+        vec![(6.0, 0.0), (6.0, 0.5)],
+        RED.stroke_width(2),
+        RED,
+        "Mako reaches top speed after 6 s (thesis 4.5)",
+    )?;
+    labelled_line(
+        &mut chart,
+        vec![(0.0, 0.0), (4.63, 0.44)],
+        GREEN.stroke_width(1),
+        GREEN,
+        "9.5 cm/s^2 from rest (thesis 4.6, upper bound)",
+    )?;
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
@@ -310,24 +331,21 @@ fn plot_speed_runs(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::er
         .x_desc("time (s)")
         .y_desc("surge speed (m/s)")
         .draw()?;
-    chart
-        .draw_series(LineSeries::new(coast.iter().copied(), &BLUE))?
-        .label("eyebot-hil")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
-    chart
-        .draw_series(LineSeries::new(
-            vec![(32.0, 0.0), (32.0, 0.5)],
-            RED.stroke_width(2),
-        ))?
-        .label("Mako at rest after 32 s (thesis 4.5)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-    chart
-        .draw_series(LineSeries::new(
-            vec![(0.0, REST_SPEED_MPS), (45.0, REST_SPEED_MPS)],
-            BLACK.stroke_width(1),
-        ))?
-        .label("1.5 cm/s (\"at rest\")")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+    labelled_line(&mut chart, coast.iter().copied(), BLUE, BLUE, "eyebot-hil")?;
+    labelled_line(
+        &mut chart,
+        vec![(32.0, 0.0), (32.0, 0.5)],
+        RED.stroke_width(2),
+        RED,
+        "Mako at rest after 32 s (thesis 4.5)",
+    )?;
+    labelled_line(
+        &mut chart,
+        vec![(0.0, REST_SPEED_MPS), (45.0, REST_SPEED_MPS)],
+        BLACK.stroke_width(1),
+        BLACK,
+        "1.5 cm/s (\"at rest\")",
+    )?;
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
@@ -366,15 +384,15 @@ fn plot_turns(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::error::
             Some(m) => format!("{label}: {:.2} m, {:.2} s/turn", m.diameter_m, m.period_s),
             None => label.to_string(),
         };
-        chart
-            .draw_series(LineSeries::new(
-                t.iter()
-                    .step_by(10)
-                    .map(|s| (s.position_m.y - centre.1, s.position_m.x - centre.0)),
-                colour,
-            ))?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
+        labelled_line(
+            &mut chart,
+            t.iter()
+                .step_by(10)
+                .map(|s| (s.position_m.y - centre.1, s.position_m.x - centre.0)),
+            colour,
+            colour,
+            label,
+        )?;
     }
     // A 0.8 m circle for scale (thesis 4.7), drawn through the start point.
     let circle: Vec<(f64, f64)> = (0..=100)
@@ -383,10 +401,13 @@ fn plot_turns(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::error::
             (-0.4 + 0.4 * a.cos(), 0.4 * a.sin())
         })
         .collect();
-    chart
-        .draw_series(LineSeries::new(circle, RED.stroke_width(2)))?
-        .label("0.8 m circle (Mako, thesis 4.7)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    labelled_line(
+        &mut chart,
+        circle,
+        RED.stroke_width(2),
+        RED,
+        "0.8 m circle (Mako, thesis 4.7)",
+    )?;
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))

@@ -587,6 +587,36 @@ pub fn sensor_client(path: &Path) -> eyebot_hil::probe::SensorClient {
     client
 }
 
+/// Sends HELLO on the sensor link at `path` and checks the reply; `context` says what the
+/// answer shows (in the panic message).
+pub async fn expect_hello(path: &Path, context: &str) {
+    let mut client = sensor_client(path);
+    let reply = client
+        .request(
+            "hello",
+            firmware_protocol::sensor_link::Message::Hello { client_version: 1 },
+            Duration::ZERO,
+        )
+        .await
+        .unwrap_or_else(|e| panic!("{context}: {e}"));
+    assert!(
+        matches!(
+            reply,
+            firmware_protocol::sensor_link::Message::HelloReply { .. }
+        ),
+        "{context}: {reply:?}"
+    );
+}
+
+/// Opens a link as a raw file (blocking), as a plain C program would.
+pub fn open_raw(path: &Path) -> std::fs::File {
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
+}
+
 /// A sonar-link client at 4800 8N1.
 pub fn sonar_client(path: &Path) -> eyebot_hil::probe::SonarClient {
     eyebot_hil::probe::SonarClient::open(path, &"4800 8N1".parse().expect("line"))

@@ -2,7 +2,6 @@
 //! `kill -9` loses at most the last 100 ms, and `eyebot-hil status` reports the run.
 
 use std::io::{Read, Write};
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -12,7 +11,7 @@ use eyebot_hil::record::Direction;
 use firmware_protocol::Frame;
 use firmware_protocol::sensor_link::{AdcChannel, Message};
 use nix::sys::signal::Signal;
-use pty_tests::daemon::{DaemonProcess, TestDir, read_chunks, stream};
+use pty_tests::daemon::{DaemonProcess, TestDir, open_raw, read_chunks, stream};
 
 fn adc_read(seq: u8) -> Vec<u8> {
     let mut b = BytesMut::new();
@@ -24,15 +23,6 @@ fn adc_read(seq: u8) -> Vec<u8> {
     )
     .encode(&mut b);
     b.to_vec()
-}
-
-/// Opens a link as a raw file (blocking), as a plain C program would.
-fn open_raw(path: &Path) -> std::fs::File {
-    std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(path)
-        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
 }
 
 /// Reads everything from `file` on a thread until `stop`; returns the bytes read.

@@ -9,31 +9,12 @@ use std::time::{Duration, Instant};
 use eyebot_hil::probe::SonarItem;
 use firmware_protocol::Transducer;
 use firmware_protocol::sensor_link::Message;
-use pty_tests::daemon::{DaemonProcess, TestDir, link_status, sensor_client, sonar_client};
+use pty_tests::daemon::{
+    DaemonProcess, TestDir, expect_hello, link_status, open_raw, sensor_client, sonar_client,
+};
 use rand::{Rng, SeedableRng};
 
 const MIB: u64 = 1024;
-
-fn open_raw(path: &Path) -> std::fs::File {
-    std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(path)
-        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
-}
-
-async fn hello(path: &Path) {
-    let mut client = sensor_client(path);
-    let reply = client
-        .request(
-            "hello",
-            Message::Hello { client_version: 1 },
-            Duration::ZERO,
-        )
-        .await
-        .expect("the daemon still answers HELLO");
-    assert!(matches!(reply, Message::HelloReply { .. }), "{reply:?}");
-}
 
 /// Writes seeded random bytes to `path` for `for_how_long`; returns how many.
 fn flood(path: &Path, seed: u64, for_how_long: Duration) -> u64 {
@@ -64,7 +45,7 @@ async fn garbage_floods_are_survived_with_bounded_memory() {
     let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
     let sensor = daemon.link("sensor");
     let sonar = daemon.link("sonar");
-    hello(&sensor).await;
+    expect_hello(&sensor, "the daemon still answers HELLO").await;
     let idle_kb = daemon.rss_kb();
     let mut sizes = Vec::new();
     let mut rss = Vec::new();
@@ -80,7 +61,7 @@ async fn garbage_floods_are_survived_with_bounded_memory() {
         });
         rss.push(daemon.rss_kb());
     }
-    hello(&sensor).await;
+    expect_hello(&sensor, "the daemon still answers HELLO").await;
     let s = daemon.status();
     let sensor_link = link_status(&s, "sensor");
     let sonar_link = link_status(&s, "sonar");
@@ -116,7 +97,7 @@ async fn hang_ups_and_reopens_are_survived() {
     let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
     let sensor = daemon.link("sensor");
     let sonar = daemon.link("sonar");
-    hello(&sensor).await;
+    expect_hello(&sensor, "the daemon still answers HELLO").await;
     let before = daemon.rss_kb();
     // HELLO is EB 90 01 seq 01 01 crc crc: cut after 5 bytes.
     for i in 0..50u8 {
@@ -128,7 +109,7 @@ async fn hang_ups_and_reopens_are_survived() {
     daemon.wait_status(Duration::from_secs(10), "the broken input counted", |s| {
         link_status(s, "sensor").errors >= 1 && link_status(s, "sonar").errors >= 1
     });
-    hello(&sensor).await;
+    expect_hello(&sensor, "the daemon still answers HELLO").await;
     let reconnects = |s: &eyebot_hil::daemon::status::StatusSnapshot| {
         (
             link_status(s, "sensor").reconnects,
@@ -148,7 +129,7 @@ async fn hang_ups_and_reopens_are_survived() {
         a >= expected.0 && b >= expected.1
     });
     assert_eq!(reconnects(&s), expected, "one reconnect per reopen");
-    hello(&sensor).await;
+    expect_hello(&sensor, "the daemon still answers HELLO").await;
     let mut sonar_client = sonar_client(&sonar);
     sonar_client
         .select(Transducer::new(2).unwrap())
@@ -184,7 +165,7 @@ async fn a_recorded_garbage_flood_loses_nothing_and_keeps_memory_bounded() {
     );
     let sensor = daemon.link("sensor");
     let sonar = daemon.link("sonar");
-    hello(&sensor).await;
+    expect_hello(&sensor, "the daemon still answers HELLO").await;
     let idle_kb = daemon.rss_kb();
     let (a, b) = (sensor.clone(), sonar.clone());
     let t1 = std::thread::spawn(move || flood(&a, 7, Duration::from_millis(2000)));

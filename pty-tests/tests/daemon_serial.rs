@@ -7,9 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use firmware_protocol::sensor_link::Message;
 use pty_tests::daemon::{
-    DaemonProcess, TestDir, link_status, poll_until, require_tool, sensor_client,
+    DaemonProcess, TestDir, expect_hello, link_status, poll_until, require_tool,
 };
 use std::os::fd::AsRawFd;
 
@@ -46,19 +45,6 @@ impl Drop for Socat {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
-}
-
-async fn hello(path: &Path) {
-    let mut client = sensor_client(path);
-    let reply = client
-        .request(
-            "hello",
-            Message::Hello { client_version: 1 },
-            Duration::ZERO,
-        )
-        .await
-        .expect("HELLO across the socat pair");
-    assert!(matches!(reply, Message::HelloReply { .. }), "{reply:?}");
 }
 
 #[tokio::test]
@@ -112,7 +98,7 @@ async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_v
     assert_eq!(t2.c_cflag & libc::PARENB, 0, "no parity");
     drop(device);
 
-    hello(&b).await;
+    expect_hello(&b, "HELLO across the socat pair").await;
     assert_eq!(link_status(&daemon.status(), "sensor").reconnects, 0);
 
     // The adapter vanishes...
@@ -129,5 +115,5 @@ async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_v
         link_status(s, "sensor").reconnects > 0
     });
     assert!(link_status(&s, "sensor").reconnects >= 1);
-    hello(&b).await;
+    expect_hello(&b, "HELLO across the socat pair").await;
 }
