@@ -433,3 +433,54 @@ fn surge_acceleration_uses_the_added_mass() {
     );
     assert!((fx - thrust / m.vehicle().mass_kg).abs() > 0.05 * expected);
 }
+
+/// `simulate --out -` writes the same CSV to standard output as to a file (the summary line
+/// goes to standard error), and a reader that stops early ends it quietly, as for `cat`.
+#[test]
+fn simulate_out_dash_writes_the_csv_to_stdout() {
+    use std::io::{BufRead, BufReader};
+    use std::process::{Command, Stdio};
+    let bin = pty_tests::daemon::binary();
+    let exp = pty_tests::daemon::configs_dir().join("experiments/acceleration.toml");
+    let dir = std::env::temp_dir().join(format!("eyebot-simulate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("run.csv");
+    let to_file = Command::new(bin)
+        .args([
+            "simulate",
+            exp.to_str().unwrap(),
+            "--out",
+            file.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(to_file.status.success(), "{to_file:?}");
+    let to_stdout = Command::new(bin)
+        .current_dir(&dir)
+        .args(["simulate", exp.to_str().unwrap(), "--out", "-"])
+        .output()
+        .unwrap();
+    assert!(to_stdout.status.success(), "{to_stdout:?}");
+    assert_eq!(to_stdout.stdout, std::fs::read(&file).unwrap());
+    assert!(String::from_utf8_lossy(&to_stdout.stderr).contains("-> standard output"));
+    assert!(!dir.join("-").exists(), "no file named `-`");
+    // A reader that takes one line and goes away.
+    let mut child = Command::new(bin)
+        .args(["simulate", exp.to_str().unwrap(), "--out", "-"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert!(first.starts_with("t_s,"), "{first}");
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{out:?}");
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("panicked"),
+        "{out:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

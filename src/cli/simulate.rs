@@ -29,7 +29,8 @@ pub struct SimulateArgs {
     /// Seed of the physics RNG stream (thruster fluctuation).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Where to write the CSV trace.
+    /// Where to write the CSV trace (`-`: standard output; the summary line then goes to
+    /// standard error).
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -90,11 +91,16 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
     let exp = Experiment::from_document(&Document::new(dir.describe(&name), &text))?;
     let model = Model::new(vehicle, world);
 
-    let file = std::fs::File::create(&args.out).map_err(|e| CliError::Io {
-        path: args.out.clone(),
-        source: e,
-    })?;
-    let mut out = std::io::BufWriter::new(file);
+    let to_stdout = args.out.as_os_str() == "-";
+    let sink: Box<dyn Write> = if to_stdout {
+        Box::new(std::io::stdout().lock())
+    } else {
+        Box::new(std::fs::File::create(&args.out).map_err(|e| CliError::Io {
+            path: args.out.clone(),
+            source: e,
+        })?)
+    };
+    let mut out = std::io::BufWriter::new(sink);
     let mut io_error = None;
     let mut rows = 0u64;
     let io = |e: std::io::Error| CliError::Io {
@@ -115,18 +121,33 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
         experiment: exp.name.clone(),
         source,
     })?;
-    if let Some(e) = io_error {
-        return Err(io(e));
+    let flushed = match io_error {
+        Some(e) => Err(e),
+        None => out.flush(),
+    };
+    match flushed {
+        Ok(()) => {}
+        // A reader that stopped early (`| head`) ends the output, as it would for `cat`.
+        Err(e) if to_stdout && e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
+        Err(e) => return Err(io(e)),
     }
-    out.flush().map_err(io)?;
     let wall = started.elapsed().as_secs_f64();
-    println!(
+    let line = format!(
         "{}: {rows} rows, {:.1} s simulated in {wall:.3} s, step {} ms, {} contact(s) -> {}",
         exp.name,
         exp.duration_s,
         model.step_s() * 1e3,
         summary.contact_count,
-        args.out.display()
+        if to_stdout {
+            "standard output".to_string()
+        } else {
+            args.out.display().to_string()
+        }
     );
+    if to_stdout {
+        eprintln!("{line}");
+    } else {
+        println!("{line}");
+    }
     Ok(())
 }
