@@ -29,8 +29,11 @@ pub const SIGNATURE_MIN_CORRELATION: f64 = 0.2;
 /// ...and at least this share of the chi-square reduction must come from those channels.
 pub const SIGNATURE_MIN_SHARE: f64 = 0.5;
 
-/// Starting points scanned along each parameter axis, in units of the effect's scale.
-pub const START_SCAN: [f64; 7] = [-4.0, -2.0, -1.0, 1.0, 2.0, 4.0, 8.0];
+/// Starting points scanned along each parameter axis, in units of the effect's scale. The
+/// +-0.25 steps: a thrust gain of -0.05 (a quarter of its scale) was fitted at -0.008 from
+/// zero, a shallow minimum that the coarser steps all scored worse than (docs/gap.md,
+/// "Benchmark notes (session 3)").
+pub const START_SCAN: [f64; 9] = [-4.0, -2.0, -1.0, -0.25, 0.25, 1.0, 2.0, 4.0, 8.0];
 
 /// What fitting one candidate gave.
 #[derive(Debug, Clone, Serialize)]
