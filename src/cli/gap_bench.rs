@@ -76,7 +76,7 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
         for r in &results {
             text.push_str(&format!(
                 "{},{},{:.2},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:.2}\n",
-                r.effect.unwrap_or("null"),
+                r.label,
                 r.seed,
                 r.size_sigma,
                 r.named.as_deref().unwrap_or("none"),

@@ -16,6 +16,17 @@
 //! turns go the other way, started from the mirrored point across the pool). The figure is the
 //! reduction of the excess of the normalised residual over the noise floor (the same measure
 //! as `gap_reduction_pct`), from the shipped model to the fitted one.
+//!
+//! **Sonar.** An effect that shows only in the sonar channels (`sonar_incidence_dropout`)
+//! runs the sonar wall-sweep ([`SONAR_SCHEDULE`], the sonar fixtures' schedule) with the four
+//! transducers pinged. Its size
+//! is the RMS over pings of `sqrt(2 KL(p_truth || p_model))` of the echo probabilities (the
+//! Gaussian `|difference| / sigma` for a Bernoulli reading), reached by bisection on the cut
+//! (kept inside 0..90 deg), over the pings at a wall; its held-out run is the same
+//! wall-sweep with another seed (only the port pair sees the wall, so a mirror image would
+//! see nothing); its held-out figures are the sonar `-2 ln L` over the truth's (data) and
+//! that KL distance (vs truth). Null cases then also run on the wall-sweep, in a
+//! row `null (sonar)` of their own.
 
 use std::time::Instant;
 
@@ -33,6 +44,9 @@ use crate::physics::experiment::Experiment;
 pub const MODEL: &str = "models/mako.toml";
 /// The training manoeuvre (embedded `configs/experiments/gap-manoeuvres.toml`).
 pub const SCHEDULE: &str = "experiments/gap-manoeuvres.toml";
+/// The sonar cases' manoeuvre (embedded `configs/experiments/gap-sonar-wall-sweep.toml`, the
+/// schedule of the sonar fixtures): parked beside the west wall, slow spot turns both ways.
+pub const SONAR_SCHEDULE: &str = "experiments/gap-sonar-wall-sweep.toml";
 /// Camera position noise of the generated measurements (m, 1 sigma).
 pub const CAMERA_STD_M: f64 = 0.01;
 /// Case sizes are drawn uniformly from this range (noise-floor units).
@@ -52,6 +66,8 @@ pub struct BenchOptions {
 pub struct CaseResult {
     /// The hidden effect (`None`: a null case).
     pub effect: Option<&'static str>,
+    /// The table row: the effect, `null`, or `null (sonar)` for nulls on the sonar schedule.
+    pub label: &'static str,
     pub seed: u64,
     pub truth: Vec<f64>,
     /// Measured size in noise-floor units.
@@ -80,12 +96,81 @@ impl CaseResult {
     }
 }
 
-fn embedded_schedule() -> Result<Experiment, GapError> {
-    let text = Embedded.read(SCHEDULE)?;
+fn embedded_schedule(path: &str) -> Result<Experiment, GapError> {
+    let text = Embedded.read(path)?;
     Ok(Experiment::from_document(&Document::new(
-        Embedded.describe(SCHEDULE),
+        Embedded.describe(path),
         &text,
     ))?)
+}
+
+/// True for an effect that shows only in the sonar channels: its cases run the sonar
+/// wall-sweep ([`SONAR_SCHEDULE`]) with the four transducers pinged, since the training
+/// manoeuvre stays about 3 m off the walls and never gives an echo.
+pub fn sonar_only(effect: &Effect) -> bool {
+    effect
+        .channels
+        .iter()
+        .all(|c| crate::gap::sonar::index(c).is_some())
+}
+
+/// The per-ping echo probabilities of every sonar channel of `m` under configs `c` on `run`
+/// (one vector per sonar channel, in the order of `m.channels`).
+fn sonar_probabilities(c: &Configs, run: &resim::Run, m: &Measurement) -> Vec<Vec<f64>> {
+    use crate::gap::sonar;
+    let s = &c.sensors.sonar;
+    let world = crate::physics::world::Pool::new(&c.world);
+    let times = sonar::ping_times(s, m.experiment.duration_s);
+    m.channels
+        .iter()
+        .filter_map(|ch| sonar::index(&ch.name).and_then(|k| s.transducers.get(k)))
+        .map(|t| {
+            let tr = crate::sensors::sonar::Transducer::new(t, s, 0);
+            times
+                .iter()
+                .map(|t| sonar::expected(s, &world, &tr, run.at(*t)).p)
+                .collect()
+        })
+        .collect()
+}
+
+/// `2 KL(p_a || p_b)` of two echo probabilities (clamped as the likelihood clamps them): the
+/// expected gain in `-2 ln L` per ping of the right model over the wrong one, the Bernoulli
+/// counterpart of `(difference / sigma)^2` for a Gaussian channel.
+fn two_kl(a: f64, b: f64) -> f64 {
+    let lo = crate::gap::sonar::P_MIN;
+    let (a, b) = (a.clamp(lo, 1.0 - lo), b.clamp(lo, 1.0 - lo));
+    2.0 * (a * (a / b).ln() + (1.0 - a) * ((1.0 - a) / (1.0 - b)).ln())
+}
+
+/// Distance of model `c` from the truth `t` in the sonar channels of `m`: the RMS over pings
+/// of `sqrt(2 KL(p_truth || p_model))` (noise-free, as [`truth_gap`] for the other channels).
+pub fn sonar_truth_gap(c: &Configs, t: &Configs, m: &Measurement) -> Result<f64, GapError> {
+    let (rc, rt) = (resim::simulate(c, m, None)?, resim::simulate(t, m, None)?);
+    let (pc, pt) = (
+        sonar_probabilities(c, &rc, m),
+        sonar_probabilities(t, &rt, m),
+    );
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (a, b) in pt.iter().zip(&pc) {
+        for (x, y) in a.iter().zip(b) {
+            sum += two_kl(*x, *y);
+            n += 1;
+        }
+    }
+    Ok(if n == 0 { 0.0 } else { (sum / n as f64).sqrt() })
+}
+
+/// The sonar `-2 ln L` (presence deviance and range residuals, the fit's own objective) of
+/// every sonar channel of `m` under configs `c`.
+pub fn sonar_deviance(c: &Configs, m: &Measurement) -> Result<f64, GapError> {
+    let run = resim::simulate(c, m, None)?;
+    Ok(m.channels
+        .iter()
+        .filter_map(|ch| crate::gap::sonar::residuals(c, &run, m.experiment.duration_s, ch))
+        .flatten()
+        .map(|r| r * r)
+        .sum())
 }
 
 /// Where the benchmark starts the training manoeuvre: the file's schedule turned to start
@@ -194,6 +279,26 @@ pub fn size_sigma(
     } else {
         base_run.clone()
     };
+    if sonar_only(effect) {
+        // Presence of an echo is Bernoulli: the size is the RMS over pings of
+        // sqrt(2 KL(p_truth || p_model)), which is |difference| / sigma for a Gaussian.
+        let (p0, p1) = (
+            sonar_probabilities(base, base_run, m),
+            sonar_probabilities(&truth, &run, m),
+        );
+        // Over the pings at a wall (an echo possible under either model): a ping with no
+        // wall in reach carries no sonar signal at all, unlike a Gaussian sample.
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (a, b) in p1.iter().zip(&p0) {
+            for (x, y) in a.iter().zip(b) {
+                if x.max(*y) > crate::gap::sonar::P_MIN {
+                    sum += two_kl(*x, *y);
+                    n += 1;
+                }
+            }
+        }
+        return Ok(if n == 0 { 0.0 } else { (sum / n as f64).sqrt() });
+    }
     let (mut sum, mut n) = (0.0, 0usize);
     for (ch, f) in m.channels.iter().zip(floors) {
         let Some(f) = f else { continue };
@@ -236,6 +341,107 @@ fn positive_only(effect: &Effect) -> bool {
     )
 }
 
+/// One manoeuvre the cases run: the training schedule, its mirrored held-out schedule,
+/// whether the sonar is pinged, and the shipped model's prediction and floor on it.
+struct Scene {
+    train: Experiment,
+    hold: Experiment,
+    sonar: bool,
+    probe: Measurement,
+    base: Configs,
+    base_run: resim::Run,
+    floors: Vec<Option<Floor>>,
+}
+
+impl Scene {
+    fn new(
+        model: &GapModel,
+        train: Experiment,
+        sonar: bool,
+        seed: u64,
+    ) -> Result<(Scene, String, String), GapError> {
+        let exp_dir = std::path::Path::new(".");
+        // A null measurement fixes the channel sample times for the size calibration.
+        let info = generate::setup(model, &train, CAMERA_STD_M);
+        let (world, sensors) = (info.world.clone(), info.sensors.clone());
+        let probe = generate::generate_with(
+            &model.configs(&info, exp_dir)?,
+            &train,
+            &world,
+            &sensors,
+            CAMERA_STD_M,
+            seed,
+            sonar,
+        )?;
+        let base = model.configs(&probe.experiment, exp_dir)?;
+        // The wall-sweep's transducers that see the wall are the port pair, so its mirror
+        // image (the east wall to starboard) would give no echo at all: the sonar held-out
+        // run is the same wall-sweep with another seed, as the sonar fixtures' held-out is.
+        let hold = if sonar {
+            train.clone()
+        } else {
+            mirrored(&train, base.world.pool_m.y)
+        };
+        let base_run = resim::simulate(&base, &probe, None)?;
+        let floors = resim::noise_floor(&base, &probe, &base_run)?;
+        Ok((
+            Scene {
+                train,
+                hold,
+                sonar,
+                probe,
+                base,
+                base_run,
+                floors,
+            },
+            world,
+            sensors,
+        ))
+    }
+}
+
+/// The parameter of a sonar-only case (a one-parameter effect) whose measured size is
+/// `target`, by bisection along `dir` up to `max_abs` (the presence probability is far from
+/// linear in the cut, so the one-point calibration of the other effects would miss). A
+/// binary reading caps the size (an echo rate falling from 90 % to none is
+/// `sqrt(2 KL)` = 2.1): when `target` is out of reach, the parameter where the size first
+/// reaches 95 % of its largest value, so the truth does not sit where the cut no longer
+/// changes anything (a wider cut than any ray's incidence) and cannot be identified.
+fn sonar_calibration(
+    scene: &Scene,
+    effect: &Effect,
+    dir: f64,
+    max_abs: f64,
+    target: f64,
+) -> Result<f64, GapError> {
+    let size = |a: f64| {
+        size_sigma(
+            &scene.base,
+            effect,
+            &[dir * a],
+            &scene.probe,
+            &scene.floors,
+            &scene.base_run,
+        )
+    };
+    let (mut lo, mut hi) = (0.0, max_abs);
+    let largest = size(hi)?;
+    let target = if largest <= target {
+        0.95 * largest
+    } else {
+        target
+    };
+    for _ in 0..20 {
+        let mid = 0.5 * (lo + hi);
+        if size(mid)? < target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Ok(dir * 0.5 * (lo + hi))
+}
+
 /// Runs the benchmark; `progress(done, total, label)` after each case.
 pub fn run(
     opts: &BenchOptions,
@@ -243,31 +449,42 @@ pub fn run(
 ) -> Result<Vec<CaseResult>, GapError> {
     let model_text = Embedded.read(MODEL)?;
     let model = GapModel::from_text(&Embedded.describe(MODEL), &model_text, ".".into())?;
-    let train = training(&embedded_schedule()?);
     let exp_dir = std::path::Path::new(".");
     let mut rng = crate::sensors::rng::stream(opts.seed, "gap-bench");
-    // A null measurement fixes the channel sample times for the size calibration.
-    let info = generate::setup(&model, &train, CAMERA_STD_M);
-    let (world, sensors) = (info.world.clone(), info.sensors.clone());
-    let probe = generate::generate(
-        &model.configs(&info, exp_dir)?,
-        &train,
-        &world,
-        &sensors,
-        CAMERA_STD_M,
+    let (main, world, sensors) = Scene::new(
+        &model,
+        training(&embedded_schedule(SCHEDULE)?),
+        false,
         opts.seed,
     )?;
-    let base = model.configs(&probe.experiment, exp_dir)?;
-    let hold = mirrored(&train, base.world.pool_m.y);
-    let base_run = resim::simulate(&base, &probe, None)?;
-    let floors = resim::noise_floor(&base, &probe, &base_run)?;
+    // The sonar wall-sweep, only when a sonar-only effect is benchmarked; its null cases then
+    // run too (a row of their own), so a sonar candidate that fires on plain data shows.
+    let sonar_scene = if opts.effects.iter().any(|e| sonar_only(e)) {
+        Some(Scene::new(&model, embedded_schedule(SONAR_SCHEDULE)?, true, opts.seed)?.0)
+    } else {
+        None
+    };
 
-    let total = opts.cases * (opts.effects.len() + 1);
+    let mut kinds: Vec<(Option<&'static Effect>, &Scene)> = opts
+        .effects
+        .iter()
+        .map(|e| {
+            let scene = match &sonar_scene {
+                Some(s) if sonar_only(e) => s,
+                _ => &main,
+            };
+            (Some(*e), scene)
+        })
+        .collect();
+    kinds.push((None, &main));
+    if let Some(s) = &sonar_scene {
+        kinds.push((None, s));
+    }
+    let total = opts.cases * kinds.len();
     let mut done = 0;
     let mut out = Vec::new();
-    let mut kinds: Vec<Option<&'static Effect>> = opts.effects.iter().map(|e| Some(*e)).collect();
-    kinds.push(None);
-    for kind in kinds {
+    for (kind, scene) in kinds {
+        let base = &scene.base;
         for _ in 0..opts.cases {
             let seed: u64 = rng.random();
             let hold_seed: u64 = rng.random();
@@ -286,16 +503,47 @@ pub fn run(
                     let a = rng.random_range(0.0..std::f64::consts::TAU);
                     vec![a.cos(), a.sin()]
                 };
-                // One-point calibration: the size of one typical step along `dir`.
-                let unit: Vec<f64> = dir.iter().zip(effect.scales).map(|(d, s)| d * s).collect();
-                let s1 = size_sigma(&base, effect, &unit, &probe, &floors, &base_run)?;
                 let target = rng.random_range(SIZE_RANGE.0..SIZE_RANGE.1);
-                let factor = if s1 > 0.0 { target / s1 } else { 1.0 };
-                truth = unit.iter().map(|u| u * factor).collect();
-                size = size_sigma(&base, effect, &truth, &probe, &floors, &base_run)?;
+                if scene.sonar && k == 1 {
+                    // The cut stays inside its physical range 0..90 deg (apply clamps it,
+                    // which would make the truth's parameter a lie).
+                    let cut = base.sensors.sonar.max_incidence_deg;
+                    let max_abs = if dir[0] < 0.0 { cut - 0.5 } else { 89.5 - cut };
+                    truth = vec![sonar_calibration(scene, effect, dir[0], max_abs, target)?];
+                } else {
+                    // One-point calibration: the size of one typical step along `dir`.
+                    let unit: Vec<f64> =
+                        dir.iter().zip(effect.scales).map(|(d, s)| d * s).collect();
+                    let s1 = size_sigma(
+                        base,
+                        effect,
+                        &unit,
+                        &scene.probe,
+                        &scene.floors,
+                        &scene.base_run,
+                    )?;
+                    let factor = if s1 > 0.0 { target / s1 } else { 1.0 };
+                    truth = unit.iter().map(|u| u * factor).collect();
+                }
+                size = size_sigma(
+                    base,
+                    effect,
+                    &truth,
+                    &scene.probe,
+                    &scene.floors,
+                    &scene.base_run,
+                )?;
                 effects::apply(effect, &truth, &mut truth_cfg);
             }
-            let m = generate::generate(&truth_cfg, &train, &world, &sensors, CAMERA_STD_M, seed)?;
+            let m = generate::generate_with(
+                &truth_cfg,
+                &scene.train,
+                &world,
+                &sensors,
+                CAMERA_STD_M,
+                seed,
+                scene.sonar,
+            )?;
             let t0 = Instant::now();
             let a = crate::gap::analyse(&model, &m, exp_dir, &mut |_, _| {})?;
             let seconds = t0.elapsed().as_secs_f64();
@@ -325,36 +573,59 @@ pub fn run(
                 (None, None)
             };
             let mut held_out_truth_reduction_pct = None;
-            let held_out_reduction_pct = if kind.is_some() {
-                let h = generate::generate(
-                    &truth_cfg,
-                    &hold,
-                    &world,
-                    &sensors,
-                    CAMERA_STD_M,
-                    hold_seed,
-                )?;
-                let hb = resim::simulate(&base, &h, None)?;
-                let hf = resim::noise_floor(&base, &h, &hb)?;
-                let before = excess(&base, &h, &hf)?;
-                // The fitted model's own floor: a fitted noise source (depth EMI) is judged
-                // by the spread it predicts.
-                let ha = resim::simulate(&a.configs_after, &h, None)?;
-                let hfa = resim::noise_floor(&a.configs_after, &h, &ha)?;
-                let after = excess(&a.configs_after, &h, &hfa)?;
-                let tb = truth_gap(&base, &truth_cfg, &h, &hf)?;
-                let ta = truth_gap(&a.configs_after, &truth_cfg, &h, &hf)?;
-                held_out_truth_reduction_pct = (tb > 0.0).then(|| 100.0 * (1.0 - ta / tb));
-                Some(if before > 0.0 {
-                    100.0 * (1.0 - after / before)
-                } else {
-                    0.0
-                })
-            } else {
-                None
+            let held_out_reduction_pct = match kind {
+                None => None,
+                Some(effect) => {
+                    let h = generate::generate_with(
+                        &truth_cfg,
+                        &scene.hold,
+                        &world,
+                        &sensors,
+                        CAMERA_STD_M,
+                        hold_seed,
+                        scene.sonar,
+                    )?;
+                    let (before, after, tb, ta) = if scene.sonar && sonar_only(effect) {
+                        // The all-channel excess does not cover the sonar (docs/gap.md): the
+                        // data figure is the sonar -2 ln L over the truth's on the held-out
+                        // data, the truth figure the KL distance of the echo probabilities.
+                        let d_truth = sonar_deviance(&truth_cfg, &h)?;
+                        (
+                            sonar_deviance(base, &h)? - d_truth,
+                            sonar_deviance(&a.configs_after, &h)? - d_truth,
+                            sonar_truth_gap(base, &truth_cfg, &h)?,
+                            sonar_truth_gap(&a.configs_after, &truth_cfg, &h)?,
+                        )
+                    } else {
+                        let hb = resim::simulate(base, &h, None)?;
+                        let hf = resim::noise_floor(base, &h, &hb)?;
+                        // The fitted model's own floor: a fitted noise source (depth EMI)
+                        // is judged by the spread it predicts.
+                        let ha = resim::simulate(&a.configs_after, &h, None)?;
+                        let hfa = resim::noise_floor(&a.configs_after, &h, &ha)?;
+                        (
+                            excess(base, &h, &hf)?,
+                            excess(&a.configs_after, &h, &hfa)?,
+                            truth_gap(base, &truth_cfg, &h, &hf)?,
+                            truth_gap(&a.configs_after, &truth_cfg, &h, &hf)?,
+                        )
+                    };
+                    held_out_truth_reduction_pct = (tb > 0.0).then(|| 100.0 * (1.0 - ta / tb));
+                    Some(if before > 0.0 {
+                        100.0 * (1.0 - after / before)
+                    } else {
+                        0.0
+                    })
+                }
+            };
+            let label = match kind {
+                Some(e) => e.name,
+                None if scene.sonar => "null (sonar)",
+                None => "null",
             };
             out.push(CaseResult {
                 effect: kind.map(|e| e.name),
+                label,
                 seed,
                 truth,
                 size_sigma: size,
@@ -368,7 +639,7 @@ pub fn run(
                 seconds,
             });
             done += 1;
-            progress(done, total, kind.map_or("null", |e| e.name));
+            progress(done, total, label);
         }
     }
     Ok(out)
@@ -443,16 +714,12 @@ pub fn table(results: &[CaseResult]) -> String {
     );
     let mut names: Vec<&str> = Vec::new();
     for r in results {
-        let n = r.effect.unwrap_or("null");
-        if !names.contains(&n) {
-            names.push(n);
+        if !names.contains(&r.label) {
+            names.push(r.label);
         }
     }
     for n in names {
-        let cases: Vec<&CaseResult> = results
-            .iter()
-            .filter(|r| r.effect.unwrap_or("null") == n)
-            .collect();
+        let cases: Vec<&CaseResult> = results.iter().filter(|r| r.label == n).collect();
         s.push_str(&row(n, &cases));
         s.push('\n');
     }
@@ -460,4 +727,48 @@ pub fn table(results: &[CaseResult]) -> String {
     s.push_str(&row("overall", &all));
     s.push('\n');
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sonar size must reduce to the Gaussian `(difference / sigma)^2` for a small change
+    /// of the echo probability (sigma^2 = p (1 - p)), be zero for no change and grow with it.
+    #[test]
+    fn two_kl_is_the_bernoulli_counterpart_of_a_squared_z() {
+        assert_eq!(two_kl(0.3, 0.3), 0.0);
+        let (p, d) = (0.3, 1e-3);
+        let z2 = d * d / (p * (1.0 - p));
+        assert!((two_kl(p + d, p) / z2 - 1.0).abs() < 1e-2);
+        assert!(two_kl(0.9, 0.3) > two_kl(0.6, 0.3));
+        // Clamped like the likelihood: a certain echo the model rules out is finite.
+        assert!(two_kl(1.0, 0.0).is_finite());
+    }
+
+    /// Only the sonar effect needs the wall-sweep; every other effect keeps the manoeuvre.
+    #[test]
+    fn only_the_sonar_effect_runs_the_wall_sweep() {
+        let sonar: Vec<&str> = effects::LIBRARY
+            .iter()
+            .filter(|e| sonar_only(e))
+            .map(|e| e.name)
+            .collect();
+        assert_eq!(sonar, ["sonar_incidence_dropout"]);
+    }
+
+    /// The embedded wall-sweep is the sonar fixtures' schedule (same start and commands).
+    #[test]
+    fn embedded_wall_sweep_is_the_sonar_fixture_schedule() {
+        let embedded = embedded_schedule(SONAR_SCHEDULE).unwrap();
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/pty-tests/fixtures/gap/sonar-schedule.toml"
+        );
+        let text = std::fs::read_to_string(path).unwrap();
+        let fixture = Experiment::from_document(&Document::new(path.to_string(), &text)).unwrap();
+        assert_eq!(embedded.schedule, fixture.schedule);
+        assert_eq!(embedded.start, fixture.start);
+        assert_eq!(embedded.duration_s, fixture.duration_s);
+    }
 }

@@ -170,12 +170,27 @@ pub const LIBRARY: [Effect; 14] = [
     },
     // Added for summary observations (issue 8 item 5): SubSim's lumped thrust constant alpha
     // was wrong by a factor (thesis 5.1, 5.4), which no per-motor difference can express.
+    // `forward_max_n` is shared by all four thrusters, so the vertical pair (depth, heave
+    // force) and every thrust step (surge acceleration) show it as much as the track does:
+    // on the bench's manoeuvre about 3/4 of its chi-square gain is in depth_adc and
+    // accel_x_adc (docs/gap.md, "Benchmark notes (session 3)").
     Effect {
         name: "thrust_gain",
         parameters: &["gain_scale"],
         scales: &[0.2],
-        signature: "every motor stronger or weaker alike: speed and turn rate off in proportion to thrust at every heading",
-        channels: &["x_m", "y_m", "surge_mps", "paddle_speed_mps", "compass_deg"],
+        signature: "every motor stronger or weaker alike, the vertical pair too: speed, turn rate, \
+                    acceleration at thrust steps and depth response off in proportion to thrust",
+        channels: &[
+            "x_m",
+            "y_m",
+            "surge_mps",
+            "paddle_speed_mps",
+            "compass_deg",
+            "depth_adc",
+            "accel_x_adc",
+            "accel_y_adc",
+            "accel_z_adc",
+        ],
         kind: Kind::Mean,
         physics: true,
     },

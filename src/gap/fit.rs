@@ -29,8 +29,11 @@ pub const SIGNATURE_MIN_CORRELATION: f64 = 0.2;
 /// ...and at least this share of the chi-square reduction must come from those channels.
 pub const SIGNATURE_MIN_SHARE: f64 = 0.5;
 
-/// Starting points scanned along each parameter axis, in units of the effect's scale.
-pub const START_SCAN: [f64; 7] = [-4.0, -2.0, -1.0, 1.0, 2.0, 4.0, 8.0];
+/// Starting points scanned along each parameter axis, in units of the effect's scale. The
+/// +-0.25 steps: a thrust gain of -0.05 (a quarter of its scale) was fitted at -0.008 from
+/// zero, a shallow minimum that the coarser steps all scored worse than (docs/gap.md,
+/// "Benchmark notes (session 3)").
+pub const START_SCAN: [f64; 9] = [-4.0, -2.0, -1.0, -0.25, 0.25, 1.0, 2.0, 4.0, 8.0];
 
 /// What fitting one candidate gave.
 #[derive(Debug, Clone, Serialize)]
@@ -347,9 +350,13 @@ fn fit_mean(
     // signature says it should, and does the improvement come from there?
     let in_sig = |i: usize| effect.channels.contains(&setup.m.channels[i].name.as_str());
     let (mut dot, mut dd, mut rr, mut gain_sig, mut gain_all) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut gain_by_channel = vec![0.0; setup.m.channels.len()];
     for (idx, (&a, &b)) in r0.iter().zip(r1.iter()).enumerate() {
         let g = a * a - b * b;
         gain_all += g;
+        if let Some(v) = gain_by_channel.get_mut(owner0[idx]) {
+            *v += g;
+        }
         if in_sig(owner0[idx]) {
             gain_sig += g;
             let d = a - b; // = predicted change of the effect, normalised
@@ -369,6 +376,22 @@ fn fit_mean(
         0.0
     };
     let signature_pass = corr >= SIGNATURE_MIN_CORRELATION && share >= SIGNATURE_MIN_SHARE;
+    tracing::debug!(
+        effect = effect.name,
+        correlation = corr,
+        share,
+        signature_pass,
+        gains = %setup
+            .m
+            .channels
+            .iter()
+            .zip(&gain_by_channel)
+            .filter(|(_, g)| **g != 0.0)
+            .map(|(c, g)| format!("{}={g:.1}", c.name))
+            .collect::<Vec<_>>()
+            .join(" "),
+        "signature test"
+    );
     CandidateResult {
         name: effect.name.to_string(),
         parameters: names(effect).zip(params.iter().copied()).collect(),
