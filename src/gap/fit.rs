@@ -326,10 +326,31 @@ fn fit_mean(
     // projected on the effect's Jacobian. Properly independent noise gains k on average;
     // correlated noise along the effect's signature gains more, and the factor scales the
     // gain down by as much (never up).
-    let noise_factor = match (&jac, &ainv) {
+    let at_fit = match (&jac, &ainv) {
         (Some(j), Some(ai)) => null_factor(j, ai, null, white),
         _ => 1.0,
     };
+    // Along a nonlinear parameter (a lag) the fit travels from the model as shipped through
+    // directions where the process noise is large and can end where the Jacobian has turned
+    // away from them; calibrated at the end point alone, the gain the noise gave on the way
+    // is under-counted and nulls are named (docs/gap.md, "Null false alarms"). So the factor
+    // is the larger of the two ends of the path: the fitted point and the start (no change).
+    let at_start = {
+        let mut p0 = Problem {
+            setup,
+            effect,
+            x: DVector::zeros(k),
+            r: None,
+            evaluations: 0,
+        };
+        p0.set_params(&DVector::zeros(k));
+        p0.jacobian().and_then(|j0| {
+            (j0.transpose() * &j0)
+                .try_inverse()
+                .map(|a0| null_factor(&j0, &a0, null, white))
+        })
+    };
+    let noise_factor = at_start.map_or(at_fit, |f| f.max(at_fit));
     // Residual variance beyond what the floor expects (reduced chi-square), never below 1.
     let reduced = (chi2_after / (n_eff - k as f64).max(1.0)).max(1.0);
     let ci = ainv
