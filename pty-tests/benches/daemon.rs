@@ -116,6 +116,28 @@ fn cpu_latency_us() -> Option<u32> {
     )
 }
 
+/// `EYEBOT_BENCH_OUTLIERS_US`: print every ADC read slower than this (minus wire time), with
+/// its monotonic send time, to match against a kernel trace.
+fn outlier_us() -> Option<f64> {
+    let value = std::env::var("EYEBOT_BENCH_OUTLIERS_US").ok()?;
+    Some(
+        value
+            .parse()
+            .expect("EYEBOT_BENCH_OUTLIERS_US is a number of microseconds"),
+    )
+}
+
+/// CLOCK_MONOTONIC now, in seconds.
+fn monotonic_s() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: a valid clock id and a pointer to a timespec this function owns.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+}
+
 /// The SCHED_FIFO priority the daemon is asked to run at (`EYEBOT_BENCH_RT_PRIORITY`).
 fn rt_priority() -> Option<u8> {
     let value = std::env::var("EYEBOT_BENCH_RT_PRIORITY").ok()?;
@@ -150,10 +172,20 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
                 channel: AdcChannel::new((i % 8) as u8).unwrap(),
             },
         );
+        let sent_mono_s = monotonic_s();
         let t = Instant::now();
         port.write_all(&request).unwrap();
         port.read_exact(&mut reply).unwrap();
         let us = t.elapsed().as_secs_f64() * 1e6;
+        if let Some(limit) = outlier_us()
+            && us - wire_us > limit
+        {
+            // On the clock the kernel trace uses (`trace_clock = mono`), to match the two.
+            println!(
+                "  outlier: request sent at {sent_mono_s:.6} s (monotonic), {:.1} us over the wire time",
+                us - wire_us
+            );
+        }
         assert_eq!(&reply[..3], &[0xEB, 0x90, 0x90], "an ADC_VALUE reply");
         if i >= WARMUP {
             latency.push(us);
