@@ -106,25 +106,26 @@ fn scheduler_lines() -> String {
     lines
 }
 
-/// The CPU latency request the daemon is asked to hold (`EYEBOT_BENCH_CPU_LATENCY_US`).
-fn cpu_latency_us() -> Option<u32> {
-    let value = std::env::var("EYEBOT_BENCH_CPU_LATENCY_US").ok()?;
+/// The value of environment variable `name`, if set; a set value that does not parse stops
+/// the bench, naming the variable and what it should be.
+fn env_number<T: std::str::FromStr>(name: &str, what: &str) -> Option<T> {
+    let value = std::env::var(name).ok()?;
     Some(
         value
             .parse()
-            .expect("EYEBOT_BENCH_CPU_LATENCY_US is a number of microseconds"),
+            .unwrap_or_else(|_| panic!("{name} is {what}, not `{value}`")),
     )
+}
+
+/// The CPU latency request the daemon is asked to hold (`EYEBOT_BENCH_CPU_LATENCY_US`).
+fn cpu_latency_us() -> Option<u32> {
+    env_number("EYEBOT_BENCH_CPU_LATENCY_US", "a number of microseconds")
 }
 
 /// `EYEBOT_BENCH_OUTLIERS_US`: print every ADC read slower than this (minus wire time), with
 /// its monotonic send time, to match against a kernel trace.
 fn outlier_us() -> Option<f64> {
-    let value = std::env::var("EYEBOT_BENCH_OUTLIERS_US").ok()?;
-    Some(
-        value
-            .parse()
-            .expect("EYEBOT_BENCH_OUTLIERS_US is a number of microseconds"),
-    )
+    env_number("EYEBOT_BENCH_OUTLIERS_US", "a number of microseconds")
 }
 
 /// CLOCK_MONOTONIC now, in seconds.
@@ -140,12 +141,7 @@ fn monotonic_s() -> f64 {
 
 /// The SCHED_FIFO priority the daemon is asked to run at (`EYEBOT_BENCH_RT_PRIORITY`).
 fn rt_priority() -> Option<u8> {
-    let value = std::env::var("EYEBOT_BENCH_RT_PRIORITY").ok()?;
-    Some(
-        value
-            .parse()
-            .expect("EYEBOT_BENCH_RT_PRIORITY is a SCHED_FIFO priority 1-99"),
-    )
+    env_number("EYEBOT_BENCH_RT_PRIORITY", "a SCHED_FIFO priority 1-99")
 }
 
 fn adc() {
