@@ -313,18 +313,8 @@ pub fn noise_floor(
     m: &Measurement,
     clean: &Run,
 ) -> Result<Vec<Option<Floor>>, GapError> {
-    noise_floor_with(c, m, clean, ENSEMBLE)
-}
-
-/// [`noise_floor`] with `members` ensemble runs.
-pub fn noise_floor_with(
-    c: &Configs,
-    m: &Measurement,
-    clean: &Run,
-    members: u64,
-) -> Result<Vec<Option<Floor>>, GapError> {
     let mut noisy = Vec::new();
-    for seed in 0..members {
+    for seed in 0..ENSEMBLE {
         noisy.push(simulate(c, m, Some(0x6a70_0000 + seed))?);
     }
     Ok(m.channels
