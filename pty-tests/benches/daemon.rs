@@ -4,8 +4,10 @@
 //!   modelled wire time of the reply; baseline: a raw pty echo round trip in the same run;
 //!   also with `release_quantum_ms = 0` (one wake-up per byte), to show the quantum costs
 //!   no latency.
-//! - `nmea`: real-time NMEA emission jitter: arrival of each sentence's last byte against
-//!   the sonar's ping schedule mapped to wall time.
+//! - `nmea`: real-time NMEA emission jitter: each byte's arrival at the client against its
+//!   sentence's 4800 baud wire schedule; beside it the same figure for the daemon's own
+//!   hand-over of each byte, from the wall times its `--record` output gives them, so a late
+//!   byte can be told apart as the daemon's or the kernel's pty delivery.
 //! - `cpu`: daemon CPU idle and under a 100 Hz ADC stream, from /proc/PID/stat; baseline: the
 //!   same stream with `release_quantum_ms = 0` (one wake-up per byte) in the same run.
 //! - `rss`: resident memory over one simulated hour at speed 100 with a client.
@@ -17,6 +19,7 @@ use std::os::fd::AsFd;
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
+use eyebot_hil::record::{Direction, parse_chunk};
 use firmware_protocol::Frame;
 use firmware_protocol::sensor_link::{AdcChannel, Message};
 use nix::sys::termios;
@@ -153,9 +156,11 @@ fn adc() {
 
 fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
     let dir = TestDir::new("bench-adc");
-    let args = quantum_args(&dir, quantum_ms);
+    let record = dir.join("rec");
+    let mut args = quantum_args(&dir, quantum_ms);
+    args.extend(["--record".to_string(), record.display().to_string()]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let daemon = DaemonProcess::start(dir, &args);
+    let mut daemon = DaemonProcess::start(dir, &args);
     let mut port = open_raw(&daemon.link("sensor"));
     // ADC_VALUE is 10 bytes: 10 x 10 bits at 115200 baud.
     let wire_us = 10.0 * 10.0 / 115_200.0 * 1e6;
@@ -187,6 +192,35 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
             latency.push(us);
         }
     }
+    let request_len = frame(
+        0,
+        Message::AdcRead {
+            channel: AdcChannel::new(0).unwrap(),
+        },
+    )
+    .len();
+    stop(&mut daemon);
+    // The daemon's own part: from reading the last byte of a request to handing over the
+    // last byte of its reply, both on its recording's wall clock.
+    let mut turnaround = Vec::new();
+    let (mut rx_bytes, mut tx_bytes, mut rx_done) = (0usize, 0usize, 0.0);
+    for (dir, _, wall) in recorded_bytes(&record, "sensor") {
+        match dir {
+            Direction::Rx => {
+                rx_bytes += 1;
+                if rx_bytes % request_len == 0 {
+                    rx_done = wall;
+                }
+            }
+            Direction::Tx => {
+                tx_bytes += 1;
+                if tx_bytes % reply.len() == 0 && tx_bytes / reply.len() > WARMUP {
+                    turnaround.push((wall - rx_done) * 1e6 - wire_us);
+                }
+            }
+        }
+    }
+    let (d50, d99, dmax) = summary(&mut turnaround);
     let mut overhead: Vec<f64> = latency.iter().map(|l| l - wire_us).collect();
     let (l50, l99, lmax) = summary(&mut latency);
     let (o50, o99, omax) = summary(&mut overhead);
@@ -201,6 +235,10 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
     println!("  request -> reply:          p50 {l50:8.1} us  p99 {l99:8.1} us  max {lmax:8.1} us");
     println!(
         "  minus wire time:           p50 {o50:8.1} us  p99 {o99:8.1} us  max {omax:8.1} us  (target p99 < 200 us; p90 {o90:.1} us)"
+    );
+    println!(
+        "  the daemon's own turnaround, minus wire time (its recording, {} replies): p50 {d50:8.1} us  p99 {d99:8.1} us  max {dmax:8.1} us",
+        turnaround.len()
     );
     println!("  baseline raw pty echo RTT: p50 {b50:8.1} us  p99 {b99:8.1} us  max {bmax:8.1} us");
     println!(
@@ -242,7 +280,8 @@ fn nmea_at(speed: f64, wall_s: f64) {
             ),
         ],
     );
-    let daemon = DaemonProcess::start(
+    let record = dir.join("rec");
+    let mut daemon = DaemonProcess::start(
         dir,
         &[
             "--config",
@@ -251,6 +290,8 @@ fn nmea_at(speed: f64, wall_s: f64) {
             "realtime",
             "--speed",
             &speed.to_string(),
+            "--record",
+            record.to_str().unwrap(),
         ],
     );
     let mut port = open_raw(&daemon.link("sonar"));
@@ -260,27 +301,87 @@ fn nmea_at(speed: f64, wall_s: f64) {
     port.write_all(b"@S1\r").unwrap();
     let char_s = 10.0 / 4800.0 / speed;
     let started = Instant::now();
-    let mut sentences: Vec<Vec<f64>> = Vec::new();
-    let mut current: Option<Vec<f64>> = None;
+    let mut arrivals = Vec::new();
     let mut buf = [0u8; 256];
     while started.elapsed() < Duration::from_secs_f64(wall_s) {
         let n = port.read(&mut buf).unwrap();
         let at = started.elapsed().as_secs_f64();
-        for &b in &buf[..n] {
-            if b == b'$' {
-                current = Some(Vec::new());
-            }
-            if let Some(arrivals) = current.as_mut() {
-                arrivals.push(at);
-                if b == b'\n' {
-                    sentences.push(current.take().unwrap());
-                }
+        arrivals.extend(buf[..n].iter().map(|&b| (b, at)));
+    }
+    let s = daemon.status();
+    stop(&mut daemon);
+    // The daemon's own hand-over of each byte to the pty, as its recording timed it.
+    let handed_over: Vec<(u8, f64)> = recorded_bytes(&record, "sonar")
+        .into_iter()
+        .filter(|(dir, _, _)| *dir == Direction::Tx)
+        .map(|(_, b, wall)| (b, wall))
+        .collect();
+    let (sentences, mut late_us) = sentence_lateness_us(&arrivals, char_s);
+    let (handed_sentences, mut handed_late_us) = sentence_lateness_us(&handed_over, char_s);
+    let samples = late_us.len();
+    let (p50, p99, max) = summary(&mut late_us);
+    let (h50, h99, hmax) = summary(&mut handed_late_us);
+    println!(
+        "nmea emission jitter, realtime speed {speed}, {sentences} sentences ({samples} bytes) over {wall_s} s wall, overruns {}",
+        s.overruns
+    );
+    println!(
+        "  byte lateness vs wire schedule: p50 {p50:8.1} us  p99 {p99:8.1} us  max {max:8.1} us  (target p99 < 1000 us)"
+    );
+    println!(
+        "  the daemon's hand-over alone (its recording, {handed_sentences} sentences): p50 {h50:8.1} us  p99 {h99:8.1} us  max {hmax:8.1} us"
+    );
+}
+
+/// SIGTERM, and the wait for the daemon to finish its recording.
+fn stop(daemon: &mut DaemonProcess) {
+    daemon.signal(nix::sys::signal::Signal::SIGTERM);
+    daemon
+        .wait(Duration::from_secs(5))
+        .expect("the daemon stops on SIGTERM");
+}
+
+/// Every byte `--record` wrote for `link`, in order, with its direction and the wall time
+/// the daemon read it (`rx`) or handed it to the port (`tx`, when it left the pacer, just
+/// before the write).
+fn recorded_bytes(record: &std::path::Path, link: &str) -> Vec<(Direction, u8, f64)> {
+    let text = std::fs::read_to_string(record.join("bytes.tsv")).expect("bytes.tsv");
+    let mut bytes = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let chunk = parse_chunk(line, i + 1).expect("a bytes.tsv row");
+        if chunk.link == link {
+            bytes.extend(
+                chunk
+                    .data
+                    .iter()
+                    .map(|&b| (chunk.dir, b, chunk.wall_unix_s)),
+            );
+        }
+    }
+    bytes
+}
+
+/// Splits `(byte, time_s)` into sentences (`$` to `\n`) and returns how many, with each
+/// byte's lateness against its sentence's wire schedule: byte k is due at S + (k + 1) x
+/// `char_s`, S fitted per sentence as the earliest time minus its offset (so the best byte of
+/// each sentence is 0 late).
+fn sentence_lateness_us(bytes: &[(u8, f64)], char_s: f64) -> (usize, Vec<f64>) {
+    let mut sentences: Vec<Vec<f64>> = Vec::new();
+    let mut current: Option<Vec<f64>> = None;
+    for &(b, at) in bytes {
+        if b == b'$' {
+            current = Some(Vec::new());
+        }
+        if let Some(times) = current.as_mut() {
+            times.push(at);
+            if b == b'\n' {
+                sentences.extend(current.take());
             }
         }
     }
     let mut late_us = Vec::new();
-    for arrivals in &sentences {
-        let offsets: Vec<f64> = arrivals
+    for times in &sentences {
+        let offsets: Vec<f64> = times
             .iter()
             .enumerate()
             .map(|(k, t)| t - (k + 1) as f64 * char_s)
@@ -288,17 +389,7 @@ fn nmea_at(speed: f64, wall_s: f64) {
         let start = offsets.iter().copied().fold(f64::INFINITY, f64::min);
         late_us.extend(offsets.iter().map(|o| (o - start) * 1e6));
     }
-    let samples = late_us.len();
-    let (p50, p99, max) = summary(&mut late_us);
-    let s = daemon.status();
-    println!(
-        "nmea emission jitter, realtime speed {speed}, {} sentences ({samples} bytes) over {wall_s} s wall, overruns {}",
-        sentences.len(),
-        s.overruns
-    );
-    println!(
-        "  byte lateness vs wire schedule: p50 {p50:8.1} us  p99 {p99:8.1} us  max {max:8.1} us  (target p99 < 1000 us)"
-    );
+    (sentences.len(), late_us)
 }
 
 fn cpu_percent(daemon: &DaemonProcess, over: Duration) -> f64 {
