@@ -9,7 +9,9 @@
 //!   hand-over of each byte, from the wall times its `--record` output gives them, so a late
 //!   byte can be told apart as the daemon's or the kernel's pty delivery.
 //! - `cpu`: daemon CPU idle and under a 100 Hz ADC stream, from /proc/PID/stat; baseline: the
-//!   same stream with `release_quantum_ms = 0` (one wake-up per byte) in the same run.
+//!   same stream with `release_quantum_ms = 0` (one wake-up per byte) in the same run. Then
+//!   the same two settings under a client polling 800 `ADC_READ`s a second, which is what
+//!   releasing replies byte by byte would cost.
 //! - `rss`: resident memory over one simulated hour at speed 100 with a client.
 //!
 //! `cargo bench -p pty-tests --bench daemon [-- adc|nmea|cpu|rss]` (all by default).
@@ -407,6 +409,59 @@ fn cpu() {
         "  ratio stream CPU, release quantum 1 ms / one wake-up per byte: {:.2}x",
         quantum / byte_by_byte
     );
+    let byte_by_byte = cpu_polled(Some(0.0));
+    let quantum = cpu_polled(None);
+    println!(
+        "  ratio polled CPU, release quantum 1 ms / one wake-up per byte: {:.2}x",
+        quantum / byte_by_byte
+    );
+}
+
+/// Prints and returns the CPU while a client polls: `ADC_READ` of channels 0-7 in turn, 800
+/// a second (each channel at 100 Hz, as a control loop reading every channel would), each
+/// write waiting for its reply.
+fn cpu_polled(quantum_ms: Option<f64>) -> f64 {
+    const PERIOD: Duration = Duration::from_micros(1250);
+    let dir = TestDir::new("bench-cpu-poll");
+    let args = quantum_args(&dir, quantum_ms);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let daemon = DaemonProcess::start(dir, &args);
+    let mut port = open_raw(&daemon.link("sensor"));
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let client = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let started = Instant::now();
+            let mut reply = [0u8; 10];
+            let mut i = 0u32;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                let due = started + PERIOD * i;
+                std::thread::sleep(due.saturating_duration_since(Instant::now()));
+                let request = frame(
+                    i as u8,
+                    Message::AdcRead {
+                        channel: AdcChannel::new((i % 8) as u8).unwrap(),
+                    },
+                );
+                port.write_all(&request).unwrap();
+                port.read_exact(&mut reply).unwrap();
+                i += 1;
+            }
+            i
+        })
+    };
+    std::thread::sleep(Duration::from_secs(1));
+    let interval = Duration::from_secs(10);
+    let polled = cpu_percent(&daemon, interval);
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let replies = client.join().unwrap();
+    let quantum = quantum_ms.map_or("1.0 (default)".to_string(), |q| format!("{q:.1}"));
+    println!("daemon CPU over {interval:?}, release_quantum_ms {quantum}");
+    println!(
+        "  800 ADC reads a second, client waiting for each: {polled:5.2} % of one core  ({replies} replies in {:.1} s)",
+        (interval + Duration::from_secs(1)).as_secs_f64()
+    );
+    polled
 }
 
 /// Prints and returns the CPU under the stream.
