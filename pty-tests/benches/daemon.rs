@@ -2,8 +2,8 @@
 //!
 //! - `adc`: ADC read over a pty at 115200 baud, request to complete reply, minus the
 //!   modelled wire time of the reply; baseline: a raw pty echo round trip in the same run;
-//!   also with `release_quantum_ms = 0` (one wake-up per byte), to show the quantum costs
-//!   no latency.
+//!   also with `release_quantum_ms = 0` (one wake-up per byte), to show what the quantum
+//!   costs in latency; and the daemon's own turnaround, from its `--record` wall times.
 //! - `nmea`: real-time NMEA emission jitter: each byte's arrival at the client against its
 //!   sentence's 4800 baud wire schedule; beside it the same figure for the daemon's own
 //!   hand-over of each byte, from the wall times its `--record` output gives them, so a late
@@ -21,11 +21,11 @@ use std::os::fd::AsFd;
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
-use eyebot_hil::record::{Direction, parse_chunk};
+use eyebot_hil::record::Direction;
 use firmware_protocol::Frame;
 use firmware_protocol::sensor_link::{AdcChannel, Message};
 use nix::sys::termios;
-use pty_tests::daemon::{DaemonProcess, TestDir, link_status, open_raw};
+use pty_tests::daemon::{DaemonProcess, TestDir, link_status, open_raw, read_chunks};
 
 fn frame(seq: u8, message: Message) -> Vec<u8> {
     let mut b = BytesMut::new();
@@ -347,20 +347,14 @@ fn stop(daemon: &mut DaemonProcess) {
 /// the daemon read it (`rx`) or handed it to the port (`tx`, when it left the pacer, just
 /// before the write).
 fn recorded_bytes(record: &std::path::Path, link: &str) -> Vec<(Direction, u8, f64)> {
-    let text = std::fs::read_to_string(record.join("bytes.tsv")).expect("bytes.tsv");
-    let mut bytes = Vec::new();
-    for (i, line) in text.lines().enumerate().skip(1) {
-        let chunk = parse_chunk(line, i + 1).expect("a bytes.tsv row");
-        if chunk.link == link {
-            bytes.extend(
-                chunk
-                    .data
-                    .iter()
-                    .map(|&b| (chunk.dir, b, chunk.wall_unix_s)),
-            );
-        }
-    }
-    bytes
+    read_chunks(record)
+        .into_iter()
+        .filter(|chunk| chunk.link == link)
+        .flat_map(|chunk| {
+            let (dir, wall) = (chunk.dir, chunk.wall_unix_s);
+            chunk.data.into_iter().map(move |b| (dir, b, wall))
+        })
+        .collect()
 }
 
 /// Splits `(byte, time_s)` into sentences (`$` to `\n`) and returns how many, with each

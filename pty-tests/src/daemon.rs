@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use eyebot_hil::config::{ConfigSource, DEFAULT_CONFIG, Directory, Document, Embedded};
+use eyebot_hil::config::{DEFAULT_CONFIG, Directory, Document};
 use eyebot_hil::daemon::config::DaemonConfig;
 use eyebot_hil::daemon::status::StatusSnapshot;
 use eyebot_hil::daemon::{Readiness, RunOptions, RunSummary};
@@ -501,14 +501,6 @@ impl Drop for InProcessDaemon {
             let _ = thread.join();
         }
     }
-}
-
-/// Loads the embedded default daemon configuration's text.
-pub fn embedded_default_text() -> String {
-    Embedded
-        .read(DEFAULT_CONFIG)
-        .expect("embedded default")
-        .into_owned()
 }
 
 /// Reads `bytes.tsv` of a recording.
