@@ -222,8 +222,19 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
             }
         }
     }
-    let (d50, d99, dmax) = summary(&mut turnaround);
     let mut overhead: Vec<f64> = latency.iter().map(|l| l - wire_us).collect();
+    // Read by read: of the reads over the target at the client, how many were already over
+    // it when the daemon handed the reply over (requests and replies alternate strictly, so
+    // the two lists line up).
+    assert_eq!(turnaround.len(), overhead.len(), "one recorded reply per read");
+    let slow: Vec<(f64, f64)> = overhead
+        .iter()
+        .zip(&turnaround)
+        .filter(|(client, _)| **client > 200.0)
+        .map(|(c, d)| (*c, *d))
+        .collect();
+    let slow_in_daemon = slow.iter().filter(|(_, d)| *d > 200.0).count();
+    let (d50, d99, dmax) = summary(&mut turnaround);
     let (l50, l99, lmax) = summary(&mut latency);
     let (o50, o99, omax) = summary(&mut overhead);
     let o90 = percentile(&overhead, 0.90);
@@ -241,6 +252,11 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
     println!(
         "  the daemon's own turnaround, minus wire time (its recording, {} replies): p50 {d50:8.1} us  p99 {d99:8.1} us  max {dmax:8.1} us",
         turnaround.len()
+    );
+    println!(
+        "  reads over 200 us at the client: {} of {}; of these, over 200 us already at the daemon's hand-over: {slow_in_daemon}",
+        slow.len(),
+        overhead.len()
     );
     println!("  baseline raw pty echo RTT: p50 {b50:8.1} us  p99 {b99:8.1} us  max {bmax:8.1} us");
     println!(
