@@ -18,7 +18,7 @@ fn main() -> ExitCode {
     match eyebot_hil::cli::main(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("eyebot-hil: {err}");
+            eyebot_hil::cli::output::write_err(format_args!("eyebot-hil: {err}\n"));
             ExitCode::FAILURE
         }
     }

@@ -226,7 +226,11 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
     // Read by read: of the reads over the target at the client, how many were already over
     // it when the daemon handed the reply over (requests and replies alternate strictly, so
     // the two lists line up).
-    assert_eq!(turnaround.len(), overhead.len(), "one recorded reply per read");
+    assert_eq!(
+        turnaround.len(),
+        overhead.len(),
+        "one recorded reply per read"
+    );
     let slow: Vec<(f64, f64)> = overhead
         .iter()
         .zip(&turnaround)

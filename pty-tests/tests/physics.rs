@@ -484,3 +484,42 @@ fn simulate_out_dash_writes_the_csv_to_stdout() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A report whose reader has gone ends quietly with status 0, as a C tool would on SIGPIPE.
+/// `replay --dry-run --stats` writes its sentences to standard output and its report to
+/// standard error; with either closed, `println!` and `eprintln!` panicked.
+#[test]
+fn reports_end_quietly_when_their_reader_is_gone() {
+    use std::process::{Command, Stdio};
+    let bin = pty_tests::daemon::binary();
+    let log = pty_tests::daemon::configs_dir().join("../pty-tests/fixtures/replay/depth.log");
+    let replay = |stdout: Stdio, stderr: Stdio| {
+        Command::new(bin)
+            .args(["replay", "--dry-run", "--stats", log.to_str().unwrap()])
+            .stdout(stdout)
+            .stderr(stderr)
+            .output()
+            .unwrap()
+    };
+    let closed = || {
+        let (reader, writer) = std::io::pipe().expect("a pipe");
+        drop(reader);
+        Stdio::from(writer)
+    };
+    let open = replay(Stdio::piped(), Stdio::piped());
+    assert!(open.status.success(), "{open:?}");
+    assert!(
+        !open.stdout.is_empty() && !open.stderr.is_empty(),
+        "{open:?}"
+    );
+    for (what, out) in [
+        ("standard output closed", replay(closed(), Stdio::piped())),
+        ("standard error closed", replay(Stdio::piped(), closed())),
+    ] {
+        assert_eq!(out.status.code(), Some(0), "{what}: {out:?}");
+        assert!(
+            !String::from_utf8_lossy(&out.stderr).contains("panicked"),
+            "{what}: {out:?}"
+        );
+    }
+}

@@ -7,6 +7,7 @@
 //! - `gap convert RECORD_DIR --out DIR`: a daemon recording as a measurement.
 //! - `gap --measured DIR_WITH_summary.toml --model MODEL.toml`: summary observations.
 
+use crate::cli::output::{errln, outln};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -111,7 +112,7 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
     }
     let m = Measurement::load(measured).map_err(to_cli)?;
     for n in &m.notices {
-        eprintln!("notice: {n}");
+        errln!("notice: {n}");
     }
     let model = GapModel::load(model_path).map_err(to_cli)?;
     let total = (gap::fit::MAX_EFFECTS * effects::LIBRARY.len()) as u64;
@@ -143,7 +144,7 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
                     .zip(&e.ci95)
                     .map(|((n, v), (_, c))| format!("{n} = {v:.4} [{:.4}, {:.4}]", c[0], c[1]))
                     .collect();
-                println!(
+                outln!(
                     "effect: {} ({}), delta BIC {:.1}",
                     e.name,
                     p.join(", "),
@@ -151,9 +152,9 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
                 );
             }
         }
-        None => println!("no significant missing effect"),
+        None => outln!("no significant missing effect"),
     }
-    println!(
+    outln!(
         "gap: {:.2} -> {:.2} ({:.0} % smaller); report in {}",
         analysis.excess_before,
         analysis.excess_after,
@@ -195,7 +196,7 @@ fn run_summary(
         std::path::Path::to_path_buf,
     );
     gap::summary::write_all(&a, &s, file, model_path, &out).map_err(to_cli)?;
-    println!(
+    outln!(
         "{} summary observations of `{}` against `{}`{}",
         s.observations.len(),
         s.name,
@@ -206,11 +207,11 @@ fn run_summary(
             ""
         }
     );
-    println!("| observation | measured | model before | z before | model after | z after |");
+    outln!("| observation | measured | model before | z before | model after | z after |");
     for o in &a.observations {
         let f =
             |v: Option<f64>, p: usize| v.map_or_else(|| "-".to_string(), |v| format!("{v:.p$}"));
-        println!(
+        outln!(
             "| {} | {}{:.3} {} | {} | {} | {} | {} |",
             o.name,
             match o.bound {
@@ -227,7 +228,7 @@ fn run_summary(
         );
     }
     if a.accepted.is_empty() {
-        println!("no significant missing effect");
+        outln!("no significant missing effect");
     }
     // Final values: each accepted effect as refitted jointly with the ones after it.
     for e in a.fitted.effects.iter().skip(model.effects.len()) {
@@ -239,14 +240,14 @@ fn run_summary(
             .zip(&e.ci95)
             .map(|((n, v), c)| format!("{n} = {v:.4} [{:.4}, {:.4}]", c[0], c[1]))
             .collect();
-        println!(
+        outln!(
             "effect: {} ({}), delta BIC {:.1} when added",
             e.effect.name,
             p.join(", "),
             e.delta_bic.unwrap_or(f64::NAN)
         );
     }
-    println!(
+    outln!(
         "gap (RMS of z): {:.2} -> {:.2} ({:.0} % smaller); chi2 after {:.1} vs 95 % point {:.1}: {}",
         a.gap_before,
         a.gap_after,
@@ -259,7 +260,7 @@ fn run_summary(
             format!("still unexplained: {}", a.unexplained.join(", "))
         }
     );
-    println!("report in {}", out.display());
+    outln!("report in {}", out.display());
     Ok(())
 }
 
@@ -273,11 +274,11 @@ fn run_convert(c: &ConvertArgs) -> Result<(), CliError> {
     };
     let conv = gap::convert::convert(&c.record, &opts).map_err(to_cli)?;
     for n in &conv.notices {
-        eprintln!("notice: {n}");
+        errln!("notice: {n}");
     }
     conv.measurement.write(&c.out).map_err(to_cli)?;
     let m = &conv.measurement;
-    println!(
+    outln!(
         "{}: {:.1} s, {} command rows, channels {} -> {}",
         c.record.display(),
         m.experiment.duration_s,
@@ -311,7 +312,7 @@ fn run_generate(g: &GenerateArgs) -> Result<(), CliError> {
     )
     .map_err(to_cli)?;
     m.write(&g.out).map_err(to_cli)?;
-    println!(
+    outln!(
         "{}: {} channels, {:.0} s -> {}",
         m.experiment.name,
         m.channels.len(),

@@ -1,6 +1,7 @@
 //! `eyebot-hil gap-bench [--cases N] [--seed S] [--effects a,b] [--out FILE]`: the
 //! hidden-effect benchmark of the reality-gap workflow ([`crate::gap::bench`]).
 
+use crate::cli::output::out;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -67,7 +68,7 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
     .map_err(|e| CliError::Output(e.to_string()))?;
     bar.finish_and_clear();
     let table = bench::table(&results);
-    print!("{table}");
+    out!("{table}");
     if let Some(path) = &args.out {
         let mut text = table.clone();
         text.push_str(

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 
 pub mod gap;
 pub mod gap_bench;
+pub mod output;
 pub mod probe;
 pub mod replay;
 pub mod run;

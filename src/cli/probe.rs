@@ -1,5 +1,6 @@
 //! `eyebot-hil probe`: a small EyeBot-side client for people and scripts.
 
+use crate::cli::output::outln;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -118,13 +119,13 @@ pub fn main(args: ProbeArgs) -> Result<(), CliError> {
                 let left = deadline.saturating_duration_since(tokio::time::Instant::now());
                 match sonar.next(left).await? {
                     None => return Err(CliError::Usage(format!("timed out after {timeout_s} s"))),
-                    Some(SonarItem::Ack(t)) => println!("ack transducer {t}"),
-                    Some(SonarItem::Nak) => println!("nak"),
+                    Some(SonarItem::Ack(t)) => outln!("ack transducer {t}"),
+                    Some(SonarItem::Nak) => outln!("nak"),
                     Some(SonarItem::Sentence { raw, .. }) => {
-                        println!("{raw}");
+                        outln!("{raw}");
                         sentences += 1;
                     }
-                    Some(SonarItem::Error(e)) => println!("error: {e}"),
+                    Some(SonarItem::Error(e)) => outln!("error: {e}"),
                 }
             }
             return Ok(());
@@ -141,12 +142,12 @@ pub fn main(args: ProbeArgs) -> Result<(), CliError> {
                     max_payload,
                 } = reply
                 {
-                    println!("protocol {protocol_version} capabilities {capabilities:#06x} tick {tick_us} us max payload {max_payload}");
+                    outln!("protocol {protocol_version} capabilities {capabilities:#06x} tick {tick_us} us max payload {max_payload}");
                 }
             }
             ProbeAction::Counters => {
                 if let Message::Counters(c) = client.request("COUNTERS_GET", Message::CountersGet, Duration::ZERO).await? {
-                    println!(
+                    outln!(
                         "rx_frames {} rx_crc_errors {} rx_framing_errors {} rx_skipped_bytes {} rx_rejected {} tx_frames {} tx_naks {}",
                         c.rx_frames, c.rx_crc_errors, c.rx_framing_errors, c.rx_skipped_bytes, c.rx_rejected, c.tx_frames, c.tx_naks
                     );
@@ -156,7 +157,7 @@ pub fn main(args: ProbeArgs) -> Result<(), CliError> {
                 let channel = AdcChannel::new(channel).map_err(|e| CliError::Usage(e.to_string()))?;
                 for _ in 0..count {
                     if let Message::AdcValue { value, .. } = client.request("ADC_READ", Message::AdcRead { channel }, Duration::ZERO).await? {
-                        println!("adc {} = {} ({:.3} V)", channel.get(), value.get(), f64::from(value.get()) * 5.0 / 1024.0);
+                        outln!("adc {} = {} ({:.3} V)", channel.get(), value.get(), f64::from(value.get()) * 5.0 / 1024.0);
                     }
                 }
             }
@@ -173,12 +174,12 @@ pub fn main(args: ProbeArgs) -> Result<(), CliError> {
                     Message::CompassHeading { word } => {
                         let fmt = if matches!(format, CompassFormat::Bcd) { HeadingFormat::Bcd } else { HeadingFormat::Binary };
                         match word.decode(fmt) {
-                            Ok(deg) => println!("heading {deg} deg (word {:#06x})", word.0),
-                            Err(e) => println!("bad heading word: {e}"),
+                            Ok(deg) => outln!("heading {deg} deg (word {:#06x})", word.0),
+                            Err(e) => outln!("bad heading word: {e}"),
                         }
                     }
-                    Message::CompassRaw { x, y } => println!("raw x {x} y {y}"),
-                    other => println!("unexpected reply {other:?}"),
+                    Message::CompassRaw { x, y } => outln!("raw x {x} y {y}"),
+                    other => outln!("unexpected reply {other:?}"),
                 }
             }
             ProbeAction::Thrusters {
@@ -194,18 +195,18 @@ pub fn main(args: ProbeArgs) -> Result<(), CliError> {
                     percent_to_command(stern)?,
                 ];
                 client.request("THRUSTER_SET_ALL", Message::ThrusterSetAll { commands }, Duration::ZERO).await?;
-                println!("thrusters set");
+                outln!("thrusters set");
             }
             ProbeAction::Advance { ticks } => {
                 // Allow the bridge time to simulate: generously 1 ms per tick.
                 let extra = Duration::from_millis(u64::from(ticks));
                 if let Message::Time { ticks, tick_us } = client.request("TIME_ADVANCE", Message::TimeAdvance { ticks }, extra).await? {
-                    println!("time {ticks} ticks ({:.3} s)", f64::from(ticks) * f64::from(tick_us) * 1e-6);
+                    outln!("time {ticks} ticks ({:.3} s)", f64::from(ticks) * f64::from(tick_us) * 1e-6);
                 }
             }
             ProbeAction::Time => {
                 if let Message::Time { ticks, tick_us } = client.request("TIME_GET", Message::TimeGet, Duration::ZERO).await? {
-                    println!("time {ticks} ticks ({:.3} s)", f64::from(ticks) * f64::from(tick_us) * 1e-6);
+                    outln!("time {ticks} ticks ({:.3} s)", f64::from(ticks) * f64::from(tick_us) * 1e-6);
                 }
             }
             ProbeAction::Sonar { .. } => unreachable!("handled above"),

@@ -1,6 +1,7 @@
 //! `eyebot-hil replay LOG... [options]`: arguments, output set-up and the terminal report.
 //! The replay itself is [`crate::replay`]; formats and rules are in `docs/replay.md`.
 
+use crate::cli::output::{err, errln, out, outln};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -167,7 +168,7 @@ impl Terminal {
     fn line(&self, text: &str) {
         match &self.bar {
             Some(bar) => bar.println(text),
-            None => eprintln!("{text}"),
+            None => errln!("{text}"),
         }
     }
 }
@@ -205,14 +206,14 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
         LineOrigin::Default => "default".to_string(),
     };
     for input in replay.inputs() {
-        eprintln!(
+        errln!(
             "replay: {}: {}{}",
             input.path.display(),
             input.format,
             if input.gzip { ", gzip" } else { "" }
         );
     }
-    eprintln!(
+    errln!(
         "replay: line {line} ({origin_note}); pacing {}; speed {}; policy {:?}",
         if args.dry_run {
             "none (dry run)".to_string()
@@ -251,14 +252,14 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
                 source,
             }
         })?;
-        println!(
+        outln!(
             "replay into the sonar multiplexer of the daemon at {}",
             run_dir.display()
         );
         Box::new(ByteSink::new(Port::Writer(Box::new(stream)), &line))
     } else if let Some(device) = &args.serial {
         let port = serial::open(device, &line)?;
-        println!("replay {} ({line})", device.display());
+        outln!("replay {} ({line})", device.display());
         Box::new(ByteSink::new(Port::Serial(port), &line))
     } else {
         let link = args
@@ -266,7 +267,7 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
             .clone()
             .unwrap_or_else(|| PathBuf::from("run/replay"));
         let pty = PtyMaster::open(Some(&link))?;
-        println!(
+        outln!(
             "replay {} -> {}",
             pty.client_path().display(),
             pty.slave_path().display()
@@ -296,18 +297,18 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
     }
     let summary = result?;
     if stop.is_triggered() {
-        eprintln!(
+        errln!(
             "replay: stopped by signal after {:.3} s",
             started.elapsed().as_secs_f64()
         );
     }
-    eprint!("{summary}");
+    err!("{summary}");
     if args.stats {
         // With sentences on stdout, the statistics go to stderr.
         if args.stdout && !args.dry_run {
-            eprint!("{}", summary.stats_text());
+            err!("{}", summary.stats_text());
         } else {
-            print!("{}", summary.stats_text());
+            out!("{}", summary.stats_text());
         }
     }
     drop(sink); // removes the pty symlink

@@ -1,5 +1,6 @@
 //! `eyebot-hil run`: the bridge daemon.
 
+use crate::cli::output::errln;
 use std::io::Write as _;
 use std::path::PathBuf;
 
@@ -148,7 +149,7 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
         })
         .await
     })?;
-    eprintln!(
+    errln!(
         "eyebot-hil: stopped at simulated time {:.3} s ({} overruns){}",
         summary.sim_time_s,
         summary.overruns,

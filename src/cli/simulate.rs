@@ -2,6 +2,7 @@
 //! --out run.csv`: runs one experiment offline, as fast as the machine allows, and writes the
 //! state trace as CSV (one row per physics step).
 
+use crate::cli::output::{errln, outln};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -145,9 +146,9 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
         }
     );
     if to_stdout {
-        eprintln!("{line}");
+        errln!("{line}");
     } else {
-        println!("{line}");
+        outln!("{line}");
     }
     Ok(())
 }

@@ -1,5 +1,6 @@
 //! `eyebot-hil status`: asks a running daemon for its snapshot.
 
+use crate::cli::output::{out, outln};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -29,12 +30,12 @@ pub fn main(args: StatusArgs) -> Result<(), CliError> {
     let runtime = super::runtime()?;
     let snapshot = runtime.block_on(status::query(&socket, Duration::from_secs(2)))?;
     if args.json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&snapshot).map_err(|e| CliError::Output(e.to_string()))?
         );
     } else {
-        print!("{}", snapshot.render());
+        out!("{}", snapshot.render());
     }
     Ok(())
 }

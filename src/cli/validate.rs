@@ -2,6 +2,7 @@
 //! SubSim's and ours. Rows come from the sources in [`ROW_SOURCES`]; each computes its rows by
 //! running the simulator now.
 
+use crate::cli::output::{out, outln};
 use std::path::PathBuf;
 
 use crate::cli::CliError;
@@ -56,9 +57,9 @@ pub fn run(args: &ValidateArgs) -> Result<(), CliError> {
     if args.json {
         let json =
             serde_json::to_string_pretty(&rows).map_err(|e| CliError::Output(e.to_string()))?;
-        println!("{json}");
+        outln!("{json}");
     } else {
-        print!("{}", render_table(&rows));
+        out!("{}", render_table(&rows));
     }
     let failed = rows.iter().filter(|r| !r.pass).count();
     if failed > 0 {
