@@ -1,5 +1,6 @@
 //! Life cycle of the binary: clean shutdown on SIGTERM/SIGINT loses no recorded byte,
-//! `kill -9` loses at most the last 100 ms, and `eyebot-hil status` reports the run.
+//! `kill -9` loses at most the last 100 ms, and `eyebot-hil status` reports the run; and
+//! the binary's own client, `eyebot-hil probe`, against it.
 
 use std::io::{Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -433,4 +434,89 @@ fn rt_priority_runs_the_bridge_thread_under_sched_fifo() {
     let mut reply = [0u8; 10];
     sensor.read_exact(&mut reply).unwrap();
     assert_eq!(&reply[..3], &[0xEB, 0x90, 0x90], "an ADC_VALUE reply");
+}
+
+/// Runs `eyebot-hil probe --link LINK ARGS` and returns its standard output, which must be
+/// a success.
+fn probe(link: &std::path::Path, args: &[&str]) -> String {
+    let out = std::process::Command::new(pty_tests::daemon::binary())
+        .arg("probe")
+        .arg("--link")
+        .arg(link)
+        .args(args)
+        .output()
+        .expect("run eyebot-hil probe");
+    assert!(out.status.success(), "probe {args:?}: {out:?}");
+    String::from_utf8(out.stdout).expect("probe prints UTF-8")
+}
+
+/// `eyebot-hil probe`, the client people and scripts use, against the built daemon in
+/// lockstep: every sensor-link action prints its line, and `advance` moves simulated time by
+/// exactly the ticks asked for.
+#[test]
+fn probe_reads_the_sensor_link_and_drives_lockstep_time() {
+    let daemon = DaemonProcess::start(TestDir::new("probe-sensor"), &["--time-mode", "lockstep"]);
+    let sensor = daemon.link("sensor");
+    let hello = probe(&sensor, &["hello"]);
+    assert!(hello.starts_with("protocol "), "{hello}");
+    let adc = probe(&sensor, &["adc", "0", "--count", "3"]);
+    assert_eq!(adc.lines().count(), 3, "{adc}");
+    for line in adc.lines() {
+        let code: u16 = line
+            .strip_prefix("adc 0 = ")
+            .and_then(|rest| rest.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("an ADC line: {line}"));
+        assert!(code <= 1023, "a 10-bit code: {line}");
+    }
+    let compass = probe(&sensor, &["compass"]);
+    assert!(compass.starts_with("heading "), "{compass}");
+    assert_eq!(
+        probe(&sensor, &["thrusters", "50", "50", "0", "-20"]),
+        "thrusters set\n"
+    );
+    let ticks = |line: &str| -> u64 {
+        line.strip_prefix("time ")
+            .and_then(|rest| rest.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("a time line: {line}"))
+    };
+    let before = ticks(&probe(&sensor, &["time"]));
+    let after = ticks(&probe(&sensor, &["advance", "250"]));
+    assert_eq!(after, before + 250);
+    assert_eq!(
+        ticks(&probe(&sensor, &["time"])),
+        after,
+        "time holds in lockstep"
+    );
+}
+
+/// `probe ... sonar N` selects a transducer and prints the multiplexer's ack, then the
+/// sentences, each a valid NMEA line.
+#[test]
+fn probe_selects_a_transducer_and_prints_its_sentences() {
+    let dir = TestDir::new("probe-sonar");
+    // Every ping gives a sentence, with or without an echo.
+    let config = dir.write_config(
+        "every-ping.toml",
+        &[("invalid_echo = \"omit\"", "invalid_echo = \"empty\"")],
+    );
+    let daemon = DaemonProcess::start(dir, &["--config", config.to_str().unwrap()]);
+    let out = probe(
+        &daemon.link("sonar"),
+        &["sonar", "2", "--count", "2", "--timeout-s", "20"],
+    );
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.first(), Some(&"ack transducer 2"), "{out}");
+    let sentences: Vec<&str> = lines
+        .iter()
+        .copied()
+        .filter(|l| l.starts_with('$'))
+        .collect();
+    assert_eq!(sentences.len(), 2, "{out}");
+    for s in sentences {
+        // probe prints each sentence as a line; on the wire it ended in CR LF.
+        firmware_protocol::nmea::parse_line(format!("{s}\r\n").as_bytes())
+            .unwrap_or_else(|e| panic!("{s}: {e}"));
+    }
 }
