@@ -469,6 +469,8 @@ fn probe_reads_the_sensor_link_and_drives_lockstep_time() {
             .unwrap_or_else(|| panic!("an ADC line: {line}"));
         assert!(code <= 1023, "a 10-bit code: {line}");
     }
+    let counters = probe(&sensor, &["counters"]);
+    assert!(counters.starts_with("rx_frames "), "{counters}");
     let compass = probe(&sensor, &["compass"]);
     assert!(compass.starts_with("heading "), "{compass}");
     assert_eq!(

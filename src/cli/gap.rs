@@ -7,13 +7,13 @@
 //! - `gap convert RECORD_DIR --out DIR`: a daemon recording as a measurement.
 //! - `gap --measured DIR_WITH_summary.toml --model MODEL.toml`: summary observations.
 
-use crate::cli::output::{errln, outln};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::cli::CliError;
+use crate::cli::output::{errln, outln};
 use crate::config::{ConfigSource, Directory, Document};
 use crate::gap::format::Measurement;
 use crate::gap::model::GapModel;

@@ -1,13 +1,13 @@
 //! `eyebot-hil gap-bench [--cases N] [--seed S] [--effects a,b] [--out FILE]`: the
 //! hidden-effect benchmark of the reality-gap workflow ([`crate::gap::bench`]).
 
-use crate::cli::output::out;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::cli::CliError;
+use crate::cli::output::out;
 use crate::gap::bench::{self, BenchOptions};
 use crate::gap::effects::{self, Effect};
 

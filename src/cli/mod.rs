@@ -81,6 +81,11 @@ pub enum CliError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error("the bridge answered {request} with {reply}")]
+    UnexpectedReply {
+        request: &'static str,
+        reply: String,
+    },
     #[error("{0}")]
     Usage(String),
     #[error("cannot format output: {0}")]

@@ -1,6 +1,5 @@
 //! `eyebot-hil probe`: a small EyeBot-side client for people and scripts.
 
-use crate::cli::output::outln;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -11,6 +10,7 @@ use firmware_protocol::sensor_link::{
 use firmware_protocol::{HeadingFormat, Transducer};
 
 use super::CliError;
+use crate::cli::output::outln;
 use crate::probe::{SensorClient, SonarClient, SonarItem};
 use crate::transport::LineSettings;
 
@@ -101,116 +101,198 @@ pub fn percent_to_command(percent: i32) -> Result<ThrusterCommand, CliError> {
 }
 
 pub fn main(args: ProbeArgs) -> Result<(), CliError> {
-    let runtime = super::runtime()?;
-    runtime.block_on(async move {
-        if let ProbeAction::Sonar {
-            transducer,
-            count,
-            timeout_s,
-        } = args.action
-        {
-            let line = args.line.unwrap_or(LineSettings::n81(4800));
-            let mut sonar = SonarClient::open(&args.link, &line)?;
-            let t = Transducer::new(transducer).map_err(|e| CliError::Usage(e.to_string()))?;
-            sonar.select(t).await?;
-            let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
-            let mut sentences = 0;
-            while sentences < count {
-                let left = deadline.saturating_duration_since(tokio::time::Instant::now());
-                match sonar.next(left).await? {
-                    None => return Err(CliError::Usage(format!("timed out after {timeout_s} s"))),
-                    Some(SonarItem::Ack(t)) => outln!("ack transducer {t}"),
-                    Some(SonarItem::Nak) => outln!("nak"),
-                    Some(SonarItem::Sentence { raw, .. }) => {
-                        outln!("{raw}");
-                        sentences += 1;
-                    }
-                    Some(SonarItem::Error(e)) => outln!("error: {e}"),
-                }
-            }
-            return Ok(());
+    super::runtime()?.block_on(run(args))
+}
+
+async fn run(args: ProbeArgs) -> Result<(), CliError> {
+    if let ProbeAction::Sonar {
+        transducer,
+        count,
+        timeout_s,
+    } = args.action
+    {
+        let line = args.line.unwrap_or(LineSettings::n81(4800));
+        return sonar(&args.link, &line, transducer, count, timeout_s).await;
+    }
+    let line = args.line.unwrap_or(LineSettings::n81(115_200));
+    let mut client = SensorClient::open(&args.link, &line)?;
+    match args.action {
+        ProbeAction::Hello => {
+            let reply = client
+                .request(
+                    "HELLO",
+                    Message::Hello { client_version: 1 },
+                    Duration::ZERO,
+                )
+                .await?;
+            let Message::HelloReply {
+                protocol_version,
+                capabilities,
+                tick_us,
+                max_payload,
+            } = reply
+            else {
+                return Err(unexpected("HELLO", reply));
+            };
+            outln!(
+                "protocol {protocol_version} capabilities {capabilities:#06x} tick {tick_us} us max payload {max_payload}"
+            );
         }
-        let line = args.line.unwrap_or(LineSettings::n81(115_200));
-        let mut client = SensorClient::open(&args.link, &line)?;
-        match args.action {
-            ProbeAction::Hello => {
-                let reply = client.request("HELLO", Message::Hello { client_version: 1 }, Duration::ZERO).await?;
-                if let Message::HelloReply {
-                    protocol_version,
-                    capabilities,
-                    tick_us,
-                    max_payload,
-                } = reply
-                {
-                    outln!("protocol {protocol_version} capabilities {capabilities:#06x} tick {tick_us} us max payload {max_payload}");
-                }
-            }
-            ProbeAction::Counters => {
-                if let Message::Counters(c) = client.request("COUNTERS_GET", Message::CountersGet, Duration::ZERO).await? {
-                    outln!(
-                        "rx_frames {} rx_crc_errors {} rx_framing_errors {} rx_skipped_bytes {} rx_rejected {} tx_frames {} tx_naks {}",
-                        c.rx_frames, c.rx_crc_errors, c.rx_framing_errors, c.rx_skipped_bytes, c.rx_rejected, c.tx_frames, c.tx_naks
-                    );
-                }
-            }
-            ProbeAction::Adc { channel, count } => {
-                let channel = AdcChannel::new(channel).map_err(|e| CliError::Usage(e.to_string()))?;
-                for _ in 0..count {
-                    if let Message::AdcValue { value, .. } = client.request("ADC_READ", Message::AdcRead { channel }, Duration::ZERO).await? {
-                        outln!("adc {} = {} ({:.3} V)", channel.get(), value.get(), f64::from(value.get()) * 5.0 / 1024.0);
-                    }
-                }
-            }
-            ProbeAction::Compass { format } => {
-                let output = match format {
-                    CompassFormat::Binary => CompassOutput::Binary,
-                    CompassFormat::Bcd => CompassOutput::Bcd,
-                    CompassFormat::Raw => CompassOutput::Raw,
-                };
-                client
-                    .request("COMPASS_MODE", Message::CompassMode { mode: CompassMode::Poll, output }, Duration::ZERO)
+        ProbeAction::Counters => {
+            let reply = client
+                .request("COUNTERS_GET", Message::CountersGet, Duration::ZERO)
+                .await?;
+            let Message::Counters(c) = reply else {
+                return Err(unexpected("COUNTERS_GET", reply));
+            };
+            outln!(
+                "rx_frames {} rx_crc_errors {} rx_framing_errors {} rx_skipped_bytes {} rx_rejected {} tx_frames {} tx_naks {}",
+                c.rx_frames,
+                c.rx_crc_errors,
+                c.rx_framing_errors,
+                c.rx_skipped_bytes,
+                c.rx_rejected,
+                c.tx_frames,
+                c.tx_naks
+            );
+        }
+        ProbeAction::Adc { channel, count } => {
+            let channel = AdcChannel::new(channel).map_err(|e| CliError::Usage(e.to_string()))?;
+            for _ in 0..count {
+                let reply = client
+                    .request("ADC_READ", Message::AdcRead { channel }, Duration::ZERO)
                     .await?;
-                match client.request("COMPASS_READ", Message::CompassRead, Duration::ZERO).await? {
-                    Message::CompassHeading { word } => {
-                        let fmt = if matches!(format, CompassFormat::Bcd) { HeadingFormat::Bcd } else { HeadingFormat::Binary };
-                        match word.decode(fmt) {
-                            Ok(deg) => outln!("heading {deg} deg (word {:#06x})", word.0),
-                            Err(e) => outln!("bad heading word: {e}"),
-                        }
-                    }
-                    Message::CompassRaw { x, y } => outln!("raw x {x} y {y}"),
-                    other => outln!("unexpected reply {other:?}"),
-                }
+                let Message::AdcValue { value, .. } = reply else {
+                    return Err(unexpected("ADC_READ", reply));
+                };
+                outln!(
+                    "adc {} = {} ({:.3} V)",
+                    channel.get(),
+                    value.get(),
+                    f64::from(value.get()) * 5.0 / 1024.0
+                );
             }
-            ProbeAction::Thrusters {
-                port,
-                starboard,
-                bow,
-                stern,
-            } => {
-                let commands = [
-                    percent_to_command(port)?,
-                    percent_to_command(starboard)?,
-                    percent_to_command(bow)?,
-                    percent_to_command(stern)?,
-                ];
-                client.request("THRUSTER_SET_ALL", Message::ThrusterSetAll { commands }, Duration::ZERO).await?;
-                outln!("thrusters set");
-            }
-            ProbeAction::Advance { ticks } => {
-                // Allow the bridge time to simulate: generously 1 ms per tick.
-                let extra = Duration::from_millis(u64::from(ticks));
-                if let Message::Time { ticks, tick_us } = client.request("TIME_ADVANCE", Message::TimeAdvance { ticks }, extra).await? {
-                    outln!("time {ticks} ticks ({:.3} s)", f64::from(ticks) * f64::from(tick_us) * 1e-6);
-                }
-            }
-            ProbeAction::Time => {
-                if let Message::Time { ticks, tick_us } = client.request("TIME_GET", Message::TimeGet, Duration::ZERO).await? {
-                    outln!("time {ticks} ticks ({:.3} s)", f64::from(ticks) * f64::from(tick_us) * 1e-6);
-                }
-            }
-            ProbeAction::Sonar { .. } => unreachable!("handled above"),
         }
-        Ok(())
-    })
+        ProbeAction::Compass { format } => {
+            let output = match format {
+                CompassFormat::Binary => CompassOutput::Binary,
+                CompassFormat::Bcd => CompassOutput::Bcd,
+                CompassFormat::Raw => CompassOutput::Raw,
+            };
+            client
+                .request(
+                    "COMPASS_MODE",
+                    Message::CompassMode {
+                        mode: CompassMode::Poll,
+                        output,
+                    },
+                    Duration::ZERO,
+                )
+                .await?;
+            match client
+                .request("COMPASS_READ", Message::CompassRead, Duration::ZERO)
+                .await?
+            {
+                Message::CompassHeading { word } => {
+                    let fmt = if matches!(format, CompassFormat::Bcd) {
+                        HeadingFormat::Bcd
+                    } else {
+                        HeadingFormat::Binary
+                    };
+                    match word.decode(fmt) {
+                        Ok(deg) => outln!("heading {deg} deg (word {:#06x})", word.0),
+                        Err(e) => outln!("bad heading word: {e}"),
+                    }
+                }
+                Message::CompassRaw { x, y } => outln!("raw x {x} y {y}"),
+                other => return Err(unexpected("COMPASS_READ", other)),
+            }
+        }
+        ProbeAction::Thrusters {
+            port,
+            starboard,
+            bow,
+            stern,
+        } => {
+            let commands = [
+                percent_to_command(port)?,
+                percent_to_command(starboard)?,
+                percent_to_command(bow)?,
+                percent_to_command(stern)?,
+            ];
+            client
+                .request(
+                    "THRUSTER_SET_ALL",
+                    Message::ThrusterSetAll { commands },
+                    Duration::ZERO,
+                )
+                .await?;
+            outln!("thrusters set");
+        }
+        ProbeAction::Advance { ticks } => {
+            // Allow the bridge time to simulate: generously 1 ms per tick.
+            let extra = Duration::from_millis(u64::from(ticks));
+            let reply = client
+                .request("TIME_ADVANCE", Message::TimeAdvance { ticks }, extra)
+                .await?;
+            let Message::Time { ticks, tick_us } = reply else {
+                return Err(unexpected("TIME_ADVANCE", reply));
+            };
+            outln!(
+                "time {ticks} ticks ({:.3} s)",
+                f64::from(ticks) * f64::from(tick_us) * 1e-6
+            );
+        }
+        ProbeAction::Time => {
+            let reply = client
+                .request("TIME_GET", Message::TimeGet, Duration::ZERO)
+                .await?;
+            let Message::Time { ticks, tick_us } = reply else {
+                return Err(unexpected("TIME_GET", reply));
+            };
+            outln!(
+                "time {ticks} ticks ({:.3} s)",
+                f64::from(ticks) * f64::from(tick_us) * 1e-6
+            );
+        }
+        ProbeAction::Sonar { .. } => unreachable!("handled above"),
+    }
+    Ok(())
+}
+
+/// A reply of the wrong kind: a bridge this client does not understand.
+fn unexpected(request: &'static str, reply: Message) -> CliError {
+    CliError::UnexpectedReply {
+        request,
+        reply: format!("{reply:?}"),
+    }
+}
+
+/// Selects `transducer` and prints what the multiplexer sends, up to `count` sentences.
+async fn sonar(
+    link: &std::path::Path,
+    line: &LineSettings,
+    transducer: u8,
+    count: u32,
+    timeout_s: f64,
+) -> Result<(), CliError> {
+    let mut sonar = SonarClient::open(link, line)?;
+    let t = Transducer::new(transducer).map_err(|e| CliError::Usage(e.to_string()))?;
+    sonar.select(t).await?;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
+    let mut sentences = 0;
+    while sentences < count {
+        let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+        match sonar.next(left).await? {
+            None => return Err(CliError::Usage(format!("timed out after {timeout_s} s"))),
+            Some(SonarItem::Ack(t)) => outln!("ack transducer {t}"),
+            Some(SonarItem::Nak) => outln!("nak"),
+            Some(SonarItem::Sentence { raw, .. }) => {
+                outln!("{raw}");
+                sentences += 1;
+            }
+            Some(SonarItem::Error(e)) => outln!("error: {e}"),
+        }
+    }
+    Ok(())
 }

@@ -1,7 +1,6 @@
 //! `eyebot-hil replay LOG... [options]`: arguments, output set-up and the terminal report.
 //! The replay itself is [`crate::replay`]; formats and rules are in `docs/replay.md`.
 
-use crate::cli::output::{err, errln, out, outln};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -9,6 +8,7 @@ use std::time::{Duration, Instant};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+use crate::cli::output::{err, errln, out, outln};
 use crate::replay::{
     ByteSink, CommentMode, LineOrigin, Loc, NullSink, Observer, Options, Pacing, Policy, Port,
     Problem, Replay, ReplayError, Sent, Shutdown, Sink,

@@ -1,6 +1,5 @@
 //! `eyebot-hil run`: the bridge daemon.
 
-use crate::cli::output::errln;
 use std::io::Write as _;
 use std::path::PathBuf;
 
@@ -8,6 +7,7 @@ use clap::{Args, ValueEnum};
 use tokio::sync::watch;
 
 use super::CliError;
+use crate::cli::output::errln;
 use crate::config::{ConfigSource, DEFAULT_CONFIG, Directory, Document, Embedded};
 use crate::daemon::clock::TimeMode;
 use crate::daemon::config::DaemonConfig;

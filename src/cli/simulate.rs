@@ -2,11 +2,11 @@
 //! --out run.csv`: runs one experiment offline, as fast as the machine allows, and writes the
 //! state trace as CSV (one row per physics step).
 
-use crate::cli::output::{errln, outln};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::cli::CliError;
+use crate::cli::output::{errln, outln};
 use crate::config::{ConfigSource, Directory, Document, Embedded};
 use crate::physics::experiment::{self, Experiment};
 use crate::physics::state::VehicleState;

@@ -1,12 +1,12 @@
 //! `eyebot-hil status`: asks a running daemon for its snapshot.
 
-use crate::cli::output::{out, outln};
 use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Args;
 
 use super::CliError;
+use crate::cli::output::{out, outln};
 use crate::daemon::status;
 
 /// Print a running daemon's uptime, simulated time, links and vehicle pose.

@@ -2,10 +2,10 @@
 //! SubSim's and ours. Rows come from the sources in [`ROW_SOURCES`]; each computes its rows by
 //! running the simulator now.
 
-use crate::cli::output::{out, outln};
 use std::path::PathBuf;
 
 use crate::cli::CliError;
+use crate::cli::output::{out, outln};
 use crate::config::{ConfigSource, Directory, Embedded};
 use crate::validate::{Context, Row, ValidateError, render_table};
 
