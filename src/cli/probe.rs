@@ -235,28 +235,28 @@ async fn run(args: ProbeArgs) -> Result<(), CliError> {
             let reply = client
                 .request("TIME_ADVANCE", Message::TimeAdvance { ticks }, extra)
                 .await?;
-            let Message::Time { ticks, tick_us } = reply else {
-                return Err(unexpected("TIME_ADVANCE", reply));
-            };
-            outln!(
-                "time {ticks} ticks ({:.3} s)",
-                f64::from(ticks) * f64::from(tick_us) * 1e-6
-            );
+            print_time("TIME_ADVANCE", reply)?;
         }
         ProbeAction::Time => {
             let reply = client
                 .request("TIME_GET", Message::TimeGet, Duration::ZERO)
                 .await?;
-            let Message::Time { ticks, tick_us } = reply else {
-                return Err(unexpected("TIME_GET", reply));
-            };
-            outln!(
-                "time {ticks} ticks ({:.3} s)",
-                f64::from(ticks) * f64::from(tick_us) * 1e-6
-            );
+            print_time("TIME_GET", reply)?;
         }
         ProbeAction::Sonar { .. } => unreachable!("handled above"),
     }
+    Ok(())
+}
+
+/// Prints a TIME reply to `request` as ticks and seconds.
+fn print_time(request: &'static str, reply: Message) -> Result<(), CliError> {
+    let Message::Time { ticks, tick_us } = reply else {
+        return Err(unexpected(request, reply));
+    };
+    outln!(
+        "time {ticks} ticks ({:.3} s)",
+        f64::from(ticks) * f64::from(tick_us) * 1e-6
+    );
     Ok(())
 }
 
