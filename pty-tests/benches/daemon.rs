@@ -134,6 +134,13 @@ fn outlier_us() -> Option<f64> {
 }
 
 /// CLOCK_MONOTONIC now, in seconds.
+/// Seconds since the Unix epoch: the clock of `bytes.tsv`'s `wall_unix_s`.
+fn unix_s() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
 fn monotonic_s() -> f64 {
     let mut ts = libc::timespec {
         tv_sec: 0,
@@ -167,6 +174,8 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
     // ADC_VALUE is 10 bytes: 10 x 10 bits at 115200 baud.
     let wire_us = 10.0 * 10.0 / 115_200.0 * 1e6;
     let mut latency = Vec::new();
+    // When each request was written, on the wall clock the daemon's recording uses.
+    let mut sent_unix_s = Vec::new();
     let mut reply = [0u8; 10];
     for i in 0..ROUNDS + WARMUP {
         let request = frame(
@@ -176,6 +185,7 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
             },
         );
         let sent_mono_s = monotonic_s();
+        let sent_unix = unix_s();
         let t = Instant::now();
         port.write_all(&request).unwrap();
         port.read_exact(&mut reply).unwrap();
@@ -192,6 +202,7 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
         assert_eq!(&reply[..3], &[0xEB, 0x90, 0x90], "an ADC_VALUE reply");
         if i >= WARMUP {
             latency.push(us);
+            sent_unix_s.push(sent_unix);
         }
     }
     let request_len = frame(
@@ -202,43 +213,57 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
     )
     .len();
     stop(&mut daemon);
-    // The daemon's own part: from reading the last byte of a request to handing over the
-    // last byte of its reply, both on its recording's wall clock.
-    let mut turnaround = Vec::new();
-    let (mut rx_bytes, mut tx_bytes, mut rx_done) = (0usize, 0usize, 0.0);
+    // Each read in three parts, from the wall times of the daemon's recording: the request
+    // reaching the daemon (the kernel's pty delivery and the daemon's wake-up), the daemon's
+    // turnaround (from reading the request to handing over the reply's last byte, minus the
+    // wire time: its work and its timer's wake-up) and the rest (the write, the kernel's
+    // delivery of the reply, the client's wake-up). Requests and replies alternate strictly.
+    let (mut rx_done, mut replies) = (Vec::new(), Vec::new());
+    let (mut rx_bytes, mut tx_bytes) = (0usize, 0usize);
     for (dir, _, wall) in recorded_bytes(&record, "sensor") {
         match dir {
             Direction::Rx => {
                 rx_bytes += 1;
-                if rx_bytes % request_len == 0 {
-                    rx_done = wall;
+                if rx_bytes % request_len == 0 && rx_bytes / request_len > WARMUP {
+                    rx_done.push(wall);
                 }
             }
             Direction::Tx => {
                 tx_bytes += 1;
                 if tx_bytes % reply.len() == 0 && tx_bytes / reply.len() > WARMUP {
-                    turnaround.push((wall - rx_done) * 1e6 - wire_us);
+                    replies.push(wall);
                 }
             }
         }
     }
-    let mut overhead: Vec<f64> = latency.iter().map(|l| l - wire_us).collect();
-    // Read by read: of the reads over the target at the client, how many were already over
-    // it when the daemon handed the reply over (requests and replies alternate strictly, so
-    // the two lists line up).
-    assert_eq!(
-        turnaround.len(),
-        overhead.len(),
-        "one recorded reply per read"
+    assert!(
+        rx_done.len() == latency.len() && replies.len() == latency.len(),
+        "one recorded request and reply per read"
     );
-    let slow: Vec<(f64, f64)> = overhead
-        .iter()
-        .zip(&turnaround)
-        .filter(|(client, _)| **client > 200.0)
-        .map(|(c, d)| (*c, *d))
-        .collect();
-    let slow_in_daemon = slow.iter().filter(|(_, d)| *d > 200.0).count();
+    let mut arrive = Vec::new();
+    let mut turnaround = Vec::new();
+    let mut after = Vec::new();
+    let mut slow = [0usize; 4];
+    for i in 0..latency.len() {
+        let a = (rx_done[i] - sent_unix_s[i]) * 1e6;
+        let b = (replies[i] - rx_done[i]) * 1e6 - wire_us;
+        let c = latency[i] - (replies[i] - sent_unix_s[i]) * 1e6;
+        if latency[i] - wire_us > 200.0 {
+            slow[0] += 1;
+            let parts = [a, b, c];
+            let longest = (0..3)
+                .max_by(|&x, &y| parts[x].total_cmp(&parts[y]))
+                .unwrap_or(0);
+            slow[1 + longest] += 1;
+        }
+        arrive.push(a);
+        turnaround.push(b);
+        after.push(c);
+    }
+    let (a50, a99, amax) = summary(&mut arrive);
     let (d50, d99, dmax) = summary(&mut turnaround);
+    let (c50, c99, cmax) = summary(&mut after);
+    let mut overhead: Vec<f64> = latency.iter().map(|l| l - wire_us).collect();
     let (l50, l99, lmax) = summary(&mut latency);
     let (o50, o99, omax) = summary(&mut overhead);
     let o90 = percentile(&overhead, 0.90);
@@ -254,13 +279,15 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
         "  minus wire time:           p50 {o50:8.1} us  p99 {o99:8.1} us  max {omax:8.1} us  (target p99 < 200 us; p90 {o90:.1} us)"
     );
     println!(
-        "  the daemon's own turnaround, minus wire time (its recording, {} replies): p50 {d50:8.1} us  p99 {d99:8.1} us  max {dmax:8.1} us",
-        turnaround.len()
+        "  in parts (the daemon's recording): request to daemon p50 {a50:6.1} p99 {a99:6.1} max {amax:7.1} us; daemon turnaround minus wire p50 {d50:6.1} p99 {d99:6.1} max {dmax:7.1} us; hand-over to client p50 {c50:6.1} p99 {c99:6.1} max {cmax:7.1} us"
     );
     println!(
-        "  reads over 200 us at the client: {} of {}; of these, over 200 us already at the daemon's hand-over: {slow_in_daemon}",
-        slow.len(),
-        overhead.len()
+        "  reads over 200 us at the client: {} of {}; the longest part was the request to the daemon in {}, the daemon's turnaround in {}, hand-over to client in {}",
+        slow[0],
+        overhead.len(),
+        slow[1],
+        slow[2],
+        slow[3]
     );
     println!("  baseline raw pty echo RTT: p50 {b50:8.1} us  p99 {b99:8.1} us  max {bmax:8.1} us");
     println!(
