@@ -32,6 +32,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from trace_pty_delivery import EVENTS, LINE, TRACING, nice_of, write  # noqa: E402
 
 DAEMON = "eyebot-hil"
+# The daemon's threads (its main thread and the recording writer).
+OURS = {DAEMON, "recorder"}
 WIRE_S = 10 * 10 / 115200
 
 
@@ -109,6 +111,8 @@ def main():
     outliers = [(float(m.group(1)), float(m.group(2))) for m in
                 re.finditer(r"outlier: request sent at (\d+\.\d+) s \(monotonic\), (\d+\.\d+) us", out)]
     print("\n%d slow reads traced (client thread `%s`)" % (len(outliers), client))
+    # (longest step, foreign tasks that held a CPU during it) per fully traced read.
+    tally = {}
     for sent, over_us in outliers:
         end = sent + WIRE_S + over_us * 1e-6 + 2e-4
         window = [e for e in events if sent - 1e-5 <= e["ts"] <= end]
@@ -139,10 +143,17 @@ def main():
                  steps[i][1]["ts"], steps[i + 1][1]["ts"], steps[i + 1][0]) for i in range(len(steps) - 1)]
         gap, a, b, name = max(gaps)
         print("  longest: before %s, %.1f us; tasks on the CPUs meanwhile:" % (name, gap * 1e6))
+        foreign = set()
         for cpu, tasks in sorted(holders(events, b - gap, b).items()):
             names = ", ".join("%s (pid %s, %s)" % (c, p, "idle" if p == "0" else nice_of(p))
                               for c, p in dict.fromkeys(tasks))
             print("    CPU %s: %s" % (cpu, names))
+            foreign |= {c for c, p in tasks if p != "0" and c not in OURS and c != client}
+        key = (name, ", ".join(sorted(foreign)) or "only idle and this test's own threads")
+        tally[key] = tally.get(key, 0) + 1
+    print("\nlongest step of each fully traced slow read, and the other tasks on the CPUs meanwhile:")
+    for (name, who), n in sorted(tally.items(), key=lambda kv: -kv[1]):
+        print("  %3d  before %-16s %s" % (n, name, who))
 
 
 if __name__ == "__main__":
