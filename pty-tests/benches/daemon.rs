@@ -3,7 +3,8 @@
 //! - `adc`: ADC read over a pty at 115200 baud, request to complete reply, minus the
 //!   modelled wire time of the reply; baseline: a raw pty echo round trip in the same run;
 //!   also with `release_quantum_ms = 0` (one wake-up per byte), to show what the quantum
-//!   costs in latency; and the daemon's own turnaround, from its `--record` wall times.
+//!   costs in latency; and each read in three parts (request to daemon, the daemon's
+//!   turnaround, hand-over to client) from the wall times of its `--record` output.
 //! - `nmea`: real-time NMEA emission jitter: each byte's arrival at the client against its
 //!   sentence's 4800 baud wire schedule; beside it the same figure for the daemon's own
 //!   hand-over of each byte, from the wall times its `--record` output gives them, so a late
