@@ -523,3 +523,33 @@ fn reports_end_quietly_when_their_reader_is_gone() {
         );
     }
 }
+
+/// A long-running command carries on when nobody reads its standard output: `replay --pty`
+/// with standard output closed still sends every sentence and removes its symlink, as the
+/// daemon ignores a closed pipe for its readiness lines. Its announcement line panicked.
+#[test]
+fn replay_to_a_pty_carries_on_when_its_stdout_is_closed() {
+    use std::process::{Command, Stdio};
+    let dir = std::env::temp_dir().join(format!("eyebot-replay-closed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let link = dir.join("link");
+    let log = pty_tests::daemon::configs_dir().join("../pty-tests/fixtures/replay/depth.log");
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let out = Command::new(pty_tests::daemon::binary())
+        .args(["replay", "--pacing", "fast", "--pty"])
+        .arg(&link)
+        .arg(&log)
+        .stdout(writer)
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    assert!(stderr.contains("12 sentences sent"), "{stderr}");
+    assert!(
+        std::fs::symlink_metadata(&link).is_err(),
+        "the pty's symlink is removed"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -8,7 +8,8 @@
 //! disk behind `>`) ends the command with a message and status 1.
 //!
 //! Ending the process skips destructors, so neither is used where state must be flushed
-//! first (the daemon writes its readiness lines itself and ignores their errors).
+//! or cleaned up first: a long-running command announces itself with [`readyln!`], which
+//! ignores a reader that has gone and carries on, as the daemon's readiness lines do.
 
 use std::io::Write;
 
@@ -25,6 +26,13 @@ pub fn write_out(args: std::fmt::Arguments<'_>) {
             std::process::exit(1);
         }
     }
+}
+
+/// Writes to standard output, ignoring a failure: for the line a long-running command prints
+/// when it is ready, after which a script may close the pipe while the command carries on
+/// (the daemon's readiness lines do the same).
+pub fn write_ready(args: std::fmt::Arguments<'_>) {
+    let _ = std::io::stdout().lock().write_fmt(args);
 }
 
 /// Writes to standard error; a failure is ignored.
@@ -46,6 +54,13 @@ macro_rules! outln {
     };
 }
 
+/// `println!` for a long-running command's readiness line: a reader that has gone is ignored.
+macro_rules! readyln {
+    ($($arg:tt)*) => {
+        $crate::cli::output::write_ready(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
 /// `eprint!` for diagnostics: a standard error that has gone is ignored.
 macro_rules! err {
     ($($arg:tt)*) => {
@@ -60,4 +75,4 @@ macro_rules! errln {
     };
 }
 
-pub(crate) use {err, errln, out, outln};
+pub(crate) use {err, errln, out, outln, readyln};

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use crate::cli::output::{err, errln, out, outln};
+use crate::cli::output::{err, errln, out, readyln};
 use crate::replay::{
     ByteSink, CommentMode, LineOrigin, Loc, NullSink, Observer, Options, Pacing, Policy, Port,
     Problem, Replay, ReplayError, Sent, Shutdown, Sink,
@@ -252,14 +252,14 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
                 source,
             }
         })?;
-        outln!(
+        readyln!(
             "replay into the sonar multiplexer of the daemon at {}",
             run_dir.display()
         );
         Box::new(ByteSink::new(Port::Writer(Box::new(stream)), &line))
     } else if let Some(device) = &args.serial {
         let port = serial::open(device, &line)?;
-        outln!("replay {} ({line})", device.display());
+        readyln!("replay {} ({line})", device.display());
         Box::new(ByteSink::new(Port::Serial(port), &line))
     } else {
         let link = args
@@ -267,7 +267,7 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
             .clone()
             .unwrap_or_else(|| PathBuf::from("run/replay"));
         let pty = PtyMaster::open(Some(&link))?;
-        outln!(
+        readyln!(
             "replay {} -> {}",
             pty.client_path().display(),
             pty.slave_path().display()
