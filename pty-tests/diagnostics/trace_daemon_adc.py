@@ -2,8 +2,8 @@
 """Where a slow ADC read's time went: an ftrace of the daemon bench's `adc` section.
 
 Runs `cargo bench -p pty-tests --bench daemon -- adc` with EYEBOT_BENCH_OUTLIERS_US set to
-THRESHOLD_US (default 200) and the scheduler and workqueue trace events on (the events of
-`trace_pty_delivery.py`), then prints a timeline for every read the bench reports as slower
+THRESHOLD_US (default 200) and the scheduler and workqueue trace events on (the events and
+tracing set-up of `trace_pty_delivery.py`), then prints a timeline for every read the bench reports as slower
 than that, from the client's `write` of the request (time 0):
 
     request delivered    the kernel's flush_to_ldisc work for the request starts
@@ -29,27 +29,12 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from trace_pty_delivery import EVENTS, LINE, TRACING, nice_of, write  # noqa: E402
+from trace_pty_delivery import TRACING, nice_of, start_tracing, take_events, write  # noqa: E402
 
 DAEMON = "eyebot-hil"
 # The daemon's threads (its main thread and the recording writer).
 OURS = {DAEMON, "recorder"}
 WIRE_S = 10 * 10 / 115200
-
-
-def start_tracing():
-    write("tracing_on", "0")
-    write("trace_clock", "mono")  # the clock the bench prints its outliers on
-    write("buffer_size_kb", "60000")
-    write("trace", "")
-    write("set_event", "")
-    for e in EVENTS:
-        fd = os.open(os.path.join(TRACING, "set_event"), os.O_WRONLY | os.O_APPEND)
-        try:
-            os.write(fd, (e + "\n").encode())
-        finally:
-            os.close(fd)
-    write("tracing_on", "1")
 
 
 def first(events, after, pred):
@@ -90,7 +75,7 @@ def main():
     if not os.path.isdir(os.path.join(TRACING, "events")):
         sys.exit("tracefs is not mounted at %s (mount -t tracefs nodev %s)" % (TRACING, TRACING))
     env = dict(os.environ, EYEBOT_BENCH_OUTLIERS_US=str(threshold_us))
-    start_tracing()
+    start_tracing(60000)
     try:
         out = subprocess.run(
             ["cargo", "bench", "-p", "pty-tests", "--bench", "daemon", "--", "adc"],
@@ -98,13 +83,8 @@ def main():
         ).stdout
     finally:
         write("tracing_on", "0")
-    with open(os.path.join(TRACING, "trace")) as f:
-        events = [m.groupdict() for m in map(LINE.match, f) if m]
-    write("set_event", "")
-    write("trace", "")
+    events = take_events()
     print(out, end="")
-    for e in events:
-        e["ts"] = float(e["ts"])
     client = next((e["task"].strip() for e in events
                    if e["event"] == "workqueue_queue_work" and "flush_to_ldisc" in e["rest"]
                    and e["task"].strip().startswith("daemon-")), None)

@@ -44,14 +44,12 @@ def nice_of(pid):
         return "gone"
 
 
-def main():
-    threshold_ms = float(sys.argv[1]) if len(sys.argv) > 1 else 1.5
-    if not os.path.isdir(os.path.join(TRACING, "events")):
-        sys.exit("tracefs is not mounted at %s (mount -t tracefs nodev %s)" % (TRACING, TRACING))
-    here = os.path.dirname(os.path.abspath(__file__))
+def start_tracing(buffer_kb):
+    """Turns on EVENTS with the monotonic clock (Python's time.monotonic_ns(), and the
+    clock the benches print outliers on), into an empty buffer of `buffer_kb` per CPU."""
     write("tracing_on", "0")
-    write("trace_clock", "mono")  # the same clock as Python's time.monotonic_ns()
-    write("buffer_size_kb", "20000")
+    write("trace_clock", "mono")
+    write("buffer_size_kb", str(buffer_kb))
     write("trace", "")
     write("set_event", "")
     for e in EVENTS:
@@ -62,6 +60,26 @@ def main():
         finally:
             os.close(fd)
     write("tracing_on", "1")
+
+
+def take_events():
+    """The parsed events of the (stopped) trace, times as floats; leaves the event list and
+    the buffer empty."""
+    with open(os.path.join(TRACING, "trace")) as f:
+        events = [m.groupdict() for m in map(LINE.match, f) if m]
+    write("set_event", "")
+    write("trace", "")
+    for e in events:
+        e["ts"] = float(e["ts"])
+    return events
+
+
+def main():
+    threshold_ms = float(sys.argv[1]) if len(sys.argv) > 1 else 1.5
+    if not os.path.isdir(os.path.join(TRACING, "events")):
+        sys.exit("tracefs is not mounted at %s (mount -t tracefs nodev %s)" % (TRACING, TRACING))
+    here = os.path.dirname(os.path.abspath(__file__))
+    start_tracing(20000)
     try:
         out = subprocess.run(
             [sys.executable, os.path.join(here, "pty_delivery_latency.py"), "fifo", "--outliers",
@@ -70,17 +88,12 @@ def main():
         ).stdout
     finally:
         write("tracing_on", "0")
-    with open(os.path.join(TRACING, "trace")) as f:
-        events = [m.groupdict() for m in map(LINE.match, f) if m]
-    write("set_event", "")
-    write("trace", "")
+    events = take_events()
     print(out, end="")
     outliers = [
         (float(m.group(1)), float(m.group(2)))
         for m in re.finditer(r"OUTLIER sent_mono (\d+\.\d+) delay (\d+\.\d+) ms", out)
     ]
-    for e in events:
-        e["ts"] = float(e["ts"])
     for sent, delay in outliers:
         print("\nbyte written at %.6f, read %.3f ms later:" % (sent, delay))
         window = [e for e in events if sent - 1e-4 <= e["ts"] <= sent + delay / 1e3 + 1e-4]
