@@ -3,8 +3,8 @@
 
 Runs `cargo bench -p pty-tests --bench daemon -- adc` with EYEBOT_BENCH_OUTLIERS_US set to
 THRESHOLD_US (default 200) and the scheduler and workqueue trace events on (the events and
-tracing set-up of `trace_pty_delivery.py`), then prints a timeline for every read the bench reports as slower
-than that, from the client's `write` of the request (time 0):
+tracing set-up of `trace_pty_delivery.py`), then prints a timeline for every read the bench
+reports as slower than that, from the client's `write` of the request (time 0):
 
     request delivered    the kernel's flush_to_ldisc work for the request starts
     reply written        eyebot-hil queues flush_to_ldisc for its write of the reply's last
