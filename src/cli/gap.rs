@@ -35,6 +35,38 @@ pub struct GapArgs {
     /// Where to write the report (default: DIR/gap-report).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Length of the re-anchored re-simulation segments (s); 0 replays the whole run open
+    /// loop.
+    #[arg(long, default_value_t = 5.0)]
+    pub segment_s: f64,
+    /// Length of the alternating fit / held-out time blocks (s).
+    #[arg(long, default_value_t = 10.0)]
+    pub heldout_block_s: f64,
+}
+
+impl GapArgs {
+    fn options(&self) -> Result<gap::Options, CliError> {
+        if !(self.segment_s.is_finite() && self.segment_s >= 0.0) {
+            return Err(CliError::Usage(format!(
+                "--segment-s {}: expected a length in seconds >= 0 (0 = open loop)",
+                self.segment_s
+            )));
+        }
+        if !(self.heldout_block_s.is_finite() && self.heldout_block_s > 0.0) {
+            return Err(CliError::Usage(format!(
+                "--heldout-block-s {}: expected a length in seconds > 0",
+                self.heldout_block_s
+            )));
+        }
+        Ok(gap::Options {
+            shooting: gap::anchor::Shooting {
+                segment_s: (self.segment_s > 0.0).then_some(self.segment_s),
+            },
+            split: gap::fit::Split {
+                block_s: self.heldout_block_s,
+            },
+        })
+    }
 }
 
 #[derive(Debug, Clone, clap::Subcommand)]
@@ -124,7 +156,8 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
     if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}") {
         bar.set_style(style);
     }
-    let analysis = gap::analyse(&model, &m, measured, &mut |round, name| {
+    let options = args.options()?;
+    let analysis = gap::analyse_with(&model, &m, measured, options, &mut |round, name| {
         bar.inc(1);
         bar.set_message(format!("round {}: {name}", round + 1));
     })
@@ -152,13 +185,33 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
                 );
             }
         }
+        None if analysis.verdict == gap::Verdict::Unexplained => {
+            outln!(
+                "unexplained: the model disagrees beyond its noise floor and no effect in the library passes every guard"
+            )
+        }
         None => outln!("no significant missing effect"),
     }
+    for u in &analysis.unexplained {
+        outln!(
+            "still off: {} (chi2/n {:.2}){}",
+            u.channel,
+            u.chi2_per_sample,
+            if u.regimes.is_empty() {
+                String::new()
+            } else {
+                format!(" in {}", u.regimes.join(", "))
+            }
+        );
+    }
     outln!(
-        "gap: {:.2} -> {:.2} ({:.0} % smaller); report in {}",
+        "gap: {:.2} -> {:.2} ({:.0} % smaller); held out: {:.2} -> {:.2} ({:.0} % smaller); report in {}",
         analysis.excess_before,
         analysis.excess_after,
         analysis.gap_reduction_pct,
+        analysis.heldout_gap_before,
+        analysis.heldout_gap_after,
+        analysis.heldout_reduction_pct,
         out.display()
     );
     Ok(())

@@ -6,6 +6,7 @@
 //! Every extension changes existing configuration parameters; nothing in `physics` or
 //! `sensors` had to change for the library.
 
+use crate::gap::anchor::Shooting;
 use crate::physics::state::{PORT, STARBOARD};
 use crate::physics::{VehicleConfig, WorldConfig};
 use crate::sensors::SensorsConfig;
@@ -16,6 +17,39 @@ pub struct Configs {
     pub vehicle: VehicleConfig,
     pub world: WorldConfig,
     pub sensors: SensorsConfig,
+    /// Per-axis analog errors the sensor configuration has no key for.
+    pub analog: AnalogErrors,
+    /// How the re-simulation is cut into re-anchored segments.
+    pub shooting: Shooting,
+}
+
+impl Configs {
+    /// The configurations as given: no analog errors, open-loop re-simulation.
+    pub fn new(vehicle: VehicleConfig, world: WorldConfig, sensors: SensorsConfig) -> Self {
+        Self {
+            vehicle,
+            world,
+            sensors,
+            analog: AnalogErrors::default(),
+            shooting: Shooting::OPEN_LOOP,
+        }
+    }
+}
+
+/// Zero offset and gain error of each accelerometer axis's ADC channel, on top of the sensor
+/// configuration (whose zero-g voltage and sensitivity are shared by the three axes). A code
+/// reads `code + offset_lsb + gain_scale * (code - zero-g code)`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct AnalogErrors {
+    pub accel_offset_lsb: [f64; 3],
+    pub accel_gain_scale: [f64; 3],
+}
+
+impl AnalogErrors {
+    /// The code an accelerometer axis reads for a true `code` whose zero-g code is `zero`.
+    pub fn accel_code(&self, axis: usize, code: f64, zero: f64) -> f64 {
+        code + self.accel_offset_lsb[axis] + self.accel_gain_scale[axis] * (code - zero)
+    }
 }
 
 /// How an effect shows itself in the data.
@@ -34,6 +68,9 @@ pub struct Effect {
     pub parameters: &'static [&'static str],
     /// Scale of each parameter for the fit and the starting step (a typical size).
     pub scales: &'static [f64],
+    /// Physical bounds of each parameter (the change, in the parameter's unit): the fit never
+    /// leaves them, and an effect whose fit ends on a bound is not named.
+    pub bounds: &'static [(f64, f64)],
     pub signature: &'static str,
     /// Channels the signature lives in.
     pub channels: &'static [&'static str],
@@ -42,12 +79,13 @@ pub struct Effect {
     pub physics: bool,
 }
 
-/// The library, in the order of the issue's table.
-pub const LIBRARY: [Effect; 14] = [
+/// The library. Its order is the order candidates are fitted and reported in.
+pub const LIBRARY: [Effect; 24] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
         scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
         signature: "yaw bias that grows with thrust: heading and track curve the same way at every heading",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
         kind: Kind::Mean,
@@ -57,6 +95,7 @@ pub const LIBRARY: [Effect; 14] = [
         name: "reverse_thrust_asymmetry",
         parameters: &["reverse_ratio_scale"],
         scales: &[0.1],
+        bounds: &[(-1.0, 2.0)],
         signature: "track and heading disagree only while a horizontal thruster runs in reverse",
         channels: &["x_m", "y_m", "compass_deg", "accel_x_adc"],
         kind: Kind::Mean,
@@ -66,6 +105,7 @@ pub const LIBRARY: [Effect; 14] = [
         name: "drag_mismatch",
         parameters: &["surge_linear_scale", "surge_quadratic_scale"],
         scales: &[0.2, 0.2],
+        bounds: &[(-0.9, 5.0), (-0.9, 5.0)],
         signature: "speed error that grows with speed; along-track position error",
         channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps", "accel_x_adc"],
         kind: Kind::Mean,
@@ -75,6 +115,7 @@ pub const LIBRARY: [Effect; 14] = [
         name: "added_mass",
         parameters: &["surge_added_kg"],
         scales: &[5.0],
+        bounds: &[(-30.0, 100.0)],
         signature: "along-track error only after thrust steps (acceleration), none at steady speed",
         channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps", "accel_x_adc"],
         kind: Kind::Mean,
@@ -84,6 +125,7 @@ pub const LIBRARY: [Effect; 14] = [
         name: "thruster_lag",
         parameters: &["lag_s"],
         scales: &[0.2],
+        bounds: &[(-1.0, 2.0)],
         signature: "error right after command changes, decaying with a time constant",
         channels: &[
             "x_m",
@@ -100,6 +142,7 @@ pub const LIBRARY: [Effect; 14] = [
         name: "water_current",
         parameters: &["north_mps", "east_mps"],
         scales: &[0.01, 0.01],
+        bounds: &[(-0.3, 0.3), (-0.3, 0.3)],
         signature: "drift fixed to the world, independent of heading",
         channels: &["x_m", "y_m"],
         kind: Kind::Mean,
@@ -109,8 +152,9 @@ pub const LIBRARY: [Effect; 14] = [
         name: "compass_hard_iron",
         parameters: &["x_ut", "y_ut"],
         scales: &[1.0, 1.0],
+        bounds: &[(-50.0, 50.0), (-50.0, 50.0)],
         signature: "compass error once per turn (first harmonic of heading)",
-        channels: &["compass_deg"],
+        channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
     },
@@ -118,8 +162,9 @@ pub const LIBRARY: [Effect; 14] = [
         name: "compass_soft_iron",
         parameters: &["diagonal_difference", "off_diagonal"],
         scales: &[0.02, 0.02],
+        bounds: &[(-0.3, 0.3), (-0.3, 0.3)],
         signature: "compass error twice per turn (second harmonic of heading)",
-        channels: &["compass_deg"],
+        channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
     },
@@ -127,8 +172,9 @@ pub const LIBRARY: [Effect; 14] = [
         name: "compass_tilt",
         parameters: &["inclination_deg"],
         scales: &[2.0],
+        bounds: &[(-45.0, 45.0)],
         signature: "compass error only while tilted, depending on heading",
-        channels: &["compass_deg"],
+        channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
     },
@@ -136,8 +182,9 @@ pub const LIBRARY: [Effect; 14] = [
         name: "sensor_latency",
         parameters: &["compass_latency_s"],
         scales: &[0.1],
+        bounds: &[(-1.0, 2.0)],
         signature: "compass error proportional to the turn rate",
-        channels: &["compass_deg"],
+        channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
     },
@@ -145,6 +192,7 @@ pub const LIBRARY: [Effect; 14] = [
         name: "depth_pwm_emi",
         parameters: &["emi_v_rms_full_duty"],
         scales: &[0.05],
+        bounds: &[(0.0, 1.0)],
         signature: "depth variance grows with the stern motor's duty",
         channels: &["depth_adc"],
         kind: Kind::Variance,
@@ -154,6 +202,7 @@ pub const LIBRARY: [Effect; 14] = [
         name: "velocity_sensor_scale",
         parameters: &["scale_factor"],
         scales: &[0.1],
+        bounds: &[(-0.9, 5.0)],
         signature: "paddle speed off by a constant factor at every speed",
         channels: &["paddle_speed_mps"],
         kind: Kind::Mean,
@@ -163,21 +212,21 @@ pub const LIBRARY: [Effect; 14] = [
         name: "sonar_incidence_dropout",
         parameters: &["max_incidence_deg"],
         scales: &[5.0],
+        bounds: &[(-90.0, 90.0)],
         signature: "sonar readings missing when the wall is seen obliquely",
         channels: &["sonar1_m", "sonar2_m", "sonar3_m", "sonar4_m"],
         kind: Kind::Mean,
         physics: false,
     },
-    // Added for summary observations (issue 8 item 5): SubSim's lumped thrust constant alpha
-    // was wrong by a factor (thesis 5.1, 5.4), which no per-motor difference can express.
-    // `forward_max_n` is shared by all four thrusters, so the vertical pair (depth, heave
-    // force) and every thrust step (surge acceleration) show it as much as the track does:
-    // on the bench's manoeuvre about 3/4 of its chi-square gain is in depth_adc and
-    // accel_x_adc (docs/gap.md, "Benchmark notes (session 3)").
+    // SubSim's lumped thrust constant was wrong by a factor (thesis 5.1, 5.4), which no
+    // per-motor difference can express. `forward_max_n` is shared by all four thrusters, so
+    // the vertical pair (depth, heave force) and every thrust step (surge acceleration) show
+    // it as much as the track does.
     Effect {
         name: "thrust_gain",
         parameters: &["gain_scale"],
         scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
         signature: "every motor stronger or weaker alike, the vertical pair too: speed, turn rate, \
                     acceleration at thrust steps and depth response off in proportion to thrust",
         channels: &[
@@ -194,8 +243,111 @@ pub const LIBRARY: [Effect; 14] = [
         kind: Kind::Mean,
         physics: true,
     },
+    Effect {
+        name: "compass_offset",
+        parameters: &["offset_deg"],
+        scales: &[1.0],
+        bounds: &[(-30.0, 30.0)],
+        signature: "compass reads a constant angle off at every heading: the track runs at that \
+                    angle to the heading the compass reports, and the surface heading is off",
+        channels: &["compass_deg", "x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "depth_offset",
+        parameters: &["offset_m"],
+        scales: &[0.02],
+        bounds: &[(-0.5, 0.5)],
+        signature: "depth reads a constant distance off: visible where the vehicle floats at the \
+                    surface, whose depth the buoyancy fixes",
+        channels: &["depth_adc"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "depth_gain",
+        parameters: &["scale_factor"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "depth changes read too large or too small in proportion: dives and climbs \
+                    off by a constant factor",
+        channels: &["depth_adc"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "accel_x_offset",
+        parameters: &["offset_lsb"],
+        scales: &[2.0],
+        bounds: &[(-200.0, 200.0)],
+        signature: "surge accelerometer code off by a constant at every speed and thrust",
+        channels: &["accel_x_adc"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "accel_y_offset",
+        parameters: &["offset_lsb"],
+        scales: &[2.0],
+        bounds: &[(-200.0, 200.0)],
+        signature: "sway accelerometer code off by a constant in straight runs and turns alike",
+        channels: &["accel_y_adc"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "accel_z_offset",
+        parameters: &["offset_lsb"],
+        scales: &[2.0],
+        bounds: &[(-200.0, 200.0)],
+        signature: "heave accelerometer code off by a constant (the 1 g reading shifted)",
+        channels: &["accel_z_adc"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "accel_x_gain",
+        parameters: &["scale_factor"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "surge accelerometer swings too large or small around its zero-g code",
+        channels: &["accel_x_adc"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "accel_y_gain",
+        parameters: &["scale_factor"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "sway accelerometer swings too large or small around its zero-g code",
+        channels: &["accel_y_adc"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "accel_z_gain",
+        parameters: &["scale_factor"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "heave accelerometer's 1 g reading too far from or near its zero-g code",
+        channels: &["accel_z_adc"],
+        kind: Kind::Mean,
+        physics: false,
+    },
+    Effect {
+        name: "yaw_damping",
+        parameters: &["linear_scale", "quadratic_scale"],
+        scales: &[0.2, 0.2],
+        bounds: &[(-0.9, 5.0), (-0.9, 5.0)],
+        signature: "turn rate off for a given thrust couple: spins too fast or slow, heading \
+                    overshoots or lags after a turn command",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+    },
 ];
-
 /// Looks an effect up by name.
 pub fn by_name(name: &str) -> Option<&'static Effect> {
     LIBRARY.iter().find(|e| e.name == name)
@@ -272,6 +424,70 @@ pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
             c.vehicle.thruster_common.forward_max_n =
                 (c.vehicle.thruster_common.forward_max_n * (1.0 + p(0))).max(1e-3);
         }
+        "compass_offset" => {
+            c.sensors.compass.errors.bias += p(0);
+        }
+        "depth_offset" => {
+            c.sensors.depth.errors.bias += p(0);
+        }
+        "depth_gain" => {
+            c.sensors.depth.volts_per_m = (c.sensors.depth.volts_per_m * (1.0 + p(0))).max(1e-3);
+        }
+        "accel_x_offset" | "accel_y_offset" | "accel_z_offset" => {
+            let axis = axis_of(effect.name);
+            c.analog.accel_offset_lsb[axis] += p(0);
+        }
+        "accel_x_gain" | "accel_y_gain" | "accel_z_gain" => {
+            let axis = axis_of(effect.name);
+            c.analog.accel_gain_scale[axis] += p(0);
+        }
+        "yaw_damping" => {
+            c.vehicle.damping_linear[5] = (c.vehicle.damping_linear[5] * (1.0 + p(0))).max(0.0);
+            c.vehicle.damping_quadratic[5] =
+                (c.vehicle.damping_quadratic[5] * (1.0 + p(1))).max(0.0);
+            if c.vehicle.damping_linear[5] + c.vehicle.damping_quadratic[5] <= 0.0 {
+                c.vehicle.damping_linear[5] = 1e-3;
+            }
+        }
         _ => {}
+    }
+}
+
+/// The accelerometer axis (0 = x, 1 = y, 2 = z) an `accel_*` effect acts on.
+fn axis_of(name: &str) -> usize {
+    match name.as_bytes().get(6) {
+        Some(b'y') => 1,
+        Some(b'z') => 2,
+        _ => 0,
+    }
+}
+
+/// True when `effect` changes what a re-anchored re-simulation anchors to (the compass or the
+/// depth sensor), so its fit re-runs the physics even though the effect is a sensor's.
+pub fn moves_anchors(effect: &Effect) -> bool {
+    matches!(
+        effect.name,
+        "compass_offset"
+            | "compass_hard_iron"
+            | "compass_soft_iron"
+            | "compass_tilt"
+            | "sensor_latency"
+            | "depth_offset"
+            | "depth_gain"
+    )
+}
+
+/// True when `values` lie strictly inside `effect`'s bounds (an end on a bound is not a fit).
+pub fn inside_bounds(effect: &Effect, values: &[f64]) -> bool {
+    effect.bounds.iter().zip(values).all(|((lo, hi), v)| {
+        let margin = 1e-6 * (hi - lo);
+        *v > lo + margin && *v < hi - margin
+    })
+}
+
+/// `values` clamped into `effect`'s bounds.
+pub fn clamp_to_bounds(effect: &Effect, values: &mut [f64]) {
+    for ((lo, hi), v) in effect.bounds.iter().zip(values.iter_mut()) {
+        *v = v.clamp(*lo, *hi);
     }
 }

@@ -1,19 +1,30 @@
-//! Naming the missing effect: fit every candidate with Levenberg-Marquardt, score it with the
-//! BIC, test its residual signature, rank, and accept the best one only when it beats "no
-//! effect" by [`BIC_MARGIN`]; repeat greedily.
+//! Naming the missing effect: fit every candidate on the training part of the data with the
+//! bounded Levenberg-Marquardt engine ([`crate::gap::lsq`]), score it, test it against its
+//! guards, rank, and accept the best candidate that passes every guard; repeat greedily.
 //!
 //! Residuals are normalised by the model's noise floor and by the square root of the
 //! channel's autocorrelation time (`tau`), so `sum r^2` is a chi-square in independent
-//! samples and `n_eff = sum n_c / tau_c` is the sample size in the BIC:
-//! `delta_BIC = chi2(no effect) - chi2(effect) - k ln(n_eff)` (positive favours the effect).
+//! samples and `n_eff = sum n_c / tau_c` is the sample size.
+//!
+//! Data that come from a real vehicle never fit the model to its own noise floor: what is
+//! left after the best fit is model error, larger than the floor and correlated. The gain of
+//! a candidate is therefore judged against the residual variance it leaves (a quasi-likelihood
+//! scale `s2 = max(1, chi2_after / (n_eff - k))`, as an F-test does) and against the model's
+//! own correlated process noise (`noise_factor`):
+//! `delta_BIC = (chi2_before - chi2_after) / (s2 * noise_factor) - k ln(n_eff)`.
+//!
+//! The guards ([`Guards`]): an effect is named only when its parameters lie inside their
+//! physical bounds, its 95 % interval is finite and excludes "no effect", it beats "no effect"
+//! by [`BIC_MARGIN`], it passes its signature test, and it shrinks the gap on the held-out
+//! blocks of the data it was not fitted to by at least [`HELDOUT_MIN_GAIN`].
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use nalgebra::DVector;
 use serde::Serialize;
 
 use crate::gap::GapError;
 use crate::gap::effects::{self, Configs, Effect, Kind};
 use crate::gap::format::Measurement;
+use crate::gap::lsq::{self, Bounds};
 use crate::gap::resim::{self, Floor, Run};
 use crate::physics::state::STERN;
 use crate::sensors::AdcBoard;
@@ -28,12 +39,74 @@ pub const MAX_EFFECTS: usize = 3;
 pub const SIGNATURE_MIN_CORRELATION: f64 = 0.2;
 /// ...and at least this share of the chi-square reduction must come from those channels.
 pub const SIGNATURE_MIN_SHARE: f64 = 0.5;
+/// Held-out guard: the fitted effect must lower the held-out chi-square (scaled as the
+/// training gain is) by at least this much: the 95 % point of chi-square with one degree of
+/// freedom, so noise fitted on the training blocks rarely passes by chance.
+pub const HELDOUT_MIN_GAIN: f64 = 3.84;
 
 /// Starting points scanned along each parameter axis, in units of the effect's scale. The
-/// +-0.25 steps: a thrust gain of -0.05 (a quarter of its scale) was fitted at -0.008 from
-/// zero, a shallow minimum that the coarser steps all scored worse than (docs/gap.md,
-/// "Benchmark notes (session 3)").
+/// +-0.25 steps find a small effect whose chi-square holds a shallow minimum between zero
+/// and the coarser steps.
 pub const START_SCAN: [f64; 9] = [-4.0, -2.0, -1.0, -0.25, 0.25, 1.0, 2.0, 4.0, 8.0];
+
+/// How the data are split into the blocks a candidate is fitted on and the blocks it is
+/// judged on: time blocks of `block_s`, even blocks train, odd blocks held out. Alternating
+/// blocks put every part of a programme (straight runs, turns, dives) into both halves.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Split {
+    pub block_s: f64,
+}
+
+impl Split {
+    /// Two 5 s shooting segments per block.
+    pub const DEFAULT: Self = Self { block_s: 10.0 };
+
+    pub fn is_training(&self, t_s: f64) -> bool {
+        (t_s / self.block_s).floor().rem_euclid(2.0) < 0.5
+    }
+}
+
+/// Which guards a candidate passed.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+pub struct Guards {
+    /// Every parameter strictly inside its physical bounds.
+    pub inside_bounds: bool,
+    /// Every 95 % interval finite, and some interval excludes the no-effect value 0.
+    pub interval_excludes_zero: bool,
+    /// `delta_bic > BIC_MARGIN`.
+    pub significant: bool,
+    /// The signature test.
+    pub signature: bool,
+    /// The held-out gain exceeds `HELDOUT_MIN_GAIN`.
+    pub heldout: bool,
+}
+
+impl Guards {
+    pub fn all(&self) -> bool {
+        self.inside_bounds
+            && self.interval_excludes_zero
+            && self.significant
+            && self.signature
+            && self.heldout
+    }
+
+    /// The guards that failed, by name.
+    pub fn failed(&self) -> Vec<&'static str> {
+        let mut out = Vec::new();
+        for (ok, name) in [
+            (self.inside_bounds, "bounds"),
+            (self.interval_excludes_zero, "interval"),
+            (self.significant, "significance"),
+            (self.signature, "signature"),
+            (self.heldout, "held-out"),
+        ] {
+            if !ok {
+                out.push(name);
+            }
+        }
+        out
+    }
+}
 
 /// What fitting one candidate gave.
 #[derive(Debug, Clone, Serialize)]
@@ -42,23 +115,62 @@ pub struct CandidateResult {
     /// (parameter, fitted change relative to the model).
     pub parameters: Vec<(String, f64)>,
     pub ci95: Vec<(String, [f64; 2])>,
+    /// Training chi-square without and with the effect.
     pub chi2_before: f64,
     pub chi2_after: f64,
-    /// BIC gain over "no effect" with the chi-square gain divided by `noise_factor`: what
-    /// the significance margin is applied to.
+    /// BIC gain over "no effect", scaled by `variance_factor * noise_factor`: what the
+    /// significance margin is applied to.
     pub delta_bic: f64,
-    /// BIC gain without that calibration (the likelihood itself): what candidates that pass
-    /// are ranked by, since all are fitted to the same data.
+    /// BIC gain without that scaling (the likelihood itself): what candidates that pass are
+    /// ranked by, since all are fitted to the same data.
     pub delta_bic_uncalibrated: f64,
+    /// Held-out chi-square without and with the effect (fitted values, blocks not fitted to).
+    pub heldout_chi2_before: f64,
+    pub heldout_chi2_after: f64,
+    /// Held-out chi-square gain, scaled as `delta_bic`'s gain is.
+    pub heldout_gain: f64,
     pub signature_pass: bool,
     pub signature: String,
+    pub guards: Guards,
     /// False when the data hold none of the channels the effect shows in.
     pub testable: bool,
-    /// Re-simulations the fit needed (an estimate for the Jacobian's share).
+    /// Re-simulations the fit needed.
     pub evaluations: usize,
     /// How much more chi-square a fit of this effect gains on the model's own noise than
-    /// independent noise would (>= 1); the gain in `delta_bic` is divided by it.
+    /// independent noise would (>= 1).
     pub noise_factor: f64,
+    /// Residual variance left beyond the noise floor after the fit (>= 1).
+    pub variance_factor: f64,
+}
+
+/// Normalised residuals of the modelled channels, with each element's channel and part.
+#[derive(Debug, Clone, Default)]
+pub struct Residuals {
+    pub values: Vec<f64>,
+    pub owner: Vec<usize>,
+    pub training: Vec<bool>,
+}
+
+impl Residuals {
+    pub fn part(&self, training: bool) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.values
+            .iter()
+            .zip(&self.training)
+            .enumerate()
+            .filter(move |(_, (_, t))| **t == training)
+            .map(|(i, (v, _))| (i, *v))
+    }
+
+    pub fn chi2(&self, training: bool) -> f64 {
+        self.part(training).map(|(_, v)| v * v).sum()
+    }
+
+    pub fn training_vector(&self) -> DVector<f64> {
+        DVector::from_iterator(
+            self.training.iter().filter(|t| **t).count(),
+            self.part(true).map(|(_, v)| v),
+        )
+    }
 }
 
 /// The re-simulation context one greedy round fits against.
@@ -67,6 +179,7 @@ pub struct Setup<'a> {
     pub base: Configs,
     pub clean: Run,
     pub floors: &'a [Option<Floor>],
+    pub split: Split,
 }
 
 impl Setup<'_> {
@@ -77,22 +190,38 @@ impl Setup<'_> {
             .collect()
     }
 
-    /// Independent sample count.
-    pub fn n_eff(&self) -> f64 {
+    fn sample_times(&self, i: usize) -> Vec<f64> {
+        let ch = &self.m.channels[i];
+        if crate::gap::sonar::index(&ch.name).is_some() {
+            let times = crate::gap::sonar::ping_times(
+                &self.base.sensors.sonar,
+                self.m.experiment.duration_s,
+            );
+            return times.iter().flat_map(|t| [*t, *t]).collect();
+        }
+        ch.samples.iter().map(|(t, _)| *t).collect()
+    }
+
+    /// Independent sample count of one part.
+    pub fn n_eff(&self, training: bool) -> f64 {
         self.modelled()
             .iter()
             .filter_map(|&i| {
-                self.floors[i]
-                    .as_ref()
-                    .map(|f| f.sigma.len() as f64 / f.tau)
+                let f = self.floors[i].as_ref()?;
+                let n = self
+                    .sample_times(i)
+                    .iter()
+                    .filter(|t| self.split.is_training(**t) == training)
+                    .count();
+                Some(n as f64 / f.tau)
             })
             .sum::<f64>()
             .max(1.0)
     }
 
-    /// The model's own null residuals, normalised as [`Setup::residual_vector`]: one vector
-    /// per ensemble run (process noise only), and the per-element variance the white
-    /// measurement noise adds.
+    /// The model's own null residuals of the training part, normalised as
+    /// [`Setup::residuals`]: one vector per ensemble run (process noise only), and the
+    /// per-element variance the white measurement noise adds.
     pub fn null_vectors(&self) -> (Vec<Vec<f64>>, Vec<f64>) {
         let members = self
             .modelled()
@@ -110,134 +239,89 @@ impl Setup<'_> {
             {
                 continue;
             }
+            let times = self.sample_times(i);
+            let keep: Vec<bool> = times.iter().map(|t| self.split.is_training(*t)).collect();
             let k = f.tau.sqrt();
             for (m, v) in null.iter_mut().enumerate() {
-                v.extend(f.null[m].iter().zip(&f.sigma).map(|(d, s)| d / (s * k)));
+                v.extend(
+                    f.null[m]
+                        .iter()
+                        .zip(&f.sigma)
+                        .zip(&keep)
+                        .filter(|(_, k)| **k)
+                        .map(|((d, s), _)| d / (s * k)),
+                );
             }
             white.extend(
                 f.measurement_std
                     .iter()
                     .zip(&f.sigma)
-                    .map(|(m, s)| (m / (s * k)).powi(2)),
+                    .zip(&keep)
+                    .filter(|(_, k)| **k)
+                    .map(|((m, s), _)| (m / (s * k)).powi(2)),
             );
         }
         (null, white)
     }
 
-    /// Normalised residuals of all modelled channels for configs `c` and run `run`, with the
-    /// channel index of each element.
-    pub fn residual_vector(&self, c: &Configs, run: &Run) -> (Vec<f64>, Vec<usize>) {
-        let mut out = Vec::new();
-        let mut owner = Vec::new();
+    /// Normalised residuals of all modelled channels for configs `c` and run `run`.
+    pub fn residuals(&self, c: &Configs, run: &Run) -> Residuals {
+        let mut out = Residuals::default();
         for i in self.modelled() {
             let ch = &self.m.channels[i];
             let Some(f) = &self.floors[i] else { continue };
+            let times = self.sample_times(i);
             // Sonar: presence deviance and range residuals, already normalised.
-            if let Some(r) = crate::gap::sonar::residuals(c, run, self.m.experiment.duration_s, ch)
+            let values: Vec<f64> = if let Some(r) =
+                crate::gap::sonar::residuals(c, run, self.m.experiment.duration_s, ch)
             {
-                owner.extend(std::iter::repeat_n(i, r.len()));
-                out.extend(r);
-                continue;
-            }
-            let Some(p) = resim::predict(c, run, ch, 0.0) else {
-                continue;
+                r
+            } else {
+                let Some(p) = resim::predict(c, run, ch, 0.0) else {
+                    continue;
+                };
+                let k = f.tau.sqrt();
+                resim::residuals(ch, &p)
+                    .iter()
+                    .zip(&f.sigma)
+                    .map(|(r, s)| r / (s * k))
+                    .collect()
             };
-            let k = f.tau.sqrt();
-            for (r, s) in resim::residuals(ch, &p).iter().zip(&f.sigma) {
-                out.push(r / (s * k));
-                owner.push(i);
+            for (v, t) in values.iter().zip(&times) {
+                out.values.push(*v);
+                out.owner.push(i);
+                out.training.push(self.split.is_training(*t));
             }
         }
-        (out, owner)
+        out
     }
 
-    fn eval(&self, effect: &Effect, params: &[f64]) -> Option<(Vec<f64>, Vec<usize>)> {
+    /// True when a fit of `effect` must re-run the physics.
+    fn resimulates(&self, effect: &Effect) -> bool {
+        effect.physics || (self.base.shooting.segment_s.is_some() && effects::moves_anchors(effect))
+    }
+
+    /// Residuals with `effect` applied at `params`.
+    pub fn eval(&self, effect: &Effect, params: &[f64]) -> Option<Residuals> {
         let mut c = self.base.clone();
         effects::apply(effect, params, &mut c);
-        if effect.physics {
+        if self.resimulates(effect) {
             let run = resim::simulate(&c, self.m, None).ok()?;
-            Some(self.residual_vector(&c, &run))
+            Some(self.residuals(&c, &run))
         } else {
-            Some(self.residual_vector(&c, &self.clean))
+            Some(self.residuals(&c, &self.clean))
         }
-    }
-}
-
-struct Problem<'a, 'b> {
-    setup: &'a Setup<'b>,
-    effect: &'static Effect,
-    /// Parameters in units of the effect's scales.
-    x: DVector<f64>,
-    r: Option<DVector<f64>>,
-    evaluations: usize,
-}
-
-impl Problem<'_, '_> {
-    fn params(&self, x: &DVector<f64>) -> Vec<f64> {
-        x.iter()
-            .zip(self.effect.scales)
-            .map(|(v, s)| v * s)
-            .collect()
-    }
-
-    fn residuals_at(&mut self, x: &DVector<f64>) -> Option<DVector<f64>> {
-        self.evaluations += 1;
-        let p = self.params(x);
-        self.setup
-            .eval(self.effect, &p)
-            .map(|(r, _)| DVector::from_vec(r))
-    }
-}
-
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
-        let x = self.x.clone();
-        self.r = self.residuals_at(&x);
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        self.r.clone()
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let r0 = self.r.as_ref()?;
-        let n = self.x.len();
-        let mut j = DMatrix::zeros(r0.len(), n);
-        // Forward differences of 2 % of a typical size; `jacobian` takes &self, so count
-        // evaluations on a copy.
-        let mut me = Problem {
-            setup: self.setup,
-            effect: self.effect,
-            x: self.x.clone(),
-            r: None,
-            evaluations: 0,
-        };
-        for k in 0..n {
-            let mut x = self.x.clone();
-            let h = 0.02;
-            x[k] += h;
-            let r = me.residuals_at(&x)?;
-            if r.len() != r0.len() {
-                return None;
-            }
-            j.set_column(k, &((r - r0) / h));
-        }
-        Some(j)
     }
 }
 
 /// The mean chi-square gain of a linearised fit along Jacobian `j` (covariance `ainv`) on
 /// the null residuals, over its expectation `k` for independent noise; at least 1.
-fn null_factor(j: &DMatrix<f64>, ainv: &DMatrix<f64>, null: &[Vec<f64>], white: &[f64]) -> f64 {
+fn null_factor(
+    j: &nalgebra::DMatrix<f64>,
+    ainv: &nalgebra::DMatrix<f64>,
+    null: &[Vec<f64>],
+    white: &[f64],
+) -> f64 {
     let k = j.ncols();
     if null.is_empty() || k == 0 {
         return 1.0;
@@ -261,124 +345,37 @@ fn null_factor(j: &DMatrix<f64>, ainv: &DMatrix<f64>, null: &[Vec<f64>], white: 
     ((process + measurement) / k as f64).max(1.0)
 }
 
-fn chi2(r: &[f64]) -> f64 {
-    r.iter().map(|v| v * v).sum()
+/// The interval guard: every interval finite, and the no-effect point 0 outside the joint
+/// 95 % confidence region (the Wald statistic `x^T C^-1 x` above the 95 % point of
+/// chi-square with k degrees of freedom). For one parameter that is "the interval excludes
+/// 0"; for two correlated parameters (linear and quadratic drag) each interval may hold 0
+/// while their combination is clearly off.
+pub fn interval_excludes_zero(
+    ci: &[[f64; 2]],
+    x: &DVector<f64>,
+    covariance: Option<&nalgebra::DMatrix<f64>>,
+    variance_factor: f64,
+) -> bool {
+    if !ci.iter().all(|c| c[0].is_finite() && c[1].is_finite()) {
+        return false;
+    }
+    let Some(inv) = covariance.and_then(|c| (c * variance_factor).try_inverse()) else {
+        return false;
+    };
+    let wald = (x.transpose() * inv * x)[(0, 0)];
+    wald > crate::gap::residuals::chi2_critical_95(x.len())
 }
 
-/// Fits one mean-type candidate.
-fn fit_mean(
-    setup: &Setup<'_>,
-    effect: &'static Effect,
-    r0: &[f64],
-    owner0: &[usize],
-    null: &[Vec<f64>],
-    white: &[f64],
-) -> CandidateResult {
-    let k = effect.parameters.len();
-    let mut problem = Problem {
-        setup,
-        effect,
-        x: DVector::zeros(k),
-        r: None,
-        evaluations: 0,
-    };
-    // Start from the best of a coarse scan along each parameter axis: the chi-square of a
-    // dynamic effect (a lag) can hold a shallow local minimum between zero and the truth.
-    let mut start = DVector::zeros(k);
-    let mut best = chi2(r0);
-    for i in 0..k {
-        for step in START_SCAN {
-            let mut x = DVector::zeros(k);
-            x[i] = step;
-            if let Some(r) = problem.residuals_at(&x) {
-                let c = chi2(r.as_slice());
-                if c < best {
-                    best = c;
-                    start = x;
-                }
-            }
-        }
-    }
-    problem.set_params(&start);
-    let (problem, report) = LevenbergMarquardt::new()
-        .with_patience(40)
-        .with_stepbound(5.0)
-        .minimize(problem);
-    tracing::debug!(
-        effect = effect.name,
-        termination = ?report.termination,
-        evaluations = report.number_of_evaluations,
-        objective = report.objective_function,
-        "fit finished"
-    );
-    let evaluations = problem.evaluations + report.number_of_evaluations * k;
-    let chi2_before = chi2(r0);
-    let Some(r1) = problem.r.clone() else {
-        return failed(effect, chi2_before, "the fit left the model's valid range");
-    };
-    let chi2_after = chi2(r1.as_slice());
-    let params = problem.params(&problem.x);
-    let n_eff = setup.n_eff();
-    let jac = problem.jacobian();
-    let ainv = jac.as_ref().and_then(|j| (j.transpose() * j).try_inverse());
-    // Null calibration: how much chi-square a fit of this effect gains on the model's own
-    // noise (the ensemble's process-noise residuals plus the white measurement noise),
-    // projected on the effect's Jacobian. Properly independent noise gains k on average;
-    // correlated noise along the effect's signature gains more, and the factor scales the
-    // gain down by as much (never up).
-    let at_fit = match (&jac, &ainv) {
-        (Some(j), Some(ai)) => null_factor(j, ai, null, white),
-        _ => 1.0,
-    };
-    // Along a nonlinear parameter (a lag) the fit travels from the model as shipped through
-    // directions where the process noise is large and can end where the Jacobian has turned
-    // away from them; calibrated at the end point alone, the gain the noise gave on the way
-    // is under-counted and nulls are named (docs/gap.md, "Null false alarms"). So the factor
-    // is the larger of the two ends of the path: the fitted point and the start (no change).
-    let at_start = {
-        let mut p0 = Problem {
-            setup,
-            effect,
-            x: DVector::zeros(k),
-            r: None,
-            evaluations: 0,
-        };
-        p0.set_params(&DVector::zeros(k));
-        p0.jacobian().and_then(|j0| {
-            (j0.transpose() * &j0)
-                .try_inverse()
-                .map(|a0| null_factor(&j0, &a0, null, white))
-        })
-    };
-    let noise_factor = at_start.map_or(at_fit, |f| f.max(at_fit));
-    // Residual variance beyond what the floor expects (reduced chi-square), never below 1.
-    let reduced = (chi2_after / (n_eff - k as f64).max(1.0)).max(1.0);
-    let ci = ainv
-        .as_ref()
-        .map(|cov| {
-            (0..k)
-                .map(|i| {
-                    let sd =
-                        (cov[(i, i)].max(0.0) * noise_factor * reduced).sqrt() * effect.scales[i];
-                    [params[i] - 1.96 * sd, params[i] + 1.96 * sd]
-                })
-                .collect::<Vec<_>>()
-        })
-        .unwrap_or_else(|| vec![[f64::NEG_INFINITY, f64::INFINITY]; k]);
-    let delta_bic = (chi2_before - chi2_after) / noise_factor - k as f64 * n_eff.ln();
-    let delta_bic_uncalibrated = chi2_before - chi2_after - k as f64 * n_eff.ln();
-    // Signature: does the change the effect makes line up with the residual where the
-    // signature says it should, and does the improvement come from there?
+/// The signature test of a mean-type fit: correlation of the effect's change with the
+/// residual in the signature channels, and their share of the gain.
+fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals) -> (bool, String) {
     let in_sig = |i: usize| effect.channels.contains(&setup.m.channels[i].name.as_str());
     let (mut dot, mut dd, mut rr, mut gain_sig, mut gain_all) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    let mut gain_by_channel = vec![0.0; setup.m.channels.len()];
-    for (idx, (&a, &b)) in r0.iter().zip(r1.iter()).enumerate() {
+    for (idx, a) in r0.part(true) {
+        let b = r1.values[idx];
         let g = a * a - b * b;
         gain_all += g;
-        if let Some(v) = gain_by_channel.get_mut(owner0[idx]) {
-            *v += g;
-        }
-        if in_sig(owner0[idx]) {
+        if in_sig(r0.owner[idx]) {
             gain_sig += g;
             let d = a - b; // = predicted change of the effect, normalised
             dot += d * a;
@@ -396,23 +393,90 @@ fn fit_mean(
     } else {
         0.0
     };
-    let signature_pass = corr >= SIGNATURE_MIN_CORRELATION && share >= SIGNATURE_MIN_SHARE;
+    (
+        corr >= SIGNATURE_MIN_CORRELATION && share >= SIGNATURE_MIN_SHARE,
+        format!(
+            "{}: correlation with the residual in {} = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}), \
+             share of the improvement there = {:.0} % (>= {:.0} %)",
+            effect.signature,
+            effect.channels.join("/"),
+            share * 100.0,
+            SIGNATURE_MIN_SHARE * 100.0
+        ),
+    )
+}
+
+/// Fits one mean-type candidate.
+fn fit_mean(
+    setup: &Setup<'_>,
+    effect: &'static Effect,
+    r0: &Residuals,
+    null: &[Vec<f64>],
+    white: &[f64],
+) -> CandidateResult {
+    let k = effect.parameters.len();
+    let scales = effect.scales;
+    let to_params =
+        |x: &DVector<f64>| -> Vec<f64> { x.iter().zip(scales).map(|(v, s)| v * s).collect() };
+    let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
+        setup
+            .eval(effect, &to_params(x))
+            .map(|r| r.training_vector())
+    };
+    let bounds = Bounds::scaled(effect.bounds, scales);
+    let chi2_before = r0.chi2(true);
+    let Some(fit) = lsq::minimize(&objective, &bounds, &lsq::axis_scan(k, &START_SCAN)) else {
+        return failed(effect, chi2_before, "the fit left the model's valid range");
+    };
     tracing::debug!(
         effect = effect.name,
-        correlation = corr,
-        share,
-        signature_pass,
-        gains = %setup
-            .m
-            .channels
-            .iter()
-            .zip(&gain_by_channel)
-            .filter(|(_, g)| **g != 0.0)
-            .map(|(c, g)| format!("{}={g:.1}", c.name))
-            .collect::<Vec<_>>()
-            .join(" "),
-        "signature test"
+        termination = ?fit.termination,
+        evaluations = fit.evaluations,
+        objective = fit.chi2(),
+        "fit finished"
     );
+    let params = to_params(&fit.x);
+    let Some(r1) = setup.eval(effect, &params) else {
+        return failed(effect, chi2_before, "the fit left the model's valid range");
+    };
+    let chi2_after = r1.chi2(true);
+    let n_eff = setup.n_eff(true);
+    let cov = fit.covariance();
+    // Null calibration: how much chi-square a fit of this effect gains on the model's own
+    // noise (the ensemble's process-noise residuals plus the white measurement noise),
+    // projected on the effect's Jacobian, at both ends of the fit's path (the fitted point and
+    // the start): along a nonlinear parameter (a lag) the fit can travel through directions
+    // where the process noise is large and end where the Jacobian has turned away from them.
+    let at_fit = match (&fit.jacobian, &cov) {
+        (Some(j), Some(ai)) => null_factor(j, ai, null, white),
+        _ => 1.0,
+    };
+    let at_start = lsq::jacobian_at(&objective, &bounds, &DVector::zeros(k)).and_then(|j| {
+        let a = (j.transpose() * &j).try_inverse()?;
+        Some(null_factor(&j, &a, null, white))
+    });
+    let noise_factor = at_start.map_or(at_fit, |f| f.max(at_fit));
+    let variance_factor = (chi2_after / (n_eff - k as f64).max(1.0)).max(1.0);
+    let ci = lsq::intervals(&fit.x, cov.as_ref(), scales, noise_factor * variance_factor);
+    let scale = noise_factor * variance_factor;
+    let delta_bic = (chi2_before - chi2_after) / scale - k as f64 * n_eff.ln();
+    let delta_bic_uncalibrated = chi2_before - chi2_after - k as f64 * n_eff.ln();
+    let heldout_chi2_before = r0.chi2(false);
+    let heldout_chi2_after = r1.chi2(false);
+    let heldout_gain = (heldout_chi2_before - heldout_chi2_after) / scale;
+    let (signature_pass, signature_text) = signature(setup, effect, r0, &r1);
+    let guards = Guards {
+        inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
+        interval_excludes_zero: interval_excludes_zero(
+            &ci,
+            &fit.x,
+            cov.as_ref(),
+            noise_factor * variance_factor,
+        ),
+        significant: delta_bic > BIC_MARGIN,
+        signature: signature_pass,
+        heldout: heldout_gain > HELDOUT_MIN_GAIN,
+    };
     CandidateResult {
         name: effect.name.to_string(),
         parameters: names(effect).zip(params.iter().copied()).collect(),
@@ -421,18 +485,16 @@ fn fit_mean(
         chi2_after,
         delta_bic,
         delta_bic_uncalibrated,
+        heldout_chi2_before,
+        heldout_chi2_after,
+        heldout_gain,
         signature_pass,
-        signature: format!(
-            "{}: correlation with the residual in {} = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}), \
-             share of the improvement there = {:.0} % (>= {:.0} %)",
-            effect.signature,
-            effect.channels.join("/"),
-            share * 100.0,
-            SIGNATURE_MIN_SHARE * 100.0
-        ),
+        signature: signature_text,
+        guards,
         testable: true,
-        evaluations,
+        evaluations: fit.evaluations,
         noise_factor,
+        variance_factor,
     }
 }
 
@@ -449,23 +511,28 @@ fn failed(effect: &Effect, chi2_before: f64, why: &str) -> CandidateResult {
         chi2_after: chi2_before,
         delta_bic: f64::NEG_INFINITY,
         delta_bic_uncalibrated: f64::NEG_INFINITY,
+        heldout_chi2_before: 0.0,
+        heldout_chi2_after: 0.0,
+        heldout_gain: 0.0,
         signature_pass: false,
         signature: why.to_string(),
+        guards: Guards::default(),
         testable: false,
         evaluations: 0,
         noise_factor: 1.0,
+        variance_factor: 1.0,
     }
 }
 
-/// The depth channel's per-sample variance for an extra EMI amplitude `e` (V rms at full
+/// The depth channel's per-difference variance for an extra EMI amplitude `e` (V rms at full
 /// stern duty).
 struct EmiData {
     r2: Vec<f64>,
     base_var: Vec<f64>,
-    /// Per-sample (duty * attenuation / lsb)^2.
+    /// Per-difference (duty * attenuation / lsb)^2, summed over the two samples.
     gain: Vec<f64>,
+    training: Vec<bool>,
     emi0: f64,
-    tau: f64,
     bins: Vec<Vec<usize>>,
 }
 
@@ -475,59 +542,27 @@ impl EmiData {
         (self.base_var[i] + (emi * emi - self.emi0 * self.emi0) * self.gain[i]).max(1e-12)
     }
 
-    fn minus2_log_l(&self, e: f64) -> f64 {
+    fn minus2_log_l(&self, e: f64, training: bool) -> f64 {
         (0..self.r2.len())
+            .filter(|&i| self.training[i] == training)
             .map(|i| {
                 let v = self.var(i, e);
                 self.r2[i] / v + v.ln()
             })
             .sum::<f64>()
-            / self.tau
     }
-}
 
-struct EmiProblem<'a> {
-    d: &'a EmiData,
-    x: DVector<f64>,
-    scale: f64,
-}
-
-impl EmiProblem<'_> {
-    fn res(&self, e: f64) -> DVector<f64> {
+    /// Per duty bin: the mean squared difference against its expected variance.
+    fn binned(&self, e: f64) -> DVector<f64> {
         DVector::from_iterator(
-            self.d.bins.len(),
-            self.d.bins.iter().map(|b| {
+            self.bins.len(),
+            self.bins.iter().map(|b| {
                 let n = b.len().max(1) as f64;
-                let s2 = b.iter().map(|&i| self.d.r2[i]).sum::<f64>() / n;
-                let v = b.iter().map(|&i| self.d.var(i, e)).sum::<f64>() / n;
-                (s2 - v) / (v * (2.0 * self.d.tau / n).sqrt())
+                let s2 = b.iter().map(|&i| self.r2[i]).sum::<f64>() / n;
+                let v = b.iter().map(|&i| self.var(i, e)).sum::<f64>() / n;
+                (s2 - v) / (v * (2.0 / n).sqrt())
             }),
         )
-    }
-}
-
-impl LeastSquaresProblem<f64, Dyn, Dyn> for EmiProblem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
-    }
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-    fn residuals(&self) -> Option<DVector<f64>> {
-        Some(self.res(self.x[0] * self.scale))
-    }
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let h = 1e-3;
-        let a = self.res(self.x[0] * self.scale);
-        let b = self.res((self.x[0] + h) * self.scale);
-        Some(DMatrix::from_column_slice(
-            a.len(),
-            1,
-            ((b - a) / h).as_slice(),
-        ))
     }
 }
 
@@ -558,46 +593,51 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
     // process noise) cancels, the white sensor noise and EMI add up. So the fit sees only
     // the spread, and a mean-type effect cannot pose as EMI.
     let idx: Vec<usize> = (1..r.len()).collect();
+    let training: Vec<bool> = idx
+        .iter()
+        .map(|&i| setup.split.is_training(ch.samples[i].0))
+        .collect();
     let mut bins: Vec<Vec<usize>> = vec![Vec::new(); 5];
     for (k, &i) in idx.iter().enumerate() {
-        bins[((duty[i].max(duty[i - 1]) * 5.0) as usize).min(4)].push(k);
+        if training[k] {
+            bins[((duty[i].max(duty[i - 1]) * 5.0) as usize).min(4)].push(k);
+        }
     }
     bins.retain(|b| b.len() >= 5);
     let data = EmiData {
         r2: idx.iter().map(|&i| (r[i] - r[i - 1]).powi(2)).collect(),
         base_var: idx.iter().map(|&i| w[i] + w[i - 1]).collect(),
         gain: idx.iter().map(|&i| g[i] + g[i - 1]).collect(),
+        training,
         emi0: d.emi_v_rms_full_duty,
-        tau: 1.0,
         bins,
     };
     let scale = effect.scales[0];
-    let problem = EmiProblem {
-        d: &data,
-        x: DVector::zeros(1),
-        scale,
-    };
-    let (problem, _) = LevenbergMarquardt::new().minimize(problem);
-    let e = problem.x[0] * scale;
-    let j = problem.jacobian()?;
-    let sd = (j.transpose() * &j)
-        .try_inverse()
-        .map_or(f64::INFINITY, |c| c[(0, 0)].max(0.0).sqrt() * scale);
-    let before = data.minus2_log_l(0.0);
-    let after = data.minus2_log_l(e);
+    let objective = |x: &DVector<f64>| Some(data.binned(x[0] * scale));
+    let bounds = Bounds::scaled(effect.bounds, effect.scales);
+    let fit = lsq::minimize(&objective, &bounds, &lsq::axis_scan(1, &[1.0]))?;
+    let e = fit.x[0] * scale;
+    let cov = fit.covariance();
+    let ci = lsq::intervals(&fit.x, cov.as_ref(), effect.scales, 1.0);
+    let before = data.minus2_log_l(0.0, true);
+    let after = data.minus2_log_l(e, true);
+    let n = data.training.iter().filter(|t| **t).count().max(2) as f64;
     // One parameter; the sample size is that of the differences the likelihood uses.
-    let delta_bic = before - after - (data.r2.len().max(2) as f64).ln();
+    let delta_bic = before - after - n.ln();
+    let heldout_before = data.minus2_log_l(0.0, false);
+    let heldout_after = data.minus2_log_l(e, false);
     // Signature: squared residuals grow with the stern duty.
-    let r2: Vec<f64> = data.r2.clone();
-    let g: Vec<f64> = data.gain.clone();
     let corr = {
-        let n = r2.len() as f64;
-        let (ma, mb) = (r2.iter().sum::<f64>() / n, g.iter().sum::<f64>() / n);
+        let k = data.r2.len() as f64;
+        let (ma, mb) = (
+            data.r2.iter().sum::<f64>() / k,
+            data.gain.iter().sum::<f64>() / k,
+        );
         let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
-        for k in 0..r2.len() {
-            ab += (r2[k] - ma) * (g[k] - mb);
-            aa += (r2[k] - ma).powi(2);
-            bb += (g[k] - mb).powi(2);
+        for (a, b) in data.r2.iter().zip(&data.gain) {
+            ab += (a - ma) * (b - mb);
+            aa += (a - ma).powi(2);
+            bb += (b - mb).powi(2);
         }
         if aa > 0.0 && bb > 0.0 {
             ab / (aa * bb).sqrt()
@@ -605,25 +645,36 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
             0.0
         }
     };
+    let signature_pass = e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION;
+    let params = [e];
+    let guards = Guards {
+        inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
+        interval_excludes_zero: interval_excludes_zero(&ci, &fit.x, cov.as_ref(), 1.0),
+        significant: delta_bic > BIC_MARGIN,
+        signature: signature_pass,
+        heldout: heldout_before - heldout_after > HELDOUT_MIN_GAIN,
+    };
     Some(CandidateResult {
         name: effect.name.to_string(),
         parameters: vec![(effect.parameters[0].to_string(), e)],
-        ci95: vec![(
-            effect.parameters[0].to_string(),
-            [e - 1.96 * sd, e + 1.96 * sd],
-        )],
+        ci95: vec![(effect.parameters[0].to_string(), ci[0])],
         chi2_before: before,
         chi2_after: after,
         delta_bic,
         delta_bic_uncalibrated: delta_bic,
-        signature_pass: e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION,
+        heldout_chi2_before: heldout_before,
+        heldout_chi2_after: heldout_after,
+        heldout_gain: heldout_before - heldout_after,
+        signature_pass,
         signature: format!(
             "{}: correlation of squared depth residuals with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION})",
             effect.signature
         ),
+        guards,
         testable: true,
-        evaluations: 0, // a variance fit needs no re-simulation
+        evaluations: fit.evaluations,
         noise_factor: 1.0,
+        variance_factor: 1.0,
     })
 }
 
@@ -633,7 +684,7 @@ pub fn fit_candidates(
     skip: &[&str],
     progress: &mut dyn FnMut(&str),
 ) -> Vec<CandidateResult> {
-    let (r0, owner0) = setup.residual_vector(&setup.base, &setup.clean);
+    let r0 = setup.residuals(&setup.base, &setup.clean);
     let (null, white) = setup.null_vectors();
     let measured: Vec<&str> = setup
         .modelled()
@@ -649,7 +700,7 @@ pub fn fit_candidates(
         if !effect.channels.iter().any(|c| measured.contains(c)) {
             out.push(failed(
                 effect,
-                chi2(&r0),
+                r0.chi2(true),
                 &format!(
                     "not testable: none of its channels ({}) is measured and modelled",
                     effect.channels.join(", ")
@@ -658,14 +709,15 @@ pub fn fit_candidates(
             continue;
         }
         let result = match effect.kind {
-            Kind::Mean => fit_mean(setup, effect, &r0, &owner0, &null, &white),
-            Kind::Variance => {
-                fit_emi(setup, effect).unwrap_or_else(|| failed(effect, chi2(&r0), "no depth data"))
-            }
+            Kind::Mean => fit_mean(setup, effect, &r0, &null, &white),
+            Kind::Variance => fit_emi(setup, effect)
+                .unwrap_or_else(|| failed(effect, r0.chi2(true), "no depth data")),
         };
         tracing::debug!(
             effect = effect.name,
             delta_bic = result.delta_bic,
+            heldout_gain = result.heldout_gain,
+            guards = ?result.guards,
             "candidate fitted"
         );
         out.push(result);
@@ -678,12 +730,9 @@ pub fn fit_candidates(
 }
 
 /// The winner of a round: the best-ranked candidate (by the likelihood, see
-/// [`CandidateResult::delta_bic_uncalibrated`]) that beats "no effect" by the margin after
-/// the noise calibration and passes its signature test.
+/// [`CandidateResult::delta_bic_uncalibrated`]) that passes every guard.
 pub fn winner(results: &[CandidateResult]) -> Option<&CandidateResult> {
-    results
-        .iter()
-        .find(|r| r.testable && r.delta_bic > BIC_MARGIN && r.signature_pass)
+    results.iter().find(|r| r.testable && r.guards.all())
 }
 
 /// Builds a setup for the given configs.
@@ -691,6 +740,7 @@ pub fn setup<'a>(
     m: &'a Measurement,
     base: Configs,
     floors: &'a [Option<Floor>],
+    split: Split,
 ) -> Result<Setup<'a>, GapError> {
     let clean = resim::simulate(&base, m, None)?;
     Ok(Setup {
@@ -698,5 +748,94 @@ pub fn setup<'a>(
         base,
         clean,
         floors,
+        split,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The interval guard: an infinite interval, or an estimate whose confidence region holds
+    /// 0, names nothing; two correlated parameters whose intervals each hold 0 can still be
+    /// jointly clear of it.
+    #[test]
+    fn interval_guard_needs_finite_intervals_and_a_region_clear_of_zero() {
+        let one = |x: f64, sd: f64| {
+            let ci = [[x - 1.96 * sd, x + 1.96 * sd]];
+            let cov = nalgebra::DMatrix::from_element(1, 1, sd * sd);
+            interval_excludes_zero(&ci, &DVector::from_element(1, x), Some(&cov), 1.0)
+        };
+        assert!(one(0.2, 0.05));
+        assert!(one(-0.2, 0.05));
+        // The null run's thruster imbalance: -0.03 with [-0.58, 0.52].
+        assert!(!one(-0.03, 0.28));
+        // A variance factor widens the region.
+        let cov = nalgebra::DMatrix::from_element(1, 1, 0.01);
+        let x = DVector::from_element(1, 0.25);
+        assert!(interval_excludes_zero(&[[0.05, 0.45]], &x, Some(&cov), 1.0));
+        assert!(!interval_excludes_zero(
+            &[[0.05, 0.45]],
+            &x,
+            Some(&cov),
+            4.0
+        ));
+        assert!(!interval_excludes_zero(
+            &[[f64::NEG_INFINITY, f64::INFINITY]],
+            &x,
+            Some(&cov),
+            1.0
+        ));
+        // Strongly anti-correlated pair: each marginal holds 0, the pair does not.
+        let cov = nalgebra::DMatrix::from_row_slice(2, 2, &[1.0, -0.99, -0.99, 1.0]);
+        let x = DVector::from_row_slice(&[1.0, 1.0]);
+        assert!(interval_excludes_zero(
+            &[[-0.96, 2.96], [-0.96, 2.96]],
+            &x,
+            Some(&cov),
+            1.0
+        ));
+        let x = DVector::from_row_slice(&[1.0, -1.0]);
+        assert!(!interval_excludes_zero(
+            &[[-0.96, 2.96], [-2.96, 0.96]],
+            &x,
+            Some(&cov),
+            1.0
+        ));
+    }
+
+    /// A candidate is named only when every guard holds.
+    #[test]
+    fn a_single_failed_guard_blocks_the_name() {
+        let all = Guards {
+            inside_bounds: true,
+            interval_excludes_zero: true,
+            significant: true,
+            signature: true,
+            heldout: true,
+        };
+        assert!(all.all());
+        for k in 0..5 {
+            let mut g = all;
+            match k {
+                0 => g.inside_bounds = false,
+                1 => g.interval_excludes_zero = false,
+                2 => g.significant = false,
+                3 => g.signature = false,
+                _ => g.heldout = false,
+            }
+            assert!(!g.all());
+            assert_eq!(g.failed().len(), 1);
+        }
+    }
+
+    #[test]
+    fn split_alternates_blocks() {
+        let s = Split { block_s: 10.0 };
+        assert!(s.is_training(0.0));
+        assert!(s.is_training(9.99));
+        assert!(!s.is_training(10.0));
+        assert!(!s.is_training(19.9));
+        assert!(s.is_training(20.0));
+    }
 }

@@ -175,7 +175,12 @@ pub fn generate_with(
                 if let Some(ch) = accel_adc[axis].channel_of(accel_sources[axis]) {
                     let volts = accel.voltage(axis, t);
                     if let Ok(code) = accel_adc[axis].convert(ch, volts, 0.0) {
-                        accel_codes[axis].push((t, f64::from(code)));
+                        let a = &truth.sensors.accelerometer;
+                        let lsb = accel_adc[axis].lsb_v();
+                        let zero = a.zero_g_v / lsb + truth.sensors.adc.offset_lsb;
+                        let full = f64::from((1u32 << truth.sensors.adc.bits) - 1);
+                        let read = truth.analog.accel_code(axis, f64::from(code), zero);
+                        accel_codes[axis].push((t, read.round().clamp(0.0, full)));
                     }
                 }
             }

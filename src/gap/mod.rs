@@ -21,12 +21,14 @@
 //!   form the thesis reports Mako's measurements in.
 //! - [`bench`]: the hidden-effect benchmark (`eyebot-hil gap-bench`).
 
+pub mod anchor;
 pub mod bench;
 pub mod convert;
 pub mod effects;
 pub mod fit;
 pub mod format;
 pub mod generate;
+pub mod lsq;
 pub mod model;
 pub mod report;
 pub mod residuals;
@@ -76,8 +78,24 @@ pub enum GapError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Verdict {
+    /// At least one effect passed every guard and was named.
     Effect,
+    /// The model agrees with the data within its noise floor: nothing to explain.
     None,
+    /// The data disagree with the model beyond its noise floor and nothing in the library
+    /// explains it; `Analysis::unexplained` says where.
+    Unexplained,
+}
+
+/// Where a gap nothing explains lies: one channel, its regimes and windows.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unexplained {
+    pub channel: String,
+    pub chi2_per_sample: f64,
+    /// Regimes (thrust states) in which the channel disagrees significantly.
+    pub regimes: Vec<String>,
+    /// Time windows (start s, end s, chi2 per sample) in which it does.
+    pub windows: Vec<(f64, f64, f64)>,
 }
 
 /// Everything `gap` found.
@@ -99,6 +117,15 @@ pub struct Analysis {
     pub excess_before: f64,
     pub excess_after: f64,
     pub gap_reduction_pct: f64,
+    /// The same gap measure on the held-out blocks only (data no fit saw), before and after.
+    pub heldout_gap_before: f64,
+    pub heldout_gap_after: f64,
+    pub heldout_reduction_pct: f64,
+    /// Channels still significantly off after the accepted effects, with where.
+    pub unexplained: Vec<Unexplained>,
+    /// How the re-simulation was cut and the data split.
+    pub shooting: anchor::Shooting,
+    pub split: fit::Split,
     /// Traces for the plots.
     pub clean_before: resim::Run,
     pub clean_after: resim::Run,
@@ -180,15 +207,60 @@ fn excess(stats: &[ChannelStats]) -> f64 {
     (mean - 1.0).max(0.0).sqrt()
 }
 
-/// Runs the whole workflow on a measurement. `exp_dir` resolves the experiment's relative
-/// references; `progress(round, effect)` is called before each candidate fit.
+/// The held-out gap: the excess of the held-out blocks' chi-square per independent sample
+/// over 1, as [`excess`] measures the whole run.
+fn heldout_excess(setup: &fit::Setup<'_>, c: &Configs, run: &resim::Run) -> f64 {
+    let r = setup.residuals(c, run);
+    let n = setup.n_eff(false);
+    (r.chi2(false) / n - 1.0).max(0.0).sqrt()
+}
+
+fn reduction_pct(before: f64, after: f64) -> f64 {
+    if before > 0.0 {
+        100.0 * (1.0 - after / before)
+    } else {
+        0.0
+    }
+}
+
+/// Options of one analysis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    pub shooting: anchor::Shooting,
+    pub split: fit::Split,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            shooting: anchor::Shooting::DEFAULT,
+            split: fit::Split::DEFAULT,
+        }
+    }
+}
+
+/// Runs the whole workflow on a measurement with the default options. `exp_dir` resolves the
+/// experiment's relative references; `progress(round, effect)` is called before each
+/// candidate fit.
 pub fn analyse(
     model: &GapModel,
     m: &Measurement,
     exp_dir: &Path,
     progress: &mut dyn FnMut(usize, &str),
 ) -> Result<Analysis, GapError> {
-    let start = model.configs(&m.experiment, exp_dir)?;
+    analyse_with(model, m, exp_dir, Options::default(), progress)
+}
+
+/// As [`analyse`], with explicit options.
+pub fn analyse_with(
+    model: &GapModel,
+    m: &Measurement,
+    exp_dir: &Path,
+    options: Options,
+    progress: &mut dyn FnMut(usize, &str),
+) -> Result<Analysis, GapError> {
+    let mut start = model.configs(&m.experiment, exp_dir)?;
+    start.shooting = options.shooting;
     let clean0 = resim::simulate(&start, m, None)?;
     let floors = resim::noise_floor(&start, m, &clean0)?;
     if floors.iter().all(Option::is_none) {
@@ -210,8 +282,10 @@ pub fn analyse(
     let mut accepted: Vec<CandidateResult> = Vec::new();
     let mut rounds = Vec::new();
     let mut configs = start.clone();
+    let first = fit::setup(m, configs.clone(), &floors, options.split)?;
+    let heldout_before = heldout_excess(&first, &start, &clean0);
     for round in 0..fit::MAX_EFFECTS {
-        let setup = fit::setup(m, configs.clone(), &floors)?;
+        let setup = fit::setup(m, configs.clone(), &floors, options.split)?;
         let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
         skip.extend(model.effects.iter().map(|e| e.effect.name));
         let results = fit::fit_candidates(&setup, &skip, &mut |name| progress(round, name));
@@ -239,22 +313,43 @@ pub fn analyse(
         resim::noise_floor(&configs, m, &clean1)?
     };
     let after = stats_for(m, &configs, &clean1, &floors_after);
+    let heldout_after = heldout_excess(&first, &configs, &clean1);
     let (eb, ea) = (excess(&before), excess(&after));
+    let unexplained: Vec<Unexplained> = after
+        .iter()
+        .filter(|s| s.significant)
+        .map(|s| Unexplained {
+            channel: s.channel.clone(),
+            chi2_per_sample: s.chi2_per_sample,
+            regimes: s
+                .regimes
+                .iter()
+                .filter(|r| r.significant)
+                .map(|r| r.regime.clone())
+                .collect(),
+            windows: s.windows.clone(),
+        })
+        .collect();
+    let verdict = if !accepted.is_empty() {
+        Verdict::Effect
+    } else if before.iter().any(|s| s.significant) {
+        Verdict::Unexplained
+    } else {
+        Verdict::None
+    };
     Ok(Analysis {
-        verdict: if accepted.is_empty() {
-            Verdict::None
-        } else {
-            Verdict::Effect
-        },
+        verdict,
         track_distance_before_m: track_distance(m, &clean0),
         track_distance_after_m: track_distance(m, &clean1),
         excess_before: eb,
         excess_after: ea,
-        gap_reduction_pct: if eb > 0.0 {
-            100.0 * (1.0 - ea / eb)
-        } else {
-            0.0
-        },
+        gap_reduction_pct: reduction_pct(eb, ea),
+        heldout_gap_before: heldout_before,
+        heldout_gap_after: heldout_after,
+        heldout_reduction_pct: reduction_pct(heldout_before, heldout_after),
+        unexplained,
+        shooting: options.shooting,
+        split: options.split,
         before,
         after,
         rounds,

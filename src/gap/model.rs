@@ -34,6 +34,8 @@ struct RawModel {
     vehicle: String,
     world: Option<String>,
     sensors: Option<String>,
+    #[serde(default, rename = "calibration")]
+    calibration: Vec<RawEffect>,
     #[serde(default, rename = "effect")]
     effects: Vec<RawEffect>,
 }
@@ -67,6 +69,9 @@ pub struct GapModel {
     pub sensors_ref: Option<String>,
     /// Where relative references resolve (the model file's directory).
     pub base: PathBuf,
+    /// Parameters fitted by `gap calibrate` on baseline runs: part of the model, applied
+    /// before the effects, and still free to be found again as a change by `gap`.
+    pub calibration: Vec<EnabledEffect>,
     pub effects: Vec<EnabledEffect>,
 }
 
@@ -93,68 +98,15 @@ impl GapModel {
     pub fn from_text(origin: &str, text: &str, base: PathBuf) -> Result<Self, GapError> {
         let doc = Document::new(origin, text);
         let raw: RawModel = doc.parse()?;
-        let mut effects = Vec::new();
-        for (i, e) in raw.effects.iter().enumerate() {
-            let key = format!("effect.{i}");
-            let effect = effects::by_name(&e.name).ok_or_else(|| {
-                doc.invalid(
-                    &format!("{key}.name"),
-                    format!(
-                        "unknown effect `{}`; known: {}",
-                        e.name,
-                        effects::LIBRARY
-                            .iter()
-                            .map(|e| e.name)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )
-            })?;
-            if let Some(k) = e
-                .parameters
-                .keys()
-                .find(|k| !effect.parameters.contains(&k.as_str()))
-            {
-                return Err(doc
-                    .invalid(
-                        &format!("{key}.parameters"),
-                        format!(
-                            "`{}` has no parameter `{k}`; it has {}",
-                            effect.name,
-                            effect.parameters.join(", ")
-                        ),
-                    )
-                    .into());
-            }
-            let values = effect
-                .parameters
-                .iter()
-                .map(|p| e.parameters.get(*p).copied().unwrap_or(0.0))
-                .collect::<Vec<_>>();
-            if values.iter().any(|v| !v.is_finite()) {
-                return Err(doc
-                    .invalid(&format!("{key}.parameters"), "values must be finite")
-                    .into());
-            }
-            let ci95 = effect
-                .parameters
-                .iter()
-                .zip(&values)
-                .map(|(p, v)| e.ci95.get(*p).copied().unwrap_or([*v, *v]))
-                .collect();
-            effects.push(EnabledEffect {
-                effect,
-                values,
-                ci95,
-                delta_bic: e.delta_bic,
-            });
-        }
+        let calibration = enabled(&doc, "calibration", &raw.calibration)?;
+        let effects = enabled(&doc, "effect", &raw.effects)?;
         Ok(Self {
             name: raw.name,
             vehicle_ref: raw.vehicle,
             world_ref: raw.world,
             sensors_ref: raw.sensors,
             base,
+            calibration,
             effects,
         })
     }
@@ -178,11 +130,7 @@ impl GapModel {
             None => read_ref(exp_dir, &experiment.sensors)?,
         };
         let sensors = SensorsConfig::from_text(o, &t)?;
-        Ok(Configs {
-            vehicle,
-            world,
-            sensors,
-        })
+        Ok(Configs::new(vehicle, world, sensors))
     }
 
     /// The configurations with every enabled effect applied.
@@ -192,7 +140,7 @@ impl GapModel {
         exp_dir: &Path,
     ) -> Result<Configs, GapError> {
         let mut c = self.base_configs(experiment, exp_dir)?;
-        for e in &self.effects {
+        for e in self.calibration.iter().chain(&self.effects) {
             effects::apply(e.effect, &e.values, &mut c);
         }
         Ok(c)
@@ -227,8 +175,13 @@ impl GapModel {
         if let Some(x) = &self.sensors_ref {
             let _ = writeln!(s, "sensors = {:?}", rel(x));
         }
-        for e in &self.effects {
-            let _ = writeln!(s, "\n[[effect]]\nname = {:?}", e.effect.name);
+        for (table, e) in self
+            .calibration
+            .iter()
+            .map(|e| ("calibration", e))
+            .chain(self.effects.iter().map(|e| ("effect", e)))
+        {
+            let _ = writeln!(s, "\n[[{table}]]\nname = {:?}", e.effect.name);
             let params: Vec<String> = e
                 .effect
                 .parameters
@@ -251,6 +204,67 @@ impl GapModel {
         }
         s
     }
+}
+
+/// Resolves the `[[effect]]` or `[[calibration]]` entries of a model file.
+fn enabled(doc: &Document, table: &str, raw: &[RawEffect]) -> Result<Vec<EnabledEffect>, GapError> {
+    let mut out = Vec::new();
+    for (i, e) in raw.iter().enumerate() {
+        let key = format!("{table}.{i}");
+        let effect = effects::by_name(&e.name).ok_or_else(|| {
+            doc.invalid(
+                &format!("{key}.name"),
+                format!(
+                    "unknown effect `{}`; known: {}",
+                    e.name,
+                    effects::LIBRARY
+                        .iter()
+                        .map(|e| e.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )
+        })?;
+        if let Some(k) = e
+            .parameters
+            .keys()
+            .find(|k| !effect.parameters.contains(&k.as_str()))
+        {
+            return Err(doc
+                .invalid(
+                    &format!("{key}.parameters"),
+                    format!(
+                        "`{}` has no parameter `{k}`; it has {}",
+                        effect.name,
+                        effect.parameters.join(", ")
+                    ),
+                )
+                .into());
+        }
+        let values = effect
+            .parameters
+            .iter()
+            .map(|p| e.parameters.get(*p).copied().unwrap_or(0.0))
+            .collect::<Vec<_>>();
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(doc
+                .invalid(&format!("{key}.parameters"), "values must be finite")
+                .into());
+        }
+        let ci95 = effect
+            .parameters
+            .iter()
+            .zip(&values)
+            .map(|(p, v)| e.ci95.get(*p).copied().unwrap_or([*v, *v]))
+            .collect();
+        out.push(EnabledEffect {
+            effect,
+            values,
+            ci95,
+            delta_bic: e.delta_bic,
+        });
+    }
+    Ok(out)
 }
 
 /// `target` relative to `from` (both absolute), if they share a root.

@@ -24,8 +24,13 @@ pub fn json(a: &Analysis) -> Value {
             "ci95": r.ci95.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_,_>>(),
             "delta_bic": r.delta_bic,
             "signature_pass": r.signature_pass,
+            "heldout_chi2_before": r.heldout_chi2_before,
+            "heldout_chi2_after": r.heldout_chi2_after,
+            "heldout_gain": r.heldout_gain,
+            "guards": r.guards,
         })
     };
+    let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
     json!({
         "effects": a.accepted.iter().map(effect).collect::<Vec<_>>(),
         "verdict": a.verdict,
@@ -33,17 +38,29 @@ pub fn json(a: &Analysis) -> Value {
         "gap_before": rms(&a.before),
         "gap_after": rms(&a.after),
         "gap_reduction_pct": a.gap_reduction_pct,
+        "excess_before": a.excess_before,
+        "excess_after": a.excess_after,
+        "heldout_gap_before": a.heldout_gap_before,
+        "heldout_gap_after": a.heldout_gap_after,
+        "heldout_reduction_pct": a.heldout_reduction_pct,
+        "unexplained": a.unexplained,
+        "segment_s": a.shooting.segment_s,
+        "heldout_block_s": a.split.block_s,
         "track_distance_before_m": a.track_distance_before_m,
         "track_distance_after_m": a.track_distance_after_m,
         "channels_before": a.before,
         "channels_after": a.after,
         "unmodelled_channels": a.unmodelled,
         "rounds": a.rounds.iter().map(|r| r.iter().map(|c| json!({
-            "name": c.name, "delta_bic": if c.delta_bic.is_finite() { json!(c.delta_bic) } else { Value::Null },
-            "parameters": c.parameters, "signature_pass": c.signature_pass,
+            "name": c.name, "delta_bic": finite(c.delta_bic),
+            "parameters": c.parameters, "ci95": c.ci95.iter().map(|(n, v)| (n.clone(), json!([finite(v[0]), finite(v[1])]))).collect::<serde_json::Map<_,_>>(),
+            "signature_pass": c.signature_pass,
             "signature": c.signature, "testable": c.testable,
             "chi2_before": c.chi2_before, "chi2_after": c.chi2_after, "noise_factor": c.noise_factor,
-            "delta_bic_uncalibrated": if c.delta_bic_uncalibrated.is_finite() { json!(c.delta_bic_uncalibrated) } else { Value::Null },
+            "variance_factor": c.variance_factor,
+            "heldout_chi2_before": c.heldout_chi2_before, "heldout_chi2_after": c.heldout_chi2_after,
+            "heldout_gain": c.heldout_gain, "guards": c.guards,
+            "delta_bic_uncalibrated": finite(c.delta_bic_uncalibrated),
         })).collect::<Vec<_>>()).collect::<Vec<_>>(),
     })
 }
@@ -52,15 +69,54 @@ pub fn json(a: &Analysis) -> Value {
 pub fn markdown(a: &Analysis, m: &Measurement) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Reality gap: {}\n", m.experiment.name);
-    let verdict = match a.accepted.first() {
-        Some(w) => format!("missing effect: **{}**", w.name),
-        None => "no significant missing effect".to_string(),
+    let verdict = match (a.verdict, a.accepted.first()) {
+        (_, Some(w)) => format!("missing effect: **{}**", w.name),
+        (crate::gap::Verdict::Unexplained, None) => {
+            "**unexplained**: the model disagrees with the data beyond its noise floor and no \
+             effect in the library passes every guard"
+                .to_string()
+        }
+        _ => "no significant missing effect".to_string(),
     };
     let _ = writeln!(
         s,
-        "Verdict: {verdict} (margin: delta BIC > {}).\n",
-        fit::BIC_MARGIN
+        "Verdict: {verdict}.\n\nAn effect is named only when its parameters lie inside their \
+         physical bounds, its 95 % interval is finite and excludes no effect, delta BIC > {} \
+         (gain scaled by the residual variance and the correlated process noise), it passes its \
+         signature test, and it lowers the held-out chi-square by more than {} (re-simulation \
+         in {} segments; even {} s blocks fitted, odd blocks held out).\n",
+        fit::BIC_MARGIN,
+        fit::HELDOUT_MIN_GAIN,
+        a.shooting
+            .segment_s
+            .map_or("one open-loop".to_string(), |s| format!(
+                "re-anchored {s} s"
+            )),
+        a.split.block_s
     );
+    for u in &a.unexplained {
+        let w: Vec<String> = u
+            .windows
+            .iter()
+            .map(|(a, b, x)| format!("{a:.0}-{b:.0} s ({x:.1})"))
+            .collect();
+        let _ = writeln!(
+            s,
+            "- unexplained after the fit: **{}** (chi2/n {:.2}); regimes: {}; windows: {}",
+            u.channel,
+            u.chi2_per_sample,
+            if u.regimes.is_empty() {
+                "-".to_string()
+            } else {
+                u.regimes.join(", ")
+            },
+            if w.is_empty() {
+                "-".to_string()
+            } else {
+                w.join(", ")
+            }
+        );
+    }
     for n in &m.notices {
         let _ = writeln!(s, "- notice: {n}");
     }
@@ -110,7 +166,7 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
         let _ = writeln!(s, "\n## Candidates, round {}\n", i + 1);
         let _ = writeln!(
             s,
-            "| rank | effect | delta BIC | parameters | signature |\n|---|---|---|---|---|"
+            "| rank | effect | delta BIC | held-out gain | parameters | failed guards | signature |\n|---|---|---|---|---|---|---|"
         );
         for (k, c) in round.iter().enumerate() {
             let p: Vec<String> = c
@@ -119,9 +175,14 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
                 .zip(&c.ci95)
                 .map(|((n, v), (_, ci))| format!("{n} = {v:.4} [{:.4}, {:.4}]", ci[0], ci[1]))
                 .collect();
+            let failed = if c.testable {
+                c.guards.failed().join(", ")
+            } else {
+                "not testable".to_string()
+            };
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} {} |",
+                "| {} | {} | {} | {:.1} | {} | {} | {} {} |",
                 k + 1,
                 c.name,
                 if c.delta_bic.is_finite() {
@@ -129,7 +190,9 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
                 } else {
                     "-".into()
                 },
+                c.heldout_gain,
                 p.join("; "),
+                if failed.is_empty() { "none" } else { &failed },
                 if c.signature_pass { "pass:" } else { "fail:" },
                 c.signature
             );
@@ -159,8 +222,13 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
     }
     let _ = writeln!(
         s,
-        "\nGap (excess of the normalised residual over the noise floor): {:.2} before, {:.2} after: {:.0} % smaller.",
-        a.excess_before, a.excess_after, a.gap_reduction_pct
+        "\nGap (excess of the normalised residual over the noise floor): {:.2} before, {:.2} after: {:.0} % smaller. On the held-out blocks: {:.2} before, {:.2} after: {:.0} % smaller.",
+        a.excess_before,
+        a.excess_after,
+        a.gap_reduction_pct,
+        a.heldout_gap_before,
+        a.heldout_gap_after,
+        a.heldout_reduction_pct
     );
     let _ = writeln!(
         s,
@@ -339,11 +407,7 @@ pub fn plots(a: &Analysis, m: &Measurement, out: &Path) -> Result<(), GapError> 
             .map_err(|e| plot_err(&path, e))?;
         chart
             .draw_series(round.iter().enumerate().map(|(i, c)| {
-                let colour = if c.signature_pass && c.delta_bic > fit::BIC_MARGIN {
-                    GREEN
-                } else {
-                    RED
-                };
+                let colour = if c.guards.all() { GREEN } else { RED };
                 Rectangle::new([(0.0, i), (sym(c.delta_bic), i + 1)], colour.filled())
             }))
             .map_err(|e| plot_err(&path, e))?;

@@ -4,14 +4,17 @@
 //! model's process noise switched on (thrust fluctuation).
 
 use nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
+use rand::RngExt;
+use rand_distr::StandardNormal;
 
 use crate::gap::GapError;
+use crate::gap::anchor;
 use crate::gap::effects::Configs;
 use crate::gap::format::{Channel, Measurement};
 use crate::physics::state::{STERN, VehicleState};
 use crate::physics::{InitialState, Model, ThrusterCommand, hdt_command};
 use crate::sensors::accelerometer::G0_MPS2;
-use crate::sensors::{AdcBoard, Compass, DepthSensor};
+use crate::sensors::{AdcBoard, Compass, DepthSensor, rng};
 
 /// Channels `gap` can re-simulate; the others are loaded and reported as not modelled.
 pub const MODELLED: [&str; 9] = [
@@ -100,8 +103,41 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     percent.push(p);
     let tables: [[f64; 11]; 4] = std::array::from_fn(|k| model.vehicle().thrusters[k].hdt_duty);
     let mut commands: [ThrusterCommand; 4] = std::array::from_fn(|k| hdt_command(&tables[k], p[k]));
+    let segment_steps = c
+        .shooting
+        .segment_s
+        .map(|s| ((s / dt).round() as usize).max(1));
+    let earth = earth_field(c);
+    // An ensemble member (process noise on) also reads its anchors with the measurement
+    // noise: the noise floor then holds what a noisy anchor costs.
+    let mut anchor_draw = noise_seed.map(|seed| {
+        let noise = segment_steps.map(|_| {
+            let probe = Run {
+                dt_s: dt,
+                states: vec![model.vehicle_state(&state)],
+                percent: vec![p],
+            };
+            anchor::AnchorNoise::of(c, m, &probe)
+        });
+        (noise.unwrap_or_default(), rng::stream(seed, "gap-anchor"))
+    });
     for k in 0..steps {
         let t = k as f64 * dt;
+        if let Some(n) = segment_steps
+            && k > 0
+            && k % n == 0
+        {
+            let here = model.vehicle_state(&state);
+            let mut a = anchor::estimate(c, m, &earth, t, &here);
+            if let Some((noise, rng)) = anchor_draw.as_mut() {
+                noise.perturb(&mut a, &mut || rng.sample(StandardNormal));
+            }
+            model.reanchor(&mut state, &a);
+            // The boundary's state is the anchored one: predictions at `t` start the segment.
+            if let Some(last) = states.last_mut() {
+                *last = model.vehicle_state(&state);
+            }
+        }
         let now = m.percent_at(t);
         if now != p {
             p = now;
@@ -197,10 +233,12 @@ pub fn predict(c: &Configs, run: &Run, channel: &Channel, lag_s: f64) -> Option<
             let a = &c.sensors.accelerometer;
             let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
             let lat = a.errors.latency_s;
+            let zero = a.zero_g_v / lsb + c.sensors.adc.offset_lsb;
             ts.map(|t| {
                 let f = run.at(t - lag_s - lat).specific_force_body_mps2[axis];
                 let v = (a.zero_g_v + a.sensitivity_v_per_g * f / G0_MPS2).clamp(a.min_v, a.max_v);
-                v / lsb + c.sensors.adc.offset_lsb
+                c.analog
+                    .accel_code(axis, v / lsb + c.sensors.adc.offset_lsb, zero)
             })
             .collect()
         }

@@ -27,7 +27,7 @@ pub mod thruster;
 pub mod world;
 
 pub use config::{VehicleConfig, WorldConfig};
-pub use model::{InitialState, Model, PhysicsError, SimState};
+pub use model::{Anchor, InitialState, Model, PhysicsError, SimState};
 pub use thruster::{Direction, ThrusterCommand, hdt_command};
 
 use crate::config::{ConfigError, ConfigSource, Document};

@@ -68,6 +68,18 @@ pub struct InitialState {
     pub angular_velocity_body_radps: Vector3<f64>,
 }
 
+/// Quantities a re-simulation sets from measurements at a segment boundary
+/// ([`Model::reanchor`]); `None` keeps the state's own value. World frame NED.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Anchor {
+    pub north_m: Option<f64>,
+    pub east_m: Option<f64>,
+    /// Depth of the centre of mass (m).
+    pub depth_m: Option<f64>,
+    /// Yaw (rad, clockwise from north); roll and pitch are kept.
+    pub heading_rad: Option<f64>,
+}
+
 /// Everything that changes during a run. Cloning it and stepping both copies with the same
 /// commands gives bit-identical results.
 #[derive(Debug, Clone, PartialEq)]
@@ -268,6 +280,26 @@ impl Model {
             contact_count: 0,
             contact_steps: 0,
             rng,
+        }
+    }
+
+    /// Replaces the parts of `state` that `anchor` names, keeping everything else (body
+    /// velocities relative to the water, roll, pitch, thruster lag, noise streams). A
+    /// re-simulation that re-anchors its state to measurements at segment boundaries
+    /// (multiple shooting) uses it; stepping never calls it.
+    pub fn reanchor(&self, state: &mut SimState, anchor: &Anchor) {
+        if let Some(x) = anchor.north_m {
+            state.position_m.x = x;
+        }
+        if let Some(y) = anchor.east_m {
+            state.position_m.y = y;
+        }
+        if let Some(z) = anchor.depth_m {
+            state.position_m.z = z;
+        }
+        if let Some(h) = anchor.heading_rad {
+            let (roll, pitch, _) = state.attitude.euler_angles();
+            state.attitude = UnitQuaternion::from_euler_angles(roll, pitch, h);
         }
     }
 
