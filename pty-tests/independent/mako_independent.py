@@ -653,7 +653,7 @@ class TurnCounter:
 class Depth:
     """PID on the depth ADC with a feed-forward for the reserve buoyancy."""
 
-    def __init__(self, period_s, ff=62.0, kp=90.0, ki=12.0, kd=150.0):
+    def __init__(self, period_s, ff=62.0, kp=200.0, ki=15.0, kd=400.0):
         self.dt, self.ff, self.kp, self.ki, self.kd = period_s, ff, kp, ki, kd
         self.i = 0.0
         self.filt = None
@@ -667,7 +667,8 @@ class Depth:
             self.rate = 0.85 * self.rate + 0.15 * (self.filt - self.prev) / self.dt
         self.prev = self.filt
         e = target_m - self.filt
-        self.i = max(-2.5, min(2.5, self.i + e * self.dt))
+        if abs(e) < 0.15:  # integrate only near the target (the student's anti-windup)
+            self.i = max(-1.5, min(1.5, self.i + e * self.dt))
         out = self.ff + self.kp * e + self.ki * self.i - self.kd * self.rate
         return max(-100.0, min(100.0, out))
 
@@ -680,11 +681,20 @@ class Program:
         self.h0 = start_heading_deg
         self.hc = Heading()
 
-    def surface(self):
-        return 0.0, 0.0
+    def note_target(self, t, target):
+        """Keeps (start, end, depth target) stretches for the summary."""
+        if not hasattr(self, "log"):
+            self.log = []
+        if not self.log or self.log[-1][2] != target:
+            if self.log:
+                self.log[-1] = (self.log[-1][0], t, self.log[-1][2])
+            self.log.append((t, None, target))
 
 
 class HeadingHold(Program):
+    """Out-and-back legs: turn on the spot to the new heading (compass), then drive a timed leg
+    holding it; the heading steps between pairs of legs are 45-120 deg, speeds 40-100 %."""
+
     def __init__(self, rng, h0):
         super().__init__(rng, h0)
         bases = [50, 80, 65, 100, 40, 90]
@@ -692,24 +702,31 @@ class HeadingHold(Program):
         ang = 0.0
         for k in range(40):
             b = bases[k % len(bases)]
-            leg = 11.0 + 3.0 * rng.random()
-            self.legs.append((leg, ang, b))
-            self.legs.append((leg * 100.0 / (100.0 + 0.3 * b), ang + 180.0, b))
+            leg = (6.0 if b >= 80 else 9.0) + 3.0 * rng.random()
+            self.legs.append((ang, b, leg))
+            self.legs.append((ang + 180.0, b, leg))
             ang += rng.choice([45.0, 60.0, 90.0, -60.0, 120.0])
         self.k = 0
-        self.t_leg = 0.0
+        self.state, self.t0, self.t_ok = "leg", 0.0, None
 
     def step(self, eb, t):
         self.hc.update(eb)
-        dur, ang, base = self.legs[self.k]
-        if t - self.t_leg >= dur:
-            self.k, self.t_leg = self.k + 1, t
-            dur, ang, base = self.legs[self.k]
+        ang, base, dur = self.legs[self.k]
         want = (self.h0 + ang) % 360.0
-        err = abs(wrap180(want - (self.hc.heading or want)))
-        b = base if err < 20.0 else 0.0  # turn on the spot first
+        if self.state == "turn":
+            err = abs(wrap180(want - self.hc.heading)) if self.hc.heading is not None else 0.0
+            self.t_ok = (self.t_ok or t) if err < 8.0 else None
+            if (self.t_ok is not None and t - self.t_ok >= 1.0) or t - self.t0 > 45.0:
+                self.state, self.t0 = "leg", t
+            self.hc.limit = 80.0
+            d = self.hc.output(want)
+            eb.motor_drive(d, -d, 0, 0)
+            return
+        self.hc.limit = 40.0
         d = self.hc.output(want)
-        eb.motor_drive(b + d, b - d, 0, 0)
+        eb.motor_drive(base + d, base - d, 0, 0)
+        if t - self.t0 >= dur:
+            self.k, self.state, self.t0, self.t_ok = self.k + 1, "turn", t, None
 
 
 class Spins(Program):
@@ -753,6 +770,7 @@ class DepthHold(Program):
         dur, target = self.targets[self.k]
         if t - self.t0 >= dur:
             self.k, self.t0 = self.k + 1, t
+        self.note_target(t, self.targets[self.k][1])
         v = self.dc.output(eb, self.targets[self.k][1])
         d = self.hc.output(self.h0)
         eb.motor_drive(d, -d, v, v)
@@ -796,8 +814,10 @@ class Square(Program):
 
 
 class WallRun(Program):
-    """Wall on port held at 1.0 m on sonar 1 (port-fore); a wall ahead on sonar 3 (bow-port)
-    closer than 2.2 m starts a 90 deg right turn by compass."""
+    """Wall on port held at 1.0 m on sonar 1 (port-fore, 15 deg ahead of the beam); a wall ahead
+    on sonar 3 (bow-port) closer than 3.0 m starts a 90 deg right turn by compass. The heading
+    correction is kept inside what the transducer still hears (turning away by more than
+    ~5 deg loses the echo); without a side echo for 3 s the program steers along the wall."""
     select = (0, 2)  # controller 0 -> port-fore, controller 1 -> bow-port
 
     def __init__(self, rng, h0):
@@ -805,24 +825,31 @@ class WallRun(Program):
         self.wall = h0
         self.want = h0
         self.turning = False
-        self.base = 60.0
+        self.base = 55.0
+        self.corners = 0
+        self.t_side = 0.0
 
     def step(self, eb, t):
         self.hc.update(eb)
         side, ahead = eb.sonar(0), eb.sonar(2)
         if not self.turning:
             if side is not None:
-                corr = max(-25.0, min(25.0, -30.0 * (side - 1.0)))
+                corr = max(-20.0, min(6.0, -30.0 * (side - 1.0)))
                 self.want = (self.wall + corr) % 360.0
-            if ahead is not None and ahead < 2.2:
+                self.t_side = t
+            elif t - self.t_side > 3.0:
+                self.want = self.wall
+            if ahead is not None and ahead < 3.0:
                 self.wall = (self.wall + 90.0) % 360.0
                 self.want = self.wall
                 self.turning = True
+                self.corners += 1
         h = self.hc.heading
         if self.turning:
             err = wrap180(self.want - h) if h is not None else 0.0
             if abs(err) < 10.0:
                 self.turning = False
+                self.t_side = t
             p = 60.0 if err > 0 else -60.0
             eb.motor_drive(p, -p, 0, 0)
             return
@@ -842,10 +869,12 @@ class Mixed(Program):
         self.square.hc = self.hc
         self.square.dc = self.dc
         self.count = TurnCounter()
+        self.t_aligned = None
 
     def step(self, eb, t):
         self.hc.update(eb)
         dt = t - self.t0
+        self.note_target(t, 0.7 if self.phase >= 6 else 1.0)
         if self.phase >= 6:
             if self.phase == 6:  # the squares start now
                 self.phase, self.square.t0 = 7, t
@@ -857,14 +886,16 @@ class Mixed(Program):
             eb.motor_drive(d, -d, v, v)
             if dt > 20.0:
                 self.phase, self.t0 = 1, t
-        elif self.phase in (1, 2):  # out and back at depth
+        elif self.phase in (1, 2):  # out and back at depth, along the pool
             want = self.h0 + (0.0 if self.phase == 1 else 180.0)
             err = abs(wrap180(want - (self.hc.heading if self.hc.heading is not None else want)))
             b = 75.0 if err < 20.0 else 0.0
+            if b and self.t_aligned is None:
+                self.t_aligned = t
             d = self.hc.output(want)
             eb.motor_drive(b + d, b - d, v, v)
-            if dt > 16.0:
-                self.phase, self.t0 = self.phase + 1, t
+            if self.t_aligned is not None and t - self.t_aligned > 12.0:
+                self.phase, self.t0, self.t_aligned = self.phase + 1, t, None
         elif self.phase in (3, 5):  # one spot turn each way, counted on the compass
             sign = 1 if self.phase == 3 else -1
             self.count.feed(self.hc)
@@ -889,8 +920,10 @@ def start_pose(program, rng):
     if program == "wall_run":
         return 2.0 + 0.5 * rng.random(), 1.4 + 0.2 * rng.random(), 0.0 + rng.uniform(-3.0, 3.0)
     if program == "square":
-        return 10.0 + 2.0 * rng.random(), 4.5 + 1.0 * rng.random(), rng.choice([0.0, 90.0, 180.0, 270.0]) + rng.uniform(-10, 10)
-    return 10.5 + 4.0 * rng.random(), 5.0 + 2.5 * rng.random(), rng.uniform(0.0, 360.0)
+        return 12.0 + 1.0 * rng.random(), 5.75 + 1.0 * rng.random(), rng.choice([0.0, 90.0, 180.0, 270.0]) + rng.uniform(-10, 10)
+    if program == "mixed":  # its long legs run along the pool
+        return 10.5 + 4.0 * rng.random(), 5.5 + 1.5 * rng.random(), rng.choice([0.0, 180.0]) + rng.uniform(-15, 15)
+    return 10.5 + 4.0 * rng.random(), 5.5 + 1.5 * rng.random(), rng.uniform(0.0, 360.0)
 
 
 def simulate(program, seed, duration_s, effect, camera=True):
@@ -964,12 +997,25 @@ def simulate(program, seed, duration_s, effect, camera=True):
                     eb.log(tick, f"accel_{axis}_adc", str(c))
             eb.depth_code = None
         if tick % 20 == 0:
-            track.append((t, veh.x, veh.y, veh.z, math.degrees(veh.psi) % 360.0, veh.u, veh.v, veh.r))
+            track.append((t, veh.x, veh.y, veh.z, math.degrees(veh.psi) % 360.0, veh.u, veh.v,
+                          veh.r, sen.depth_port_m(veh), port_clearance(veh)))
         if tick % 10 == 0:
             veh.slow_noise()
         if tick < n_ticks:
             vstep()
-    return {"eb": eb, "veh": veh, "track": track, "start": (x0, y0, z0, h0), "params": p}
+    if hasattr(prog, "log") and prog.log and prog.log[-1][1] is None:
+        a, _, target = prog.log[-1]
+        prog.log[-1] = (a, duration_s, target)
+    return {"eb": eb, "veh": veh, "track": track, "start": (x0, y0, z0, h0), "params": p,
+            "program": prog}
+
+
+def port_clearance(veh):
+    """Distance from the port side (0.32 m off the centre line) to the wall on the port beam."""
+    bearing = (math.degrees(veh.psi) - 90.0) % 360.0
+    walls = {0.0: POOL["length_m"] - veh.x, 180.0: veh.x, 90.0: POOL["width_m"] - veh.y, 270.0: veh.y}
+    best = min(walls, key=lambda n: abs(wrap180(bearing - n)))
+    return walls[best] - 0.32
 
 
 def write_run(out, args, effect, res):
@@ -1034,13 +1080,59 @@ def write_run(out, args, effect, res):
 
 
 def summarise(program, res):
-    tr = res["track"]
+    """Summaries of the true track (0.1 s samples) to compare with the thesis."""
+    tr, eb = res["track"], res["eb"]
     speeds = [math.hypot(s[5], s[6]) for s in tr]
     xs, ys, zs = [s[1] for s in tr], [s[2] for s in tr], [s[3] for s in tr]
-    out = [f"top speed {max(speeds):.3f} m/s, mean {sum(speeds) / len(speeds):.3f} m/s",
+    out = [f"top speed {max(speeds):.3f} m/s, mean {sum(speeds) / len(speeds):.3f} m/s; "
            f"x {min(xs):.2f}..{max(xs):.2f} m, y {min(ys):.2f}..{max(ys):.2f} m, "
-           f"CoM depth {min(zs):.2f}..{max(zs):.2f} m, wall contacts {res['veh'].contacts}",
-           f"commands rows {len(res['eb'].commands)}"]
+           f"CoM depth {min(zs):.2f}..{max(zs):.2f} m; wall contacts {res['veh'].contacts}; "
+           f"{len(eb.commands)} command rows, {len(eb.rows)} measured rows"]
+    # spins: segments of steady turning
+    seg, segs = [], []
+    for s in tr:
+        if abs(s[7]) > 0.08:
+            seg.append(s)
+        elif seg:
+            segs.append(seg)
+            seg = []
+    if seg:
+        segs.append(seg)
+    for seg in segs:
+        unwrapped, prev = [0.0], seg[0][4]
+        for s in seg[1:]:
+            unwrapped.append(unwrapped[-1] + wrap180(s[4] - prev))
+            prev = s[4]
+        turns = abs(unwrapped[-1]) / 360.0
+        if turns < 1.0:
+            continue
+        # the last full turn: period and circle
+        end_h = unwrapped[-1]
+        k = max(i for i, h in enumerate(unwrapped) if abs(end_h - h) >= 360.0)
+        last = seg[k:]
+        period = last[-1][0] - last[0][0]
+        dia = 0.5 * ((max(q[1] for q in last) - min(q[1] for q in last))
+                     + (max(q[2] for q in last) - min(q[2] for q in last)))
+        way = "clockwise" if unwrapped[-1] > 0 else "anticlockwise"
+        out.append(f"spin {way} at t={seg[0][0]:.0f} s: {turns:.1f} turns, last turn {period:.1f} s, "
+                   f"circle {dia:.2f} m across")
+    # depth hold: the sensor-port depth over the last 8 s of each constant-target stretch
+    prog = res["program"]
+    if isinstance(prog, (DepthHold, Mixed)):
+        for a, b, target in prog.log:
+            vals = [s[8] for s in tr if b - 8.0 <= s[0] < b]
+            if len(vals) > 10:
+                m = sum(vals) / len(vals)
+                sd = math.sqrt(sum((v - m) ** 2 for v in vals) / len(vals))
+                out.append(f"depth target {target:.2f} m ({a:.0f}-{b:.0f} s): sensor port at "
+                           f"{m:.3f} +- {sd:.3f} m over the last 8 s")
+    if isinstance(prog, WallRun):
+        d = [s[9] for s in tr if s[0] > 10.0 and abs(s[7]) < 0.05]
+        d.sort()
+        if d:
+            out.append(f"wall run: port side to the nearest wall, straight running: median "
+                       f"{d[len(d) // 2]:.2f} m, 10-90 % {d[len(d) // 10]:.2f}..{d[9 * len(d) // 10]:.2f} m "
+                       f"(target 1.0 m from the port-fore transducer); corners turned {prog.corners}")
     return out
 
 
