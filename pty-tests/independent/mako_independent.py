@@ -116,7 +116,7 @@ POOL = {"length_m": 25.0, "width_m": 12.5, "depth_m": 2.0, "rho": 998.2, "g": 9.
 # name -> (default size, unit, meaning)
 EFFECTS = {
     "none": (None, "", "nothing hidden: a null run"),
-    "water_current": ([0.04, -0.03], "m/s north, east", "steady current in the pool"),
+    "water_current": ([0.02, -0.015], "m/s north, east", "steady current in the pool"),
     "compass_hard_iron": ([3.0, 2.0], "uT body x, y", "extra magnetic offset on the hull: heading error once per turn"),
     "compass_latency": (0.4, "s", "extra delay before a compass reading reaches the program"),
     "compass_offset": (6.0, "deg", "compass mounted rotated: constant heading offset"),
@@ -560,6 +560,7 @@ class EyeBot:
         self.veh, self.sen = veh, sen
         self.t = 0.0
         self.tick = 0
+        self.duration_s = 0.0
         self.cmd = [0, 0, 0, 0]
         self.commands = []  # (t, [4])
         self.rows = {}  # tick -> {column: text}
@@ -767,6 +768,14 @@ class DepthHold(Program):
 
     def step(self, eb, t):
         self.hc.update(eb)
+        eb.depth_adc()
+        if t < FLOAT_START_S or t >= eb.duration_s - FLOAT_END_S:
+            # floating at the surface before the dive and after the run: the depth channel's
+            # only absolute reference
+            self.t0 = t
+            self.note_target(t, 0.0)
+            eb.motor_drive(0, 0, 0, 0)
+            return
         dur, target = self.targets[self.k]
         if t - self.t0 >= dur:
             self.k, self.t0 = self.k + 1, t
@@ -873,6 +882,12 @@ class Mixed(Program):
 
     def step(self, eb, t):
         self.hc.update(eb)
+        if t < FLOAT_START_S or t >= eb.duration_s - FLOAT_END_S:
+            eb.depth_adc()
+            self.t0 = t
+            self.note_target(t, 0.0)
+            eb.motor_drive(0, 0, 0, 0)
+            return
         dt = t - self.t0
         self.note_target(t, 0.7 if self.phase >= 6 else 1.0)
         if self.phase >= 6:
@@ -909,6 +924,10 @@ class Mixed(Program):
                 self.phase, self.t0 = self.phase + 1, t
 
 
+FLOAT_START_S = 5.0  # s, depth programs float with the motors off before diving
+FLOAT_END_S = 15.0  # s, and let the vehicle rise at the end
+
+
 PROGRAM_CLASSES = {"heading_hold": HeadingHold, "spins": Spins, "depth_hold": DepthHold,
                    "square": Square, "wall_run": WallRun, "mixed": Mixed}
 
@@ -935,6 +954,7 @@ def simulate(program, seed, duration_s, effect, camera=True):
     veh = Vehicle(p, seed, x0, y0, h0, z0, effect.current)
     sen = Sensors(SENSORS, seed, effect)
     eb = EyeBot(veh, sen, camera)
+    eb.duration_s = duration_s
     # the program knows its start heading only from the compass, as on the EyeBot: it is given
     # the true heading rounded to a degree here (the first reading, before the motors start)
     prog = PROGRAM_CLASSES[program](stream(seed, "plan"), float(round(h0)))
@@ -1124,7 +1144,8 @@ def summarise(program, res):
             if len(vals) > 10:
                 m = sum(vals) / len(vals)
                 sd = math.sqrt(sum((v - m) ** 2 for v in vals) / len(vals))
-                out.append(f"depth target {target:.2f} m ({a:.0f}-{b:.0f} s): sensor port at "
+                what = "floating, motors off" if target == 0.0 else f"depth target {target:.2f} m"
+                out.append(f"{what} ({a:.0f}-{b:.0f} s): sensor port at "
                            f"{m:.3f} +- {sd:.3f} m over the last 8 s")
     if isinstance(prog, WallRun):
         d = [s[9] for s in tr if s[0] > 10.0 and abs(s[7]) < 0.05]
