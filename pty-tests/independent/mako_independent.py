@@ -1038,6 +1038,29 @@ def port_clearance(veh):
     return walls[best] - 0.32
 
 
+def derived(effect):
+    """The hidden effect in other units a scorer may want (ADC codes, degrees)."""
+    lsb = SENSORS["adc_ref_v"] / SENSORS["adc_codes"]
+    n, v = effect.name, effect.size
+    h_ut = SENSORS["field_ut"] * math.cos(math.radians(SENSORS["inclination_deg"]))
+    if n == "water_current":
+        return {"speed_mps": math.hypot(*v), "direction_deg": math.degrees(math.atan2(v[1], v[0])) % 360.0}
+    if n == "compass_hard_iron":
+        return {"horizontal_field_ut": h_ut,
+                "peak_heading_error_deg": math.degrees(math.asin(min(1.0, math.hypot(*v) / h_ut)))}
+    if n == "depth_emi":
+        return {"lsb_rms_at_full_stern_duty": v / lsb}
+    if n == "depth_offset":
+        return {"offset_lsb": v * SENSORS["depth_gain_v_per_m"] / lsb}
+    if n == "accel_offset":
+        return {"offset_lsb": [x / lsb for x in v]}
+    if n == "velocity_sensor_scale":
+        return {"paddle_factor": 1.0 + v}
+    if n == "depth_gain":
+        return {"volts_per_m": SENSORS["depth_gain_v_per_m"] * (1.0 + v)}
+    return {}
+
+
 def write_run(out, args, effect, res):
     os.makedirs(out, exist_ok=True)
     eb, x0y0 = res["eb"], res["start"]
@@ -1085,8 +1108,9 @@ def write_run(out, args, effect, res):
         "seed": args.seed,
         "duration_s": args.duration,
         "camera": args.camera,
-        "hidden": {"name": effect.name, "size": effect.size,
-                   "unit": EFFECTS[effect.name][1], "meaning": EFFECTS[effect.name][2]},
+        "hidden": {"name": effect.name, "size": effect.size, "default_size": EFFECTS[effect.name][0],
+                   "unit": EFFECTS[effect.name][1], "meaning": EFFECTS[effect.name][2],
+                   "derived": derived(effect)},
         "start": {"x_m": x0, "y_m": y0, "z_m": z0, "heading_deg": h0},
         "wall_contacts": res["veh"].contacts,
         "vehicle": res["params"],
@@ -1126,15 +1150,21 @@ def summarise(program, res):
         turns = abs(unwrapped[-1]) / 360.0
         if turns < 1.0:
             continue
-        # the last full turn: period and circle
-        end_h = unwrapped[-1]
-        k = max(i for i, h in enumerate(unwrapped) if abs(end_h - h) >= 360.0)
-        last = seg[k:]
+        # the first full turn that starts 5 s into the spin (spun up): period and circle
+        k0 = next(i for i, q in enumerate(seg) if q[0] >= seg[0][0] + 5.0)
+        ends = [i for i, h in enumerate(unwrapped) if abs(h - unwrapped[k0]) >= 360.0]
+        label = "one turn after spin-up"
+        if ends:
+            last = seg[k0:ends[0] + 1]
+        else:  # a single turn: the last full turn, spin-up included
+            label = "last full turn"
+            k = max(i for i, h in enumerate(unwrapped) if abs(unwrapped[-1] - h) >= 360.0)
+            last = seg[k:]
         period = last[-1][0] - last[0][0]
         dia = 0.5 * ((max(q[1] for q in last) - min(q[1] for q in last))
                      + (max(q[2] for q in last) - min(q[2] for q in last)))
         way = "clockwise" if unwrapped[-1] > 0 else "anticlockwise"
-        out.append(f"spin {way} at t={seg[0][0]:.0f} s: {turns:.1f} turns, last turn {period:.1f} s, "
+        out.append(f"spin {way} at t={seg[0][0]:.0f} s: {turns:.1f} turns, {label} {period:.1f} s, "
                    f"circle {dia:.2f} m across")
     # depth hold: the sensor-port depth over the last 8 s of each constant-target stretch
     prog = res["program"]
