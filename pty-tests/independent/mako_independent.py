@@ -824,7 +824,7 @@ class Square(Program):
 
 class WallRun(Program):
     """Wall on port held at 1.0 m on sonar 1 (port-fore, 15 deg ahead of the beam); a wall ahead
-    on sonar 3 (bow-port) closer than 3.0 m starts a 90 deg right turn by compass. The heading
+    on sonar 3 (bow-port) closer than 3.5 m starts a 90 deg right turn by compass. The heading
     correction is kept inside what the transducer still hears (turning away by more than
     ~5 deg loses the echo); without a side echo for 3 s the program steers along the wall."""
     select = (0, 2)  # controller 0 -> port-fore, controller 1 -> bow-port
@@ -848,7 +848,7 @@ class WallRun(Program):
                 self.t_side = t
             elif t - self.t_side > 3.0:
                 self.want = self.wall
-            if ahead is not None and ahead < 3.0:
+            if ahead is not None and ahead < 3.5:
                 self.wall = (self.wall + 90.0) % 360.0
                 self.want = self.wall
                 self.turning = True
@@ -986,7 +986,7 @@ def simulate(program, seed, duration_s, effect, camera=True):
         if tick > 0 and tick % window == 0:
             sen.paddle_window_end()
             eb.paddle_new = sen.paddle_value
-            eb.log(tick, "paddle_speed_mps", f"{sen.paddle_value:.2f}")
+            eb.log(tick, "paddle_speed_mps", f"{sen.paddle_value:.4f}")
         k = (tick - compass_phase) % compass_period
         if k == 0:
             sen.compass_sample_x(veh)
