@@ -11,6 +11,7 @@ import unittest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PROGRAM = os.path.join(HERE, "mako_independent.py")
+sys.dont_write_bytecode = True  # leave no __pycache__ in the tree
 sys.path.insert(0, HERE)
 import mako_independent as model  # noqa: E402
 
