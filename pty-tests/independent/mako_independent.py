@@ -704,6 +704,8 @@ class HeadingHold(Program):
         for k in range(40):
             b = bases[k % len(bases)]
             leg = (6.0 if b >= 80 else 9.0) + 3.0 * rng.random()
+            # the pool is half as wide as it is long: shorter legs across it
+            leg *= 0.45 + 0.55 * abs(math.cos(math.radians(h0 + ang)))
             self.legs.append((ang, b, leg))
             self.legs.append((ang + 180.0, b, leg))
             ang += rng.choice([45.0, 60.0, 90.0, -60.0, 120.0])
