@@ -675,12 +675,27 @@ class Depth:
 
 
 class Program:
+    """An EyeBot program: it learns its start heading from the first compass reading (motors
+    off until then), then `step` runs once per control period."""
     period_s = 0.05
 
-    def __init__(self, rng, start_heading_deg):
+    def __init__(self, rng):
         self.rng = rng
-        self.h0 = start_heading_deg
+        self.h0 = None
         self.hc = Heading()
+
+    def run(self, eb, t):
+        if self.h0 is None:
+            h = self.hc.update(eb)
+            if h is None:
+                eb.motor_drive(0, 0, 0, 0)
+                return
+            self.h0 = float(h)
+            self.begin()
+        self.step(eb, t)
+
+    def begin(self):
+        """Called once the start heading is known."""
 
     def note_target(self, t, target):
         """Keeps (start, end, depth target) stretches for the summary."""
@@ -696,8 +711,13 @@ class HeadingHold(Program):
     """Out-and-back legs: turn on the spot to the new heading (compass), then drive a timed leg
     holding it; the heading steps between pairs of legs are 45-120 deg, speeds 40-100 %."""
 
-    def __init__(self, rng, h0):
-        super().__init__(rng, h0)
+    def __init__(self, rng):
+        super().__init__(rng)
+        self.k = 0
+        self.state, self.t0, self.t_ok = "leg", 0.0, None
+
+    def begin(self):
+        rng, h0 = self.rng, self.h0
         bases = [50, 80, 65, 100, 40, 90]
         self.legs = []
         ang = 0.0
@@ -709,8 +729,6 @@ class HeadingHold(Program):
             self.legs.append((ang, b, leg))
             self.legs.append((ang + 180.0, b, leg))
             ang += rng.choice([45.0, 60.0, 90.0, -60.0, 120.0])
-        self.k = 0
-        self.state, self.t0, self.t_ok = "leg", 0.0, None
 
     def step(self, eb, t):
         self.hc.update(eb)
@@ -733,8 +751,8 @@ class HeadingHold(Program):
 
 
 class Spins(Program):
-    def __init__(self, rng, h0):
-        super().__init__(rng, h0)
+    def __init__(self, rng):
+        super().__init__(rng)
         self.plan = []
         for power, sign in ((100, 1), (100, -1), (60, 1), (60, -1), (100, -1), (80, 1)):
             self.plan.append(("turn", power, sign, 2 if power == 100 else 1))
@@ -760,8 +778,8 @@ class Spins(Program):
 
 
 class DepthHold(Program):
-    def __init__(self, rng, h0):
-        super().__init__(rng, h0)
+    def __init__(self, rng):
+        super().__init__(rng)
         self.dc = Depth(self.period_s)
         self.targets = []
         for k in range(30):
@@ -788,15 +806,18 @@ class DepthHold(Program):
 
 
 class Square(Program):
-    def __init__(self, rng, h0, leg_s=10.0, base=70.0, dive_m=None):
-        super().__init__(rng, h0)
+    def __init__(self, rng, leg_s=10.0, base=70.0, dive_m=None):
+        super().__init__(rng)
         self.leg_s, self.base = leg_s, base
         self.dc = Depth(self.period_s) if dive_m else None
         self.dive_m = dive_m
         self.side = 0
         self.direction = 1
         self.state, self.t0 = "leg", 0.0
-        self.want = h0
+        self.want = None
+
+    def begin(self):
+        self.want = self.h0
 
     def step(self, eb, t):
         self.hc.update(eb)
@@ -831,14 +852,15 @@ class WallRun(Program):
     ~5 deg loses the echo); without a side echo for 3 s the program steers along the wall."""
     select = (0, 2)  # controller 0 -> port-fore, controller 1 -> bow-port
 
-    def __init__(self, rng, h0):
-        super().__init__(rng, h0)
-        self.wall = h0
-        self.want = h0
+    def __init__(self, rng):
+        super().__init__(rng)
         self.turning = False
         self.base = 55.0
         self.corners = 0
         self.t_side = 0.0
+
+    def begin(self):  # the student put Mako along the wall: the first reading is its heading
+        self.wall = self.want = self.h0
 
     def step(self, eb, t):
         self.hc.update(eb)
@@ -871,16 +893,20 @@ class WallRun(Program):
 class Mixed(Program):
     """Dive to 1 m, out and back at depth, a spot turn each way, then squares at 0.7 m."""
 
-    def __init__(self, rng, h0):
-        super().__init__(rng, h0)
+    def __init__(self, rng):
+        super().__init__(rng)
         self.dc = Depth(self.period_s)
         self.phase = 0
         self.t0 = 0.0
-        self.square = Square(rng, h0, leg_s=8.0, base=70.0, dive_m=0.7)
+        self.square = Square(rng, leg_s=8.0, base=70.0, dive_m=0.7)
         self.square.hc = self.hc
         self.square.dc = self.dc
         self.count = TurnCounter()
         self.t_aligned = None
+
+    def begin(self):
+        self.square.h0 = self.h0
+        self.square.begin()
 
     def step(self, eb, t):
         self.hc.update(eb)
@@ -957,9 +983,7 @@ def simulate(program, seed, duration_s, effect, camera=True):
     sen = Sensors(SENSORS, seed, effect)
     eb = EyeBot(veh, sen, camera)
     eb.duration_s = duration_s
-    # the program knows its start heading only from the compass, as on the EyeBot: it is given
-    # the true heading rounded to a degree here (the first reading, before the motors start)
-    prog = PROGRAM_CLASSES[program](stream(seed, "plan"), float(round(h0)))
+    prog = PROGRAM_CLASSES[program](stream(seed, "plan"))
     sp = SENSORS
     period = round(prog.period_s * TICKS_PER_S)
     compass_period = round(sp["compass_period_s"] * TICKS_PER_S)
@@ -1010,7 +1034,7 @@ def simulate(program, seed, duration_s, effect, camera=True):
                 eb.log(tick, f"sonar{kk + 1}_m", f"{r:.1f}")
         # the program
         if tick % period == 0 and tick < n_ticks:
-            prog.step(eb, t)
+            prog.run(eb, t)
             if tick % (2 * period) == 0:  # the logging task: depth and accelerometer at 10 Hz
                 code = eb.depth_code if eb.depth_code is not None else eb.depth_adc()
                 eb.depth_code = None
