@@ -782,22 +782,21 @@ class DepthHold(Program):
         super().__init__(rng)
         self.dc = Depth(self.period_s)
         self.targets = []
-        for k in range(30):
+        for _ in range(30):
             self.targets.append((20.0 + 10.0 * rng.random(), rng.choice([0.6, 0.9, 1.2, 1.5, 0.8, 1.1])))
         self.k, self.t0 = 0, 0.0
 
     def step(self, eb, t):
         self.hc.update(eb)
-        eb.depth_adc()
         if t < FLOAT_START_S or t >= eb.duration_s - FLOAT_END_S:
             # floating at the surface before the dive and after the run: the depth channel's
             # only absolute reference
+            eb.depth_adc()
             self.t0 = t
             self.note_target(t, 0.0)
             eb.motor_drive(0, 0, 0, 0)
             return
-        dur, target = self.targets[self.k]
-        if t - self.t0 >= dur:
+        if t - self.t0 >= self.targets[self.k][0]:
             self.k, self.t0 = self.k + 1, t
         self.note_target(t, self.targets[self.k][1])
         v = self.dc.output(eb, self.targets[self.k][1])
@@ -1089,8 +1088,8 @@ def derived(effect):
 
 def write_run(out, args, effect, res):
     os.makedirs(out, exist_ok=True)
-    eb, x0y0 = res["eb"], res["start"]
-    x0, y0, z0, h0 = x0y0
+    eb = res["eb"]
+    x0, y0, z0, h0 = res["start"]
     name = f"independent-{args.program}-seed{args.seed}-{effect.name}"
     desc = (f"{VERSION}: program {args.program}, seed {args.seed}, hidden {effect.name}. "
             "Written by pty-tests/independent/mako_independent.py, not by eyebot-hil.")
@@ -1270,7 +1269,6 @@ def manoeuvres(effect):
         mid = 0.5 * (lo + hi)
         veh = fresh()
         veh.command([0, 0, mid, mid])
-        net = sum(veh.thrusts()[2:])
         veh.n = list(veh.n_ss)
         net = sum(veh.thrusts()[2:]) - p["reserve_buoyancy_n"]
         lo, hi = (mid, hi) if net < 0.0 else (lo, mid)
