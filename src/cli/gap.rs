@@ -75,6 +75,26 @@ pub enum GapCommand {
     Generate(GenerateArgs),
     /// Convert a daemon recording (`run --record DIR`) into a measurement directory.
     Convert(ConvertArgs),
+    /// Fit the base model's continuous parameters on baseline runs (thrust curve, drag,
+    /// added mass, yaw damping, sensor offsets and gains) and write a calibrated model.
+    Calibrate(CalibrateArgs),
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct CalibrateArgs {
+    /// A baseline measurement directory; repeat for several runs.
+    #[arg(long, required = true)]
+    pub measured: Vec<PathBuf>,
+    /// The model file to calibrate.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Where to write the calibrated model file (e.g. MODEL.calibrated.toml).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// A run the calibration is not fitted to, on which it reports its gap before and after;
+    /// repeat for several.
+    #[arg(long)]
+    pub validate: Vec<PathBuf>,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -124,14 +144,11 @@ pub struct GenerateArgs {
     pub sonar: bool,
 }
 
-fn to_cli(e: GapError) -> CliError {
-    CliError::Output(e.to_string())
-}
-
 pub fn run(args: &GapArgs) -> Result<(), CliError> {
     match &args.command {
         Some(GapCommand::Generate(g)) => return run_generate(g),
         Some(GapCommand::Convert(c)) => return run_convert(c),
+        Some(GapCommand::Calibrate(c)) => return run_calibrate(c),
         None => {}
     }
     let (Some(measured), Some(model_path)) = (&args.measured, &args.model) else {
@@ -142,11 +159,11 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
     if let Some(file) = gap::summary::summary_file(measured) {
         return run_summary(&file, model_path, args.out.as_deref());
     }
-    let m = Measurement::load(measured).map_err(to_cli)?;
+    let m = Measurement::load(measured)?;
     for n in &m.notices {
         errln!("notice: {n}");
     }
-    let model = GapModel::load(model_path).map_err(to_cli)?;
+    let model = GapModel::load(model_path)?;
     let total = (gap::fit::MAX_EFFECTS * effects::LIBRARY.len()) as u64;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
@@ -160,14 +177,13 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
     let analysis = gap::analyse_with(&model, &m, measured, options, &mut |round, name| {
         bar.inc(1);
         bar.set_message(format!("round {}: {name}", round + 1));
-    })
-    .map_err(to_cli)?;
+    })?;
     bar.finish_and_clear();
     let out = args
         .out
         .clone()
         .unwrap_or_else(|| measured.join("gap-report"));
-    report::write_all(&analysis, &m, measured, model_path, &out).map_err(to_cli)?;
+    report::write_all(&analysis, &m, measured, model_path, &out)?;
     match analysis.accepted.first() {
         Some(_) => {
             for e in &analysis.accepted {
@@ -217,14 +233,119 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// `gap calibrate`.
+fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
+    let load = |dirs: &[PathBuf]| -> Result<Vec<gap::calibrate::Run>, CliError> {
+        dirs.iter()
+            .map(|d| gap::calibrate::Run::load(d).map_err(CliError::from))
+            .collect()
+    };
+    let baseline = load(&args.measured)?;
+    let validate = load(&args.validate)?;
+    for r in baseline.iter().chain(&validate) {
+        for n in &r.m.notices {
+            errln!("notice: {}: {n}", r.dir.display());
+        }
+    }
+    let model = GapModel::load(&args.model)?;
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    let c = gap::calibrate::calibrate(&model, &baseline, &validate, &mut |msg| {
+        bar.set_message(msg.to_string());
+        bar.tick();
+    })?;
+    bar.finish_and_clear();
+    let out_dir = args
+        .out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), std::path::Path::to_path_buf);
+    std::fs::create_dir_all(&out_dir).map_err(|source| GapError::Io {
+        path: out_dir.clone(),
+        source,
+    })?;
+    let provenance = format!(
+        "calibrated by `eyebot-hil gap calibrate` on {}",
+        args.measured
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let text = c.model.to_toml(&provenance, &out_dir);
+    std::fs::write(&args.out, text).map_err(|source| GapError::Io {
+        path: args.out.clone(),
+        source,
+    })?;
+    let json_path = args.out.with_extension("json");
+    let json = serde_json::to_string_pretty(&c).map_err(|e| GapError::Data(e.to_string()))?;
+    std::fs::write(&json_path, json).map_err(|source| GapError::Io {
+        path: json_path.clone(),
+        source,
+    })?;
+    outln!("| effect | parameter | value | 95 % interval |");
+    for p in &c.parameters {
+        outln!(
+            "| {} | {} | {:.4}{} | [{:.4}, {:.4}] |",
+            p.effect,
+            p.parameter,
+            p.value,
+            if p.at_bound { " (at bound)" } else { "" },
+            p.ci95[0],
+            p.ci95[1]
+        );
+    }
+    if c.spread.is_empty() {
+        outln!(
+            "one baseline run: no between-run spread measured; give two or more --measured runs \
+             so `gap` knows how far an effect strays when nothing changed"
+        );
+    } else {
+        outln!("| effect | parameter | between-run spread (1 sigma) |");
+        for p in &c.spread {
+            outln!("| {} | {} | {:.4} |", p.effect, p.parameter, p.value);
+        }
+    }
+    if !c.not_fitted.is_empty() {
+        outln!(
+            "not fitted (no channel of theirs measured): {}",
+            c.not_fitted.join(", ")
+        );
+    }
+    for r in &c.runs {
+        outln!(
+            "{} {}: gap {:.2} -> {:.2} ({:.0} % smaller)",
+            if r.fitted {
+                "fitted on"
+            } else {
+                "validated on"
+            },
+            r.dir,
+            r.gap_before,
+            r.gap_after,
+            r.reduction_pct
+        );
+    }
+    outln!(
+        "calibrated model in {} ({} re-simulations); details in {}",
+        args.out.display(),
+        c.evaluations,
+        json_path.display()
+    );
+    Ok(())
+}
+
 /// The summary-observation workflow (`summary.toml`, docs/gap.md).
 fn run_summary(
     file: &std::path::Path,
     model_path: &std::path::Path,
     out: Option<&std::path::Path>,
 ) -> Result<(), CliError> {
-    let s = gap::summary::Summary::load(file).map_err(to_cli)?;
-    let model = GapModel::load(model_path).map_err(to_cli)?;
+    let s = gap::summary::Summary::load(file)?;
+    let model = GapModel::load(model_path)?;
     let total = (gap::fit::MAX_EFFECTS * effects::LIBRARY.len()) as u64;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
@@ -237,8 +358,7 @@ fn run_summary(
     let a = gap::summary::analyse(&model, &s, &mut |round, name| {
         bar.inc(1);
         bar.set_message(format!("round {}: {name}", round + 1));
-    })
-    .map_err(to_cli)?;
+    })?;
     bar.finish_and_clear();
     let out = out.map_or_else(
         || {
@@ -248,7 +368,7 @@ fn run_summary(
         },
         std::path::Path::to_path_buf,
     );
-    gap::summary::write_all(&a, &s, file, model_path, &out).map_err(to_cli)?;
+    gap::summary::write_all(&a, &s, file, model_path, &out)?;
     outln!(
         "{} summary observations of `{}` against `{}`{}",
         s.observations.len(),
@@ -325,11 +445,11 @@ fn run_convert(c: &ConvertArgs) -> Result<(), CliError> {
         camera_std_m: c.camera_std_m,
         seed: c.seed,
     };
-    let conv = gap::convert::convert(&c.record, &opts).map_err(to_cli)?;
+    let conv = gap::convert::convert(&c.record, &opts)?;
     for n in &conv.notices {
         errln!("notice: {n}");
     }
-    conv.measurement.write(&c.out).map_err(to_cli)?;
+    conv.measurement.write(&c.out)?;
     let m = &conv.measurement;
     outln!(
         "{}: {:.1} s, {} command rows, channels {} -> {}",
@@ -347,13 +467,13 @@ fn run_convert(c: &ConvertArgs) -> Result<(), CliError> {
 }
 
 fn run_generate(g: &GenerateArgs) -> Result<(), CliError> {
-    let truth = GapModel::load(&g.truth).map_err(to_cli)?;
+    let truth = GapModel::load(&g.truth)?;
     let (dir, name) = Directory::for_file(&g.schedule);
     let text = dir.read(&name)?;
     let schedule = Experiment::from_document(&Document::new(dir.describe(&name), &text))?;
     let info = generate::setup(&truth, &schedule, g.camera_std_m);
     let (world, sensors) = (info.world.clone(), info.sensors.clone());
-    let configs = truth.configs(&info, &truth.base).map_err(to_cli)?;
+    let configs = truth.configs(&info, &truth.base)?;
     let m = generate::generate_with(
         &configs,
         &schedule,
@@ -362,9 +482,8 @@ fn run_generate(g: &GenerateArgs) -> Result<(), CliError> {
         g.camera_std_m,
         g.seed,
         g.sonar,
-    )
-    .map_err(to_cli)?;
-    m.write(&g.out).map_err(to_cli)?;
+    )?;
+    m.write(&g.out)?;
     outln!(
         "{}: {} channels, {:.0} s -> {}",
         m.experiment.name,

@@ -86,6 +86,8 @@ pub enum CliError {
         request: &'static str,
         reply: String,
     },
+    #[error(transparent)]
+    Gap(#[from] crate::gap::GapError),
     #[error("{0}")]
     Usage(String),
     #[error("cannot format output: {0}")]

@@ -25,6 +25,7 @@ use crate::gap::GapError;
 use crate::gap::effects::{self, Configs, Effect, Kind};
 use crate::gap::format::Measurement;
 use crate::gap::lsq::{self, Bounds};
+use crate::gap::model::EnabledEffect;
 use crate::gap::resim::{self, Floor, Run};
 use crate::physics::state::STERN;
 use crate::sensors::AdcBoard;
@@ -180,9 +181,26 @@ pub struct Setup<'a> {
     pub clean: Run,
     pub floors: &'a [Option<Floor>],
     pub split: Split,
+    /// Between-run spread of each effect on baseline runs (`GapModel::spread`).
+    pub spread: Vec<EnabledEffect>,
 }
 
 impl Setup<'_> {
+    /// The between-run variance of each of `effect`'s parameters, in units of its scales.
+    fn spread_variance(&self, effect: &Effect) -> Vec<f64> {
+        let found = self.spread.iter().find(|s| s.effect.name == effect.name);
+        effect
+            .scales
+            .iter()
+            .enumerate()
+            .map(|(j, scale)| {
+                found
+                    .and_then(|s| s.values.get(j))
+                    .map_or(0.0, |v| (v / scale).powi(2))
+            })
+            .collect()
+    }
+
     /// Channels (indices into `m.channels`) that are both modelled and have a floor.
     pub fn modelled(&self) -> Vec<usize> {
         (0..self.m.channels.len())
@@ -457,8 +475,18 @@ fn fit_mean(
     });
     let noise_factor = at_start.map_or(at_fit, |f| f.max(at_fit));
     let variance_factor = (chi2_after / (n_eff - k as f64).max(1.0)).max(1.0);
-    let ci = lsq::intervals(&fit.x, cov.as_ref(), scales, noise_factor * variance_factor);
     let scale = noise_factor * variance_factor;
+    // The fit's own covariance, inflated, plus what baseline runs say the effect strays by
+    // when nothing changed.
+    let spread = setup.spread_variance(effect);
+    let cov = cov.map(|c| {
+        let mut total = c * scale;
+        for (j, v) in spread.iter().enumerate() {
+            total[(j, j)] += v;
+        }
+        total
+    });
+    let ci = lsq::intervals(&fit.x, cov.as_ref(), scales, 1.0);
     let delta_bic = (chi2_before - chi2_after) / scale - k as f64 * n_eff.ln();
     let delta_bic_uncalibrated = chi2_before - chi2_after - k as f64 * n_eff.ln();
     let heldout_chi2_before = r0.chi2(false);
@@ -467,12 +495,7 @@ fn fit_mean(
     let (signature_pass, signature_text) = signature(setup, effect, r0, &r1);
     let guards = Guards {
         inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
-        interval_excludes_zero: interval_excludes_zero(
-            &ci,
-            &fit.x,
-            cov.as_ref(),
-            noise_factor * variance_factor,
-        ),
+        interval_excludes_zero: interval_excludes_zero(&ci, &fit.x, cov.as_ref(), 1.0),
         significant: delta_bic > BIC_MARGIN,
         signature: signature_pass,
         heldout: heldout_gain > HELDOUT_MIN_GAIN,
@@ -741,6 +764,7 @@ pub fn setup<'a>(
     base: Configs,
     floors: &'a [Option<Floor>],
     split: Split,
+    spread: &[EnabledEffect],
 ) -> Result<Setup<'a>, GapError> {
     let clean = resim::simulate(&base, m, None)?;
     Ok(Setup {
@@ -749,6 +773,7 @@ pub fn setup<'a>(
         clean,
         floors,
         split,
+        spread: spread.to_vec(),
     })
 }
 

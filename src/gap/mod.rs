@@ -20,9 +20,13 @@
 //! - [`summary`]: summary observations (a quantity per experiment, with its uncertainty), the
 //!   form the thesis reports Mako's measurements in.
 //! - [`bench`]: the hidden-effect benchmark (`eyebot-hil gap-bench`).
+//! - [`anchor`]: multiple shooting, the re-anchoring of the re-simulation to measurements.
+//! - [`lsq`]: the one bounded Levenberg-Marquardt engine every fit uses.
+//! - [`calibrate`]: `gap calibrate`, the base model's parameters fitted on baseline runs.
 
 pub mod anchor;
 pub mod bench;
+pub mod calibrate;
 pub mod convert;
 pub mod effects;
 pub mod fit;
@@ -282,10 +286,10 @@ pub fn analyse_with(
     let mut accepted: Vec<CandidateResult> = Vec::new();
     let mut rounds = Vec::new();
     let mut configs = start.clone();
-    let first = fit::setup(m, configs.clone(), &floors, options.split)?;
+    let first = fit::setup(m, configs.clone(), &floors, options.split, &model.spread)?;
     let heldout_before = heldout_excess(&first, &start, &clean0);
     for round in 0..fit::MAX_EFFECTS {
-        let setup = fit::setup(m, configs.clone(), &floors, options.split)?;
+        let setup = fit::setup(m, configs.clone(), &floors, options.split, &model.spread)?;
         let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
         skip.extend(model.effects.iter().map(|e| e.effect.name));
         let results = fit::fit_candidates(&setup, &skip, &mut |name| progress(round, name));

@@ -38,6 +38,8 @@ struct RawModel {
     calibration: Vec<RawEffect>,
     #[serde(default, rename = "effect")]
     effects: Vec<RawEffect>,
+    #[serde(default, rename = "spread")]
+    spread: Vec<RawEffect>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -73,6 +75,11 @@ pub struct GapModel {
     /// before the effects, and still free to be found again as a change by `gap`.
     pub calibration: Vec<EnabledEffect>,
     pub effects: Vec<EnabledEffect>,
+    /// How far each effect's apparent value strays between baseline runs of the calibrated
+    /// model with nothing changed (1 sigma per parameter, written by `gap calibrate` from
+    /// two or more runs): model error that looks like the effect. `gap` adds it to the fit's
+    /// own uncertainty before deciding an effect is there.
+    pub spread: Vec<EnabledEffect>,
 }
 
 /// Reads `name` relative to `base` if such a file exists, else from the embedded configs.
@@ -100,6 +107,7 @@ impl GapModel {
         let raw: RawModel = doc.parse()?;
         let calibration = enabled(&doc, "calibration", &raw.calibration)?;
         let effects = enabled(&doc, "effect", &raw.effects)?;
+        let spread = enabled(&doc, "spread", &raw.spread)?;
         Ok(Self {
             name: raw.name,
             vehicle_ref: raw.vehicle,
@@ -108,6 +116,7 @@ impl GapModel {
             base,
             calibration,
             effects,
+            spread,
         })
     }
 
@@ -180,6 +189,7 @@ impl GapModel {
             .iter()
             .map(|e| ("calibration", e))
             .chain(self.effects.iter().map(|e| ("effect", e)))
+            .chain(self.spread.iter().map(|e| ("spread", e)))
         {
             let _ = writeln!(s, "\n[[{table}]]\nname = {:?}", e.effect.name);
             let params: Vec<String> = e
@@ -190,6 +200,9 @@ impl GapModel {
                 .map(|(p, v)| format!("{p} = {v:.6}"))
                 .collect();
             let _ = writeln!(s, "parameters = {{ {} }}", params.join(", "));
+            if table == "spread" {
+                continue;
+            }
             let ci: Vec<String> = e
                 .effect
                 .parameters

@@ -1,0 +1,412 @@
+//! `gap calibrate`: fit the base model's continuous parameters on baseline runs before looking
+//! for anything new (the thesis's own order: calibrate Mako against baseline runs, then
+//! explain what changes).
+//!
+//! The parameters are the library's effects listed in [`PARAMETERS`] (thrust curve, drag,
+//! added mass, yaw damping, thruster balance and lag, sensor offsets and gains), fitted
+//! jointly with the bounded engine ([`crate::gap::lsq`]) on the re-anchored residuals of every
+//! baseline run. Two things keep a fit of twenty-odd parameters on data that never match the
+//! model exactly well posed:
+//! - **Channel weights.** Model error, not noise, dominates an uncalibrated model's residual,
+//!   and one channel (a depth hold) can hold a hundred times the chi-square of another. Each
+//!   channel is weighted by `1 / sqrt(max(1, chi2/n))` of its residual at the previous pass,
+//!   so every channel speaks with about one voice (two passes).
+//! - **A weak prior.** Each parameter adds a residual `x / PRIOR_WIDTH` (in units of its
+//!   typical size): a direction the data do not inform stays near the model as given instead
+//!   of wandering to a bound.
+//!
+//! The result is written as the model's `[[calibration]]` entries: applied before any effect,
+//! and still free to be found again by `gap` as a change in a later run. Calibration reports
+//! its gap before and after on runs it was not fitted to (`--validate`).
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::DVector;
+use serde::Serialize;
+
+use crate::gap::GapError;
+use crate::gap::anchor::Shooting;
+use crate::gap::effects::{self, Configs, Effect};
+use crate::gap::fit::{self, Setup, Split};
+use crate::gap::format::Measurement;
+use crate::gap::lsq::{self, Bounds};
+use crate::gap::model::{EnabledEffect, GapModel};
+use crate::gap::resim::{self, Floor};
+
+/// The effects whose parameters calibration fits, when the data hold one of their channels.
+pub const PARAMETERS: [&str; 18] = [
+    "thrust_gain",
+    "reverse_thrust_asymmetry",
+    "thruster_imbalance",
+    "drag_mismatch",
+    "added_mass",
+    "thruster_lag",
+    "yaw_damping",
+    "compass_offset",
+    "compass_hard_iron",
+    "depth_offset",
+    "depth_gain",
+    "accel_x_offset",
+    "accel_y_offset",
+    "accel_z_offset",
+    "accel_x_gain",
+    "accel_y_gain",
+    "accel_z_gain",
+    "velocity_sensor_scale",
+];
+
+/// Width of the prior on each parameter, in units of its typical size.
+pub const PRIOR_WIDTH: f64 = 10.0;
+
+/// One run the calibration reads.
+pub struct Run {
+    pub dir: PathBuf,
+    pub m: Measurement,
+}
+
+impl Run {
+    pub fn load(dir: &Path) -> Result<Self, GapError> {
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            m: Measurement::load(dir)?,
+        })
+    }
+}
+
+/// A run prepared for fitting: its base configuration and noise floor.
+struct Prepared<'a> {
+    run: &'a Run,
+    base: Configs,
+    floors: Vec<Option<Floor>>,
+}
+
+impl Prepared<'_> {
+    fn setup(&self) -> Result<Setup<'_>, GapError> {
+        fit::setup(
+            &self.run.m,
+            self.base.clone(),
+            &self.floors,
+            Split::DEFAULT,
+            &[],
+        )
+    }
+}
+
+/// One fitted parameter.
+#[derive(Debug, Clone, Serialize)]
+pub struct Parameter {
+    pub effect: String,
+    pub parameter: String,
+    pub value: f64,
+    pub ci95: [f64; 2],
+    /// True when the fit ended on the parameter's bound.
+    pub at_bound: bool,
+}
+
+/// The gap of one run before and after calibration.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunGap {
+    pub dir: String,
+    /// True for a run the calibration was fitted to.
+    pub fitted: bool,
+    pub gap_before: f64,
+    pub gap_after: f64,
+    pub reduction_pct: f64,
+    /// chi2 per independent sample by channel, before and after.
+    pub channels: Vec<(String, f64, f64)>,
+}
+
+/// What calibration gave.
+#[derive(Debug, Clone, Serialize)]
+pub struct Calibration {
+    pub parameters: Vec<Parameter>,
+    pub runs: Vec<RunGap>,
+    pub evaluations: usize,
+    /// Between-run spread of each effect's apparent value on the baseline runs (1 sigma),
+    /// from two or more runs; empty with one.
+    pub spread: Vec<Parameter>,
+    /// Parameters left out because none of their channels is measured.
+    pub not_fitted: Vec<String>,
+    #[serde(skip)]
+    pub model: GapModel,
+}
+
+fn prepare<'a>(model: &GapModel, run: &'a Run) -> Result<Prepared<'a>, GapError> {
+    let mut base = model.configs(&run.m.experiment, &run.dir)?;
+    base.shooting = Shooting::DEFAULT;
+    let clean = resim::simulate(&base, &run.m, None)?;
+    let floors = resim::noise_floor(&base, &run.m, &clean)?;
+    Ok(Prepared { run, base, floors })
+}
+
+/// Per-channel chi-square per independent sample of `c` on a prepared run.
+fn channel_chi2(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Option<Vec<(usize, f64)>> {
+    let run = resim::simulate(c, &p.run.m, None).ok()?;
+    let r = setup.residuals(c, &run);
+    let mut out = Vec::new();
+    for i in setup.modelled() {
+        let f = p.floors[i].as_ref()?;
+        let (sum, n) = r
+            .values
+            .iter()
+            .zip(&r.owner)
+            .filter(|(_, o)| **o == i)
+            .fold((0.0, 0usize), |(s, n), (v, _)| (s + v * v, n + 1));
+        if n > 0 {
+            out.push((i, sum / (n as f64 / f.tau)));
+        }
+    }
+    Some(out)
+}
+
+/// The gap measure `gap` reports: the excess of chi-square per independent sample over 1.
+fn excess(per_channel: &[(usize, f64)]) -> f64 {
+    if per_channel.is_empty() {
+        return 0.0;
+    }
+    let mean = per_channel.iter().map(|(_, c)| c).sum::<f64>() / per_channel.len() as f64;
+    (mean - 1.0).max(0.0).sqrt()
+}
+
+/// Applies the parameter vector (units of the scales) to a copy of `base`.
+fn applied(base: &Configs, chosen: &[&'static Effect], x: &DVector<f64>) -> Configs {
+    let mut c = base.clone();
+    let mut k = 0;
+    for e in chosen {
+        let values: Vec<f64> = e
+            .scales
+            .iter()
+            .enumerate()
+            .map(|(j, s)| x[k + j] * s)
+            .collect();
+        k += e.parameters.len();
+        effects::apply(e, &values, &mut c);
+    }
+    c
+}
+
+/// Fits the calibration parameters on `baseline` runs and scores the result on `validate`
+/// runs (and on the baseline). `progress(pass, evaluations)` is called as the fit goes.
+pub fn calibrate(
+    model: &GapModel,
+    baseline: &[Run],
+    validate: &[Run],
+    progress: &mut dyn FnMut(&str),
+) -> Result<Calibration, GapError> {
+    if baseline.is_empty() {
+        return Err(GapError::Data(
+            "calibration needs at least one baseline run (--measured DIR)".into(),
+        ));
+    }
+    progress("noise floors");
+    let prepared: Vec<Prepared<'_>> = baseline
+        .iter()
+        .map(|r| prepare(model, r))
+        .collect::<Result<_, _>>()?;
+    let setups: Vec<Setup<'_>> = prepared
+        .iter()
+        .map(Prepared::setup)
+        .collect::<Result<_, _>>()?;
+    let measured: Vec<&str> = setups
+        .iter()
+        .flat_map(|s| {
+            s.modelled()
+                .into_iter()
+                .map(|i| s.m.channels[i].name.as_str())
+        })
+        .collect();
+    let mut chosen: Vec<&'static Effect> = Vec::new();
+    let mut not_fitted = Vec::new();
+    for name in PARAMETERS {
+        let Some(e) = effects::by_name(name) else {
+            continue;
+        };
+        if e.channels.iter().any(|c| measured.contains(c)) {
+            chosen.push(e);
+        } else {
+            not_fitted.push(name.to_string());
+        }
+    }
+    let scales: Vec<f64> = chosen
+        .iter()
+        .flat_map(|e| e.scales.iter().copied())
+        .collect();
+    let bounds_raw: Vec<(f64, f64)> = chosen
+        .iter()
+        .flat_map(|e| e.bounds.iter().copied())
+        .collect();
+    let bounds = Bounds::scaled(&bounds_raw, &scales);
+    let dims = scales.len();
+
+    // Channel weights, one per (run, channel), from the residual at the current point.
+    let weights_at = |x: &DVector<f64>| -> Vec<Vec<f64>> {
+        prepared
+            .iter()
+            .zip(&setups)
+            .map(|(p, s)| {
+                let c = applied(&p.base, &chosen, x);
+                let per = channel_chi2(p, s, &c).unwrap_or_default();
+                (0..p.run.m.channels.len())
+                    .map(|i| {
+                        per.iter()
+                            .find(|(k, _)| *k == i)
+                            .map_or(1.0, |(_, c)| 1.0 / c.max(1.0).sqrt())
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let residuals_with = |x: &DVector<f64>, weights: &[Vec<f64>]| -> Option<DVector<f64>> {
+        let mut out = Vec::new();
+        for ((p, s), w) in prepared.iter().zip(&setups).zip(weights) {
+            let c = applied(&p.base, &chosen, x);
+            let run = resim::simulate(&c, &p.run.m, None).ok()?;
+            let r = s.residuals(&c, &run);
+            out.extend(r.values.iter().zip(&r.owner).map(|(v, o)| v * w[*o]));
+        }
+        out.extend(x.iter().map(|v| v / PRIOR_WIDTH));
+        Some(DVector::from_vec(out))
+    };
+    let mut x = DVector::zeros(dims);
+    let mut evaluations = 0;
+    let mut last = None;
+    for pass in 0..2 {
+        progress(&format!("pass {} of 2: {dims} parameters", pass + 1));
+        let weights = weights_at(&x);
+        let objective = |x: &DVector<f64>| residuals_with(x, &weights);
+        let Some(fit) = lsq::minimize(&objective, &bounds, std::slice::from_ref(&x)) else {
+            return Err(GapError::Data(
+                "calibration: the model could not be re-simulated at the starting point".into(),
+            ));
+        };
+        evaluations += fit.evaluations;
+        x = fit.x.clone();
+        last = Some(fit);
+    }
+    let Some(fit) = last else {
+        return Err(GapError::Data("calibration: no fit".into()));
+    };
+    // Intervals: residual variance beyond the (weighted) floor inflates them, as in `fit`.
+    let n = fit.residuals.len() as f64;
+    let variance_factor = (fit.chi2() / (n - dims as f64).max(1.0)).max(1.0);
+    let ci = lsq::intervals(&x, fit.covariance().as_ref(), &scales, variance_factor);
+    let mut parameters = Vec::new();
+    let mut calibrated = model.clone();
+    let mut k = 0;
+    for e in &chosen {
+        let n = e.parameters.len();
+        let values: Vec<f64> = (0..n).map(|j| x[k + j] * scales[k + j]).collect();
+        let cis: Vec<[f64; 2]> = (0..n).map(|j| ci[k + j]).collect();
+        for j in 0..n {
+            let (lo, hi) = bounds_raw[k + j];
+            let margin = 1e-6 * (hi - lo);
+            parameters.push(Parameter {
+                effect: e.name.to_string(),
+                parameter: e.parameters[j].to_string(),
+                value: values[j],
+                ci95: cis[j],
+                at_bound: values[j] <= lo + margin || values[j] >= hi - margin,
+            });
+        }
+        calibrated.calibration.push(EnabledEffect {
+            effect: e,
+            values,
+            ci95: cis,
+            delta_bic: None,
+        });
+        k += n;
+    }
+
+    // Between-run spread: every candidate fitted on each baseline run of the calibrated
+    // model. The joint calibration pulls each run's apparent value towards zero by
+    // sqrt((n - 1) / n), which the spread undoes.
+    let mut spread = Vec::new();
+    if prepared.len() >= 2 {
+        let n = prepared.len() as f64;
+        let mut apparent: Vec<(&'static Effect, Vec<Vec<f64>>)> = Vec::new();
+        for (i, p) in prepared.iter().enumerate() {
+            progress(&format!("spread: run {} of {}", i + 1, prepared.len()));
+            let base = applied(&p.base, &chosen, &x);
+            let s = fit::setup(&p.run.m, base, &p.floors, Split::DEFAULT, &[])?;
+            for r in fit::fit_candidates(&s, &[], &mut |_| {}) {
+                let Some(e) = effects::by_name(&r.name) else {
+                    continue;
+                };
+                if !r.testable || e.kind != effects::Kind::Mean {
+                    continue;
+                }
+                let values: Vec<f64> = r.parameters.iter().map(|(_, v)| *v).collect();
+                match apparent.iter_mut().find(|(a, _)| a.name == e.name) {
+                    Some((_, v)) => v.push(values),
+                    None => apparent.push((e, vec![values])),
+                }
+            }
+        }
+        for (e, runs) in apparent {
+            if runs.len() < 2 {
+                continue;
+            }
+            let values: Vec<f64> = (0..e.parameters.len())
+                .map(|j| {
+                    let ms = runs.iter().map(|v| v[j] * v[j]).sum::<f64>() / runs.len() as f64;
+                    (ms * n / (n - 1.0)).sqrt()
+                })
+                .collect();
+            for (j, v) in values.iter().enumerate() {
+                spread.push(Parameter {
+                    effect: e.name.to_string(),
+                    parameter: e.parameters[j].to_string(),
+                    value: *v,
+                    ci95: [f64::NAN, f64::NAN],
+                    at_bound: false,
+                });
+            }
+            calibrated.spread.retain(|s| s.effect.name != e.name);
+            calibrated.spread.push(EnabledEffect {
+                effect: e,
+                ci95: values.iter().map(|v| [*v, *v]).collect(),
+                values,
+                delta_bic: None,
+            });
+        }
+    }
+
+    progress("scoring");
+    let mut runs = Vec::new();
+    for (fitted, list) in [(true, baseline), (false, validate)] {
+        for r in list {
+            let p = prepare(model, r)?;
+            let s = p.setup()?;
+            let after_c = applied(&p.base, &chosen, &x);
+            let before = channel_chi2(&p, &s, &p.base).unwrap_or_default();
+            let after = channel_chi2(&p, &s, &after_c).unwrap_or_default();
+            let (gb, ga) = (excess(&before), excess(&after));
+            runs.push(RunGap {
+                dir: r.dir.display().to_string(),
+                fitted,
+                gap_before: gb,
+                gap_after: ga,
+                reduction_pct: if gb > 0.0 {
+                    100.0 * (1.0 - ga / gb)
+                } else {
+                    0.0
+                },
+                channels: before
+                    .iter()
+                    .map(|(i, b)| {
+                        let a = after.iter().find(|(k, _)| k == i).map_or(f64::NAN, |x| x.1);
+                        (r.m.channels[*i].name.clone(), *b, a)
+                    })
+                    .collect(),
+            });
+        }
+    }
+    Ok(Calibration {
+        parameters,
+        runs,
+        evaluations,
+        spread,
+        not_fitted,
+        model: calibrated,
+    })
+}
