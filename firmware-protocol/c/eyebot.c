@@ -48,7 +48,7 @@
 #define CAL_FINISH 2
 #define CAL_CLEAR 3
 
-/* The program's tick: 1/100 s (MK4 OSGetCount, hardware-facts.md "Timing"). */
+/* The program's tick: 1/100 s, the unit of the MK4's OSGetCount and OSWait (RoBIOS). */
 #define PROGRAM_TICK_US 10000UL
 
 /* ---- byte helpers --------------------------------------------------------------------- */

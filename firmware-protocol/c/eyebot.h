@@ -3,8 +3,8 @@
  * unchanged against the eyebot-hil bridge.
  *
  * A Mako program includes this header instead of RoBIOS's own eyebot.h and links against
- * libeyebot.a. The calls keep their RoBIOS names and argument order (hardware-facts.md,
- * "EyeBot MK4 controller and RoBIOS"); underneath, the analog inputs, the compass, the
+ * libeyebot.a. The calls keep the names and argument order of the EyeBot MK4's RoBIOS
+ * operating system; underneath, the analog inputs, the compass, the
  * thrusters and the clock are served by the bridge over the sensor link (PROTOCOL.md
  * section 2), and the serial ports are ordinary serial ports (the sonar multiplexer is one of
  * them, PROTOCOL.md section 1).
