@@ -545,7 +545,12 @@ pub fn run(
                 scene.sonar,
             )?;
             let t0 = Instant::now();
-            let a = crate::gap::analyse(&model, &m, exp_dir, &mut |_, _| {})?;
+            // Generated cases are open-loop schedules of the model's own form: replayed whole.
+            let options = crate::gap::Options {
+                shooting: crate::gap::anchor::Shooting::OPEN_LOOP,
+                ..crate::gap::Options::default()
+            };
+            let a = crate::gap::analyse_with(&model, &m, exp_dir, options, &mut |_, _| {})?;
             let seconds = t0.elapsed().as_secs_f64();
             let first = a.accepted.first();
             let named = first.map(|w| w.name.clone());

@@ -172,6 +172,10 @@ impl Residuals {
             self.part(true).map(|(_, v)| v),
         )
     }
+
+    pub fn all_chi2(&self) -> f64 {
+        self.values.iter().map(|v| v * v).sum()
+    }
 }
 
 /// The re-simulation context one greedy round fits against.
@@ -220,8 +224,8 @@ impl Setup<'_> {
         ch.samples.iter().map(|(t, _)| *t).collect()
     }
 
-    /// Independent sample count of one part.
-    pub fn n_eff(&self, training: bool) -> f64 {
+    /// Independent sample count of one part (`None`: all).
+    pub fn n_eff(&self, part: Option<bool>) -> f64 {
         self.modelled()
             .iter()
             .filter_map(|&i| {
@@ -229,7 +233,7 @@ impl Setup<'_> {
                 let n = self
                     .sample_times(i)
                     .iter()
-                    .filter(|t| self.split.is_training(**t) == training)
+                    .filter(|t| part.is_none_or(|p| self.split.is_training(**t) == p))
                     .count();
                 Some(n as f64 / f.tau)
             })
@@ -237,10 +241,10 @@ impl Setup<'_> {
             .max(1.0)
     }
 
-    /// The model's own null residuals of the training part, normalised as
-    /// [`Setup::residuals`]: one vector per ensemble run (process noise only), and the
-    /// per-element variance the white measurement noise adds.
-    pub fn null_vectors(&self) -> (Vec<Vec<f64>>, Vec<f64>) {
+    /// The model's own null residuals of one part (`Some(true)` training, `Some(false)` held
+    /// out, `None` all), normalised as [`Setup::residuals`]: one vector per ensemble run
+    /// (process noise only), and the per-element variance the white measurement noise adds.
+    pub fn null_vectors(&self, part: Option<bool>) -> (Vec<Vec<f64>>, Vec<f64>) {
         let members = self
             .modelled()
             .iter()
@@ -258,7 +262,10 @@ impl Setup<'_> {
                 continue;
             }
             let times = self.sample_times(i);
-            let keep: Vec<bool> = times.iter().map(|t| self.split.is_training(*t)).collect();
+            let keep: Vec<bool> = times
+                .iter()
+                .map(|t| part.is_none_or(|p| self.split.is_training(*t) == p))
+                .collect();
             let k = f.tau.sqrt();
             for (m, v) in null.iter_mut().enumerate() {
                 v.extend(
@@ -424,41 +431,64 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
     )
 }
 
-/// Fits one mean-type candidate.
-fn fit_mean(
+/// A fit of one candidate on one part of the data, scored.
+struct Scored {
+    params: Vec<f64>,
+    ci: Vec<[f64; 2]>,
+    chi2_before: f64,
+    chi2_after: f64,
+    delta_bic: f64,
+    delta_bic_uncalibrated: f64,
+    /// The effect's scaling of chi-square gains (`noise_factor * variance_factor`).
+    scale: f64,
+    noise_factor: f64,
+    variance_factor: f64,
+    interval_excludes_zero: bool,
+    inside_bounds: bool,
+    residuals: Residuals,
+    evaluations: usize,
+}
+
+/// Fits `effect` on the training part (`Some(true)`) or on all the data (`None`), from
+/// `starts`, and scores it.
+fn fit_part(
     setup: &Setup<'_>,
     effect: &'static Effect,
     r0: &Residuals,
-    null: &[Vec<f64>],
-    white: &[f64],
-) -> CandidateResult {
+    part: Option<bool>,
+    starts: &[DVector<f64>],
+) -> Option<Scored> {
     let k = effect.parameters.len();
     let scales = effect.scales;
-    let to_params =
-        |x: &DVector<f64>| -> Vec<f64> { x.iter().zip(scales).map(|(v, s)| v * s).collect() };
-    let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
-        setup
-            .eval(effect, &to_params(x))
-            .map(|r| r.training_vector())
+    let to_params = |x: &DVector<f64>| -> Vec<f64> {
+        x.iter().zip(scales).map(|(v, s)| v * s).collect()
     };
+    let select = |r: Residuals| -> DVector<f64> {
+        match part {
+            Some(_) => r.training_vector(),
+            None => DVector::from_vec(r.values),
+        }
+    };
+    let objective =
+        |x: &DVector<f64>| -> Option<DVector<f64>> { setup.eval(effect, &to_params(x)).map(select) };
     let bounds = Bounds::scaled(effect.bounds, scales);
-    let chi2_before = r0.chi2(true);
-    let Some(fit) = lsq::minimize(&objective, &bounds, &lsq::axis_scan(k, &START_SCAN)) else {
-        return failed(effect, chi2_before, "the fit left the model's valid range");
-    };
+    let fit = lsq::minimize(&objective, &bounds, starts)?;
     tracing::debug!(
         effect = effect.name,
+        part = ?part,
         termination = ?fit.termination,
         evaluations = fit.evaluations,
         objective = fit.chi2(),
         "fit finished"
     );
     let params = to_params(&fit.x);
-    let Some(r1) = setup.eval(effect, &params) else {
-        return failed(effect, chi2_before, "the fit left the model's valid range");
+    let r1 = setup.eval(effect, &params)?;
+    let (chi2_before, chi2_after) = match part {
+        Some(_) => (r0.chi2(true), r1.chi2(true)),
+        None => (r0.all_chi2(), r1.all_chi2()),
     };
-    let chi2_after = r1.chi2(true);
-    let n_eff = setup.n_eff(true);
+    let n_eff = setup.n_eff(part);
+    let (null, white) = setup.null_vectors(part);
     let cov = fit.covariance();
     // Null calibration: how much chi-square a fit of this effect gains on the model's own
     // noise (the ensemble's process-noise residuals plus the white measurement noise),
@@ -466,12 +496,12 @@ fn fit_mean(
     // the start): along a nonlinear parameter (a lag) the fit can travel through directions
     // where the process noise is large and end where the Jacobian has turned away from them.
     let at_fit = match (&fit.jacobian, &cov) {
-        (Some(j), Some(ai)) => null_factor(j, ai, null, white),
+        (Some(j), Some(ai)) => null_factor(j, ai, &null, &white),
         _ => 1.0,
     };
     let at_start = lsq::jacobian_at(&objective, &bounds, &DVector::zeros(k)).and_then(|j| {
         let a = (j.transpose() * &j).try_inverse()?;
-        Some(null_factor(&j, &a, null, white))
+        Some(null_factor(&j, &a, &null, &white))
     });
     let noise_factor = at_start.map_or(at_fit, |f| f.max(at_fit));
     let variance_factor = (chi2_after / (n_eff - k as f64).max(1.0)).max(1.0);
@@ -487,27 +517,69 @@ fn fit_mean(
         total
     });
     let ci = lsq::intervals(&fit.x, cov.as_ref(), scales, 1.0);
-    let delta_bic = (chi2_before - chi2_after) / scale - k as f64 * n_eff.ln();
-    let delta_bic_uncalibrated = chi2_before - chi2_after - k as f64 * n_eff.ln();
-    let heldout_chi2_before = r0.chi2(false);
-    let heldout_chi2_after = r1.chi2(false);
-    let heldout_gain = (heldout_chi2_before - heldout_chi2_after) / scale;
-    let (signature_pass, signature_text) = signature(setup, effect, r0, &r1);
-    let guards = Guards {
-        inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
+    Some(Scored {
         interval_excludes_zero: interval_excludes_zero(&ci, &fit.x, cov.as_ref(), 1.0),
-        significant: delta_bic > BIC_MARGIN,
+        inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
+        delta_bic: (chi2_before - chi2_after) / scale - k as f64 * n_eff.ln(),
+        delta_bic_uncalibrated: chi2_before - chi2_after - k as f64 * n_eff.ln(),
+        params,
+        ci,
+        chi2_before,
+        chi2_after,
+        scale,
+        noise_factor,
+        variance_factor,
+        residuals: r1,
+        evaluations: fit.evaluations,
+    })
+}
+
+/// Fits one mean-type candidate: on the training blocks first, judged on the held-out
+/// blocks; a candidate that the held-out blocks confirm is then fitted on all the data for
+/// its values, interval and significance (the structure validated on data it was not
+/// fitted to, the values estimated from everything).
+fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> CandidateResult {
+    let k = effect.parameters.len();
+    let Some(train) = fit_part(setup, effect, r0, Some(true), &lsq::axis_scan(k, &START_SCAN))
+    else {
+        return failed(effect, r0.chi2(true), "the fit left the model's valid range");
+    };
+    let heldout_chi2_before = r0.chi2(false);
+    let heldout_chi2_after = train.residuals.chi2(false);
+    let heldout_gain = (heldout_chi2_before - heldout_chi2_after) / train.scale;
+    let (signature_pass, signature_text) = signature(setup, effect, r0, &train.residuals);
+    let heldout = heldout_gain > HELDOUT_MIN_GAIN;
+    let mut evaluations = train.evaluations;
+    let chosen = if heldout && signature_pass {
+        let start = DVector::from_iterator(
+            k,
+            train.params.iter().zip(effect.scales).map(|(p, s)| p / s),
+        );
+        match fit_part(setup, effect, r0, None, &[start]) {
+            Some(all) => {
+                evaluations += all.evaluations;
+                all
+            }
+            None => train,
+        }
+    } else {
+        train
+    };
+    let guards = Guards {
+        inside_bounds: chosen.inside_bounds,
+        interval_excludes_zero: chosen.interval_excludes_zero,
+        significant: chosen.delta_bic > BIC_MARGIN,
         signature: signature_pass,
-        heldout: heldout_gain > HELDOUT_MIN_GAIN,
+        heldout,
     };
     CandidateResult {
         name: effect.name.to_string(),
-        parameters: names(effect).zip(params.iter().copied()).collect(),
-        ci95: names(effect).zip(ci).collect(),
-        chi2_before,
-        chi2_after,
-        delta_bic,
-        delta_bic_uncalibrated,
+        parameters: names(effect).zip(chosen.params.iter().copied()).collect(),
+        ci95: names(effect).zip(chosen.ci.iter().copied()).collect(),
+        chi2_before: chosen.chi2_before,
+        chi2_after: chosen.chi2_after,
+        delta_bic: chosen.delta_bic,
+        delta_bic_uncalibrated: chosen.delta_bic_uncalibrated,
         heldout_chi2_before,
         heldout_chi2_after,
         heldout_gain,
@@ -515,9 +587,9 @@ fn fit_mean(
         signature: signature_text,
         guards,
         testable: true,
-        evaluations: fit.evaluations,
-        noise_factor,
-        variance_factor,
+        evaluations,
+        noise_factor: chosen.noise_factor,
+        variance_factor: chosen.variance_factor,
     }
 }
 
@@ -701,38 +773,38 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
     })
 }
 
-/// Fits every candidate not yet in the model; `progress` is called before each.
+/// Fits every candidate not yet in the model, on as many threads as the machine has cores
+/// (each fit is independent and deterministic, and results keep the library's order before
+/// ranking, so the outcome does not depend on the thread count); `progress` is called as
+/// each candidate finishes.
 pub fn fit_candidates(
     setup: &Setup<'_>,
     skip: &[&str],
     progress: &mut dyn FnMut(&str),
 ) -> Vec<CandidateResult> {
     let r0 = setup.residuals(&setup.base, &setup.clean);
-    let (null, white) = setup.null_vectors();
     let measured: Vec<&str> = setup
         .modelled()
         .iter()
         .map(|&i| setup.m.channels[i].name.as_str())
         .collect();
-    let mut out = Vec::new();
-    for effect in &effects::LIBRARY {
-        progress(effect.name);
-        if skip.contains(&effect.name) {
-            continue;
-        }
+    let todo: Vec<&'static Effect> = effects::LIBRARY
+        .iter()
+        .filter(|e| !skip.contains(&e.name))
+        .collect();
+    let one = |effect: &'static Effect| -> CandidateResult {
         if !effect.channels.iter().any(|c| measured.contains(c)) {
-            out.push(failed(
+            return failed(
                 effect,
                 r0.chi2(true),
                 &format!(
                     "not testable: none of its channels ({}) is measured and modelled",
                     effect.channels.join(", ")
                 ),
-            ));
-            continue;
+            );
         }
         let result = match effect.kind {
-            Kind::Mean => fit_mean(setup, effect, &r0, &null, &white),
+            Kind::Mean => fit_mean(setup, effect, &r0),
             Kind::Variance => fit_emi(setup, effect)
                 .unwrap_or_else(|| failed(effect, r0.chi2(true), "no depth data")),
         };
@@ -743,8 +815,35 @@ pub fn fit_candidates(
             guards = ?result.guards,
             "candidate fitted"
         );
-        out.push(result);
-    }
+        result
+    };
+    let threads = std::thread::available_parallelism()
+        .map_or(1, std::num::NonZero::get)
+        .min(todo.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let (tx, rx) = std::sync::mpsc::channel::<(usize, CandidateResult)>();
+    let mut slots: Vec<Option<CandidateResult>> = vec![None; todo.len()];
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            let tx = tx.clone();
+            let (next, todo, one) = (&next, &todo, &one);
+            scope.spawn(move || {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(effect) = todo.get(i) else { break };
+                    if tx.send((i, one(effect))).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        for (i, result) in rx {
+            progress(&result.name);
+            slots[i] = Some(result);
+        }
+    });
+    let mut out: Vec<CandidateResult> = slots.into_iter().flatten().collect();
     out.sort_by(|a, b| {
         b.delta_bic_uncalibrated
             .total_cmp(&a.delta_bic_uncalibrated)

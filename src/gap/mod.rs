@@ -215,7 +215,7 @@ fn excess(stats: &[ChannelStats]) -> f64 {
 /// over 1, as [`excess`] measures the whole run.
 fn heldout_excess(setup: &fit::Setup<'_>, c: &Configs, run: &resim::Run) -> f64 {
     let r = setup.residuals(c, run);
-    let n = setup.n_eff(false);
+    let n = setup.n_eff(Some(false));
     (r.chi2(false) / n - 1.0).max(0.0).sqrt()
 }
 

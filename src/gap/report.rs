@@ -59,7 +59,7 @@ pub fn json(a: &Analysis) -> Value {
             "chi2_before": c.chi2_before, "chi2_after": c.chi2_after, "noise_factor": c.noise_factor,
             "variance_factor": c.variance_factor,
             "heldout_chi2_before": c.heldout_chi2_before, "heldout_chi2_after": c.heldout_chi2_after,
-            "heldout_gain": c.heldout_gain, "guards": c.guards,
+            "heldout_gain": c.heldout_gain, "guards": c.guards, "evaluations": c.evaluations,
             "delta_bic_uncalibrated": finite(c.delta_bic_uncalibrated),
         })).collect::<Vec<_>>()).collect::<Vec<_>>(),
     })

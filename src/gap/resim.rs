@@ -422,7 +422,7 @@ pub fn noise_floor(
 #[cfg(test)]
 mod tests {
     use crate::config::{ConfigSource, Document, Embedded};
-    use crate::gap::{Verdict, analyse, bench, generate, model::GapModel};
+    use crate::gap::{Verdict, analyse_with, bench, generate, model::GapModel};
     use crate::physics::experiment::Experiment;
 
     /// Null data as `gap-bench` makes it: the shipped model on the benchmark's manoeuvre,
@@ -451,7 +451,11 @@ mod tests {
             seed,
         )
         .unwrap();
-        let a = analyse(&model, &m, dir, &mut |_, _| {}).unwrap();
+        let options = crate::gap::Options {
+            shooting: crate::gap::anchor::Shooting::OPEN_LOOP,
+            ..crate::gap::Options::default()
+        };
+        let a = analyse_with(&model, &m, dir, options, &mut |_, _| {}).unwrap();
         (
             a.verdict,
             a.accepted.iter().map(|w| w.name.clone()).collect(),
