@@ -7,12 +7,17 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use eyebot_hil::probe::SonarItem;
+use eyebot_hil::record::Direction;
+use eyebot_test_support::clients::{expect_hello, open_raw, sensor_client, sonar_client};
+use eyebot_test_support::config::NEAR_WALL;
+use eyebot_test_support::daemon::link_status;
+use eyebot_test_support::recording::{read_chunks, read_drops, stream};
+use eyebot_test_support::{Daemon, RunningDaemon, TempDir};
 use firmware_protocol::Transducer;
 use firmware_protocol::sensor_link::Message;
-use pty_tests::daemon::{
-    DaemonProcess, TestDir, expect_hello, link_status, open_raw, sensor_client, sonar_client,
-};
 use rand::{Rng, SeedableRng};
+
+const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 
 const MIB: u64 = 1024;
 
@@ -41,8 +46,8 @@ fn flood(path: &Path, seed: u64, for_how_long: Duration) -> u64 {
 /// flood (many MiB) would exceed both bounds.
 #[tokio::test]
 async fn garbage_floods_are_survived_with_bounded_memory() {
-    let dir = TestDir::new("flood");
-    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
+    let dir = TempDir::new("flood");
+    let daemon = Daemon::start(BIN, dir, &["--time-mode", "realtime"]);
     let sensor = daemon.link("sensor");
     let sonar = daemon.link("sonar");
     expect_hello(&sensor, "the daemon still answers HELLO").await;
@@ -93,8 +98,8 @@ async fn garbage_floods_are_survived_with_bounded_memory() {
 /// reports the broken input, and memory stays flat.
 #[tokio::test]
 async fn hang_ups_and_reopens_are_survived() {
-    let dir = TestDir::new("hangup");
-    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime"]);
+    let dir = TempDir::new("hangup");
+    let daemon = Daemon::start(BIN, dir, &["--time-mode", "realtime"]);
     let sensor = daemon.link("sensor");
     let sonar = daemon.link("sonar");
     expect_hello(&sensor, "the daemon still answers HELLO").await;
@@ -152,9 +157,10 @@ async fn hang_ups_and_reopens_are_survived() {
 /// bridge waits for the recorder instead: back-pressure down to the EyeBot's writes).
 #[tokio::test]
 async fn a_recorded_garbage_flood_loses_nothing_and_keeps_memory_bounded() {
-    let dir = TestDir::new("flood-rec");
+    let dir = TempDir::new("flood-rec");
     let record = dir.join("rec");
-    let mut daemon = DaemonProcess::start(
+    let mut daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--time-mode",
@@ -181,21 +187,9 @@ async fn a_recorded_garbage_flood_loses_nothing_and_keeps_memory_bounded() {
             && link_status(s, "sonar").bytes_rx >= sent.1
     });
     peak_kb = peak_kb.max(daemon.rss_kb());
-    daemon.signal(nix::sys::signal::Signal::SIGTERM);
-    assert!(
-        daemon
-            .wait(Duration::from_secs(5))
-            .expect("exits")
-            .success()
-    );
-    let chunks = pty_tests::daemon::read_chunks(&record);
-    let recorded = |link: &str| -> u64 {
-        chunks
-            .iter()
-            .filter(|c| c.link == link && c.dir == eyebot_hil::record::Direction::Rx)
-            .map(|c| c.data.len() as u64)
-            .sum()
-    };
+    daemon.stop();
+    let chunks = read_chunks(&record);
+    let recorded = |link: &str| stream(&chunks, link, Direction::Rx).len() as u64;
     eprintln!(
         "recorded flood: sent {sent:?} bytes; recorded rx sensor {} sonar {}; RSS idle {idle_kb} kB, peak {peak_kb} kB",
         recorded("sensor"),
@@ -215,17 +209,12 @@ async fn a_recorded_garbage_flood_loses_nothing_and_keeps_memory_bounded() {
 /// keeps being served, and status reports the dropped bytes.
 #[tokio::test]
 async fn a_client_that_never_reads_does_not_stall_the_other_link() {
-    let dir = TestDir::new("noread");
-    // 1.5 m off the west wall, so the port transducer has echoes (see daemon_devices.rs).
-    let config = dir.write_config(
-        "near-wall.toml",
-        &[(
-            "position_m = [3.0, 6.25, 0.3]",
-            "position_m = [3.0, 1.5, 0.5]",
-        )],
-    );
+    let dir = TempDir::new("noread");
+    // Near the west wall, so the port transducer has echoes.
+    let config = dir.write_config("near-wall.toml", &[NEAR_WALL]);
     let record = dir.join("rec");
-    let mut daemon = DaemonProcess::start(
+    let mut daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--config",
@@ -279,18 +268,12 @@ async fn a_client_that_never_reads_does_not_stall_the_other_link() {
     // The recording says which released bytes never reached the client (regression: they
     // were recorded as sent, with nothing to tell them apart).
     let dropped_before_stop = link_status(&later, "sensor").dropped_tx;
-    daemon.signal(nix::sys::signal::Signal::SIGTERM);
-    assert!(
-        daemon
-            .wait(Duration::from_secs(5))
-            .expect("exits")
-            .success()
-    );
-    let drops = pty_tests::daemon::read_drops(&record);
+    daemon.stop();
+    let drops = read_drops(&record);
     let not_read: usize = drops
         .iter()
-        .filter(|d| d.0 == "sensor" && d.1 == "not-read")
-        .map(|d| d.2.len())
+        .filter(|d| d.link == "sensor" && d.reason == "not-read")
+        .map(|d| d.data.len())
         .sum();
     assert!(
         not_read as u64 >= dropped_before_stop,
@@ -298,7 +281,7 @@ async fn a_client_that_never_reads_does_not_stall_the_other_link() {
     );
     // Only the stuck link dropped anything.
     assert!(
-        drops.iter().all(|d| d.0 == "sensor"),
+        drops.iter().all(|d| d.link == "sensor"),
         "only the sensor link dropped"
     );
     drop(sensor);

@@ -5,15 +5,24 @@
 use std::path::Path;
 use std::time::Duration;
 
-use pty_tests::eyebot_c::{self, Daemon, Scratch, Target, run_program};
+use eyebot_test_support::TempDir;
+use eyebot_test_support::eyebot_c::{self, Target, run_program, start_daemon, stop_daemon};
+
+const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 
 #[test]
 fn foreign_robios_program_builds_and_runs_unchanged() {
     let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/foreign/robios_demo.c");
-    let out = eyebot_c::build("foreign", Target::Host, &[&source]);
-    let scratch = Scratch::new("foreign");
-    let lcd = scratch.0.join("lcd.txt");
-    let daemon = Daemon::start(&scratch.0, None, 3);
+    let out = eyebot_c::build(
+        env!("CARGO_TARGET_TMPDIR"),
+        "foreign",
+        Target::Host,
+        &[&source],
+        &[],
+    );
+    let dir = TempDir::new("foreign");
+    let lcd = dir.join("lcd.txt");
+    let mut daemon = start_daemon(BIN, dir, None, 3);
     let run = run_program(
         &daemon,
         Target::Host,
@@ -25,7 +34,7 @@ fn foreign_robios_program_builds_and_runs_unchanged() {
         ],
         Duration::from_secs(120),
     );
-    let rec = daemon.stop();
+    let rec = stop_daemon(&mut daemon);
     let text = std::fs::read_to_string(&lcd).expect("LCD file");
     eprintln!("{text}\n{}", run.stderr);
     assert!(run.status.success(), "{:?}: {}", run.status, run.stderr);
@@ -36,7 +45,7 @@ fn foreign_robios_program_builds_and_runs_unchanged() {
     );
     assert!(text.contains("bye"), "{text}");
     // it really drove: 5 s at 50 % moves Mako forward
-    let (first, last) = (rec.states[0], *rec.states.last().expect("states"));
+    let (first, last) = (&rec.states[0], rec.states.last().expect("states"));
     assert!(
         last.x_m - first.x_m > 0.5,
         "moved {:.2} m",

@@ -2,7 +2,8 @@
 //! tables of `configs/vehicles/mako.toml`. `EYEBOT_HDT_REGENERATE=1` rewrites the C table
 //! from the TOML instead of failing.
 
-use pty_tests::eyebot_c::{c_source_dir, workspace_root};
+use eyebot_test_support::eyebot_c::c_source_dir;
+use eyebot_test_support::workspace_root;
 
 const BEGIN: &str = "static const uint16_t hdt_duty_x10[4][11] = {\n";
 const END: &str = "};\n";
@@ -52,7 +53,7 @@ fn c_hdt_table_matches_mako_toml() {
     }
     panic!(
         "{} differs from configs/vehicles/mako.toml; expected rows:\n{expected}\n\
-         run EYEBOT_HDT_REGENERATE=1 cargo test -p pty-tests --test eyebot_c_hdt",
+         run EYEBOT_HDT_REGENERATE=1 cargo test --test eyebot_c_hdt",
         path.display()
     );
 }

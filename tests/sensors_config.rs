@@ -4,7 +4,7 @@ use eyebot_hil::config::{ConfigError, Directory};
 use eyebot_hil::sensors::SensorsConfig;
 
 fn dir() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/sensors")
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/sensors")
 }
 
 #[test]

@@ -3,56 +3,23 @@
 //! other; then socat is killed and restarted (the adapter vanishes and comes back) and the
 //! daemon reopens the device with back-off.
 
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::os::fd::AsRawFd;
+use std::path::PathBuf;
 use std::time::Duration;
 
-use pty_tests::daemon::{
-    DaemonProcess, TestDir, expect_hello, link_status, poll_until, require_tool,
-};
-use std::os::fd::AsRawFd;
+use eyebot_test_support::clients::expect_hello;
+use eyebot_test_support::daemon::link_status;
+use eyebot_test_support::process::socat_pair;
+use eyebot_test_support::{Daemon, RunningDaemon, TempDir};
 
-/// `socat pty,raw,echo=0,link=A pty,raw,echo=0,link=B`, killed in `Drop`.
-struct Socat {
-    child: Child,
-}
-
-impl Socat {
-    fn start(a: &Path, b: &Path) -> Self {
-        let socat = require_tool("socat", "the real-serial test (Debian package `socat`)");
-        let child = Command::new(socat)
-            .arg(format!("pty,raw,echo=0,link={}", a.display()))
-            .arg(format!("pty,raw,echo=0,link={}", b.display()))
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("start socat");
-        poll_until(Duration::from_secs(10), "socat's pty links", || {
-            (a.exists() && b.exists()).then_some(())
-        });
-        Self { child }
-    }
-
-    fn kill(mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for Socat {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 
 #[tokio::test]
 async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_vanishing() {
-    let dir = TestDir::new("socat");
+    let dir = TempDir::new("socat");
     let a: PathBuf = dir.join("ttyA");
     let b: PathBuf = dir.join("ttyB");
-    let socat = Socat::start(&a, &b);
+    let socat = socat_pair(&a, &b);
     let config = dir.write_config(
         "serial.toml",
         &[("path = \"sensor\"", &format!("path = \"{}\"", a.display()))],
@@ -66,7 +33,8 @@ async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_v
         &text[at + "endpoint = \"pty\"".len()..]
     );
     std::fs::write(&config, text).unwrap();
-    let daemon = DaemonProcess::start(
+    let daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--config",
@@ -78,7 +46,6 @@ async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_v
     assert!(
         daemon
             .links
-            .lines
             .iter()
             .any(|(name, path)| name == "sensor" && path.contains("115200")),
         "{:?}",
@@ -110,7 +77,7 @@ async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_v
     let _ = std::fs::remove_file(&a);
     let _ = std::fs::remove_file(&b);
     // Same names, new devices.
-    let _socat = Socat::start(&a, &b);
+    let _socat = socat_pair(&a, &b);
     let s = daemon.wait_status(Duration::from_secs(15), "a reconnect", |s| {
         link_status(s, "sensor").reconnects > 0
     });

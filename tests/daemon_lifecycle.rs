@@ -8,11 +8,18 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
+use eyebot_hil::daemon::status::StatusSnapshot;
 use eyebot_hil::record::Direction;
+use eyebot_test_support::clients::open_raw;
+use eyebot_test_support::daemon::link_status;
+use eyebot_test_support::process::stat_fields;
+use eyebot_test_support::recording::{read_chunks, stream};
+use eyebot_test_support::{Daemon, RunningDaemon, TempDir};
 use firmware_protocol::Frame;
 use firmware_protocol::sensor_link::{AdcChannel, Message};
 use nix::sys::signal::Signal;
-use pty_tests::daemon::{DaemonProcess, TestDir, open_raw, read_chunks, stream};
+
+const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 
 fn adc_read(seq: u8) -> Vec<u8> {
     let mut b = BytesMut::new();
@@ -51,10 +58,11 @@ fn reader(mut file: std::fs::File, stop: Arc<AtomicBool>) -> std::thread::JoinHa
 }
 
 fn shutdown_loses_nothing(signal: Signal, tag: &str) {
-    let dir = TestDir::new(tag);
+    let dir = TempDir::new(tag);
     let record = dir.join("rec");
     let pid_file = dir.join("eyebot-hil.pid");
-    let mut daemon = DaemonProcess::start(
+    let mut daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--time-mode",
@@ -166,9 +174,10 @@ fn sigint_mid_recording_loses_nothing() {
 /// the kill is in `bytes.tsv`.
 #[test]
 fn kill_9_loses_at_most_the_last_100_ms() {
-    let dir = TestDir::new("kill9");
+    let dir = TempDir::new("kill9");
     let record = dir.join("rec");
-    let mut daemon = DaemonProcess::start(
+    let mut daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--time-mode",
@@ -224,13 +233,13 @@ fn kill_9_loses_at_most_the_last_100_ms() {
 /// `--json` parses and agrees.
 #[test]
 fn status_reports_uptime_time_mode_links_and_pose() {
-    let dir = TestDir::new("status");
-    let daemon = DaemonProcess::start(dir, &["--time-mode", "realtime", "--speed", "2"]);
+    let dir = TempDir::new("status");
+    let daemon = Daemon::start(BIN, dir, &["--time-mode", "realtime", "--speed", "2"]);
     let mut sensor = open_raw(&daemon.link("sensor"));
     sensor.write_all(&adc_read(1)).unwrap();
     sensor.write_all(b"\x00\x01garbage").unwrap();
     let s = daemon.wait_status(Duration::from_secs(10), "the request and the junk", |s| {
-        let l = pty_tests::daemon::link_status(s, "sensor");
+        let l = link_status(s, "sensor");
         l.frames_rx >= 1 && l.errors >= 1 && s.sim_time_s > 0.5
     });
     assert_eq!(s.time_mode, "realtime");
@@ -244,7 +253,7 @@ fn status_reports_uptime_time_mode_links_and_pose() {
         s.sim_time_s,
         s.uptime_s
     );
-    let sensor_link = pty_tests::daemon::link_status(&s, "sensor");
+    let sensor_link = link_status(&s, "sensor");
     assert_eq!(sensor_link.bytes_rx, 8 + 9);
     assert!(sensor_link.bytes_tx >= 10, "{sensor_link:?}");
     assert!(
@@ -253,6 +262,14 @@ fn status_reports_uptime_time_mode_links_and_pose() {
         s.pose
     );
 
+    let json: StatusSnapshot =
+        serde_json::from_str(&daemon.status_command(&["--json"])).expect("status --json parses");
+    assert_eq!(
+        (json.pid, json.time_mode.as_str(), json.speed),
+        (s.pid, s.time_mode.as_str(), s.speed),
+        "status --json agrees with the socket"
+    );
+    assert!(json.uptime_s >= s.uptime_s, "{json:?} after {s:?}");
     let text = daemon.status_command(&[]);
     for needle in [
         "uptime",
@@ -287,7 +304,7 @@ fn status_reports_uptime_time_mode_links_and_pose() {
 #[test]
 fn shutdown_is_bounded_when_the_recorder_hangs() {
     use std::os::unix::fs::OpenOptionsExt;
-    let dir = TestDir::new("hung");
+    let dir = TempDir::new("hung");
     let record = dir.join("rec");
     std::fs::create_dir_all(&record).unwrap();
     let fifo = record.join("bytes.tsv");
@@ -299,7 +316,8 @@ fn shutdown_is_bounded_when_the_recorder_hangs() {
         .open(&fifo)
         .unwrap();
     let pid_file = dir.join("eyebot-hil.pid");
-    let mut daemon = DaemonProcess::start(
+    let mut daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--time-mode",
@@ -360,9 +378,9 @@ fn shutdown_is_bounded_when_the_recorder_hangs() {
 /// `(policy, rt_priority)` of one thread, from `/proc/PID/task/TID/stat` (fields 41 and 40;
 /// counted after the parenthesised command name, which may hold spaces).
 fn scheduling(pid: u32, tid: &str) -> (u32, u32) {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/task/{tid}/stat")).unwrap();
-    let fields: Vec<&str> = stat[stat.rfind(')').unwrap() + 2..].split(' ').collect();
-    // `fields[0]` is field 3 (state).
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/task/{tid}/stat"))
+        .expect("read /proc/PID/task/TID/stat");
+    let fields = stat_fields(&stat);
     (
         fields[41 - 3].parse().unwrap(),
         fields[40 - 3].parse().unwrap(),
@@ -371,7 +389,7 @@ fn scheduling(pid: u32, tid: &str) -> (u32, u32) {
 
 #[test]
 fn rt_priority_runs_the_bridge_thread_under_sched_fifo() {
-    let dir = TestDir::new("rt-priority");
+    let dir = TempDir::new("rt-priority");
     let config = dir.write_config(
         "rt.toml",
         &[(
@@ -379,7 +397,8 @@ fn rt_priority_runs_the_bridge_thread_under_sched_fifo() {
             "release_quantum_ms = 1.0\nrt_priority = 7",
         )],
     );
-    let daemon = DaemonProcess::start(
+    let daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--config",
@@ -439,7 +458,7 @@ fn rt_priority_runs_the_bridge_thread_under_sched_fifo() {
 /// Runs `eyebot-hil probe --link LINK ARGS` and returns its standard output, which must be
 /// a success.
 fn probe(link: &std::path::Path, args: &[&str]) -> String {
-    let out = std::process::Command::new(pty_tests::daemon::binary())
+    let out = std::process::Command::new(BIN)
         .arg("probe")
         .arg("--link")
         .arg(link)
@@ -455,7 +474,11 @@ fn probe(link: &std::path::Path, args: &[&str]) -> String {
 /// exactly the ticks asked for.
 #[test]
 fn probe_reads_the_sensor_link_and_drives_lockstep_time() {
-    let daemon = DaemonProcess::start(TestDir::new("probe-sensor"), &["--time-mode", "lockstep"]);
+    let daemon = Daemon::start(
+        BIN,
+        TempDir::new("probe-sensor"),
+        &["--time-mode", "lockstep"],
+    );
     let sensor = daemon.link("sensor");
     let hello = probe(&sensor, &["hello"]);
     assert!(hello.starts_with("protocol "), "{hello}");
@@ -497,13 +520,13 @@ fn probe_reads_the_sensor_link_and_drives_lockstep_time() {
 /// sentences, each a valid NMEA line.
 #[test]
 fn probe_selects_a_transducer_and_prints_its_sentences() {
-    let dir = TestDir::new("probe-sonar");
+    let dir = TempDir::new("probe-sonar");
     // Every ping gives a sentence, with or without an echo.
     let config = dir.write_config(
         "every-ping.toml",
         &[("invalid_echo = \"omit\"", "invalid_echo = \"empty\"")],
     );
-    let daemon = DaemonProcess::start(dir, &["--config", config.to_str().unwrap()]);
+    let daemon = Daemon::start(BIN, dir, &["--config", config.to_str().unwrap()]);
     let out = probe(
         &daemon.link("sonar"),
         &["sonar", "2", "--count", "2", "--timeout-s", "20"],

@@ -3,30 +3,26 @@
 
 use std::time::Duration;
 
-use eyebot_hil::daemon::status::StatusSnapshot;
 use eyebot_hil::probe::SonarItem;
+use eyebot_test_support::clients::{sensor_client, sonar_client};
+use eyebot_test_support::config::NEAR_WALL;
+use eyebot_test_support::daemon::link_status;
+use eyebot_test_support::{Daemon, RunningDaemon, TempDir, wait_for};
 use firmware_protocol::Transducer;
 use firmware_protocol::sensor_link::Message;
-use pty_tests::daemon::{
-    DaemonProcess, TestDir, link_status, poll_until, sensor_client, sonar_client,
-};
 
-const NEAR_WALL: (&str, &str) = (
-    "position_m = [3.0, 6.25, 0.3]",
-    "position_m = [3.0, 1.5, 0.5]",
-);
+const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 
 /// Selects each transducer in turn and returns the raw sentences (without CR LF).
-async fn collect_sentences(daemon: &DaemonProcess) -> Vec<String> {
+async fn collect_sentences(daemon: &Daemon) -> Vec<String> {
     let mut sensor = sensor_client(&daemon.link("sensor"));
     let mut sonar = sonar_client(&daemon.link("sonar"));
-    let status = || -> StatusSnapshot { daemon.status() };
     let mut raw = Vec::new();
     for t in [1, 2, 3, 4, 1] {
-        let before = link_status(&status(), "sonar").frames_rx;
+        let before = link_status(&daemon.status(), "sonar").frames_rx;
         sonar.select(Transducer::new(t).unwrap()).await.unwrap();
-        poll_until(Duration::from_secs(10), "select received", || {
-            (link_status(&status(), "sonar").frames_rx > before).then_some(())
+        wait_for("select received", Duration::from_secs(10), || {
+            (link_status(&daemon.status(), "sonar").frames_rx > before).then_some(())
         });
         sensor
             .request(
@@ -47,12 +43,13 @@ async fn collect_sentences(daemon: &DaemonProcess) -> Vec<String> {
     raw
 }
 
-fn start(tag: &str, edits: &[(&str, &str)]) -> DaemonProcess {
-    let dir = TestDir::new(tag);
+fn start(tag: &str, edits: &[(&str, &str)]) -> Daemon {
+    let dir = TempDir::new(tag);
     let mut all = vec![NEAR_WALL];
     all.extend_from_slice(edits);
     let config = dir.write_config("nmea.toml", &all);
-    DaemonProcess::start(
+    Daemon::start(
+        BIN,
         dir,
         &[
             "--config",

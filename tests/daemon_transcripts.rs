@@ -2,38 +2,33 @@
 //! speed factor, the client's pace and whether it runs as a binary or in-process; realtime
 //! physics does not depend on the speed factor.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
-use eyebot_hil::daemon::status::StatusSnapshot;
 use eyebot_hil::probe::SensorClient;
+use eyebot_hil::record::Direction as Dir;
+use eyebot_test_support::clients::{sensor_client, sonar_client};
+use eyebot_test_support::config::{LOCKSTEP, NEAR_WALL, config_text};
+use eyebot_test_support::daemon::link_status;
+use eyebot_test_support::recording::StateRow;
+use eyebot_test_support::recording::{
+    TranscriptChunk, first_difference, read_chunks, read_states, transcript,
+};
+use eyebot_test_support::{Daemon, InProcessDaemon, RunningDaemon, TempDir, wait_for};
 use firmware_protocol::Transducer;
 use firmware_protocol::sensor_link::{
     AdcChannel, CompassMode, CompassOutput, Direction, Message, ThrusterCommand,
 };
-use nix::sys::signal::Signal;
-use pty_tests::daemon::{
-    DaemonProcess, InProcessDaemon, TestDir, config_text, link_status, poll_until, read_chunks,
-    sensor_client, sonar_client, status_at, transcript,
-};
 
-const NEAR_WALL: (&str, &str) = (
-    "position_m = [3.0, 6.25, 0.3]",
-    "position_m = [3.0, 1.5, 0.5]",
-);
+const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 
-type Transcript = Vec<(String, String, &'static str, String)>;
+type Transcript = Vec<TranscriptChunk>;
 
 /// A scripted EyeBot: streams, compass pushes, two sonar selects, thrusters, polls. `pace` is
 /// slept before every request (a slow client).
-async fn script(
-    sensor_path: &Path,
-    sonar_path: &Path,
-    status: &dyn Fn() -> StatusSnapshot,
-    pace: Duration,
-) {
-    let mut sensor = sensor_client(sensor_path);
-    let mut sonar = sonar_client(sonar_path);
+async fn script(daemon: &impl RunningDaemon, pace: Duration) {
+    let mut sensor = sensor_client(&daemon.link("sensor"));
+    let mut sonar = sonar_client(&daemon.link("sonar"));
     async fn req(sensor: &mut SensorClient, pace: Duration, m: Message) -> Message {
         tokio::time::sleep(pace).await;
         sensor.request("script", m, Duration::ZERO).await.unwrap()
@@ -62,7 +57,7 @@ async fn script(
     )
     .await;
     for transducer in [1, 2] {
-        let before = link_status(&status(), "sonar").frames_rx;
+        let before = link_status(&daemon.status(), "sonar").frames_rx;
         tokio::time::sleep(pace).await;
         sonar
             .select(Transducer::new(transducer).unwrap())
@@ -70,10 +65,10 @@ async fn script(
             .unwrap();
         // The sonar line is a different pty: wait until the bridge has the select, so it
         // lands at the same simulated time in every run.
-        poll_until(
-            Duration::from_secs(10),
+        wait_for(
             "the select reached the bridge",
-            || (link_status(&status(), "sonar").frames_rx > before).then_some(()),
+            Duration::from_secs(10),
+            || (link_status(&daemon.status(), "sonar").frames_rx > before).then_some(()),
         );
         req(&mut sensor, pace, Message::TimeAdvance { ticks: 150 }).await;
         for c in 0..4 {
@@ -116,10 +111,11 @@ async fn script(
 }
 
 fn binary_run(tag: &str, seed: &str, speed: &str, pace: Duration) -> Transcript {
-    let dir = TestDir::new(tag);
+    let dir = TempDir::new(tag);
     let config = dir.write_config("near-wall.toml", &[NEAR_WALL]);
     let record = dir.join("rec");
-    let mut daemon = DaemonProcess::start(
+    let mut daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--config",
@@ -134,54 +130,28 @@ fn binary_run(tag: &str, seed: &str, speed: &str, pace: Duration) -> Transcript 
             record.to_str().unwrap(),
         ],
     );
-    let socket = daemon.status_socket();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    runtime.block_on(script(
-        &daemon.link("sensor"),
-        &daemon.link("sonar"),
-        &|| status_at(&socket),
-        pace,
-    ));
-    daemon.signal(Signal::SIGTERM);
-    let exit = daemon.wait(Duration::from_secs(5)).expect("daemon exits");
-    assert!(exit.success(), "{exit:?}");
+    runtime().block_on(script(&daemon, pace));
+    daemon.stop();
     transcript(&read_chunks(&record))
 }
 
 fn in_process_run(tag: &str, seed: u64) -> Transcript {
-    let dir = TestDir::new(tag);
+    let dir = TempDir::new(tag);
     let record: PathBuf = dir.join("rec");
-    let text = config_text(&[
-        NEAR_WALL,
-        ("time_mode = \"realtime\"", "time_mode = \"lockstep\""),
-        ("speed = 1.0", "speed = 0.5"),
-    ]);
+    let text = config_text(&[NEAR_WALL, LOCKSTEP, ("speed = 1.0", "speed = 0.5")]);
     let mut daemon = InProcessDaemon::start(dir, &text, Some(record.clone()), |c| c.seed = seed);
-    let socket = daemon.status_socket.clone();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    runtime.block_on(script(
-        &daemon.link("sensor"),
-        &daemon.link("sonar"),
-        &|| status_at(&socket),
-        Duration::ZERO,
-    ));
+    runtime().block_on(script(&daemon, Duration::ZERO));
     let records = daemon.stop().records.expect("recording");
     assert!(records.chunks > 0);
     let chunks = read_chunks(&record);
     transcript(&chunks)
 }
 
-fn first_difference(a: &Transcript, b: &Transcript) -> String {
-    match a.iter().zip(b).position(|(x, y)| x != y) {
-        Some(i) => format!("line {i}: {:?} vs {:?}", a[i], b[i]),
-        None => format!("lengths {} vs {}", a.len(), b.len()),
-    }
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("a tokio runtime")
 }
 
 /// Same seed, same scripted client: the same bytes at the same simulated times, whether
@@ -190,21 +160,18 @@ fn first_difference(a: &Transcript, b: &Transcript) -> String {
 fn lockstep_transcripts_are_identical_across_speeds_pace_and_runners() {
     let fast = binary_run("tr-fast", "7", "1", Duration::ZERO);
     // Non-trivial: both links carried traffic both ways, with sentences and pushes.
-    for (link, dir) in [
-        ("sonar", "rx"),
-        ("sonar", "tx"),
-        ("sensor", "rx"),
-        ("sensor", "tx"),
-    ] {
-        assert!(
-            fast.iter().any(|c| c.1 == link && c.2 == dir),
-            "no {link} {dir} chunk in {fast:#?}"
-        );
+    for link in ["sonar", "sensor"] {
+        for dir in [Dir::Rx, Dir::Tx] {
+            assert!(
+                fast.iter().any(|c| c.link == link && c.dir == dir),
+                "no {link} {dir:?} chunk in {fast:#?}"
+            );
+        }
     }
     let sonar_tx: String = fast
         .iter()
-        .filter(|c| c.1 == "sonar" && c.2 == "tx")
-        .map(|c| c.3.clone())
+        .filter(|c| c.link == "sonar" && c.dir == Dir::Tx)
+        .map(|c| c.hex.clone())
         .collect();
     let sonar_tx = hex::decode(sonar_tx).unwrap();
     assert!(
@@ -233,10 +200,11 @@ fn lockstep_transcripts_are_identical_across_speeds_pace_and_runners() {
     );
 }
 
-fn realtime_states(tag: &str, speed: &str, until_sim_s: f64) -> Vec<String> {
-    let dir = TestDir::new(tag);
+fn realtime_states(tag: &str, speed: &str, until_sim_s: f64) -> Vec<StateRow> {
+    let dir = TempDir::new(tag);
     let record = dir.join("rec");
-    let mut daemon = DaemonProcess::start(
+    let mut daemon = Daemon::start(
+        BIN,
         dir,
         &[
             "--time-mode",
@@ -252,10 +220,8 @@ fn realtime_states(tag: &str, speed: &str, until_sim_s: f64) -> Vec<String> {
     daemon.wait_status(Duration::from_secs(15), "enough simulated time", |s| {
         s.sim_time_s >= until_sim_s
     });
-    daemon.signal(Signal::SIGTERM);
-    assert!(daemon.wait(Duration::from_secs(5)).expect("exit").success());
-    let text = std::fs::read_to_string(record.join("state.csv")).unwrap();
-    text.lines().skip(1).map(str::to_string).collect()
+    daemon.stop();
+    read_states(&record)
 }
 
 /// Realtime at speed 1 and 10, no client: every ground-truth row at the same simulated time
@@ -264,13 +230,15 @@ fn realtime_states(tag: &str, speed: &str, until_sim_s: f64) -> Vec<String> {
 fn realtime_speed_1_and_10_give_the_same_physics() {
     let slow = realtime_states("rt-1", "1", 2.0);
     let fast = realtime_states("rt-10", "10", 4.0);
-    let time = |row: &String| row.split(',').next().unwrap().to_string();
-    let fast_by_time: std::collections::HashMap<String, &String> =
+    let time = |row: &StateRow| row.t_s.to_bits();
+    let fast_by_time: std::collections::HashMap<u64, &StateRow> =
         fast.iter().map(|r| (time(r), r)).collect();
     let mut compared = 0;
     for row in &slow {
         if let Some(other) = fast_by_time.get(&time(row)) {
-            assert_eq!(row, *other, "state at t = {} s differs", time(row));
+            // Bit for bit: every column, compared through its bits.
+            let bits = |r: &StateRow| r.values.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(row), bits(other), "state at t = {} s differs", row.t_s);
             compared += 1;
         }
     }
@@ -286,10 +254,9 @@ fn realtime_speed_1_and_10_give_the_same_physics() {
         .rev()
         .find(|r| fast_by_time.contains_key(&time(r)))
         .unwrap();
-    let columns = |r: &str| r.split(',').skip(1).map(str::to_string).collect::<Vec<_>>();
     assert_ne!(
-        columns(&slow[0]),
-        columns(last_common),
+        slow[0].values[1..],
+        last_common.values[1..],
         "the state never changed"
     );
 }

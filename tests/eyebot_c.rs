@@ -1,14 +1,31 @@
 //! The example control programs of `firmware-protocol/c/examples`, built from `cargo test`,
-//! run against the bridge in lockstep and judged from the recorded ground truth (issue 6).
+//! run against the bridge in lockstep and judged from the recorded ground truth.
 
 use std::time::Duration;
 
-use pty_tests::eyebot_c::{
-    self, Daemon, Recording, Scratch, Target, config_with_start, point_depth_m, point_north_east_m,
-    run_program,
-};
+use eyebot_test_support::eyebot_c::{self, Target, run_program, start_daemon, stop_daemon};
+use eyebot_test_support::recording::StateRow;
+use eyebot_test_support::{Recording, TempDir};
 
+const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
+const TMP: &str = env!("CARGO_TARGET_TMPDIR");
 const TIMEOUT: Duration = Duration::from_secs(300);
+
+/// Depth of a body-frame point (m, forward-starboard-down from the centre of mass).
+fn point_depth_m(s: &StateRow, body_m: [f64; 3]) -> f64 {
+    let (sr, cr) = s.roll_rad.sin_cos();
+    let (sp, cp) = s.pitch_rad.sin_cos();
+    s.z_m - sp * body_m[0] + cp * sr * body_m[1] + cp * cr * body_m[2]
+}
+
+/// North/east position of a body-frame point (yaw only; roll and pitch stay small).
+fn point_north_east_m(s: &StateRow, body_m: [f64; 2]) -> (f64, f64) {
+    let (sy, cy) = s.yaw_rad.sin_cos();
+    (
+        s.x_m + cy * body_m[0] - sy * body_m[1],
+        s.y_m + sy * body_m[0] + cy * body_m[1],
+    )
+}
 
 fn run(name: &str, program: &str, start: Option<([f64; 3], f64)>) -> (Recording, String) {
     run_seed(name, program, start, 1)
@@ -20,10 +37,8 @@ fn run_seed(
     start: Option<([f64; 3], f64)>,
     seed: u64,
 ) -> (Recording, String) {
-    let out = eyebot_c::build("examples", Target::Host, &[]);
-    let scratch = Scratch::new(name);
-    let config = start.map(|(p, h)| config_with_start(&scratch.0, p, h));
-    let daemon = Daemon::start(&scratch.0, config.as_deref(), seed);
+    let out = eyebot_c::build(TMP, "examples", Target::Host, &[], &[]);
+    let mut daemon = start_daemon(BIN, TempDir::new(name), start, seed);
     let result = run_program(&daemon, Target::Host, &out.join(program), &[], TIMEOUT);
     assert!(
         result.status.success(),
@@ -32,7 +47,7 @@ fn run_seed(
         result.stdout,
         result.stderr
     );
-    (daemon.stop(), result.stdout)
+    (stop_daemon(&mut daemon), result.stdout)
 }
 
 /// Thesis 4.5: the compass heading hold drives straight: lateral deviation under 0.3 m over
@@ -40,7 +55,7 @@ fn run_seed(
 #[test]
 fn heading_hold_drives_straight() {
     let (rec, _) = run("heading_hold", "heading_hold", None);
-    let s0 = rec.states[0];
+    let s0 = &rec.states[0];
     let mut deviation_m: f64 = 0.0;
     let mut reached = false;
     for s in &rec.states {
@@ -123,10 +138,10 @@ const PORT_TRANSDUCERS_M: [[f64; 2]; 2] = [[0.25, -0.32], [-0.25, -0.32]];
 #[test]
 fn sonar_three_readings_see_the_port_wall() {
     let (rec, stdout) = run("sonar_three", "sonar_three", Some(WALL_START));
-    let s = rec.states[0];
+    let s = &rec.states[0];
     let truth_m = PORT_TRANSDUCERS_M
         .iter()
-        .map(|p| point_north_east_m(&s, *p).1)
+        .map(|p| point_north_east_m(s, *p).1)
         .fold(f64::MAX, f64::min);
     let first: f64 = stdout
         .lines()
@@ -227,7 +242,7 @@ fn wall_follower_passes_the_first_corner() {
 /// default 1-20), judged like the test above; prints one line per seed and fails naming the
 /// seeds that missed. Figures in docs/eyebot.md.
 #[test]
-#[ignore = "a sweep of many runs: EYEBOT_C_SEEDS=1-100 cargo test -p pty-tests --test eyebot_c \
+#[ignore = "a sweep of many runs: EYEBOT_C_SEEDS=1-100 cargo test --test eyebot_c \
             wall_follower_seed_sweep -- --ignored --nocapture"]
 fn wall_follower_seed_sweep() {
     let range = std::env::var("EYEBOT_C_SEEDS").unwrap_or_else(|_| "1-20".into());
@@ -260,11 +275,8 @@ fn wall_follower_seed_sweep() {
 /// receives exactly the bytes the host build does, at the same simulated times.
 #[test]
 fn m68k_build_under_qemu_gives_the_host_transcript() {
-    if !eyebot_c::m68k_tools_or_skip("m68k_build_under_qemu_gives_the_host_transcript") {
-        return;
-    }
-    let host = eyebot_c::build("transcript", Target::Host, &[]);
-    let m68k = eyebot_c::build("transcript", Target::M68k, &[]);
+    let host = eyebot_c::build(TMP, "transcript", Target::Host, &[], &[]);
+    let m68k = eyebot_c::build(TMP, "transcript", Target::M68k, &[], &[]);
     for (program, start) in [
         ("sonar_three", Some(WALL_START)),
         ("heading_hold", None),
@@ -272,9 +284,8 @@ fn m68k_build_under_qemu_gives_the_host_transcript() {
     ] {
         let mut transcripts = Vec::new();
         for (target, dir) in [(Target::Host, &host), (Target::M68k, &m68k)] {
-            let scratch = Scratch::new(&format!("transcript-{program}"));
-            let config = start.map(|(p, h)| config_with_start(&scratch.0, p, h));
-            let daemon = Daemon::start(&scratch.0, config.as_deref(), 7);
+            let scratch = TempDir::new(&format!("transcript-{program}"));
+            let mut daemon = start_daemon(BIN, scratch, start, 7);
             let result = run_program(&daemon, target, &dir.join(program), &[], TIMEOUT);
             assert!(
                 result.status.success(),
@@ -282,7 +293,7 @@ fn m68k_build_under_qemu_gives_the_host_transcript() {
                 result.status,
                 result.stderr
             );
-            transcripts.push((daemon.stop().transcript(), result.stdout));
+            transcripts.push((stop_daemon(&mut daemon).transcript(), result.stdout));
         }
         let (h, m) = (&transcripts[0], &transcripts[1]);
         assert!(h.0.len() > 100, "{program}: short transcript");
@@ -332,7 +343,7 @@ const C99_HEADERS: [&str; 24] = [
     "wctype.h",
 ];
 
-/// Issue 6: the examples contain no simulation-specific code: they include only `eyebot.h`
+/// The examples contain no simulation-specific code: they include only `eyebot.h`
 /// and standard C headers (and no other file of this project).
 #[test]
 fn examples_include_only_eyebot_h_and_standard_headers() {

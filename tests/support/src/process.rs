@@ -1,86 +1,13 @@
-//! Processes and names for end-to-end tests: unique names per test, a child that is killed
-//! and reaped in `Drop`, readiness by polling with a timeout (never a fixed sleep), and a
-//! loud failure when a system tool the test needs is missing.
+//! Child processes killed and reaped in `Drop`, a socat-linked pty pair, free ports, and the
+//! `/proc` figures of a process.
 
 use std::net::{Ipv4Addr, TcpListener};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-/// A name no other test in this run (or a concurrent run) uses: `prefix-PID-N`.
-pub fn unique_name(prefix: &str) -> String {
-    static NEXT: AtomicU32 = AtomicU32::new(0);
-    format!(
-        "{prefix}-{}-{}",
-        std::process::id(),
-        NEXT.fetch_add(1, Ordering::Relaxed)
-    )
-}
-
-/// A temporary directory with a unique name, removed (with its contents) on drop.
-#[derive(Debug)]
-pub struct TempDir(PathBuf);
-
-impl TempDir {
-    pub fn new(prefix: &str) -> Self {
-        let path = std::env::temp_dir().join(unique_name(prefix));
-        let _ = std::fs::remove_dir_all(&path);
-        std::fs::create_dir_all(&path)
-            .unwrap_or_else(|e| panic!("cannot create {}: {e}", path.display()));
-        Self(path)
-    }
-    pub fn path(&self) -> &Path {
-        &self.0
-    }
-    pub fn join(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// The path of a system tool, or a loud panic naming it and the package that provides it.
-pub fn require_tool(tool: &str, package: &str) -> PathBuf {
-    let found = std::env::var_os("PATH").and_then(|paths| {
-        std::env::split_paths(&paths)
-            .chain([PathBuf::from("/usr/sbin"), PathBuf::from("/sbin")])
-            .map(|dir| dir.join(tool))
-            .find(|p| p.is_file())
-    });
-    found.unwrap_or_else(|| {
-        let banner = "!".repeat(72);
-        eprintln!(
-            "\n{banner}\n!! MISSING TOOL: `{tool}` is not installed (Debian package `{package}`).\n!! This test needs it; install it with `bash .ci/install-deps`.\n{banner}\n"
-        );
-        panic!("required tool `{tool}` (package `{package}`) is missing");
-    })
-}
-
-/// Polls `ready` every `every` until it returns `Some`, or panics after `timeout` naming
-/// `what`.
-pub fn wait_for<T>(
-    what: &str,
-    timeout: Duration,
-    every: Duration,
-    mut ready: impl FnMut() -> Option<T>,
-) -> T {
-    let deadline = Instant::now() + timeout;
-    loop {
-        if let Some(v) = ready() {
-            return v;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "timed out after {timeout:?} waiting for {what}"
-        );
-        std::thread::sleep(every);
-    }
-}
+use crate::tools::require_tool;
+use crate::wait::wait_for;
 
 /// A loopback TCP port free at the time of the call.
 pub fn free_tcp_port() -> u16 {
@@ -129,6 +56,18 @@ impl ChildGuard {
         }
     }
 
+    /// Kills the process now (SIGKILL) and reaps it.
+    pub fn kill(mut self) {
+        self.kill_and_reap();
+    }
+
+    fn kill_and_reap(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
     /// Waits up to `timeout` for the process to exit by itself and returns its output
     /// (stdout/stderr must have been piped); kills it and panics on timeout.
     pub fn wait_output(mut self, timeout: Duration) -> Output {
@@ -159,12 +98,62 @@ impl ChildGuard {
 
 impl Drop for ChildGuard {
     fn drop(&mut self) {
-        if let Some(mut child) = self.child.take() {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
+        self.kill_and_reap();
         for path in &self.cleanup {
             let _ = std::fs::remove_file(path);
         }
     }
+}
+
+/// `socat pty,raw,echo=0,link=A pty,raw,echo=0,link=B`: two linked ptys standing in for a
+/// serial adapter and its cable, ready once both links exist; killed in `Drop`.
+pub fn socat_pair(a: &Path, b: &Path) -> ChildGuard {
+    let socat = require_tool("socat", "socat");
+    let guard = ChildGuard::spawn(
+        "socat",
+        Command::new(socat)
+            .arg(format!("pty,raw,echo=0,link={}", a.display()))
+            .arg(format!("pty,raw,echo=0,link={}", b.display()))
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    wait_for("socat's pty links", Duration::from_secs(10), || {
+        (a.exists() && b.exists()).then_some(())
+    });
+    guard
+}
+
+/// `VmRSS` of process `pid` in kB.
+pub fn rss_kb(pid: u32) -> u64 {
+    let text =
+        std::fs::read_to_string(format!("/proc/{pid}/status")).expect("read /proc/PID/status");
+    text.lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .expect("VmRSS in /proc/PID/status")
+}
+
+/// utime + stime of process `pid` (all its threads).
+pub fn cpu_time(pid: u32) -> Duration {
+    let text = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("read /proc/PID/stat");
+    let fields = stat_fields(&text);
+    // utime and stime are fields 14 and 15.
+    let ticks: u64 = fields[14 - 3].parse::<u64>().expect("utime")
+        + fields[15 - 3].parse::<u64>().expect("stime");
+    Duration::from_nanos(ticks * 1_000_000_000 / clock_ticks_per_s())
+}
+
+/// The fields of a `/proc/.../stat` line from field 3 (the state) on: they follow the
+/// parenthesised command name, which may hold spaces.
+pub fn stat_fields(stat: &str) -> Vec<&str> {
+    let after = &stat[stat.rfind(')').expect("comm in parentheses") + 2..];
+    after.split_whitespace().collect()
+}
+
+/// `sysconf(_SC_CLK_TCK)`: the unit of `/proc/PID/stat` times.
+pub fn clock_ticks_per_s() -> u64 {
+    // SAFETY: sysconf has no preconditions.
+    let ticks = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    if ticks > 0 { ticks as u64 } else { 100 }
 }

@@ -8,10 +8,14 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use pty_tests::eyebot_c::{
-    self, Daemon, Scratch, Target, build_with, config_with_start, run_program,
-};
-use pty_tests::pty::PtyFixture;
+use eyebot_hil::record::Direction;
+
+use eyebot_test_support::eyebot_c::{self, Target, run_program, start_daemon, stop_daemon};
+use eyebot_test_support::pty::PtyFixture;
+use eyebot_test_support::{Daemon, TempDir, require_tool};
+
+const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
+const TMP: &str = env!("CARGO_TARGET_TMPDIR");
 
 const TIMEOUT: Duration = Duration::from_secs(300);
 /// Where the wall-following course starts (configs/worlds/pool.toml [wall_following]).
@@ -22,17 +26,15 @@ fn stub_dir() -> PathBuf {
 }
 
 /// Builds libeyebot with the RoBIOS back-end, the stand-in and the examples into
-/// `target/eyebot-c/<name>-host/`. `timeout_ms` is the compiled-in reply timeout
+/// `CARGO_TARGET_TMPDIR/eyebot-c/<name>-host/`. `timeout_ms` is the compiled-in reply timeout
 /// (`EYEBOT_HIL_TIMEOUT_MS`); the time mode is lockstep.
 fn build_robios(name: &str, timeout_ms: u32) -> PathBuf {
     let stub = stub_dir();
-    let objects = eyebot_c::target_dir()
-        .join("eyebot-c")
-        .join(format!("{name}-stub"));
+    let objects = Path::new(TMP).join("eyebot-c").join(format!("{name}-stub"));
     std::fs::create_dir_all(&objects).expect("create the stub directory");
     let stub_o = objects.join("robios_stub.o");
     // the stand-in itself is held to the same flags as the library
-    let status = Command::new("cc")
+    let status = Command::new(require_tool("cc", "gcc"))
         .args([
             "-std=c99",
             "-Wall",
@@ -53,7 +55,8 @@ fn build_robios(name: &str, timeout_ms: u32) -> PathBuf {
          -DEYEBOT_HIL_TIME_MODE='\"lockstep\"' -DEYEBOT_HIL_TIMEOUT_MS='\"{timeout_ms}\"'",
         stub.display()
     );
-    build_with(
+    eyebot_c::build(
+        TMP,
         name,
         Target::Host,
         &[],
@@ -88,13 +91,16 @@ fn stub_env(daemon: &Daemon) -> Vec<(String, String)> {
 #[test]
 fn robios_backend_gives_the_posix_transcript() {
     let robios = build_robios("robios", 3000);
-    let posix = eyebot_c::build("robios-posix", Target::Host, &[]);
+    let posix = eyebot_c::build(TMP, "robios-posix", Target::Host, &[], &[]);
     let program = "sonar_three";
     let mut runs = Vec::new();
     for (label, dir) in [("posix", &posix), ("robios", &robios)] {
-        let scratch = Scratch::new(&format!("robios-{label}"));
-        let config = config_with_start(&scratch.0, WALL_START.0, WALL_START.1);
-        let daemon = Daemon::start(&scratch.0, Some(&config), 7);
+        let mut daemon = start_daemon(
+            BIN,
+            TempDir::new(&format!("robios-{label}")),
+            Some(WALL_START),
+            7,
+        );
         let env = stub_env(&daemon);
         let env: Vec<(&str, &str)> = env.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
         let result = run_program(&daemon, Target::Host, &dir.join(program), &env, TIMEOUT);
@@ -105,12 +111,13 @@ fn robios_backend_gives_the_posix_transcript() {
             result.stdout,
             result.stderr
         );
-        runs.push((daemon.stop().transcript(), result.stdout));
+        runs.push((stop_daemon(&mut daemon).transcript(), result.stdout));
     }
     let (p, r) = (&runs[0], &runs[1]);
     assert!(p.0.len() > 100, "short transcript ({} chunks)", p.0.len());
     assert!(
-        r.0.iter().any(|c| c.link == "sonar" && c.dir == "rx"),
+        r.0.iter()
+            .any(|c| c.link == "sonar" && c.dir == Direction::Rx),
         "the RoBIOS build sent nothing on SERIAL2"
     );
     let first_diff = p.0.iter().zip(&r.0).position(|(a, b)| a != b);
@@ -138,8 +145,8 @@ fn robios_backend_gives_the_posix_transcript() {
 fn robios_backend_times_out_and_resends_the_identical_frame() {
     const TIMEOUT_MS: u32 = 300;
     let out = build_robios("robios-timeout", TIMEOUT_MS);
-    let scratch = Scratch::new("robios-timeout");
-    let pty = PtyFixture::new(&scratch.0, "sensor");
+    let dir = TempDir::new("robios-timeout");
+    let pty = PtyFixture::new(dir.path(), "sensor");
     let master = pty.open();
     let started = Instant::now();
     let run = Command::new(out.join("heading_hold"))

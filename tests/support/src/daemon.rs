@@ -1,0 +1,389 @@
+//! The daemon under test: the built binary as a child process ([`Daemon`]) or
+//! `eyebot_hil::daemon::run` on a thread of the test ([`InProcessDaemon`]).
+//!
+//! The binary's path is always given by the test: `env!("CARGO_BIN_EXE_eyebot-hil")`, which
+//! cargo sets for the root package's integration tests and builds for the same profile first,
+//! so a test never runs a stale or guessed binary. Both handles own a [`TempDir`] (run
+//! directory, recordings, configurations), wait for readiness with a timeout (never a fixed
+//! sleep), and stop and clean up in `Drop`. Both answer [`RunningDaemon`], so one script runs
+//! against either.
+
+use std::ffi::OsStr;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use eyebot_hil::config::{Directory, Document};
+use eyebot_hil::daemon::config::DaemonConfig;
+use eyebot_hil::daemon::status::{LinkStatus, StatusSnapshot};
+use eyebot_hil::daemon::{Readiness, RunOptions, RunSummary};
+use nix::sys::signal::Signal;
+use nix::unistd::Pid;
+
+use crate::dir::TempDir;
+use crate::wait::wait_for;
+
+/// How long a daemon may take to come up (a cold start on a loaded 2-core machine).
+pub const READY_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// How long a daemon may take to exit after SIGTERM or SIGINT (its bound is 1 s).
+pub const EXIT_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// What a test asks of a running daemon, whichever way it runs.
+pub trait RunningDaemon {
+    /// The run directory, where the link symlinks and the status socket live.
+    fn run_dir(&self) -> &Path;
+
+    /// The symlink of link `name` (`sonar`, `sensor`).
+    fn link(&self, name: &str) -> PathBuf {
+        self.run_dir().join(name)
+    }
+
+    fn status_socket(&self) -> PathBuf {
+        self.run_dir().join("status.sock")
+    }
+
+    /// A status snapshot, read from the status socket (refreshed every 100 ms).
+    fn status(&self) -> StatusSnapshot {
+        status_at(&self.status_socket())
+    }
+
+    /// Polls the status until `pred` holds, or panics after `timeout` naming `what`.
+    fn wait_status(
+        &self,
+        timeout: Duration,
+        what: &str,
+        pred: impl Fn(&StatusSnapshot) -> bool,
+    ) -> StatusSnapshot
+    where
+        Self: Sized,
+    {
+        wait_for(what, timeout, || {
+            let s = self.status();
+            pred(&s).then_some(s)
+        })
+    }
+}
+
+/// The status snapshot served at `socket`, read through the library's client on a thread of
+/// its own (so it can be called from inside an async test).
+pub fn status_at(socket: &Path) -> StatusSnapshot {
+    let path = socket.to_path_buf();
+    let result = std::thread::spawn(move || {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("a runtime for the status query");
+        runtime.block_on(eyebot_hil::daemon::status::query(
+            &path,
+            Duration::from_secs(5),
+        ))
+    })
+    .join()
+    .expect("the status query thread");
+    result.unwrap_or_else(|e| panic!("status at {}: {e}", socket.display()))
+}
+
+/// The counters of link `name` in a status snapshot.
+pub fn link_status<'a>(s: &'a StatusSnapshot, name: &str) -> &'a LinkStatus {
+    s.links
+        .iter()
+        .find(|l| l.name == name)
+        .unwrap_or_else(|| panic!("no link `{name}` in status: {s:#?}"))
+}
+
+/// The built binary, running as a child process (`eyebot-hil run`).
+#[derive(Debug)]
+pub struct Daemon {
+    bin: PathBuf,
+    child: Child,
+    exit: Option<ExitStatus>,
+    pub dir: TempDir,
+    pub run_dir: PathBuf,
+    /// `(name, path)` of each `link NAME: PATH` line of the announcement.
+    pub links: Vec<(String, String)>,
+}
+
+impl Daemon {
+    /// Starts `BIN run --run-dir DIR/run ARGS` in `dir` (stderr to `DIR/daemon.log`) and
+    /// waits for its `ready` line.
+    pub fn start(bin: &str, dir: TempDir, args: &[&str]) -> Self {
+        let bin = PathBuf::from(bin);
+        let run_dir = dir.join("run");
+        let log = std::fs::File::create(dir.join("daemon.log")).expect("create daemon.log");
+        let mut child = Command::new(&bin)
+            .current_dir(dir.path())
+            .arg("run")
+            .arg("--run-dir")
+            .arg(&run_dir)
+            .args(args)
+            .env(
+                "EYEBOT_HIL_LOG",
+                std::env::var("EYEBOT_HIL_LOG").unwrap_or_else(|_| "info".into()),
+            )
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(log)
+            .spawn()
+            .unwrap_or_else(|e| panic!("spawn {} run: {e}", bin.display()));
+        let stdout = child.stdout.take().expect("piped stdout");
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut daemon = Self {
+            bin,
+            child,
+            exit: None,
+            dir,
+            run_dir,
+            links: Vec::new(),
+        };
+        let deadline = Instant::now() + READY_TIMEOUT;
+        loop {
+            match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+                Ok(line) => {
+                    if let Some(rest) = line.strip_prefix("link ") {
+                        let (name, path) = rest.split_once(": ").expect("`link NAME: PATH`");
+                        daemon.links.push((name.into(), path.into()));
+                    } else if line.starts_with("ready") {
+                        return daemon;
+                    }
+                }
+                Err(_) => panic!(
+                    "eyebot-hil run announced no `ready` within {READY_TIMEOUT:?} (links {:?}); \
+                     exit {:?}; log:\n{}",
+                    daemon.links,
+                    daemon.child.try_wait(),
+                    daemon.log()
+                ),
+            }
+        }
+    }
+
+    /// The symlink of link `name` (as [`RunningDaemon::link`], without the trait in scope).
+    pub fn link(&self, name: &str) -> PathBuf {
+        RunningDaemon::link(self, name)
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// The daemon's stderr so far (its tracing output).
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.join("daemon.log")).unwrap_or_default()
+    }
+
+    pub fn signal(&self, signal: Signal) {
+        nix::sys::signal::kill(Pid::from_raw(self.pid() as i32), signal).expect("signal daemon");
+    }
+
+    /// Waits up to `timeout` for the process to exit; `None` if it is still running.
+    pub fn wait(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        if self.exit.is_none() {
+            let deadline = Instant::now() + timeout;
+            loop {
+                if let Some(status) = self.child.try_wait().expect("try_wait") {
+                    self.exit = Some(status);
+                    break;
+                }
+                if Instant::now() >= deadline {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        }
+        self.exit
+    }
+
+    /// Sends `signal` (SIGTERM or SIGINT) and checks the daemon exits with status 0 within
+    /// [`EXIT_TIMEOUT`]: the recording is then complete.
+    pub fn stop_with(&mut self, signal: Signal) {
+        self.signal(signal);
+        let exit = self.wait(EXIT_TIMEOUT).unwrap_or_else(|| {
+            panic!("the daemon did not exit within {EXIT_TIMEOUT:?} of {signal}")
+        });
+        assert!(exit.success(), "{signal}: exit {exit:?}\n{}", self.log());
+    }
+
+    /// [`stop_with`](Self::stop_with) SIGTERM.
+    pub fn stop(&mut self) {
+        self.stop_with(Signal::SIGTERM);
+    }
+
+    /// Runs `BIN SUBCOMMAND ARGS` (another subcommand of the same binary, such as `status` or
+    /// `probe`), checks it succeeds, and returns its stdout.
+    pub fn cli(&self, args: &[&OsStr]) -> String {
+        let out = Command::new(&self.bin)
+            .args(args)
+            .output()
+            .unwrap_or_else(|e| panic!("run {} {args:?}: {e}", self.bin.display()));
+        assert!(
+            out.status.success(),
+            "eyebot-hil {args:?} failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).expect("the CLI prints UTF-8")
+    }
+
+    /// `eyebot-hil status --run-dir RUN EXTRA`: its stdout.
+    pub fn status_command(&self, extra: &[&str]) -> String {
+        let mut args: Vec<&OsStr> = vec![
+            OsStr::new("status"),
+            OsStr::new("--run-dir"),
+            self.run_dir.as_os_str(),
+        ];
+        args.extend(extra.iter().map(OsStr::new));
+        self.cli(&args)
+    }
+
+    /// Resident set size (kB), from `/proc/PID/status`.
+    pub fn rss_kb(&self) -> u64 {
+        crate::process::rss_kb(self.pid())
+    }
+
+    /// User + system CPU time consumed so far, from `/proc/PID/stat`.
+    pub fn cpu_time(&self) -> Duration {
+        crate::process::cpu_time(self.pid())
+    }
+}
+
+impl RunningDaemon for Daemon {
+    fn run_dir(&self) -> &Path {
+        &self.run_dir
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if self.exit.is_none() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+        if std::thread::panicking() {
+            eprintln!(
+                "daemon log ({}):\n{}",
+                self.dir.path().display(),
+                self.log()
+            );
+        }
+    }
+}
+
+/// The daemon run in-process through `eyebot_hil::daemon::run`, on its own thread and tokio
+/// runtime, stopped through its shutdown watch channel.
+pub struct InProcessDaemon {
+    stop: tokio::sync::watch::Sender<bool>,
+    thread: Option<std::thread::JoinHandle<Result<RunSummary, String>>>,
+    pub dir: TempDir,
+    pub run_dir: PathBuf,
+    pub status_socket: PathBuf,
+}
+
+impl InProcessDaemon {
+    /// Runs with the configuration text `config_text` (see [`crate::config::config_text`]),
+    /// adjusted by `adjust`, recording into `record` if given.
+    pub fn start(
+        dir: TempDir,
+        config_text: &str,
+        record: Option<PathBuf>,
+        adjust: impl FnOnce(&mut DaemonConfig),
+    ) -> Self {
+        let run_dir = dir.join("run");
+        let source = Directory::new(dir.path().to_path_buf());
+        let mut config = DaemonConfig::resolve(&Document::new("test config", config_text))
+            .expect("test config resolves");
+        config.run_dir = run_dir.clone();
+        adjust(&mut config);
+        let model = eyebot_hil::daemon::plant::MakoPlant::from_config(&source, &config)
+            .expect("the model loads");
+        let (board, mux) = eyebot_hil::daemon::plant::devices(&config);
+        let options = RunOptions {
+            record,
+            pid_file: None,
+            record_meta: format!("seed = {}\n", config.seed),
+            ..RunOptions::default()
+        };
+        let (stop, stop_rx) = tokio::sync::watch::channel(false);
+        let (ready_tx, ready_rx) = mpsc::channel();
+        let thread = std::thread::spawn(move || {
+            let runtime = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .map_err(|e| e.to_string())?;
+            runtime
+                .block_on(eyebot_hil::daemon::run(
+                    &config,
+                    model,
+                    board,
+                    mux,
+                    options,
+                    stop_rx,
+                    move |r| {
+                        let _ = ready_tx.send(r);
+                    },
+                ))
+                .map_err(|e| e.to_string())
+        });
+        let deadline = Instant::now() + READY_TIMEOUT;
+        let status_socket = loop {
+            match ready_rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+                Ok(Readiness::Ready { status_socket }) => break status_socket,
+                Ok(Readiness::Link { .. }) => {}
+                Err(_) => {
+                    let outcome = thread.join();
+                    panic!("in-process daemon never became ready: {outcome:?}");
+                }
+            }
+        };
+        Self {
+            stop,
+            thread: Some(thread),
+            dir,
+            run_dir,
+            status_socket,
+        }
+    }
+
+    /// The symlink of link `name` (as [`RunningDaemon::link`], without the trait in scope).
+    pub fn link(&self, name: &str) -> PathBuf {
+        RunningDaemon::link(self, name)
+    }
+
+    /// Stops the daemon and returns its summary (the directory stays until `Drop`).
+    pub fn stop(&mut self) -> RunSummary {
+        let thread = self.thread.take().expect("the daemon is running");
+        let _ = self.stop.send(true);
+        thread
+            .join()
+            .expect("daemon thread panicked")
+            .expect("daemon run failed")
+    }
+}
+
+impl RunningDaemon for InProcessDaemon {
+    fn run_dir(&self) -> &Path {
+        &self.run_dir
+    }
+
+    fn status_socket(&self) -> PathBuf {
+        self.status_socket.clone()
+    }
+}
+
+impl Drop for InProcessDaemon {
+    fn drop(&mut self) {
+        if let Some(thread) = self.thread.take() {
+            let _ = self.stop.send(true);
+            let _ = thread.join();
+        }
+    }
+}
