@@ -75,6 +75,7 @@ impl Rig {
             }
             Runner::InProcess => {
                 let text = config_text(&[NEAR_WALL, LOCKSTEP]);
+                let dir = TempDir::new(tag);
                 UnderTest::InProcess(InProcessDaemon::start(dir, &text, None, |_| {}))
             }
         };

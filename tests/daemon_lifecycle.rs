@@ -3,18 +3,20 @@
 //! the binary's own client, `eyebot-hil probe`, against it.
 
 use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
 use eyebot_hil::daemon::status::StatusSnapshot;
 use eyebot_hil::record::Direction;
 use eyebot_test_support::clients::open_raw;
+use eyebot_test_support::daemon::DaemonOptions;
 use eyebot_test_support::daemon::link_status;
 use eyebot_test_support::process::stat_fields;
 use eyebot_test_support::recording::{read_chunks, stream};
-use eyebot_test_support::{Daemon, RunningDaemon, TempDir};
+use eyebot_test_support::{Daemon, RunningDaemon};
 use firmware_protocol::Frame;
 use firmware_protocol::sensor_link::{AdcChannel, Message};
 use nix::sys::signal::Signal;
@@ -31,6 +33,34 @@ fn adc_read(seq: u8) -> Vec<u8> {
     )
     .encode(&mut b);
     b.to_vec()
+}
+
+/// ADC_READ requests written to a link: every byte, and when each request was written with
+/// the byte count so far.
+#[derive(Default)]
+struct Requests {
+    seq: u8,
+    written: Vec<u8>,
+    log: Vec<(Instant, usize)>,
+}
+
+impl Requests {
+    fn write_one(&mut self, port: &mut std::fs::File) {
+        self.seq = self.seq.wrapping_add(1);
+        let frame = adc_read(self.seq);
+        port.write_all(&frame).expect("write a request");
+        self.written.extend_from_slice(&frame);
+        self.log.push((Instant::now(), self.written.len()));
+    }
+
+    /// Writes a request every `pause` for `how_long`.
+    fn write_for(&mut self, port: &mut std::fs::File, how_long: Duration, pause: Duration) {
+        let started = Instant::now();
+        while started.elapsed() < how_long {
+            self.write_one(port);
+            std::thread::sleep(pause);
+        }
+    }
 }
 
 /// Reads everything from `file` on a thread until `stop`; returns the bytes read.
@@ -57,22 +87,17 @@ fn reader(mut file: std::fs::File, stop: Arc<AtomicBool>) -> std::thread::JoinHa
     })
 }
 
+/// `--pid-file DIR/eyebot-hil.pid`, and that path.
+fn with_pid_file(options: DaemonOptions) -> (DaemonOptions, PathBuf) {
+    let pid_file = options.dir().join("eyebot-hil.pid");
+    let options = options.args(&["--pid-file", pid_file.to_str().expect("a UTF-8 path")]);
+    (options, pid_file)
+}
+
 fn shutdown_loses_nothing(signal: Signal, tag: &str) {
-    let dir = TempDir::new(tag);
-    let record = dir.join("rec");
-    let pid_file = dir.join("eyebot-hil.pid");
-    let mut daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--time-mode",
-            "realtime",
-            "--record",
-            record.to_str().unwrap(),
-            "--pid-file",
-            pid_file.to_str().unwrap(),
-        ],
-    );
+    let (options, pid_file) = with_pid_file(Daemon::options(BIN, tag).realtime().record());
+    let mut daemon = options.start();
+    let record = daemon.record_dir().to_path_buf();
     assert_eq!(
         std::fs::read_to_string(&pid_file).unwrap().trim(),
         daemon.pid().to_string()
@@ -86,23 +111,17 @@ fn shutdown_loses_nothing(signal: Signal, tag: &str) {
     sonar.write_all(b"@S1\r").unwrap();
     // Requests back to back for a second (the line is busy), then the signal right after a
     // write, while replies are still on their way.
-    let mut written = Vec::new();
-    let started = Instant::now();
-    let mut seq = 0u8;
-    while started.elapsed() < Duration::from_millis(1500) {
-        seq = seq.wrapping_add(1);
-        let frame = adc_read(seq);
-        sensor.write_all(&frame).unwrap();
-        written.extend_from_slice(&frame);
-        std::thread::sleep(Duration::from_millis(1));
-    }
+    let mut requests = Requests::default();
+    requests.write_for(
+        &mut sensor,
+        Duration::from_millis(1500),
+        Duration::from_millis(1),
+    );
     // A last burst, back to back, with the signal straight after it.
     for _ in 0..50 {
-        seq = seq.wrapping_add(1);
-        let frame = adc_read(seq);
-        sensor.write_all(&frame).unwrap();
-        written.extend_from_slice(&frame);
+        requests.write_one(&mut sensor);
     }
+    let written = requests.written;
     let signalled = Instant::now();
     daemon.signal(signal);
     let exit = daemon
@@ -145,16 +164,20 @@ fn shutdown_loses_nothing(signal: Signal, tag: &str) {
         stream(&chunks, "sonar", Direction::Tx).starts_with(&sonar_got),
         "sonar bytes received and recorded differ"
     );
-    // The run directory is clean.
+    assert_cleaned_up(&daemon, &pid_file, &signal.to_string());
+}
+
+/// The links, the status socket and the pid file are gone.
+fn assert_cleaned_up(daemon: &Daemon, pid_file: &Path, context: &str) {
     for name in ["sonar", "sensor", "status.sock"] {
         let path = daemon.run_dir.join(name);
         assert!(
             std::fs::symlink_metadata(&path).is_err(),
-            "{signal}: {} left behind",
+            "{context}: {} left behind",
             path.display()
         );
     }
-    assert!(!pid_file.exists(), "{signal}: pid file left behind");
+    assert!(!pid_file.exists(), "{context}: pid file left behind");
 }
 
 /// SIGTERM while a client talks and the recorder writes: every byte is recorded, exit 0
@@ -174,33 +197,18 @@ fn sigint_mid_recording_loses_nothing() {
 /// the kill is in `bytes.tsv`.
 #[test]
 fn kill_9_loses_at_most_the_last_100_ms() {
-    let dir = TempDir::new("kill9");
-    let record = dir.join("rec");
-    let mut daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--time-mode",
-            "realtime",
-            "--record",
-            record.to_str().unwrap(),
-        ],
-    );
+    let mut daemon = Daemon::options(BIN, "kill9").realtime().record().start();
+    let record = daemon.record_dir().to_path_buf();
     let mut sensor = open_raw(&daemon.link("sensor"));
     let stop = Arc::new(AtomicBool::new(false));
     let replies = reader(sensor.try_clone().unwrap(), stop.clone());
-    let log: Arc<Mutex<Vec<(Instant, usize)>>> = Arc::default();
-    let mut written = Vec::new();
-    let started = Instant::now();
-    let mut seq = 0u8;
-    while started.elapsed() < Duration::from_millis(1500) {
-        seq = seq.wrapping_add(1);
-        let frame = adc_read(seq);
-        sensor.write_all(&frame).unwrap();
-        written.extend_from_slice(&frame);
-        log.lock().unwrap().push((Instant::now(), written.len()));
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let mut requests = Requests::default();
+    requests.write_for(
+        &mut sensor,
+        Duration::from_millis(1500),
+        Duration::from_millis(2),
+    );
+    let Requests { written, log, .. } = requests;
     let killed = Instant::now();
     daemon.signal(Signal::SIGKILL);
     daemon.wait(Duration::from_secs(5)).expect("killed");
@@ -208,8 +216,6 @@ fn kill_9_loses_at_most_the_last_100_ms() {
     let _ = replies.join();
 
     let must_have = log
-        .lock()
-        .unwrap()
         .iter()
         .filter(|(t, _)| killed.duration_since(*t) > Duration::from_millis(100))
         .map(|(_, n)| *n)
@@ -233,8 +239,10 @@ fn kill_9_loses_at_most_the_last_100_ms() {
 /// `--json` parses and agrees.
 #[test]
 fn status_reports_uptime_time_mode_links_and_pose() {
-    let dir = TempDir::new("status");
-    let daemon = Daemon::start(BIN, dir, &["--time-mode", "realtime", "--speed", "2"]);
+    let daemon = Daemon::options(BIN, "status")
+        .realtime()
+        .args(&["--speed", "2"])
+        .start();
     let mut sensor = open_raw(&daemon.link("sensor"));
     sensor.write_all(&adc_read(1)).unwrap();
     sensor.write_all(b"\x00\x01garbage").unwrap();
@@ -304,10 +312,9 @@ fn status_reports_uptime_time_mode_links_and_pose() {
 #[test]
 fn shutdown_is_bounded_when_the_recorder_hangs() {
     use std::os::unix::fs::OpenOptionsExt;
-    let dir = TempDir::new("hung");
-    let record = dir.join("rec");
-    std::fs::create_dir_all(&record).unwrap();
-    let fifo = record.join("bytes.tsv");
+    let options = Daemon::options(BIN, "hung").realtime().record();
+    std::fs::create_dir_all(options.record_dir()).unwrap();
+    let fifo = options.record_dir().join("bytes.tsv");
     nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
     // Hold the read end open (so the recorder can open its end) and never read.
     let _stalled_reader = std::fs::OpenOptions::new()
@@ -315,19 +322,8 @@ fn shutdown_is_bounded_when_the_recorder_hangs() {
         .custom_flags(libc::O_NONBLOCK)
         .open(&fifo)
         .unwrap();
-    let pid_file = dir.join("eyebot-hil.pid");
-    let mut daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--time-mode",
-            "realtime",
-            "--record",
-            record.to_str().unwrap(),
-            "--pid-file",
-            pid_file.to_str().unwrap(),
-        ],
-    );
+    let (options, pid_file) = with_pid_file(options);
+    let mut daemon = options.start();
     // Non-blocking garbage for a second: the pipe (64 KiB) and the recorder's queue fill,
     // then the daemon stops reading (its writes would otherwise block here too).
     let mut port = std::fs::OpenOptions::new()
@@ -364,15 +360,7 @@ fn shutdown_is_bounded_when_the_recorder_hangs() {
         daemon.log()
     );
     assert!(daemon.log().contains("shutdown did not finish in time"));
-    for name in ["sonar", "sensor", "status.sock"] {
-        let path = daemon.run_dir.join(name);
-        assert!(
-            std::fs::symlink_metadata(&path).is_err(),
-            "{} left behind",
-            path.display()
-        );
-    }
-    assert!(!pid_file.exists(), "pid file left behind");
+    assert_cleaned_up(&daemon, &pid_file, "cut short");
 }
 
 /// `(policy, rt_priority)` of one thread, from `/proc/PID/task/TID/stat` (fields 41 and 40;
@@ -389,24 +377,13 @@ fn scheduling(pid: u32, tid: &str) -> (u32, u32) {
 
 #[test]
 fn rt_priority_runs_the_bridge_thread_under_sched_fifo() {
-    let dir = TempDir::new("rt-priority");
-    let config = dir.write_config(
-        "rt.toml",
-        &[(
+    let daemon = Daemon::options(BIN, "rt-priority")
+        .config(&[(
             "release_quantum_ms = 1.0",
             "release_quantum_ms = 1.0\nrt_priority = 7",
-        )],
-    );
-    let daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--config",
-            config.to_str().unwrap(),
-            "--time-mode",
-            "realtime",
-        ],
-    );
+        )])
+        .realtime()
+        .start();
     let pid = daemon.pid();
     // SAFETY: geteuid has no preconditions and cannot fail.
     if unsafe { libc::geteuid() } != 0 {
@@ -474,11 +451,7 @@ fn probe(link: &std::path::Path, args: &[&str]) -> String {
 /// exactly the ticks asked for.
 #[test]
 fn probe_reads_the_sensor_link_and_drives_lockstep_time() {
-    let daemon = Daemon::start(
-        BIN,
-        TempDir::new("probe-sensor"),
-        &["--time-mode", "lockstep"],
-    );
+    let daemon = Daemon::options(BIN, "probe-sensor").lockstep().start();
     let sensor = daemon.link("sensor");
     let hello = probe(&sensor, &["hello"]);
     assert!(hello.starts_with("protocol "), "{hello}");
@@ -520,13 +493,10 @@ fn probe_reads_the_sensor_link_and_drives_lockstep_time() {
 /// sentences, each a valid NMEA line.
 #[test]
 fn probe_selects_a_transducer_and_prints_its_sentences() {
-    let dir = TempDir::new("probe-sonar");
     // Every ping gives a sentence, with or without an echo.
-    let config = dir.write_config(
-        "every-ping.toml",
-        &[("invalid_echo = \"omit\"", "invalid_echo = \"empty\"")],
-    );
-    let daemon = Daemon::start(BIN, dir, &["--config", config.to_str().unwrap()]);
+    let daemon = Daemon::options(BIN, "probe-sonar")
+        .config(&[("invalid_echo = \"omit\"", "invalid_echo = \"empty\"")])
+        .start();
     let out = probe(
         &daemon.link("sonar"),
         &["sonar", "2", "--count", "2", "--timeout-s", "20"],

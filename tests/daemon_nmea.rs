@@ -7,7 +7,7 @@ use eyebot_hil::probe::SonarItem;
 use eyebot_test_support::clients::{sensor_client, sonar_client};
 use eyebot_test_support::config::NEAR_WALL;
 use eyebot_test_support::daemon::link_status;
-use eyebot_test_support::{Daemon, RunningDaemon, TempDir, wait_for};
+use eyebot_test_support::{Daemon, RunningDaemon, wait_for};
 use firmware_protocol::Transducer;
 use firmware_protocol::sensor_link::Message;
 
@@ -44,20 +44,9 @@ async fn collect_sentences(daemon: &Daemon) -> Vec<String> {
 }
 
 fn start(tag: &str, edits: &[(&str, &str)]) -> Daemon {
-    let dir = TempDir::new(tag);
     let mut all = vec![NEAR_WALL];
     all.extend_from_slice(edits);
-    let config = dir.write_config("nmea.toml", &all);
-    Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--config",
-            config.to_str().unwrap(),
-            "--time-mode",
-            "lockstep",
-        ],
-    )
+    Daemon::options(BIN, tag).config(&all).lockstep().start()
 }
 
 /// DBT (the default): the `nmea` crate checks framing and checksum and names the sentence

@@ -12,7 +12,7 @@ use eyebot_test_support::clients::{expect_hello, open_raw, sensor_client, sonar_
 use eyebot_test_support::config::NEAR_WALL;
 use eyebot_test_support::daemon::link_status;
 use eyebot_test_support::recording::{read_chunks, read_drops, stream};
-use eyebot_test_support::{Daemon, RunningDaemon, TempDir};
+use eyebot_test_support::{Daemon, RunningDaemon};
 use firmware_protocol::Transducer;
 use firmware_protocol::sensor_link::Message;
 use rand::{Rng, SeedableRng};
@@ -46,8 +46,7 @@ fn flood(path: &Path, seed: u64, for_how_long: Duration) -> u64 {
 /// flood (many MiB) would exceed both bounds.
 #[tokio::test]
 async fn garbage_floods_are_survived_with_bounded_memory() {
-    let dir = TempDir::new("flood");
-    let daemon = Daemon::start(BIN, dir, &["--time-mode", "realtime"]);
+    let daemon = Daemon::options(BIN, "flood").realtime().start();
     let sensor = daemon.link("sensor");
     let sonar = daemon.link("sonar");
     expect_hello(&sensor, "the daemon still answers HELLO").await;
@@ -98,8 +97,7 @@ async fn garbage_floods_are_survived_with_bounded_memory() {
 /// reports the broken input, and memory stays flat.
 #[tokio::test]
 async fn hang_ups_and_reopens_are_survived() {
-    let dir = TempDir::new("hangup");
-    let daemon = Daemon::start(BIN, dir, &["--time-mode", "realtime"]);
+    let daemon = Daemon::options(BIN, "hangup").realtime().start();
     let sensor = daemon.link("sensor");
     let sonar = daemon.link("sonar");
     expect_hello(&sensor, "the daemon still answers HELLO").await;
@@ -157,18 +155,10 @@ async fn hang_ups_and_reopens_are_survived() {
 /// bridge waits for the recorder instead: back-pressure down to the EyeBot's writes).
 #[tokio::test]
 async fn a_recorded_garbage_flood_loses_nothing_and_keeps_memory_bounded() {
-    let dir = TempDir::new("flood-rec");
-    let record = dir.join("rec");
-    let mut daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--time-mode",
-            "realtime",
-            "--record",
-            record.to_str().unwrap(),
-        ],
-    );
+    let mut daemon = Daemon::options(BIN, "flood-rec")
+        .realtime()
+        .record()
+        .start();
     let sensor = daemon.link("sensor");
     let sonar = daemon.link("sonar");
     expect_hello(&sensor, "the daemon still answers HELLO").await;
@@ -188,7 +178,7 @@ async fn a_recorded_garbage_flood_loses_nothing_and_keeps_memory_bounded() {
     });
     peak_kb = peak_kb.max(daemon.rss_kb());
     daemon.stop();
-    let chunks = read_chunks(&record);
+    let chunks = read_chunks(daemon.record_dir());
     let recorded = |link: &str| stream(&chunks, link, Direction::Rx).len() as u64;
     eprintln!(
         "recorded flood: sent {sent:?} bytes; recorded rx sensor {} sonar {}; RSS idle {idle_kb} kB, peak {peak_kb} kB",
@@ -209,24 +199,13 @@ async fn a_recorded_garbage_flood_loses_nothing_and_keeps_memory_bounded() {
 /// keeps being served, and status reports the dropped bytes.
 #[tokio::test]
 async fn a_client_that_never_reads_does_not_stall_the_other_link() {
-    let dir = TempDir::new("noread");
     // Near the west wall, so the port transducer has echoes.
-    let config = dir.write_config("near-wall.toml", &[NEAR_WALL]);
-    let record = dir.join("rec");
-    let mut daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--config",
-            config.to_str().unwrap(),
-            "--time-mode",
-            "realtime",
-            "--speed",
-            "10",
-            "--record",
-            record.to_str().unwrap(),
-        ],
-    );
+    let mut daemon = Daemon::options(BIN, "noread")
+        .config(&[NEAR_WALL])
+        .realtime()
+        .args(&["--speed", "10"])
+        .record()
+        .start();
     let mut sensor = sensor_client(&daemon.link("sensor"));
     let reply = sensor
         .request(
@@ -269,7 +248,7 @@ async fn a_client_that_never_reads_does_not_stall_the_other_link() {
     // were recorded as sent, with nothing to tell them apart).
     let dropped_before_stop = link_status(&later, "sensor").dropped_tx;
     daemon.stop();
-    let drops = read_drops(&record);
+    let drops = read_drops(daemon.record_dir());
     let not_read: usize = drops
         .iter()
         .filter(|d| d.link == "sensor" && d.reason == "not-read")

@@ -8,23 +8,20 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use eyebot_test_support::clients::expect_hello;
+use eyebot_test_support::config::config_text;
 use eyebot_test_support::daemon::link_status;
 use eyebot_test_support::process::socat_pair;
-use eyebot_test_support::{Daemon, RunningDaemon, TempDir};
+use eyebot_test_support::{Daemon, RunningDaemon};
 
 const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 
 #[tokio::test]
 async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_vanishing() {
-    let dir = TempDir::new("socat");
-    let a: PathBuf = dir.join("ttyA");
-    let b: PathBuf = dir.join("ttyB");
+    let options = Daemon::options(BIN, "socat").realtime();
+    let a: PathBuf = options.dir().join("ttyA");
+    let b: PathBuf = options.dir().join("ttyB");
     let socat = socat_pair(&a, &b);
-    let config = dir.write_config(
-        "serial.toml",
-        &[("path = \"sensor\"", &format!("path = \"{}\"", a.display()))],
-    );
-    let text = std::fs::read_to_string(&config).unwrap();
+    let text = config_text(&[("path = \"sensor\"", &format!("path = \"{}\"", a.display()))]);
     // The sensor link's endpoint is the second `endpoint = "pty"`.
     let at = text.match_indices("endpoint = \"pty\"").nth(1).unwrap().0;
     let text = format!(
@@ -32,17 +29,10 @@ async fn a_socat_linked_pair_exercises_the_serial_path_and_survives_the_device_v
         &text[..at],
         &text[at + "endpoint = \"pty\"".len()..]
     );
-    std::fs::write(&config, text).unwrap();
-    let daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--config",
-            config.to_str().unwrap(),
-            "--time-mode",
-            "realtime",
-        ],
-    );
+    let config = options.dir().write("serial.toml", text);
+    let daemon = options
+        .args(&["--config", config.to_str().expect("a UTF-8 path")])
+        .start();
     assert!(
         daemon
             .links

@@ -111,28 +111,15 @@ async fn script(daemon: &impl RunningDaemon, pace: Duration) {
 }
 
 fn binary_run(tag: &str, seed: &str, speed: &str, pace: Duration) -> Transcript {
-    let dir = TempDir::new(tag);
-    let config = dir.write_config("near-wall.toml", &[NEAR_WALL]);
-    let record = dir.join("rec");
-    let mut daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--config",
-            config.to_str().unwrap(),
-            "--time-mode",
-            "lockstep",
-            "--seed",
-            seed,
-            "--speed",
-            speed,
-            "--record",
-            record.to_str().unwrap(),
-        ],
-    );
+    let mut daemon = Daemon::options(BIN, tag)
+        .config(&[NEAR_WALL])
+        .lockstep()
+        .args(&["--seed", seed, "--speed", speed])
+        .record()
+        .start();
     runtime().block_on(script(&daemon, pace));
     daemon.stop();
-    transcript(&read_chunks(&record))
+    transcript(&read_chunks(daemon.record_dir()))
 }
 
 fn in_process_run(tag: &str, seed: u64) -> Transcript {
@@ -201,27 +188,16 @@ fn lockstep_transcripts_are_identical_across_speeds_pace_and_runners() {
 }
 
 fn realtime_states(tag: &str, speed: &str, until_sim_s: f64) -> Vec<StateRow> {
-    let dir = TempDir::new(tag);
-    let record = dir.join("rec");
-    let mut daemon = Daemon::start(
-        BIN,
-        dir,
-        &[
-            "--time-mode",
-            "realtime",
-            "--speed",
-            speed,
-            "--seed",
-            "3",
-            "--record",
-            record.to_str().unwrap(),
-        ],
-    );
+    let mut daemon = Daemon::options(BIN, tag)
+        .realtime()
+        .args(&["--speed", speed, "--seed", "3"])
+        .record()
+        .start();
     daemon.wait_status(Duration::from_secs(15), "enough simulated time", |s| {
         s.sim_time_s >= until_sim_s
     });
     daemon.stop();
-    read_states(&record)
+    read_states(daemon.record_dir())
 }
 
 /// Realtime at speed 1 and 10, no client: every ground-truth row at the same simulated time

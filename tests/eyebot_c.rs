@@ -3,9 +3,9 @@
 
 use std::time::Duration;
 
-use eyebot_test_support::eyebot_c::{self, Target, run_program, start_daemon, stop_daemon};
+use eyebot_test_support::Recording;
+use eyebot_test_support::eyebot_c::{self, Target, assert_same_run, run_to_end, start_daemon};
 use eyebot_test_support::recording::StateRow;
-use eyebot_test_support::{Recording, TempDir};
 
 const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 const TMP: &str = env!("CARGO_TARGET_TMPDIR");
@@ -38,16 +38,8 @@ fn run_seed(
     seed: u64,
 ) -> (Recording, String) {
     let out = eyebot_c::build(TMP, "examples", Target::Host, &[], &[]);
-    let mut daemon = start_daemon(BIN, TempDir::new(name), start, seed);
-    let result = run_program(&daemon, Target::Host, &out.join(program), &[], TIMEOUT);
-    assert!(
-        result.status.success(),
-        "{program} failed: {:?}\n{}\n{}",
-        result.status,
-        result.stdout,
-        result.stderr
-    );
-    (stop_daemon(&mut daemon), result.stdout)
+    let daemon = start_daemon(BIN, name, start, seed);
+    run_to_end(daemon, Target::Host, &out.join(program), &[], TIMEOUT)
 }
 
 /// Thesis 4.5: the compass heading hold drives straight: lateral deviation under 0.3 m over
@@ -284,33 +276,18 @@ fn m68k_build_under_qemu_gives_the_host_transcript() {
     ] {
         let mut transcripts = Vec::new();
         for (target, dir) in [(Target::Host, &host), (Target::M68k, &m68k)] {
-            let scratch = TempDir::new(&format!("transcript-{program}"));
-            let mut daemon = start_daemon(BIN, scratch, start, 7);
-            let result = run_program(&daemon, target, &dir.join(program), &[], TIMEOUT);
-            assert!(
-                result.status.success(),
-                "{program} {target:?}: {:?}\n{}",
-                result.status,
-                result.stderr
-            );
-            transcripts.push((stop_daemon(&mut daemon).transcript(), result.stdout));
+            let daemon = start_daemon(BIN, &format!("transcript-{program}"), start, 7);
+            let (rec, stdout) = run_to_end(daemon, target, &dir.join(program), &[], TIMEOUT);
+            transcripts.push((rec.transcript(), stdout));
         }
-        let (h, m) = (&transcripts[0], &transcripts[1]);
-        assert!(h.0.len() > 100, "{program}: short transcript");
-        let first_diff = h.0.iter().zip(&m.0).position(|(a, b)| a != b);
-        assert!(
-            first_diff.is_none() && h.0.len() == m.0.len(),
-            "{program}: transcripts differ at chunk {first_diff:?} (host {} chunks, m68k {}): \
-             host {:?} m68k {:?}",
-            h.0.len(),
-            m.0.len(),
-            first_diff.map(|i| &h.0[i]),
-            first_diff.map(|i| &m.0[i])
+        assert_same_run(
+            &format!("{program}, host and m68k"),
+            &transcripts[0],
+            &transcripts[1],
         );
-        assert_eq!(h.1, m.1, "{program}: LCD output differs");
         eprintln!(
             "{program}: host and m68k transcripts equal ({} chunks)",
-            h.0.len()
+            transcripts[0].0.len()
         );
     }
 }

@@ -5,7 +5,6 @@
 use std::path::Path;
 use std::time::Duration;
 
-use eyebot_test_support::TempDir;
 use eyebot_test_support::eyebot_c::{self, Target, run_program, start_daemon, stop_daemon};
 
 const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
@@ -20,9 +19,8 @@ fn foreign_robios_program_builds_and_runs_unchanged() {
         &[&source],
         &[],
     );
-    let dir = TempDir::new("foreign");
-    let lcd = dir.join("lcd.txt");
-    let mut daemon = start_daemon(BIN, dir, None, 3);
+    let mut daemon = start_daemon(BIN, "foreign", None, 3);
+    let lcd = daemon.dir.join("lcd.txt");
     let run = run_program(
         &daemon,
         Target::Host,

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use eyebot_hil::record::Direction;
 
-use eyebot_test_support::eyebot_c::{self, Target, run_program, start_daemon, stop_daemon};
+use eyebot_test_support::eyebot_c::{self, Target, assert_same_run, run_to_end, start_daemon};
 use eyebot_test_support::pty::PtyFixture;
 use eyebot_test_support::{Daemon, TempDir, require_tool};
 
@@ -95,42 +95,19 @@ fn robios_backend_gives_the_posix_transcript() {
     let program = "sonar_three";
     let mut runs = Vec::new();
     for (label, dir) in [("posix", &posix), ("robios", &robios)] {
-        let mut daemon = start_daemon(
-            BIN,
-            TempDir::new(&format!("robios-{label}")),
-            Some(WALL_START),
-            7,
-        );
+        let daemon = start_daemon(BIN, &format!("robios-{label}"), Some(WALL_START), 7);
         let env = stub_env(&daemon);
         let env: Vec<(&str, &str)> = env.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
-        let result = run_program(&daemon, Target::Host, &dir.join(program), &env, TIMEOUT);
-        assert!(
-            result.status.success(),
-            "{label}: {:?}\n{}\n{}",
-            result.status,
-            result.stdout,
-            result.stderr
-        );
-        runs.push((stop_daemon(&mut daemon).transcript(), result.stdout));
+        let (rec, stdout) = run_to_end(daemon, Target::Host, &dir.join(program), &env, TIMEOUT);
+        runs.push((rec.transcript(), stdout));
     }
     let (p, r) = (&runs[0], &runs[1]);
-    assert!(p.0.len() > 100, "short transcript ({} chunks)", p.0.len());
     assert!(
         r.0.iter()
             .any(|c| c.link == "sonar" && c.dir == Direction::Rx),
         "the RoBIOS build sent nothing on SERIAL2"
     );
-    let first_diff = p.0.iter().zip(&r.0).position(|(a, b)| a != b);
-    assert!(
-        first_diff.is_none() && p.0.len() == r.0.len(),
-        "transcripts differ at chunk {first_diff:?} (posix {} chunks, robios {}): posix {:?} \
-         robios {:?}",
-        p.0.len(),
-        r.0.len(),
-        first_diff.map(|i| &p.0[i]),
-        first_diff.map(|i| &r.0[i])
-    );
-    assert_eq!(p.1, r.1, "LCD output differs");
+    assert_same_run("sonar_three, POSIX and RoBIOS", p, r);
     eprintln!(
         "{program}: POSIX and RoBIOS back-ends give the same transcript ({} chunks)\n{}",
         p.0.len(),

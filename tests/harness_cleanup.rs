@@ -107,7 +107,7 @@ fn panic_with_fixtures() -> Vec<PathBuf> {
     let result = std::panic::catch_unwind(|| {
         let dir = TempDir::new("cleanup-panic");
         dir.write("file", "text");
-        let daemon = Daemon::start(BIN, TempDir::new("cleanup-panic-bin"), &[]);
+        let daemon = Daemon::options(BIN, "cleanup-panic-bin").start();
         made.lock()
             .expect("lock")
             .extend([dir.path().to_path_buf(), daemon.dir.path().to_path_buf()]);

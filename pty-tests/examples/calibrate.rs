@@ -250,6 +250,20 @@ fn labelled_line(
     Ok(())
 }
 
+/// The legend of `chart`'s labelled series, at `position` (plotters' default if `None`).
+fn draw_legend(
+    chart: &mut Chart<'_, '_>,
+    position: Option<SeriesLabelPosition>,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let mut legend = chart.configure_series_labels();
+    legend.background_style(WHITE.mix(0.8)).border_style(BLACK);
+    if let Some(position) = position {
+        legend.position(position);
+    }
+    legend.draw()?;
+    Ok(())
+}
+
 fn plot_speed_runs(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::error::Error>> {
     let axis = Vector3::x();
     let acc = measure::camera_velocities(&trace(model, &e.acc), &axis, CAMERA_PERIOD_S);
@@ -313,12 +327,7 @@ fn plot_speed_runs(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::er
         GREEN,
         "9.5 cm/s^2 from rest (thesis 4.6, upper bound)",
     )?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::LowerRight)
-        .draw()?;
+    draw_legend(&mut chart, Some(SeriesLabelPosition::LowerRight))?;
 
     let mut chart = ChartBuilder::on(&lower)
         .caption("Coast-down from 0.44 m/s, motors off", ("sans-serif", 18))
@@ -346,11 +355,7 @@ fn plot_speed_runs(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::er
         BLACK,
         "1.5 cm/s (\"at rest\")",
     )?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+    draw_legend(&mut chart, None)?;
     root.present()?;
     Ok(())
 }
@@ -408,12 +413,7 @@ fn plot_turns(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::error::
         RED,
         "0.8 m circle (Mako, thesis 4.7)",
     )?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::LowerLeft)
-        .draw()?;
+    draw_legend(&mut chart, Some(SeriesLabelPosition::LowerLeft))?;
     root.present()?;
     Ok(())
 }

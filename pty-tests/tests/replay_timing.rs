@@ -161,24 +161,19 @@ fn timed_replay(bound: Bound) {
         (q(0.0), q(0.5), q(0.99), q(1.0))
     };
     let mut l: Vec<i64> = lateness.iter().map(|(l, _)| *l).collect();
-    let (min, p50, p99, max) = stats(&mut l);
-    let mut w = write_late.clone();
-    let (wmin, w50, w99, wmax) = stats(&mut w);
-    eprintln!(
-        "arrival minus schedule over {} bytes: min {:.3} ms, p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms",
-        l.len(),
-        min as f64 * 1e-6,
-        p50 as f64 * 1e-6,
-        p99 as f64 * 1e-6,
-        max as f64 * 1e-6
+    let arrival_stats = stats(&mut l);
+    let (min, _, _, max) = arrival_stats;
+    print_stats(
+        &format!("arrival minus schedule over {} bytes", l.len()),
+        arrival_stats,
     );
-    eprintln!(
-        "write (last byte of each sentence) minus schedule over {} sentences: min {:.3} ms, p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms",
-        w.len(),
-        wmin as f64 * 1e-6,
-        w50 as f64 * 1e-6,
-        w99 as f64 * 1e-6,
-        wmax as f64 * 1e-6
+    let mut w = write_late.clone();
+    print_stats(
+        &format!(
+            "write (last byte of each sentence) minus schedule over {} sentences",
+            w.len()
+        ),
+        stats(&mut w),
     );
     // Which sentences were late at the consumer, and how late this process wrote them.
     let mut sentence_of_byte = Vec::new();
@@ -204,18 +199,15 @@ fn timed_replay(bound: Bound) {
     let write_worst = write_side.iter().copied().max().unwrap_or(0).max(0) as u64;
     let write_min = write_side.iter().copied().min().unwrap_or(0);
     let mut d = delivery.clone();
-    let (dmin, d50, d99, dmax) = stats(&mut d);
+    let delivery_stats = stats(&mut d);
     eprintln!(
         "write minus schedule, every byte: min {:.3} ms, max {:.3} ms",
         write_min as f64 * 1e-6,
         write_worst as f64 * 1e-6
     );
-    eprintln!(
-        "kernel pty delivery (read minus write), every byte: min {:.3} ms, p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms",
-        dmin as f64 * 1e-6,
-        d50 as f64 * 1e-6,
-        d99 as f64 * 1e-6,
-        dmax as f64 * 1e-6
+    print_stats(
+        "kernel pty delivery (read minus write), every byte",
+        delivery_stats,
     );
     for (late, byte) in lateness.iter().filter(|(l, _)| *l > BOUND_NS) {
         eprintln!(
@@ -262,5 +254,17 @@ fn timed_replay(bound: Bound) {
         lateness.len(),
         max as f64 * 1e-6,
         write_worst as f64 * 1e-6
+    );
+}
+
+/// Prints `what`: the minimum, median, 99th percentile and maximum, given in ns, in ms.
+fn print_stats(what: &str, (min, p50, p99, max): (i64, i64, i64, i64)) {
+    let ms = |ns: i64| ns as f64 * 1e-6;
+    eprintln!(
+        "{what}: min {:.3} ms, p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms",
+        ms(min),
+        ms(p50),
+        ms(p99),
+        ms(max)
     );
 }

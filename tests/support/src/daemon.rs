@@ -94,12 +94,78 @@ pub fn link_status<'a>(s: &'a StatusSnapshot, name: &str) -> &'a LinkStatus {
         .unwrap_or_else(|| panic!("no link `{name}` in status: {s:#?}"))
 }
 
+/// How to start the binary: `eyebot-hil run` arguments gathered on a fresh [`TempDir`].
+#[derive(Debug)]
+pub struct DaemonOptions {
+    bin: String,
+    dir: TempDir,
+    args: Vec<String>,
+    record: Option<PathBuf>,
+}
+
+impl DaemonOptions {
+    /// The directory the daemon will run in, to prepare files before [`start`](Self::start).
+    pub fn dir(&self) -> &TempDir {
+        &self.dir
+    }
+
+    /// `--config FILE`: `configs/default.toml` with `edits` (see
+    /// [`crate::config::config_text`]), written into the directory.
+    pub fn config(mut self, edits: &[(&str, &str)]) -> Self {
+        let config = self.dir.write_config("config.toml", edits);
+        self.args
+            .extend(["--config".into(), config.display().to_string()]);
+        self
+    }
+
+    /// `--time-mode lockstep`.
+    pub fn lockstep(self) -> Self {
+        self.args(&["--time-mode", "lockstep"])
+    }
+
+    /// `--time-mode realtime`.
+    pub fn realtime(self) -> Self {
+        self.args(&["--time-mode", "realtime"])
+    }
+
+    /// `--record DIR/rec`; [`Daemon::record_dir`] gives the path.
+    pub fn record(mut self) -> Self {
+        let record = self.dir.join("rec");
+        self.args
+            .extend(["--record".into(), record.display().to_string()]);
+        self.record = Some(record);
+        self
+    }
+
+    /// The recording directory [`record`](Self::record) asked for.
+    pub fn record_dir(&self) -> &Path {
+        self.record
+            .as_deref()
+            .expect("DaemonOptions::record was called")
+    }
+
+    /// More arguments, as given.
+    pub fn args(mut self, args: &[&str]) -> Self {
+        self.args.extend(args.iter().map(|a| a.to_string()));
+        self
+    }
+
+    /// Starts the daemon and waits for its `ready` line.
+    pub fn start(self) -> Daemon {
+        let args: Vec<&str> = self.args.iter().map(String::as_str).collect();
+        let mut daemon = Daemon::start(&self.bin, self.dir, &args);
+        daemon.record = self.record;
+        daemon
+    }
+}
+
 /// The built binary, running as a child process (`eyebot-hil run`).
 #[derive(Debug)]
 pub struct Daemon {
     bin: PathBuf,
     child: Child,
     exit: Option<ExitStatus>,
+    record: Option<PathBuf>,
     pub dir: TempDir,
     pub run_dir: PathBuf,
     /// `(name, path)` of each `link NAME: PATH` line of the announcement.
@@ -107,6 +173,23 @@ pub struct Daemon {
 }
 
 impl Daemon {
+    /// Options for `BIN run` in a fresh [`TempDir`] named after `tag`.
+    pub fn options(bin: &str, tag: &str) -> DaemonOptions {
+        DaemonOptions {
+            bin: bin.to_string(),
+            dir: TempDir::new(tag),
+            args: Vec::new(),
+            record: None,
+        }
+    }
+
+    /// The recording directory of a daemon started with [`DaemonOptions::record`].
+    pub fn record_dir(&self) -> &Path {
+        self.record
+            .as_deref()
+            .expect("the daemon was started with DaemonOptions::record")
+    }
+
     /// Starts `BIN run --run-dir DIR/run ARGS` in `dir` (stderr to `DIR/daemon.log`) and
     /// waits for its `ready` line.
     pub fn start(bin: &str, dir: TempDir, args: &[&str]) -> Self {
@@ -142,6 +225,7 @@ impl Daemon {
             bin,
             child,
             exit: None,
+            record: None,
             dir,
             run_dir,
             links: Vec::new(),

@@ -12,10 +12,9 @@ use std::time::Duration;
 
 use nix::sys::signal::Signal;
 
-use crate::config::{as_edits, config_text, start_at};
+use crate::config::{as_edits, start_at};
 use crate::daemon::Daemon;
-use crate::dir::TempDir;
-use crate::recording::Recording;
+use crate::recording::{Recording, TranscriptChunk, first_difference};
 use crate::tools::{require_file, require_tool};
 
 /// Which compiler builds the C.
@@ -105,34 +104,65 @@ pub fn build(
     out
 }
 
-/// Starts `BIN run --time-mode lockstep --seed SEED --record DIR/rec` in `dir`, with the
-/// vehicle at `start` (position north-east-down in m, heading in deg) if given, else at the
-/// default start.
-pub fn start_daemon(bin: &str, dir: TempDir, start: Option<([f64; 3], f64)>, seed: u64) -> Daemon {
-    let record = dir.join("rec");
-    let seed = seed.to_string();
-    let mut args = vec![
-        "--time-mode".to_string(),
-        "lockstep".into(),
-        "--seed".into(),
-        seed,
-        "--record".into(),
-        record.display().to_string(),
-    ];
+/// Starts `BIN run --time-mode lockstep --seed SEED --record DIR/rec` in a fresh directory
+/// named after `tag`, with the vehicle at `start` (position north-east-down in m, heading in
+/// deg) if given, else at the default start.
+pub fn start_daemon(bin: &str, tag: &str, start: Option<([f64; 3], f64)>, seed: u64) -> Daemon {
+    let mut options = Daemon::options(bin, tag)
+        .lockstep()
+        .args(&["--seed", &seed.to_string()])
+        .record();
     if let Some((position_m, heading_deg)) = start {
-        let edits = start_at(position_m, heading_deg);
-        let config = dir.write("start.toml", config_text(&as_edits(&edits)));
-        args.extend(["--config".to_string(), config.display().to_string()]);
+        options = options.config(&as_edits(&start_at(position_m, heading_deg)));
     }
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    Daemon::start(bin, dir, &args)
+    options.start()
 }
 
 /// Stops a daemon of [`start_daemon`] (SIGINT: the recording is flushed) and reads its
 /// recording.
 pub fn stop_daemon(daemon: &mut Daemon) -> Recording {
     daemon.stop_with(Signal::SIGINT);
-    Recording::read(&daemon.dir.join("rec"))
+    Recording::read(daemon.record_dir())
+}
+
+/// Runs `program` against `daemon` ([`run_program`]), checks it succeeded, stops the daemon
+/// ([`stop_daemon`]) and returns the recording and what the program printed.
+pub fn run_to_end(
+    mut daemon: Daemon,
+    target: Target,
+    program: &Path,
+    env: &[(&str, &str)],
+    timeout: Duration,
+) -> (Recording, String) {
+    let result = run_program(&daemon, target, program, env, timeout);
+    assert!(
+        result.status.success(),
+        "{} ({target:?}): {:?}\n{}\n{}",
+        program.display(),
+        result.status,
+        result.stdout,
+        result.stderr
+    );
+    (stop_daemon(&mut daemon), result.stdout)
+}
+
+/// A run's transcript and what the program printed.
+pub type RunOutput = (Vec<TranscriptChunk>, String);
+
+/// Checks that two runs of one program (other builds, same seed) sent and received the same
+/// bytes at the same simulated times and printed the same text; `what` names them.
+pub fn assert_same_run(what: &str, a: &RunOutput, b: &RunOutput) {
+    assert!(
+        a.0.len() > 100,
+        "{what}: short transcript ({} chunks)",
+        a.0.len()
+    );
+    assert!(
+        a.0 == b.0,
+        "{what}: transcripts differ at {}",
+        first_difference(&a.0, &b.0)
+    );
+    assert_eq!(a.1, b.1, "{what}: LCD output differs");
 }
 
 /// What a program printed and how it ended.
