@@ -9,7 +9,7 @@
 //!   every 100 ms, and a sonar select every 3 s with its events polled;
 //! - **baseline**: the same physics alone ([`Simulation::step`]), same commands.
 //!
-//! Goal (issues 3 and 4): the full model at or above 5,000x real time.
+//! Target: the full model at or above 5,000x real time.
 
 use std::hint::black_box;
 use std::time::Instant;

@@ -3,8 +3,8 @@
  * RoBIOS back-end (firmware-protocol/c/eb_robios.c) on a POSIX host.
  *
  * It declares only what eb_robios.c, eyebot.h's RoBIOS branch and the example programs use,
- * with RoBIOS's names and argument order (hardware-facts.md "EyeBot MK4 controller and
- * RoBIOS"). robios_stub.c maps the serial calls onto POSIX ttys named by the environment
+ * with RoBIOS's names and argument order, as the RoBIOS MK4 documentation gives them.
+ * robios_stub.c maps the serial calls onto POSIX ttys named by the environment
  * (ROBIOS_STUB_SERIAL1..3), the clock onto CLOCK_MONOTONIC in 1/100 s ticks, and the LCD onto
  * stdout. It is not RoBIOS: the constant values are invented, and MotorHandle is a pointer
  * on purpose, to exercise eyebot.h's "integer or pointer" handle assumption. See
