@@ -251,8 +251,8 @@ fn labelled_line(
 }
 
 /// The legend of `chart`'s labelled series, at `position` (plotters' default if `None`).
-fn draw_legend(
-    chart: &mut Chart<'_, '_>,
+fn draw_legend<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
     position: Option<SeriesLabelPosition>,
 ) -> Result<(), Box<dyn std::error::Error>> {
     let mut legend = chart.configure_series_labels();
