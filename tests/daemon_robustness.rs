@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use eyebot_hil::probe::SonarItem;
-use eyebot_hil::record::Direction;
+use eyebot_hil::record::{Direction, DropReason};
 use eyebot_test_support::clients::{expect_hello, open_raw, sensor_client, sonar_client};
 use eyebot_test_support::config::NEAR_WALL;
 use eyebot_test_support::daemon::link_status;
@@ -251,7 +251,7 @@ async fn a_client_that_never_reads_does_not_stall_the_other_link() {
     let drops = read_drops(daemon.record_dir());
     let not_read: usize = drops
         .iter()
-        .filter(|d| d.link == "sensor" && d.reason == "not-read")
+        .filter(|d| d.link == "sensor" && d.reason == DropReason::NotRead)
         .map(|d| d.data.len())
         .sum();
     assert!(

@@ -106,23 +106,15 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
     }
     let model = crate::daemon::plant::MakoPlant::from_config(source.as_ref(), &config)?;
     let (board, mux) = crate::daemon::plant::devices(&config);
-    let meta = format!(
-        "# eyebot-hil recording\nversion = \"{}\"\nseed = {}\ntime_mode = \"{}\"\nspeed = {}\nconfig = \"{}\"\n\n# The daemon configuration used, verbatim:\n{}",
-        env!("CARGO_PKG_VERSION"),
-        config.seed,
-        config.time_mode.name(),
-        speed,
-        args.config.as_ref().map_or_else(
-            || format!("<embedded>/{DEFAULT_CONFIG}"),
-            |p| p.display().to_string()
-        ),
-        text.lines().map(|l| format!("# {l}\n")).collect::<String>()
-    );
     let leftovers = daemon::shutdown::Leftovers::default();
     let options = RunOptions {
         record: args.record,
         pid_file: args.pid_file,
-        record_meta: meta,
+        config_toml: text,
+        config_name: args.config.as_ref().map_or_else(
+            || format!("<embedded>/{DEFAULT_CONFIG}"),
+            |p| p.display().to_string(),
+        ),
         leftovers: leftovers.clone(),
     };
 

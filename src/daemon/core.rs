@@ -470,7 +470,7 @@ impl<M: Model> Core<M> {
             return;
         };
         if self.now >= self.next_state_ns {
-            rec.state(crate::record::state_row(&self.model.state()));
+            rec.state(crate::record::StateRow::from_state(&self.model.state()));
             // Rows fall on the period's grid; a gap (none in normal stepping) is skipped.
             let periods = (self.now - self.next_state_ns) / self.state_period_ns + 1;
             self.next_state_ns += periods * self.state_period_ns;

@@ -70,8 +70,11 @@ pub struct RunOptions {
     pub record: Option<PathBuf>,
     /// Write the daemon's PID here (removed at exit).
     pub pid_file: Option<PathBuf>,
-    /// Text of `meta.toml` in the recording.
-    pub record_meta: String,
+    /// The daemon configuration's text, copied verbatim into a recording as `config.toml`.
+    pub config_toml: String,
+    /// The configuration's name for the recording's `meta.toml` (a path, or
+    /// `<embedded>/default.toml`).
+    pub config_name: String,
     /// Filled with what the run creates (symlinks, sockets, pid file), for the process-level
     /// shutdown guard ([`shutdown::spawn_signal_guard`]).
     pub leftovers: shutdown::Leftovers,
@@ -191,7 +194,17 @@ where
     let feed_listener = feed::bind(&feed_path)?;
     options.leftovers.socket(&feed_path);
     if let Some(dir) = &options.record {
-        let recorder = Recorder::start(dir, &options.record_meta, crate::record::STATE_HEADER)?;
+        let speed = match config.time_mode {
+            TimeMode::Realtime { speed } => speed,
+            TimeMode::Lockstep => 1.0,
+        };
+        let meta = crate::record::Meta::new(
+            config.seed,
+            config.time_mode.name(),
+            speed,
+            &options.config_name,
+        );
+        let recorder = Recorder::start(dir, &meta, &options.config_toml)?;
         core.set_recorder(recorder, (1e9 / config.state_record_hz) as u64);
     }
 
@@ -781,7 +794,7 @@ mod tests {
         let options = RunOptions {
             record: Some(record.clone()),
             pid_file: Some(dir.join("pid")),
-            record_meta: "seed = 1\n".into(),
+            config_toml: "seed = 1\n".into(),
             ..RunOptions::default()
         };
         std::fs::create_dir_all(&dir).unwrap();

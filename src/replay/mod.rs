@@ -583,7 +583,8 @@ mod tests {
         let dir =
             std::env::temp_dir().join(format!("eyebot-hil-replay-rec-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let rec = Recorder::start(&dir, "seed = 1\n", "t_s").unwrap();
+        let meta = crate::record::Meta::new(1, "lockstep", 1.0, "test");
+        let rec = Recorder::start(&dir, &meta, "").unwrap();
         let a = b"$SDDBT,6.6,f,2.0,M,1.1,F*04\r\n";
         let b = b"$SDDPT,2.0,0.5*50\r\n";
         rec.bytes(0.100, "sonar", Direction::Rx, b"@S1\r");

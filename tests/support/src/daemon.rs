@@ -393,7 +393,8 @@ impl InProcessDaemon {
         let options = RunOptions {
             record,
             pid_file: None,
-            record_meta: format!("seed = {}\n", config.seed),
+            config_toml: config_text.to_string(),
+            config_name: "test config".into(),
             ..RunOptions::default()
         };
         let (stop, stop_rx) = tokio::sync::watch::channel(false);

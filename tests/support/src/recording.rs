@@ -1,9 +1,9 @@
-//! A `--record` directory read back (`docs/recording.md`): `bytes.tsv`, `state.csv` and
-//! `drops.tsv`.
+//! A `--record` directory read back (`docs/recording.md`) through the recorder's own types
+//! and readers in `eyebot_hil::record`.
 
 use std::path::Path;
 
-use eyebot_hil::record::{BYTES_HEADER, ByteChunk, DROPS_HEADER, Direction, parse_chunk};
+pub use eyebot_hil::record::{ByteChunk, Direction, DropRow, StateRow};
 
 /// A recording read back: every byte chunk and every ground-truth row.
 #[derive(Debug)]
@@ -31,114 +31,45 @@ impl Recording {
     }
 }
 
-fn read_text(dir: &Path, name: &str) -> String {
-    let path = dir.join(name);
-    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("read {}: {e}", path.display()))
-}
-
 /// Every chunk of `bytes.tsv`.
 pub fn read_chunks(dir: &Path) -> Vec<ByteChunk> {
-    let text = read_text(dir, "bytes.tsv");
-    let mut lines = text.lines().enumerate();
-    assert_eq!(
-        lines.next().map(|l| l.1),
-        Some(BYTES_HEADER),
-        "bytes.tsv header"
-    );
-    lines
-        .map(|(i, l)| parse_chunk(l, i + 1).unwrap_or_else(|e| panic!("{e}")))
-        .collect()
+    eyebot_hil::record::read_bytes(dir).unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// One row of `drops.tsv`: released bytes that never reached the link's endpoint.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DropRow {
-    pub sim_s: f64,
-    pub link: String,
-    pub reason: String,
-    pub data: Vec<u8>,
-}
-
-/// Every row of `drops.tsv`.
+/// Every row of `drops.tsv`: released bytes that never reached the link's endpoint.
 pub fn read_drops(dir: &Path) -> Vec<DropRow> {
-    let text = read_text(dir, "drops.tsv");
-    let mut lines = text.lines();
-    assert_eq!(lines.next(), Some(DROPS_HEADER), "drops.tsv header");
-    lines
-        .map(|l| {
-            let f: Vec<&str> = l.split('\t').collect();
-            assert_eq!(f.len(), 5, "drops.tsv row {l:?}");
-            DropRow {
-                sim_s: f[0].parse().expect("drops.tsv sim_s"),
-                link: f[2].to_string(),
-                reason: f[3].to_string(),
-                data: hex::decode(f[4]).expect("drops.tsv hex"),
-            }
-        })
-        .collect()
-}
-
-/// One row of `state.csv`: the ground truth at `t_s`. `values` holds every column in file
-/// order, for comparisons bit for bit.
-#[derive(Debug, Clone, PartialEq)]
-pub struct StateRow {
-    pub t_s: f64,
-    pub x_m: f64,
-    pub y_m: f64,
-    pub z_m: f64,
-    pub roll_rad: f64,
-    pub pitch_rad: f64,
-    pub yaw_rad: f64,
-    pub contact: bool,
-    pub values: Vec<f64>,
+    eyebot_hil::record::read_drops(dir).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Every row of `state.csv`.
 pub fn read_states(dir: &Path) -> Vec<StateRow> {
-    let text = read_text(dir, "state.csv");
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("state.csv header").split(',').collect();
-    let column = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .unwrap_or_else(|| panic!("state.csv has no column {name}: {header:?}"))
-    };
-    let [t, x, y, z, roll, pitch, yaw, contact] = [
-        "t_s",
-        "x_m",
-        "y_m",
-        "z_m",
-        "roll_rad",
-        "pitch_rad",
-        "yaw_rad",
-        "contact",
+    eyebot_hil::record::read_state(dir).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Every number of a state row as its bits, in column order, for comparisons bit for bit
+/// (where `==` on `f64` would take `-0.0` for `0.0`).
+pub fn state_bits(r: &StateRow) -> [u64; 18] {
+    [
+        r.t_s,
+        r.x_m,
+        r.y_m,
+        r.z_m,
+        r.roll_rad,
+        r.pitch_rad,
+        r.yaw_rad,
+        r.u_mps,
+        r.v_mps,
+        r.w_mps,
+        r.p_radps,
+        r.q_radps,
+        r.r_radps,
+        r.force_port_n,
+        r.force_starboard_n,
+        r.force_bow_n,
+        r.force_stern_n,
+        if r.contact { 1.0 } else { 0.0 },
     ]
-    .map(column);
-    lines
-        .filter(|l| !l.is_empty())
-        .map(|l| {
-            let values: Vec<f64> = l
-                .split(',')
-                .map(|v| {
-                    v.parse()
-                        .unwrap_or_else(|_| panic!("state.csv value {v:?} in {l:?}"))
-                })
-                .collect();
-            assert_eq!(values.len(), header.len(), "state.csv row {l:?}");
-            StateRow {
-                t_s: values[t],
-                x_m: values[x],
-                y_m: values[y],
-                z_m: values[z],
-                roll_rad: values[roll],
-                pitch_rad: values[pitch],
-                yaw_rad: values[yaw],
-                contact: values[contact] != 0.0,
-                values,
-            }
-        })
-        .collect()
+    .map(f64::to_bits)
 }
 
 /// Every byte recorded on `link` in direction `dir`, concatenated in order.
