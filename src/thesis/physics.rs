@@ -10,7 +10,7 @@ use crate::physics::experiment::{self, Experiment};
 use crate::physics::measure::{self, CAMERA_PERIOD_S, REST_SPEED_MPS, TOP_SPEED_FRACTION};
 use crate::physics::state::VehicleState;
 use crate::physics::{DEFAULT_VEHICLE, DEFAULT_WORLD, Model, load_model};
-use crate::validate::{Context, Group, Row, ValidateError, Value};
+use crate::thesis::{Context, Group, Row, ValidateError, Value};
 
 /// The experiment files the rows are computed from (names inside the config source).
 pub const ACCELERATION: &str = "experiments/acceleration.toml";
