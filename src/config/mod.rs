@@ -1,6 +1,6 @@
 //! Configuration: TOML text in, checked settings out.
 //!
-//! Every config file goes through two stages (see `STYLE.md` §7, modelled on helix):
+//! Every config file goes through two stages (modelled on helix's `config.rs`):
 //!
 //! 1. **Raw**: the text is parsed into a `Raw*` struct with `#[serde(deny_unknown_fields)]`,
 //!    so a misspelt key is an error, not a silently ignored setting.

@@ -157,7 +157,8 @@ pub fn rows(ctx: &Context<'_>) -> Result<Vec<Row>, ValidateError> {
     Ok(rows_from(&f))
 }
 
-/// The rows for measured figures, with the thesis values and tolerances of issue 3.
+/// The rows for measured figures: each computed figure next to the thesis's value, judged
+/// against that row's tolerance.
 pub fn rows_from(f: &PhysicsFigures) -> Vec<Row> {
     let within = |x: f64, target: f64, tol: f64| (x - target).abs() <= tol;
     let drift_text = if f.drift_deg > DRIFT_THRESHOLD_DEG {
