@@ -1,5 +1,5 @@
 //! Every device the bridge emulates, exercised over its ptys, one test per device, each
-//! against the built binary and against `eyebot_hil::daemon::run` in-process. The shared
+//! against the built binary and against the library's daemon in-process. The shared
 //! fixture, [`Rig`], starts the daemon in lockstep 1.5 m off the west wall, opens both links,
 //! counts the sensor-link requests and, when the test is done, checks the bridge counted the
 //! same requests, saw no error, and sent only well-formed frames.

@@ -10,7 +10,7 @@ use eyebot_hil::physics::{
     self, DEFAULT_VEHICLE, DEFAULT_WORLD, InitialState, Model, Simulation, ThrusterCommand,
     VehicleConfig, WorldConfig, hdt_command,
 };
-use eyebot_hil::validate::{self, Context};
+use eyebot_hil::thesis::{self, Context};
 use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 
@@ -40,7 +40,7 @@ fn percent(model: &Model, p: [f64; 4]) -> [ThrusterCommand; 4] {
 }
 
 fn experiment(name: &str) -> Experiment {
-    validate::physics::load_experiment(&Embedded, name).expect("embedded experiment")
+    thesis::physics::load_experiment(&Embedded, name).expect("embedded experiment")
 }
 
 /// Every vehicle, world and experiment file in configs/ loads and resolves.
@@ -117,7 +117,7 @@ fn mass_distribution_is_mako() {
 /// `eyebot-hil validate`'s physics rows, computed the same way, all pass.
 #[test]
 fn validate_physics_rows_pass() {
-    let rows = validate::physics::rows(&Context {
+    let rows = thesis::physics::rows(&Context {
         configs: &Embedded,
         seed: 1,
     })
@@ -127,14 +127,14 @@ fn validate_physics_rows_pass() {
     assert!(
         failed.is_empty(),
         "failing rows:\n{}",
-        validate::render_table(&rows)
+        thesis::render_table(&rows)
     );
 }
 
 #[test]
 fn same_experiment_twice_is_bit_identical() {
     let m = model();
-    let e = experiment(validate::physics::TURN_ANTICLOCKWISE);
+    let e = experiment(thesis::physics::TURN_ANTICLOCKWISE);
     let a = experiment::trace(&m, &e, 7).unwrap();
     let b = experiment::trace(&m, &e, 7).unwrap();
     assert_eq!(a.len(), b.len());

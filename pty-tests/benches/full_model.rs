@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use eyebot_hil::config::{ConfigSource, DEFAULT_CONFIG, Document, Embedded};
 use eyebot_hil::daemon::config::DaemonConfig;
-use eyebot_hil::daemon::core::Model as _;
+use eyebot_hil::daemon::engine::Model as _;
 use eyebot_hil::daemon::plant::MakoPlant;
 use eyebot_hil::devices::Plant;
 use eyebot_hil::physics::{InitialState, Simulation, load_model};

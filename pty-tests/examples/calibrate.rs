@@ -22,7 +22,7 @@ use eyebot_hil::physics::state::{PORT, STARBOARD, VehicleState};
 use eyebot_hil::physics::{
     self, DEFAULT_VEHICLE, DEFAULT_WORLD, Model, VehicleConfig, WorldConfig,
 };
-use eyebot_hil::validate::physics::{
+use eyebot_hil::thesis::physics::{
     ACCELERATION, COAST_DOWN, TOP_SPEED_AVERAGE_FROM_S, TURN_ANTICLOCKWISE, TURN_CLOCKWISE,
     figures, load_experiment, rows_from,
 };
@@ -212,7 +212,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let fitted = fit.vehicle(&fit.log_p);
         let f = figures(&Model::new(fitted, world.clone()), &configs, SEED)?;
         println!("\nvalidate rows with the fitted parameters:");
-        print!("{}", eyebot_hil::validate::render_table(&rows_from(&f)));
+        print!("{}", eyebot_hil::thesis::render_table(&rows_from(&f)));
     }
 
     // Plots of the model as configured (run again after copying the fitted numbers).

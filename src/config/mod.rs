@@ -1,6 +1,6 @@
 //! Configuration: TOML text in, checked settings out.
 //!
-//! Every config file goes through two stages (see `STYLE.md` §7, modelled on helix):
+//! Every config file goes through two stages (modelled on helix's `config.rs`):
 //!
 //! 1. **Raw**: the text is parsed into a `Raw*` struct with `#[serde(deny_unknown_fields)]`,
 //!    so a misspelt key is an error, not a silently ignored setting.
@@ -42,6 +42,14 @@ pub enum ConfigError {
         origin: String,
         key: String,
         line: Option<usize>,
+        message: String,
+    },
+    /// A value given in place of a configuration key (a command-line option) is out of
+    /// range.
+    #[error("{option} (in place of `{key}`): {message}")]
+    Override {
+        option: String,
+        key: String,
         message: String,
     },
     /// A file named by the user, or referenced from another config file, cannot be read.

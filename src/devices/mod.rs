@@ -2,7 +2,7 @@
 //! Vector 2X compass, motor driver, lockstep time), as sans-IO state machines over
 //! `firmware-protocol`.
 //!
-//! Each device is driven the same way (STYLE.md §1): `handle(input, now, plant)` for what
+//! Each device is driven the same way, sans-IO: `handle(input, now, plant)` for what
 //! arrives from the EyeBot side, `poll(now, plant)` for what is due by simulated time `now`,
 //! and `poll_timeout()` for when to call `poll` next. Devices never read a clock, never
 //! sleep and never touch a port. What they know of the simulated vehicle comes through the

@@ -1,5 +1,5 @@
-//! The daemon under test: the built binary as a child process ([`Daemon`]) or
-//! `eyebot_hil::daemon::run` on a thread of the test ([`InProcessDaemon`]).
+//! The daemon under test: the built binary as a child process ([`Daemon`]) or the library's
+//! daemon on a thread of the test ([`InProcessDaemon`]).
 //!
 //! The binary's path is always given by the test: `env!("CARGO_BIN_EXE_eyebot-hil")`, which
 //! cargo sets for the root package's integration tests and builds for the same profile first,
@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use eyebot_hil::config::{Directory, Document};
 use eyebot_hil::daemon::config::DaemonConfig;
 use eyebot_hil::daemon::status::{LinkStatus, StatusSnapshot};
-use eyebot_hil::daemon::{Readiness, RunOptions, RunSummary};
+use eyebot_hil::daemon::{Daemon as Bridge, RunOptions, Summary};
 use nix::sys::signal::Signal;
 use nix::unistd::Pid;
 
@@ -362,11 +362,12 @@ impl Drop for Daemon {
     }
 }
 
-/// The daemon run in-process through `eyebot_hil::daemon::run`, on its own thread and tokio
-/// runtime, stopped through its shutdown watch channel.
+/// The daemon run in-process on its own thread and tokio runtime, through the library's
+/// [`Bridge::start`], [`Bridge::serve`] (until [`stop`](InProcessDaemon::stop) or `Drop`)
+/// and [`Bridge::finish`].
 pub struct InProcessDaemon {
-    stop: tokio::sync::watch::Sender<bool>,
-    thread: Option<std::thread::JoinHandle<Result<RunSummary, String>>>,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<Result<Summary, String>>>,
     pub dir: TempDir,
     pub run_dir: PathBuf,
     pub status_socket: PathBuf,
@@ -397,40 +398,38 @@ impl InProcessDaemon {
             config_name: "test config".into(),
             ..RunOptions::default()
         };
-        let (stop, stop_rx) = tokio::sync::watch::channel(false);
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         let (ready_tx, ready_rx) = mpsc::channel();
         let thread = std::thread::spawn(move || {
             let runtime = tokio::runtime::Builder::new_current_thread()
                 .enable_all()
                 .build()
                 .map_err(|e| e.to_string())?;
-            runtime
-                .block_on(eyebot_hil::daemon::run(
-                    &config,
-                    model,
-                    board,
-                    mux,
-                    options,
-                    stop_rx,
-                    move |r| {
-                        let _ = ready_tx.send(r);
-                    },
-                ))
-                .map_err(|e| e.to_string())
+            runtime.block_on(async move {
+                let mut bridge = Bridge::start(&config, model, board, mux, options)
+                    .await
+                    .map_err(|e| e.to_string())?;
+                let _ = ready_tx.send(bridge.status_socket().to_path_buf());
+                // A dropped sender stops the daemon too.
+                let served = bridge
+                    .serve(async move {
+                        let _ = stopped.await;
+                    })
+                    .await;
+                let summary = bridge.finish().await.map_err(|e| e.to_string());
+                served.map_err(|e| e.to_string())?;
+                summary
+            })
         });
-        let deadline = Instant::now() + READY_TIMEOUT;
-        let status_socket = loop {
-            match ready_rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-                Ok(Readiness::Ready { status_socket }) => break status_socket,
-                Ok(Readiness::Link { .. }) => {}
-                Err(_) => {
-                    let outcome = thread.join();
-                    panic!("in-process daemon never became ready: {outcome:?}");
-                }
+        let status_socket = match ready_rx.recv_timeout(READY_TIMEOUT) {
+            Ok(socket) => socket,
+            Err(_) => {
+                let outcome = thread.join();
+                panic!("in-process daemon never became ready: {outcome:?}");
             }
         };
         Self {
-            stop,
+            stop: Some(stop),
             thread: Some(thread),
             dir,
             run_dir,
@@ -444,9 +443,9 @@ impl InProcessDaemon {
     }
 
     /// Stops the daemon and returns its summary (the directory stays until `Drop`).
-    pub fn stop(&mut self) -> RunSummary {
+    pub fn stop(&mut self) -> Summary {
         let thread = self.thread.take().expect("the daemon is running");
-        let _ = self.stop.send(true);
+        drop(self.stop.take());
         thread
             .join()
             .expect("daemon thread panicked")
@@ -466,8 +465,8 @@ impl RunningDaemon for InProcessDaemon {
 
 impl Drop for InProcessDaemon {
     fn drop(&mut self) {
+        drop(self.stop.take());
         if let Some(thread) = self.thread.take() {
-            let _ = self.stop.send(true);
             let _ = thread.join();
         }
     }

@@ -1,4 +1,5 @@
-//! `eyebot-hil validate`: the thesis's measurements next to SubSim's and ours.
+//! The thesis table (`eyebot-hil validate`, `cli::validate`): the thesis's measurements next
+//! to SubSim's and ours.
 //!
 //! Each row is computed by running the simulator; nothing here is a stored answer. Physics
 //! rows and sensor rows are produced by their own modules and share the [`Row`] shape, which

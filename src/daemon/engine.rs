@@ -1,8 +1,8 @@
-//! The bridge core: the model, the device emulators and the wire, in simulated time.
+//! The bridge engine: the model, the device emulators and the wire, in simulated time.
 //!
 //! Sans-IO like the devices it holds. The daemon hands it bytes that arrived on a line
-//! ([`Core::receive`]), tells it how far simulated time may run ([`Core::advance_to`]), and
-//! takes the bytes due on each line ([`Core::take_output`]). The same calls serve both time
+//! ([`Engine::receive`]), tells it how far simulated time may run ([`Engine::advance_to`]), and
+//! takes the bytes due on each line ([`Engine::take_output`]). The same calls serve both time
 //! modes; only who chooses the target differs (the wall clock, or the client's time frames).
 //!
 //! Ordering within one call is fixed: inputs are decoded in arrival order, the model steps
@@ -86,7 +86,7 @@ pub struct LineSpec {
 }
 
 /// The core.
-pub struct Core<M: Model> {
+pub struct Engine<M: Model> {
     model: M,
     board: SensorBoard,
     mux: Multiplexer,
@@ -105,7 +105,7 @@ pub struct Core<M: Model> {
     feed_errors: u64,
 }
 
-impl<M: Model> Core<M> {
+impl<M: Model> Engine<M> {
     /// `lines` must carry the sonar link exactly once and the sensor link exactly once.
     pub fn new(
         model: M,
@@ -636,7 +636,7 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    fn core(lockstep: bool, shared: bool) -> Core<FakeModel> {
+    fn core(lockstep: bool, shared: bool) -> Engine<FakeModel> {
         let board = SensorBoard::new(BoardSettings {
             tick_ns: 10 * MS,
             lockstep,
@@ -686,7 +686,7 @@ mod tests {
                 },
             ]
         };
-        Core::new(FakeModel::default(), board, mux, &lines, lockstep)
+        Engine::new(FakeModel::default(), board, mux, &lines, lockstep)
     }
 
     fn frame_bytes(seq: u8, message: Message) -> Vec<u8> {

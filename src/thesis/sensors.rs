@@ -444,7 +444,7 @@ mod tests {
         assert!(hi0 > 0.0 && hi0 < 0.01);
     }
 
-    /// Prints the rows (`cargo test --lib validate::sensors -- --nocapture`) and checks that
+    /// Prints the rows (`cargo test --lib thesis::sensors -- --nocapture`) and checks that
     /// there is one row per table 4.7 distance and that every row passes.
     #[test]
     fn sensor_rows_pass() {

@@ -10,7 +10,7 @@ use crate::physics::experiment::{self, Experiment};
 use crate::physics::measure::{self, CAMERA_PERIOD_S, REST_SPEED_MPS, TOP_SPEED_FRACTION};
 use crate::physics::state::VehicleState;
 use crate::physics::{DEFAULT_VEHICLE, DEFAULT_WORLD, Model, load_model};
-use crate::validate::{Context, Group, Row, ValidateError, Value};
+use crate::thesis::{Context, Group, Row, ValidateError, Value};
 
 /// The experiment files the rows are computed from (names inside the config source).
 pub const ACCELERATION: &str = "experiments/acceleration.toml";
@@ -157,7 +157,8 @@ pub fn rows(ctx: &Context<'_>) -> Result<Vec<Row>, ValidateError> {
     Ok(rows_from(&f))
 }
 
-/// The rows for measured figures, with the thesis values and tolerances of issue 3.
+/// The rows for measured figures: each computed figure next to the thesis's value, judged
+/// against that row's tolerance.
 pub fn rows_from(f: &PhysicsFigures) -> Vec<Row> {
     let within = |x: f64, target: f64, tol: f64| (x - target).abs() <= tol;
     let drift_text = if f.drift_deg > DRIFT_THRESHOLD_DEG {
