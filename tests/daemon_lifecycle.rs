@@ -164,7 +164,7 @@ fn shutdown_loses_nothing(signal: Signal, tag: &str) {
         stream(&chunks, "sonar", Direction::Tx).starts_with(&sonar_got),
         "sonar bytes received and recorded differ"
     );
-    assert_cleaned_up(&daemon, &pid_file, &signal.to_string());
+    assert_cleaned_up(&daemon, &pid_file, signal.as_ref());
 }
 
 /// The links, the status socket and the pid file are gone.
