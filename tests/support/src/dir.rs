@@ -65,3 +65,27 @@ impl Drop for TempDir {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_temp_dir_is_named_for_this_process_and_removed_on_drop() {
+        let dir = TempDir::new("unit");
+        let name = dir
+            .path()
+            .file_name()
+            .expect("a name")
+            .to_string_lossy()
+            .into_owned();
+        assert!(
+            name.starts_with(&format!("{}unit-", process_prefix())),
+            "{name}"
+        );
+        dir.write("file", "text");
+        let path = dir.path().to_path_buf();
+        drop(dir);
+        assert!(!path.exists(), "{} left behind", path.display());
+    }
+}

@@ -128,3 +128,44 @@ pub fn first_difference(a: &[TranscriptChunk], b: &[TranscriptChunk]) -> String 
         None => format!("lengths {} vs {}", a.len(), b.len()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chunk(sim_s: f64, link: &str, dir: Direction, data: &[u8]) -> ByteChunk {
+        ByteChunk {
+            sim_s,
+            wall_unix_s: 0.0,
+            link: link.into(),
+            dir,
+            data: data.to_vec(),
+        }
+    }
+
+    /// Reads split differently and two lines read in either order at one instant give one
+    /// transcript; a byte at another time does not.
+    #[test]
+    fn transcripts_ignore_read_splits_and_same_instant_line_order() {
+        let a = [
+            chunk(0.01, "sonar", Direction::Rx, b"@S"),
+            chunk(0.01, "sensor", Direction::Rx, &[0xEB]),
+            chunk(0.01, "sonar", Direction::Rx, b"1\r"),
+            chunk(0.02, "sonar", Direction::Tx, b"@1"),
+        ];
+        let b = [
+            chunk(0.01, "sensor", Direction::Rx, &[0xEB]),
+            chunk(0.01, "sonar", Direction::Rx, b"@S1\r"),
+            chunk(0.02, "sonar", Direction::Tx, b"@1"),
+        ];
+        assert_eq!(transcript(&a), transcript(&b));
+        assert_eq!(transcript(&a).len(), 3, "{:?}", transcript(&a));
+        let later = [
+            chunk(0.01, "sensor", Direction::Rx, &[0xEB]),
+            chunk(0.01, "sonar", Direction::Rx, b"@S1\r"),
+            chunk(0.03, "sonar", Direction::Tx, b"@1"),
+        ];
+        assert_ne!(transcript(&a), transcript(&later));
+        assert!(first_difference(&transcript(&a), &transcript(&later)).starts_with("chunk 2"));
+    }
+}

@@ -32,3 +32,22 @@ fn missing(what: &str, package: &str) -> ! {
     );
     panic!("{what} is missing: install the Debian package `{package}` (bash .ci/install-deps)");
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_present_tool_is_found_on_the_path() {
+        assert!(require_tool("sh", "dash").is_file());
+    }
+
+    /// A missing tool is a failure that names the tool and its package, never a skip.
+    #[test]
+    #[should_panic(
+        expected = "`eyebot-no-such-tool` is missing: install the Debian package `no-such-package`"
+    )]
+    fn a_missing_tool_fails_naming_its_package() {
+        require_tool("eyebot-no-such-tool", "no-such-package");
+    }
+}
