@@ -4,7 +4,7 @@
 //! counts the sensor-link requests and, when the test is done, checks the bridge counted the
 //! same requests, saw no error, and sent only well-formed frames.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use eyebot_hil::daemon::status::StatusSnapshot;
@@ -51,6 +51,16 @@ impl UnderTest {
     }
 }
 
+impl RunningDaemon for UnderTest {
+    fn run_dir(&self) -> &Path {
+        self.daemon().run_dir()
+    }
+
+    fn status_socket(&self) -> PathBuf {
+        self.daemon().status_socket()
+    }
+}
+
 /// The shared fixture: a lockstep daemon near the west wall, a client on each link, and the
 /// number of sensor-link requests sent.
 struct Rig {
@@ -79,9 +89,8 @@ impl Rig {
                 UnderTest::InProcess(InProcessDaemon::start(dir, &text, None, |_| {}))
             }
         };
-        let daemon = under_test.daemon();
-        let sensor = sensor_client(&daemon.link("sensor"));
-        let sonar = sonar_client(&daemon.link("sonar"));
+        let sensor = sensor_client(&under_test.link("sensor"));
+        let sonar = sonar_client(&under_test.link("sonar"));
         Self {
             under_test,
             sensor,
@@ -91,19 +100,17 @@ impl Rig {
     }
 
     fn status(&self) -> StatusSnapshot {
-        self.under_test.daemon().status()
+        self.under_test.status()
     }
 
     /// Polls the status until `pred` holds.
     fn wait_status(&self, what: &str, pred: impl Fn(&StatusSnapshot) -> bool) -> StatusSnapshot {
-        eyebot_test_support::wait_for(what, Duration::from_secs(10), || {
-            let s = self.status();
-            pred(&s).then_some(s)
-        })
+        self.under_test
+            .wait_status(Duration::from_secs(10), what, pred)
     }
 
     fn link(&self, name: &str) -> PathBuf {
-        self.under_test.daemon().link(name)
+        self.under_test.link(name)
     }
 
     async fn try_request(
