@@ -1,11 +1,13 @@
 //! The bridge daemon (`eyebot-hil run`): links, device emulators, the time model, recording
 //! and the process life cycle around the simulation.
 //!
-//! [`run`] is a library function: it takes the resolved configuration, a model, the options
-//! and a shutdown signal, and reports readiness through a callback. `main.rs` (through
-//! `cli::run`) only parses arguments, installs tracing and signal handlers and calls it, so
-//! tests run the daemon in-process. Time comes from tokio's clock, which tests can pause and
-//! advance; the model itself never reads a clock.
+//! A run has three stages, each a library call: [`Daemon::start`] (the resolved
+//! configuration, a model, the devices and the options in; endpoints open, tasks running
+//! out), [`Daemon::serve`] (until a shutdown future resolves) and [`Daemon::finish`] (a
+//! [`Summary`] out). [`run`] composes them and reports readiness through a callback;
+//! `main.rs` (through `cli::run`) only parses arguments, installs tracing and signal handlers
+//! and calls it, so tests run the daemon in-process. Time comes from tokio's clock, which
+//! tests can pause and advance; the model itself never reads a clock.
 
 pub mod clock;
 pub mod config;
@@ -126,9 +128,10 @@ struct LineRuntime {
 /// [`Daemon::start`] brings it up, [`Daemon::serve`] runs the simulation loop until a
 /// shutdown future resolves, [`Daemon::finish`] flushes, closes and reports. Between them the
 /// caller can announce readiness ([`Daemon::links`], [`Daemon::status_socket`]). Services
-/// that run beside the links (the status socket, the sonar feed) are tokio tasks started in
-/// `start` with [`Daemon::stop_signal`] and joined in `finish`; a new service follows the
-/// same pattern.
+/// that run beside the links (the status socket, the sonar feed) are tokio tasks added with
+/// [`Daemon::spawn_service`], told to stop and joined in `finish`; a new one (a live view,
+/// reading [`Daemon::status_updates`]) is added the same way, in `start` or by the caller
+/// before `serve`.
 pub struct Daemon<M: Model> {
     config: DaemonConfig,
     engine: Engine<M>,
@@ -137,9 +140,9 @@ pub struct Daemon<M: Model> {
     link_tasks: Vec<tokio::task::JoinHandle<()>>,
     inbound: mpsc::Receiver<Inbound>,
     feed: mpsc::Receiver<feed::FeedEvent>,
-    feed_task: tokio::task::JoinHandle<()>,
     status: watch::Sender<StatusSnapshot>,
-    status_task: tokio::task::JoinHandle<()>,
+    /// Tasks beside the links (the status socket, the sonar feed), stopped by `stop`.
+    services: Vec<Service>,
     status_socket: PathBuf,
     /// Tells the link tasks and services to stop (sent by `finish`).
     stop: watch::Sender<bool>,
@@ -147,6 +150,12 @@ pub struct Daemon<M: Model> {
     record_dir: Option<PathBuf>,
     pid_file: Option<PidFile>,
     leftovers: shutdown::Leftovers,
+}
+
+/// A task that runs beside the links for the life of the daemon.
+struct Service {
+    name: &'static str,
+    task: tokio::task::JoinHandle<()>,
 }
 
 /// The loop's view of wall time in realtime mode, and when it next reports status.
@@ -278,19 +287,9 @@ impl<M: Model> Daemon<M> {
         drop(in_tx);
 
         let (feed_tx, feed) = mpsc::channel(64);
-        let feed_task = tokio::spawn(feed::serve(
-            feed_listener,
-            feed_path,
-            feed_tx,
-            stop_rx.clone(),
-        ));
         let (status, status_rx) = watch::channel(StatusSnapshot::default());
-        let status_task = {
-            let stop_rx = stop_rx.clone();
-            tokio::spawn(async move { status_server.serve(status_rx, stop_rx).await })
-        };
         let started = Instant::now();
-        Ok(Self {
+        let mut daemon = Self {
             config: config.clone(),
             engine,
             lines,
@@ -298,9 +297,8 @@ impl<M: Model> Daemon<M> {
             link_tasks,
             inbound,
             feed,
-            feed_task,
             status,
-            status_task,
+            services: Vec::new(),
             status_socket,
             stop,
             pacing: LoopClock {
@@ -316,7 +314,35 @@ impl<M: Model> Daemon<M> {
             record_dir: options.record,
             pid_file,
             leftovers,
-        })
+        };
+        daemon.spawn_service("sonar feed", |stop| {
+            feed::serve(feed_listener, feed_path, feed_tx, stop)
+        });
+        daemon.spawn_service("status", |stop| async move {
+            status_server.serve(status_rx, stop).await
+        });
+        Ok(daemon)
+    }
+
+    /// Runs a service beside the links: `service` is given the stop signal (it turns true
+    /// in [`Daemon::finish`]) and must end soon after; one still running after
+    /// [`shutdown::SERVICES_BUDGET`] is aborted. A view of the run subscribes to
+    /// [`Daemon::status_updates`].
+    pub fn spawn_service<F>(
+        &mut self,
+        name: &'static str,
+        service: impl FnOnce(watch::Receiver<bool>) -> F,
+    ) where
+        F: Future<Output = ()> + Send + 'static,
+    {
+        let task = tokio::spawn(service(self.stop.subscribe()));
+        self.services.push(Service { name, task });
+    }
+
+    /// The latest status snapshot, refreshed every [`STATUS_PERIOD`] while serving: a
+    /// latest-wins channel, so a slow reader never holds the simulation up.
+    pub fn status_updates(&self) -> watch::Receiver<StatusSnapshot> {
+        self.status.subscribe()
     }
 
     /// The open links, in line order.
@@ -327,12 +353,6 @@ impl<M: Model> Daemon<M> {
     /// The status socket (`eyebot-hil status`).
     pub fn status_socket(&self) -> &Path {
         &self.status_socket
-    }
-
-    /// A receiver that turns true when [`Daemon::finish`] stops the tasks: for a service
-    /// spawned beside the links.
-    pub fn stop_signal(&self) -> watch::Receiver<bool> {
-        self.stop.subscribe()
     }
 
     /// Runs the simulation until `shutdown` resolves, every link task has ended, or the model
@@ -455,8 +475,19 @@ impl<M: Model> Daemon<M> {
         while let Ok(inbound) = self.inbound.try_recv() {
             self.engine.record_unprocessed(inbound.line, &inbound.data);
         }
-        self.status_task.abort();
-        let _ = tokio::time::timeout(Duration::from_millis(200), &mut self.feed_task).await;
+        let services_deadline = Instant::now() + shutdown::SERVICES_BUDGET;
+        for mut service in std::mem::take(&mut self.services) {
+            if tokio::time::timeout_at(services_deadline, &mut service.task)
+                .await
+                .is_err()
+            {
+                tracing::warn!(
+                    service = service.name,
+                    "a service did not stop in time; aborting it"
+                );
+                service.task.abort();
+            }
+        }
         let records = match self.engine.take_recorder() {
             Some(recorder) => Some(recorder.finish()?),
             None => None,
@@ -787,6 +818,62 @@ mod tests {
         // 10 s in an ideal world; a loaded machine may slip a little (counted overruns).
         assert!(summary.sim_time_s >= 5.0, "1 s at speed 10: {summary:?}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The three stages on their own: after `start` the links exist before anything is
+    /// served; a service added with `spawn_service` runs beside them and is told to stop by
+    /// `finish`; `serve` returns when its shutdown future resolves, having published status.
+    #[tokio::test]
+    async fn start_serve_finish_run_a_service_beside_the_links() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-stages-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let run_dir = dir.join("run");
+        let config = config(&run_dir);
+        let (board, mux) = devices();
+        let mut daemon = Daemon::start(
+            &config,
+            FakeModel::default(),
+            board,
+            mux,
+            RunOptions::default(),
+        )
+        .await
+        .unwrap();
+        let names: Vec<&str> = daemon.links().iter().map(|l| l.name).collect();
+        assert_eq!(names, ["sonar", "sensor"]);
+        assert!(std::fs::symlink_metadata(run_dir.join("sensor")).is_ok());
+        assert_eq!(daemon.status_socket(), run_dir.join("status.sock"));
+        let (told_tx, told_rx) = tokio::sync::oneshot::channel();
+        daemon.spawn_service("test", |mut stop| async move {
+            let _ = stop.wait_for(|stop| *stop).await;
+            let _ = told_tx.send(());
+        });
+        let mut updates = daemon.status_updates();
+        daemon
+            .serve(tokio::time::sleep(STATUS_PERIOD * 2))
+            .await
+            .unwrap();
+        assert!(
+            updates.has_changed().unwrap(),
+            "status published while serving"
+        );
+        assert_eq!(updates.borrow_and_update().links.len(), 2);
+        let summary = daemon.finish().await.unwrap();
+        assert_eq!(
+            summary.sim_time_s, 0.0,
+            "lockstep without a client stays at 0"
+        );
+        tokio::time::timeout(Duration::from_secs(1), told_rx)
+            .await
+            .expect("the service stopped within its budget")
+            .expect("the service was told to stop");
+        for name in ["sonar", "sensor", "status.sock", feed::FEED_SOCKET] {
+            assert!(
+                std::fs::symlink_metadata(run_dir.join(name)).is_err(),
+                "{name} removed"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[tokio::test]
