@@ -17,6 +17,7 @@ pub mod link;
 pub mod pid_file;
 pub mod plant;
 pub mod shutdown;
+pub mod socket;
 pub mod status;
 
 use std::path::{Path, PathBuf};
@@ -29,7 +30,7 @@ use tokio::time::Instant;
 
 use self::clock::{RealtimeMap, TimeMode};
 use self::config::{DaemonConfig, Endpoint};
-use self::engine::{Engine, LineSpec, Model};
+use self::engine::{Carries, Engine, LineSpec, Model};
 use self::link::{EndpointError, Inbound, LineContext, LinkCounters, OpenEndpoint, Outbound};
 use self::pid_file::PidFile;
 use self::status::{LinkStatus, Pose, StatusServer, StatusSnapshot};
@@ -193,24 +194,14 @@ impl<M: Model> Daemon<M> {
             tx_queue_bytes: link.tx_queue_bytes,
             release_quantum_ns: config.release_quantum.as_nanos() as u64,
         };
-        let mut specs = vec![line_spec(
-            if shared { "shared" } else { "sonar" },
-            engine::Carries {
-                sonar: true,
-                sensor: shared,
-            },
-            &config.sonar,
-        )];
+        let mut specs = vec![if shared {
+            line_spec("shared", Carries::SHARED, &config.sonar)
+        } else {
+            line_spec("sonar", Carries::SONAR, &config.sonar)
+        }];
         let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, &run_dir).await?];
         if !shared {
-            specs.push(line_spec(
-                "sensor",
-                engine::Carries {
-                    sonar: false,
-                    sensor: true,
-                },
-                &config.sensor,
-            ));
+            specs.push(line_spec("sensor", Carries::SENSOR, &config.sensor));
             endpoints.push(OpenEndpoint::open("sensor", &config.sensor, &run_dir).await?);
         }
         for endpoint in &endpoints {
@@ -726,6 +717,47 @@ mod tests {
         }
     }
 
+    /// `run` on a fake model with the test devices, as a task.
+    fn spawn_run(
+        config: DaemonConfig,
+        options: RunOptions,
+        stop: watch::Receiver<bool>,
+        on_ready: impl FnMut(Readiness) + Send + 'static,
+    ) -> tokio::task::JoinHandle<Result<Summary, DaemonError>> {
+        let (board, mux) = devices();
+        tokio::spawn(async move {
+            run(
+                &config,
+                FakeModel::default(),
+                board,
+                mux,
+                options,
+                stop,
+                on_ready,
+            )
+            .await
+        })
+    }
+
+    /// Sends `message` as frame `seq` on the sensor link and returns the reply to it.
+    async fn ask(
+        (port, buf, decoder): &mut (
+            &mut tokio_serial::SerialStream,
+            &mut BytesMut,
+            &mut LineDecoder,
+        ),
+        seq: u8,
+        message: Message,
+    ) -> Message {
+        let mut frame = BytesMut::new();
+        Frame::new(seq, message).encode(&mut frame);
+        port.write_all(&frame).await.unwrap();
+        match read_item(port, buf, decoder).await {
+            LineItem::Frame(reply) if reply.seq == seq => reply.message,
+            other => panic!("expected the reply to frame {seq}, got {other:?}"),
+        }
+    }
+
     /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
     /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
     /// the time; shutdown removes the links and finishes the recording.
@@ -735,7 +767,6 @@ mod tests {
     /// in the one-hour run at speed 100 of `bench daemon rss`). Now they wait in a backlog.
     #[test]
     fn released_bytes_wait_for_a_busy_link_task_instead_of_being_dropped() {
-        use crate::daemon::engine::Carries;
         let (board, mux) = devices();
         let spec = |name, sonar, baud| LineSpec {
             name,
@@ -798,20 +829,8 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         let mut config = config(&dir.join("run"));
         config.time_mode = TimeMode::Realtime { speed: 10.0 };
-        let (board, mux) = devices();
         let (stop_tx, stop_rx) = watch::channel(false);
-        let daemon = tokio::spawn(async move {
-            run(
-                &config,
-                FakeModel::default(),
-                board,
-                mux,
-                RunOptions::default(),
-                stop_rx,
-                |_| {},
-            )
-            .await
-        });
+        let daemon = spawn_run(config, RunOptions::default(), stop_rx, |_| {});
         tokio::time::sleep(Duration::from_secs(1)).await;
         stop_tx.send(true).unwrap();
         let summary = daemon.await.unwrap().unwrap();
@@ -883,7 +902,6 @@ mod tests {
         let run_dir = dir.join("run");
         let record = dir.join("rec");
         let config = config(&run_dir);
-        let (board, mux) = devices();
         let (stop_tx, stop_rx) = watch::channel(false);
         let (ready_tx, mut ready_rx) = mpsc::unbounded_channel();
         let options = RunOptions {
@@ -893,19 +911,8 @@ mod tests {
             ..RunOptions::default()
         };
         std::fs::create_dir_all(&dir).unwrap();
-        let daemon = tokio::spawn(async move {
-            run(
-                &config,
-                FakeModel::default(),
-                board,
-                mux,
-                options,
-                stop_rx,
-                move |r| {
-                    let _ = ready_tx.send(r);
-                },
-            )
-            .await
+        let daemon = spawn_run(config, options, stop_rx, move |r| {
+            let _ = ready_tx.send(r);
         });
         let mut links = Vec::new();
         while let Readiness::Link { name, path } =
@@ -930,42 +937,18 @@ mod tests {
         )
         .unwrap();
         let (mut sbuf, mut sdec) = (BytesMut::new(), LineDecoder::new());
-        let send = |seq, message| {
-            let mut b = BytesMut::new();
-            Frame::new(seq, message).encode(&mut b);
-            b
-        };
-        sensor
-            .write_all(&send(1, Message::Hello { client_version: 1 }))
-            .await
-            .unwrap();
+        let mut sensor_link = (&mut sensor, &mut sbuf, &mut sdec);
         assert!(matches!(
-            read_item(&mut sensor, &mut sbuf, &mut sdec).await,
-            LineItem::Frame(Frame {
-                seq: 1,
-                message: Message::HelloReply { .. }
-            })
+            ask(&mut sensor_link, 1, Message::Hello { client_version: 1 }).await,
+            Message::HelloReply { .. }
         ));
         let mut select = BytesMut::new();
         SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
         sonar.write_all(&select).await.unwrap();
         // Give the select time to cross its pty before time moves on.
         tokio::time::sleep(Duration::from_millis(100)).await;
-        sensor
-            .write_all(&send(2, Message::TimeAdvance { ticks: 150 }))
-            .await
-            .unwrap();
-        let time = read_item(&mut sensor, &mut sbuf, &mut sdec).await;
-        assert!(
-            matches!(
-                time,
-                LineItem::Frame(Frame {
-                    seq: 2,
-                    message: Message::Time { ticks: 150, .. }
-                })
-            ),
-            "{time:?}"
-        );
+        let time = ask(&mut sensor_link, 2, Message::TimeAdvance { ticks: 150 }).await;
+        assert!(matches!(time, Message::Time { ticks: 150, .. }), "{time:?}");
         let (mut nbuf, mut ndec) = (BytesMut::new(), LineDecoder::new());
         assert!(matches!(
             read_item(&mut sonar, &mut nbuf, &mut ndec).await,
@@ -994,17 +977,8 @@ mod tests {
         .await
         .unwrap();
         tokio::time::sleep(Duration::from_millis(200)).await;
-        sensor
-            .write_all(&send(3, Message::TimeAdvance { ticks: 50 }))
-            .await
-            .unwrap();
-        assert!(matches!(
-            read_item(&mut sensor, &mut sbuf, &mut sdec).await,
-            LineItem::Frame(Frame {
-                seq: 3,
-                message: Message::Time { ticks: 200, .. }
-            })
-        ));
+        let time = ask(&mut sensor_link, 3, Message::TimeAdvance { ticks: 50 }).await;
+        assert!(matches!(time, Message::Time { ticks: 200, .. }), "{time:?}");
         let fed = read_item(&mut sonar, &mut nbuf, &mut ndec).await;
         let LineItem::Nmea(firmware_protocol::Sentence::Dbt(dbt)) = fed else {
             panic!("expected the fed DBT, got {fed:?}")
