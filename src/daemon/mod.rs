@@ -186,29 +186,7 @@ impl<M: Model> Daemon<M> {
         let lockstep = config.time_mode == TimeMode::Lockstep;
         let leftovers = options.leftovers.clone();
 
-        let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;
-        let line_spec = |name, carries, link: &config::LinkConfig| LineSpec {
-            name,
-            carries,
-            settings: link.line,
-            tx_queue_bytes: link.tx_queue_bytes,
-            release_quantum_ns: config.release_quantum.as_nanos() as u64,
-        };
-        let mut specs = vec![if shared {
-            line_spec("shared", Carries::SHARED, &config.sonar)
-        } else {
-            line_spec("sonar", Carries::SONAR, &config.sonar)
-        }];
-        let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, &run_dir).await?];
-        if !shared {
-            specs.push(line_spec("sensor", Carries::SENSOR, &config.sensor));
-            endpoints.push(OpenEndpoint::open("sensor", &config.sensor, &run_dir).await?);
-        }
-        for endpoint in &endpoints {
-            if let Some((path, target)) = endpoint.owned_link() {
-                leftovers.symlink(path, target);
-            }
-        }
+        let (specs, endpoints) = open_lines(config, &run_dir, &leftovers).await?;
         let status_socket = run_dir.join("status.sock");
         let status_server = StatusServer::bind(&status_socket)?;
         leftovers.socket(&status_socket);
@@ -240,42 +218,12 @@ impl<M: Model> Daemon<M> {
         }
 
         let (stop, stop_rx) = watch::channel(false);
-        let (in_tx, inbound) = mpsc::channel::<Inbound>(256);
-        let mut lines = Vec::new();
-        let mut links = Vec::new();
-        let mut link_tasks = Vec::new();
-        for (index, endpoint) in endpoints.into_iter().enumerate() {
-            let name = specs[index].name;
-            let describe = endpoint.describe();
-            links.push(LinkInfo {
-                name,
-                path: describe.clone(),
-            });
-            let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
-            let counters = Arc::new(LinkCounters::default());
-            let cx = LineContext {
-                line: index,
-                name,
-                counters: counters.clone(),
-                recorder: engine.recorder_handle(),
-            };
-            link_tasks.push(tokio::spawn(link::run_line(
-                cx,
-                endpoint,
-                in_tx.clone(),
-                out_rx,
-                stop_rx.clone(),
-            )));
-            lines.push(LineRuntime {
-                name,
-                describe,
-                to_link: out_tx,
-                counters,
-                backlog: bytes::BytesMut::new(),
-                backlog_limit: specs[index].tx_queue_bytes,
-            });
-        }
-        drop(in_tx);
+        let Spawned {
+            lines,
+            links,
+            link_tasks,
+            inbound,
+        } = spawn_link_tasks(&specs, endpoints, engine.recorder_handle(), &stop_rx);
 
         let (feed_tx, feed) = mpsc::channel(64);
         let (status, status_rx) = watch::channel(StatusSnapshot::default());
@@ -491,6 +439,96 @@ impl<M: Model> Daemon<M> {
             overruns,
         })
     }
+}
+
+/// The lines the configuration asks for, each with its endpoint opened: the sonar line
+/// (carrying the sensor link too when it is shared), then the sensor line. Symlinks we own
+/// are noted in `leftovers`.
+async fn open_lines(
+    config: &DaemonConfig,
+    run_dir: &Path,
+    leftovers: &shutdown::Leftovers,
+) -> Result<(Vec<LineSpec>, Vec<OpenEndpoint>), DaemonError> {
+    let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;
+    let line_spec = |name, carries, link: &config::LinkConfig| LineSpec {
+        name,
+        carries,
+        settings: link.line,
+        tx_queue_bytes: link.tx_queue_bytes,
+        release_quantum_ns: config.release_quantum.as_nanos() as u64,
+    };
+    let mut specs = vec![if shared {
+        line_spec("shared", Carries::SHARED, &config.sonar)
+    } else {
+        line_spec("sonar", Carries::SONAR, &config.sonar)
+    }];
+    let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, run_dir).await?];
+    if !shared {
+        specs.push(line_spec("sensor", Carries::SENSOR, &config.sensor));
+        endpoints.push(OpenEndpoint::open("sensor", &config.sensor, run_dir).await?);
+    }
+    for endpoint in &endpoints {
+        if let Some((path, target)) = endpoint.owned_link() {
+            leftovers.symlink(path, target);
+        }
+    }
+    Ok((specs, endpoints))
+}
+
+/// What [`spawn_link_tasks`] started.
+struct Spawned {
+    lines: Vec<LineRuntime>,
+    links: Vec<LinkInfo>,
+    link_tasks: Vec<tokio::task::JoinHandle<()>>,
+    /// Everything the link tasks read, in arrival order.
+    inbound: mpsc::Receiver<Inbound>,
+}
+
+/// One link task per line, on its endpoint; the loop's side of each in `lines`.
+fn spawn_link_tasks(
+    specs: &[LineSpec],
+    endpoints: Vec<OpenEndpoint>,
+    recorder: Option<crate::record::RecordHandle>,
+    stop: &watch::Receiver<bool>,
+) -> Spawned {
+    let (in_tx, inbound) = mpsc::channel::<Inbound>(256);
+    let mut spawned = Spawned {
+        lines: Vec::new(),
+        links: Vec::new(),
+        link_tasks: Vec::new(),
+        inbound,
+    };
+    for ((index, endpoint), spec) in endpoints.into_iter().enumerate().zip(specs) {
+        let describe = endpoint.describe();
+        spawned.links.push(LinkInfo {
+            name: spec.name,
+            path: describe.clone(),
+        });
+        let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
+        let counters = Arc::new(LinkCounters::default());
+        let cx = LineContext {
+            line: index,
+            name: spec.name,
+            counters: counters.clone(),
+            recorder: recorder.clone(),
+        };
+        spawned.link_tasks.push(tokio::spawn(link::run_line(
+            cx,
+            endpoint,
+            in_tx.clone(),
+            out_rx,
+            stop.clone(),
+        )));
+        spawned.lines.push(LineRuntime {
+            name: spec.name,
+            describe,
+            to_link: out_tx,
+            counters,
+            backlog: bytes::BytesMut::new(),
+            backlog_limit: spec.tx_queue_bytes,
+        });
+    }
+    spawned
 }
 
 impl LoopClock {
