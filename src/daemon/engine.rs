@@ -43,6 +43,24 @@ pub struct Carries {
     pub sensor: bool,
 }
 
+impl Carries {
+    /// The sonar link alone.
+    pub const SONAR: Self = Self {
+        sonar: true,
+        sensor: false,
+    };
+    /// The sensor link alone.
+    pub const SENSOR: Self = Self {
+        sonar: false,
+        sensor: true,
+    };
+    /// Both links on one line, told apart by the first byte.
+    pub const SHARED: Self = Self {
+        sonar: true,
+        sensor: true,
+    };
+}
+
 /// Per-line counters for the status snapshot.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LineCounters {
@@ -654,10 +672,7 @@ mod tests {
         let lines = if shared {
             vec![LineSpec {
                 name: "shared",
-                carries: Carries {
-                    sonar: true,
-                    sensor: true,
-                },
+                carries: Carries::SHARED,
                 settings: LineSettings::n81(115_200),
                 tx_queue_bytes: 4096,
                 release_quantum_ns: MS,
@@ -666,20 +681,14 @@ mod tests {
             vec![
                 LineSpec {
                     name: "sonar",
-                    carries: Carries {
-                        sonar: true,
-                        sensor: false,
-                    },
+                    carries: Carries::SONAR,
                     settings: LineSettings::n81(4800),
                     tx_queue_bytes: 4096,
                     release_quantum_ns: MS,
                 },
                 LineSpec {
                     name: "sensor",
-                    carries: Carries {
-                        sonar: false,
-                        sensor: true,
-                    },
+                    carries: Carries::SENSOR,
                     settings: LineSettings::n81(115_200),
                     tx_queue_bytes: 4096,
                     release_quantum_ns: MS,
@@ -695,6 +704,23 @@ mod tests {
         buf.to_vec()
     }
 
+    /// An ADC_READ of `channel`.
+    fn adc_read(seq: u8, channel: u8) -> Vec<u8> {
+        let channel = AdcChannel::new(channel).expect("a test's channel is 0-7");
+        frame_bytes(seq, Message::AdcRead { channel })
+    }
+
+    /// An ADC_STREAM of the `channels` mask every 10 ms.
+    fn adc_stream(seq: u8, channels: u8) -> Vec<u8> {
+        frame_bytes(
+            seq,
+            Message::AdcStream {
+                channels,
+                period_ms: 10,
+            },
+        )
+    }
+
     fn decode(bytes: &[u8]) -> Vec<LineItem> {
         LineDecoder::decode_all(bytes)
     }
@@ -702,12 +728,7 @@ mod tests {
     #[test]
     fn realtime_replies_wait_for_their_wire_time() {
         let mut c = core(false, false);
-        let read = frame_bytes(
-            5,
-            Message::AdcRead {
-                channel: AdcChannel::new(1).unwrap(),
-            },
-        );
+        let read = adc_read(5, 1);
         c.receive(1, &read).unwrap();
         assert_eq!(c.take_output(1), None, "no byte before one character time");
         // The reply (9 bytes) takes 9 x 86.8 us at 115200 baud.
@@ -724,17 +745,7 @@ mod tests {
     #[test]
     fn lockstep_advance_releases_stream_samples_before_the_time_reply() {
         let mut c = core(true, false);
-        c.receive(
-            1,
-            &frame_bytes(
-                1,
-                Message::AdcStream {
-                    channels: 0b1,
-                    period_ms: 10,
-                },
-            ),
-        )
-        .unwrap();
+        c.receive(1, &adc_stream(1, 0b1)).unwrap();
         let ack = c
             .take_output(1)
             .expect("a lockstep reply is released at once");
@@ -773,17 +784,7 @@ mod tests {
     #[test]
     fn a_long_lockstep_advance_delivers_every_stream_sample() {
         let mut c = core(true, false);
-        c.receive(
-            1,
-            &frame_bytes(
-                1,
-                Message::AdcStream {
-                    channels: 0xFF,
-                    period_ms: 10,
-                },
-            ),
-        )
-        .unwrap();
+        c.receive(1, &adc_stream(1, 0xFF)).unwrap();
         let _ack = c.take_output(1);
         c.receive(1, &frame_bytes(2, Message::TimeAdvance { ticks: 400 }))
             .unwrap();
@@ -801,21 +802,10 @@ mod tests {
     #[test]
     fn lockstep_output_does_not_depend_on_input_chunking() {
         let mut script = Vec::new();
-        script.extend(frame_bytes(
-            1,
-            Message::AdcStream {
-                channels: 0b11,
-                period_ms: 10,
-            },
-        ));
+        script.extend(adc_stream(1, 0b11));
         script.extend(frame_bytes(2, Message::TimeAdvance { ticks: 7 }));
         script.extend(b"junk\x00");
-        script.extend(frame_bytes(
-            3,
-            Message::AdcRead {
-                channel: AdcChannel::new(0).unwrap(),
-            },
-        ));
+        script.extend(adc_read(3, 0));
         script.extend(frame_bytes(4, Message::TimeAdvance { ticks: 3 }));
         let run = |chunk: usize| {
             let mut c = core(true, false);
@@ -840,12 +830,7 @@ mod tests {
     #[test]
     fn a_partial_frame_is_dropped_after_the_idle_limit() {
         let mut c = core(true, false);
-        let read = frame_bytes(
-            1,
-            Message::AdcRead {
-                channel: AdcChannel::new(0).unwrap(),
-            },
-        );
+        let read = adc_read(1, 0);
         c.receive(1, &read[..4]).unwrap();
         let advance = frame_bytes(2, Message::TimeAdvance { ticks: 10 });
         // The advance arrives glued to the partial frame: the CRC fails, the rescan finds it.

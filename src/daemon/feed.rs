@@ -97,23 +97,10 @@ pub enum FeedEvent {
 
 /// Binds `path` with owner-only permissions (replacing a stale socket).
 pub fn bind(path: &Path) -> Result<UnixListener, FeedError> {
-    use std::os::unix::fs::PermissionsExt;
-    let fail = |source| FeedError::Socket {
+    super::socket::bind_owner_only(path).map_err(|source| FeedError::Socket {
         path: path.to_path_buf(),
         source,
-    };
-    if std::fs::symlink_metadata(path).is_ok() {
-        if std::os::unix::net::UnixStream::connect(path).is_ok() {
-            return Err(fail(std::io::Error::new(
-                std::io::ErrorKind::AddrInUse,
-                "another daemon is serving this socket",
-            )));
-        }
-        std::fs::remove_file(path).map_err(fail)?;
-    }
-    let listener = UnixListener::bind(path).map_err(fail)?;
-    std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).map_err(fail)?;
-    Ok(listener)
+    })
 }
 
 /// Serves feeders one at a time until `shutdown`; the socket file is removed at the end.
@@ -169,55 +156,57 @@ pub async fn serve(
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_timestamped_log_becomes_a_schedule_from_time_zero() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-feed-{}", std::process::id()));
+    fn scratch(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let log = dir.join("log.nmea");
-        std::fs::write(
-            &log,
-            "100.000 $SDDBT,8.2,f,2.5,M,1.4,F*0E\n100.070 $PEBHS,1,2.5,90*71\n101.500 $SDDBT,9.9,f,3.0,M,1.6,F*02\n",
-        )
-        .unwrap();
-        let schedule = load_schedule(&log).unwrap();
-        let times: Vec<SimNanos> = schedule.iter().map(|(t, _)| *t).collect();
-        assert_eq!(times, vec![0, 70_000_000, 1_500_000_000]);
-        assert_eq!(&schedule[2].1[..], b"$SDDBT,9.9,f,3.0,M,1.6,F*02\r\n");
-        let missing = load_schedule(&dir.join("nope.nmea")).unwrap_err();
-        assert!(missing.to_string().contains("nope.nmea"), "{missing}");
-        std::fs::remove_dir_all(dir).unwrap();
+        dir
     }
 
-    /// A log without timestamps plays at 1 Hz from time 0; a timestamp that goes back is due
-    /// with the sentence before (never reordered); a comment is not a sentence.
+    /// The schedule's times for a log with this text.
+    fn times(dir: &Path, name: &str, text: &str) -> Vec<SimNanos> {
+        let log = dir.join(name);
+        std::fs::write(&log, text).unwrap();
+        load_schedule(&log)
+            .unwrap()
+            .iter()
+            .map(|(t, _)| *t)
+            .collect()
+    }
+
+    const DBT_A: &str = "$SDDBT,8.2,f,2.5,M,1.4,F*0E";
+    const DBT_B: &str = "$SDDBT,9.9,f,3.0,M,1.6,F*02";
+
+    /// A timestamped log plays from time 0 at its log times, and a time that goes back is
+    /// due with the sentence before (never reordered); a log without timestamps plays at
+    /// 1 Hz; a comment is not a sentence.
     #[test]
-    fn untimed_logs_play_at_1_hz_and_times_never_go_back() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-feed1hz-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let plain = dir.join("plain.nmea");
-        std::fs::write(
-            &plain,
-            "$SDDBT,8.2,f,2.5,M,1.4,F*0E\n# a comment\n$SDDBT,9.9,f,3.0,M,1.6,F*02\n$SDDBT,8.2,f,2.5,M,1.4,F*0E\n",
-        )
-        .unwrap();
-        let times: Vec<SimNanos> = load_schedule(&plain)
-            .unwrap()
-            .iter()
-            .map(|(t, _)| *t)
-            .collect();
-        assert_eq!(times, vec![0, UNTIMED_PERIOD_NS, 2 * UNTIMED_PERIOD_NS]);
-        let back = dir.join("back.nmea");
-        std::fs::write(
-            &back,
-            "10.0 $SDDBT,8.2,f,2.5,M,1.4,F*0E\n12.0 $SDDBT,9.9,f,3.0,M,1.6,F*02\n11.0 $SDDBT,8.2,f,2.5,M,1.4,F*0E\n",
-        )
-        .unwrap();
-        let times: Vec<SimNanos> = load_schedule(&back)
-            .unwrap()
-            .iter()
-            .map(|(t, _)| *t)
-            .collect();
-        assert_eq!(times, vec![0, 2_000_000_000, 2_000_000_000]);
+    fn a_log_becomes_a_schedule_from_time_zero() {
+        let dir = scratch("feed");
+        let second = UNTIMED_PERIOD_NS;
+        let cases = [
+            (
+                "timed.nmea",
+                format!("100.000 {DBT_A}\n100.070 $PEBHS,1,2.5,90*71\n101.500 {DBT_B}\n"),
+                vec![0, 70_000_000, 1_500_000_000],
+            ),
+            (
+                "back.nmea",
+                format!("10.0 {DBT_A}\n12.0 {DBT_B}\n11.0 {DBT_A}\n"),
+                vec![0, 2 * second, 2 * second],
+            ),
+            (
+                "plain.nmea",
+                format!("{DBT_A}\n# a comment\n{DBT_B}\n{DBT_A}\n"),
+                vec![0, second, 2 * second],
+            ),
+        ];
+        for (name, text, expected) in cases {
+            assert_eq!(times(&dir, name, &text), expected, "{name}");
+        }
+        let schedule = load_schedule(&dir.join("timed.nmea")).unwrap();
+        assert_eq!(&schedule[2].1[..], format!("{DBT_B}\r\n").as_bytes());
+        let missing = load_schedule(&dir.join("nope.nmea")).unwrap_err();
+        assert!(missing.to_string().contains("nope.nmea"), "{missing}");
         std::fs::remove_dir_all(dir).unwrap();
     }
 }

@@ -1,11 +1,13 @@
 //! The bridge daemon (`eyebot-hil run`): links, device emulators, the time model, recording
 //! and the process life cycle around the simulation.
 //!
-//! [`run`] is a library function: it takes the resolved configuration, a model, the options
-//! and a shutdown signal, and reports readiness through a callback. `main.rs` (through
-//! `cli::run`) only parses arguments, installs tracing and signal handlers and calls it, so
-//! tests run the daemon in-process. Time comes from tokio's clock, which tests can pause and
-//! advance; the model itself never reads a clock.
+//! A run has three stages, each a library call: [`Daemon::start`] (the resolved
+//! configuration, a model, the devices and the options in; endpoints open, tasks running
+//! out), [`Daemon::serve`] (until a shutdown future resolves) and [`Daemon::finish`] (a
+//! [`Summary`] out). [`run`] composes them and reports readiness through a callback;
+//! `main.rs` (through `cli::run`) only parses arguments, installs tracing and signal handlers
+//! and calls it, so tests run the daemon in-process. Time comes from tokio's clock, which
+//! tests can pause and advance; the model itself never reads a clock.
 
 pub mod clock;
 pub mod config;
@@ -15,6 +17,7 @@ pub mod link;
 pub mod pid_file;
 pub mod plant;
 pub mod shutdown;
+pub mod socket;
 pub mod status;
 
 use std::path::{Path, PathBuf};
@@ -27,7 +30,7 @@ use tokio::time::Instant;
 
 use self::clock::{RealtimeMap, TimeMode};
 use self::config::{DaemonConfig, Endpoint};
-use self::engine::{Engine, LineSpec, Model};
+use self::engine::{Carries, Engine, LineSpec, Model};
 use self::link::{EndpointError, Inbound, LineContext, LinkCounters, OpenEndpoint, Outbound};
 use self::pid_file::PidFile;
 use self::status::{LinkStatus, Pose, StatusServer, StatusSnapshot};
@@ -126,9 +129,10 @@ struct LineRuntime {
 /// [`Daemon::start`] brings it up, [`Daemon::serve`] runs the simulation loop until a
 /// shutdown future resolves, [`Daemon::finish`] flushes, closes and reports. Between them the
 /// caller can announce readiness ([`Daemon::links`], [`Daemon::status_socket`]). Services
-/// that run beside the links (the status socket, the sonar feed) are tokio tasks started in
-/// `start` with [`Daemon::stop_signal`] and joined in `finish`; a new service follows the
-/// same pattern.
+/// that run beside the links (the status socket, the sonar feed) are tokio tasks added with
+/// [`Daemon::spawn_service`], told to stop and joined in `finish`; a new one (a live view,
+/// reading [`Daemon::status_updates`]) is added the same way, in `start` or by the caller
+/// before `serve`.
 pub struct Daemon<M: Model> {
     config: DaemonConfig,
     engine: Engine<M>,
@@ -137,9 +141,9 @@ pub struct Daemon<M: Model> {
     link_tasks: Vec<tokio::task::JoinHandle<()>>,
     inbound: mpsc::Receiver<Inbound>,
     feed: mpsc::Receiver<feed::FeedEvent>,
-    feed_task: tokio::task::JoinHandle<()>,
     status: watch::Sender<StatusSnapshot>,
-    status_task: tokio::task::JoinHandle<()>,
+    /// Tasks beside the links (the status socket, the sonar feed), stopped by `stop`.
+    services: Vec<Service>,
     status_socket: PathBuf,
     /// Tells the link tasks and services to stop (sent by `finish`).
     stop: watch::Sender<bool>,
@@ -147,6 +151,12 @@ pub struct Daemon<M: Model> {
     record_dir: Option<PathBuf>,
     pid_file: Option<PidFile>,
     leftovers: shutdown::Leftovers,
+}
+
+/// A task that runs beside the links for the life of the daemon.
+struct Service {
+    name: &'static str,
+    task: tokio::task::JoinHandle<()>,
 }
 
 /// The loop's view of wall time in realtime mode, and when it next reports status.
@@ -176,39 +186,7 @@ impl<M: Model> Daemon<M> {
         let lockstep = config.time_mode == TimeMode::Lockstep;
         let leftovers = options.leftovers.clone();
 
-        let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;
-        let line_spec = |name, carries, link: &config::LinkConfig| LineSpec {
-            name,
-            carries,
-            settings: link.line,
-            tx_queue_bytes: link.tx_queue_bytes,
-            release_quantum_ns: config.release_quantum.as_nanos() as u64,
-        };
-        let mut specs = vec![line_spec(
-            if shared { "shared" } else { "sonar" },
-            engine::Carries {
-                sonar: true,
-                sensor: shared,
-            },
-            &config.sonar,
-        )];
-        let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, &run_dir).await?];
-        if !shared {
-            specs.push(line_spec(
-                "sensor",
-                engine::Carries {
-                    sonar: false,
-                    sensor: true,
-                },
-                &config.sensor,
-            ));
-            endpoints.push(OpenEndpoint::open("sensor", &config.sensor, &run_dir).await?);
-        }
-        for endpoint in &endpoints {
-            if let Some((path, target)) = endpoint.owned_link() {
-                leftovers.symlink(path, target);
-            }
-        }
+        let (specs, endpoints) = open_lines(config, &run_dir, &leftovers).await?;
         let status_socket = run_dir.join("status.sock");
         let status_server = StatusServer::bind(&status_socket)?;
         leftovers.socket(&status_socket);
@@ -240,57 +218,17 @@ impl<M: Model> Daemon<M> {
         }
 
         let (stop, stop_rx) = watch::channel(false);
-        let (in_tx, inbound) = mpsc::channel::<Inbound>(256);
-        let mut lines = Vec::new();
-        let mut links = Vec::new();
-        let mut link_tasks = Vec::new();
-        for (index, endpoint) in endpoints.into_iter().enumerate() {
-            let name = specs[index].name;
-            let describe = endpoint.describe();
-            links.push(LinkInfo {
-                name,
-                path: describe.clone(),
-            });
-            let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
-            let counters = Arc::new(LinkCounters::default());
-            let cx = LineContext {
-                line: index,
-                name,
-                counters: counters.clone(),
-                recorder: engine.recorder_handle(),
-            };
-            link_tasks.push(tokio::spawn(link::run_line(
-                cx,
-                endpoint,
-                in_tx.clone(),
-                out_rx,
-                stop_rx.clone(),
-            )));
-            lines.push(LineRuntime {
-                name,
-                describe,
-                to_link: out_tx,
-                counters,
-                backlog: bytes::BytesMut::new(),
-                backlog_limit: specs[index].tx_queue_bytes,
-            });
-        }
-        drop(in_tx);
+        let Spawned {
+            lines,
+            links,
+            link_tasks,
+            inbound,
+        } = spawn_link_tasks(&specs, endpoints, engine.recorder_handle(), &stop_rx);
 
         let (feed_tx, feed) = mpsc::channel(64);
-        let feed_task = tokio::spawn(feed::serve(
-            feed_listener,
-            feed_path,
-            feed_tx,
-            stop_rx.clone(),
-        ));
         let (status, status_rx) = watch::channel(StatusSnapshot::default());
-        let status_task = {
-            let stop_rx = stop_rx.clone();
-            tokio::spawn(async move { status_server.serve(status_rx, stop_rx).await })
-        };
         let started = Instant::now();
-        Ok(Self {
+        let mut daemon = Self {
             config: config.clone(),
             engine,
             lines,
@@ -298,9 +236,8 @@ impl<M: Model> Daemon<M> {
             link_tasks,
             inbound,
             feed,
-            feed_task,
             status,
-            status_task,
+            services: Vec::new(),
             status_socket,
             stop,
             pacing: LoopClock {
@@ -316,7 +253,35 @@ impl<M: Model> Daemon<M> {
             record_dir: options.record,
             pid_file,
             leftovers,
-        })
+        };
+        daemon.spawn_service("sonar feed", |stop| {
+            feed::serve(feed_listener, feed_path, feed_tx, stop)
+        });
+        daemon.spawn_service("status", |stop| async move {
+            status_server.serve(status_rx, stop).await
+        });
+        Ok(daemon)
+    }
+
+    /// Runs a service beside the links: `service` is given the stop signal (it turns true
+    /// in [`Daemon::finish`]) and must end soon after; one still running after
+    /// [`shutdown::SERVICES_BUDGET`] is aborted. A view of the run subscribes to
+    /// [`Daemon::status_updates`].
+    pub fn spawn_service<F>(
+        &mut self,
+        name: &'static str,
+        service: impl FnOnce(watch::Receiver<bool>) -> F,
+    ) where
+        F: Future<Output = ()> + Send + 'static,
+    {
+        let task = tokio::spawn(service(self.stop.subscribe()));
+        self.services.push(Service { name, task });
+    }
+
+    /// The latest status snapshot, refreshed every [`STATUS_PERIOD`] while serving: a
+    /// latest-wins channel, so a slow reader never holds the simulation up.
+    pub fn status_updates(&self) -> watch::Receiver<StatusSnapshot> {
+        self.status.subscribe()
     }
 
     /// The open links, in line order.
@@ -327,12 +292,6 @@ impl<M: Model> Daemon<M> {
     /// The status socket (`eyebot-hil status`).
     pub fn status_socket(&self) -> &Path {
         &self.status_socket
-    }
-
-    /// A receiver that turns true when [`Daemon::finish`] stops the tasks: for a service
-    /// spawned beside the links.
-    pub fn stop_signal(&self) -> watch::Receiver<bool> {
-        self.stop.subscribe()
     }
 
     /// Runs the simulation until `shutdown` resolves, every link task has ended, or the model
@@ -455,8 +414,19 @@ impl<M: Model> Daemon<M> {
         while let Ok(inbound) = self.inbound.try_recv() {
             self.engine.record_unprocessed(inbound.line, &inbound.data);
         }
-        self.status_task.abort();
-        let _ = tokio::time::timeout(Duration::from_millis(200), &mut self.feed_task).await;
+        let services_deadline = Instant::now() + shutdown::SERVICES_BUDGET;
+        for mut service in std::mem::take(&mut self.services) {
+            if tokio::time::timeout_at(services_deadline, &mut service.task)
+                .await
+                .is_err()
+            {
+                tracing::warn!(
+                    service = service.name,
+                    "a service did not stop in time; aborting it"
+                );
+                service.task.abort();
+            }
+        }
         let records = match self.engine.take_recorder() {
             Some(recorder) => Some(recorder.finish()?),
             None => None,
@@ -469,6 +439,96 @@ impl<M: Model> Daemon<M> {
             overruns,
         })
     }
+}
+
+/// The lines the configuration asks for, each with its endpoint opened: the sonar line
+/// (carrying the sensor link too when it is shared), then the sensor line. Symlinks we own
+/// are noted in `leftovers`.
+async fn open_lines(
+    config: &DaemonConfig,
+    run_dir: &Path,
+    leftovers: &shutdown::Leftovers,
+) -> Result<(Vec<LineSpec>, Vec<OpenEndpoint>), DaemonError> {
+    let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;
+    let line_spec = |name, carries, link: &config::LinkConfig| LineSpec {
+        name,
+        carries,
+        settings: link.line,
+        tx_queue_bytes: link.tx_queue_bytes,
+        release_quantum_ns: config.release_quantum.as_nanos() as u64,
+    };
+    let mut specs = vec![if shared {
+        line_spec("shared", Carries::SHARED, &config.sonar)
+    } else {
+        line_spec("sonar", Carries::SONAR, &config.sonar)
+    }];
+    let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, run_dir).await?];
+    if !shared {
+        specs.push(line_spec("sensor", Carries::SENSOR, &config.sensor));
+        endpoints.push(OpenEndpoint::open("sensor", &config.sensor, run_dir).await?);
+    }
+    for endpoint in &endpoints {
+        if let Some((path, target)) = endpoint.owned_link() {
+            leftovers.symlink(path, target);
+        }
+    }
+    Ok((specs, endpoints))
+}
+
+/// What [`spawn_link_tasks`] started.
+struct Spawned {
+    lines: Vec<LineRuntime>,
+    links: Vec<LinkInfo>,
+    link_tasks: Vec<tokio::task::JoinHandle<()>>,
+    /// Everything the link tasks read, in arrival order.
+    inbound: mpsc::Receiver<Inbound>,
+}
+
+/// One link task per line, on its endpoint; the loop's side of each in `lines`.
+fn spawn_link_tasks(
+    specs: &[LineSpec],
+    endpoints: Vec<OpenEndpoint>,
+    recorder: Option<crate::record::RecordHandle>,
+    stop: &watch::Receiver<bool>,
+) -> Spawned {
+    let (in_tx, inbound) = mpsc::channel::<Inbound>(256);
+    let mut spawned = Spawned {
+        lines: Vec::new(),
+        links: Vec::new(),
+        link_tasks: Vec::new(),
+        inbound,
+    };
+    for ((index, endpoint), spec) in endpoints.into_iter().enumerate().zip(specs) {
+        let describe = endpoint.describe();
+        spawned.links.push(LinkInfo {
+            name: spec.name,
+            path: describe.clone(),
+        });
+        let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
+        let counters = Arc::new(LinkCounters::default());
+        let cx = LineContext {
+            line: index,
+            name: spec.name,
+            counters: counters.clone(),
+            recorder: recorder.clone(),
+        };
+        spawned.link_tasks.push(tokio::spawn(link::run_line(
+            cx,
+            endpoint,
+            in_tx.clone(),
+            out_rx,
+            stop.clone(),
+        )));
+        spawned.lines.push(LineRuntime {
+            name: spec.name,
+            describe,
+            to_link: out_tx,
+            counters,
+            backlog: bytes::BytesMut::new(),
+            backlog_limit: spec.tx_queue_bytes,
+        });
+    }
+    spawned
 }
 
 impl LoopClock {
@@ -695,6 +755,47 @@ mod tests {
         }
     }
 
+    /// `run` on a fake model with the test devices, as a task.
+    fn spawn_run(
+        config: DaemonConfig,
+        options: RunOptions,
+        stop: watch::Receiver<bool>,
+        on_ready: impl FnMut(Readiness) + Send + 'static,
+    ) -> tokio::task::JoinHandle<Result<Summary, DaemonError>> {
+        let (board, mux) = devices();
+        tokio::spawn(async move {
+            run(
+                &config,
+                FakeModel::default(),
+                board,
+                mux,
+                options,
+                stop,
+                on_ready,
+            )
+            .await
+        })
+    }
+
+    /// Sends `message` as frame `seq` on the sensor link and returns the reply to it.
+    async fn ask(
+        (port, buf, decoder): &mut (
+            &mut tokio_serial::SerialStream,
+            &mut BytesMut,
+            &mut LineDecoder,
+        ),
+        seq: u8,
+        message: Message,
+    ) -> Message {
+        let mut frame = BytesMut::new();
+        Frame::new(seq, message).encode(&mut frame);
+        port.write_all(&frame).await.unwrap();
+        match read_item(port, buf, decoder).await {
+            LineItem::Frame(reply) if reply.seq == seq => reply.message,
+            other => panic!("expected the reply to frame {seq}, got {other:?}"),
+        }
+    }
+
     /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
     /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
     /// the time; shutdown removes the links and finishes the recording.
@@ -704,7 +805,6 @@ mod tests {
     /// in the one-hour run at speed 100 of `bench daemon rss`). Now they wait in a backlog.
     #[test]
     fn released_bytes_wait_for_a_busy_link_task_instead_of_being_dropped() {
-        use crate::daemon::engine::Carries;
         let (board, mux) = devices();
         let spec = |name, sonar, baud| LineSpec {
             name,
@@ -767,26 +867,70 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         let mut config = config(&dir.join("run"));
         config.time_mode = TimeMode::Realtime { speed: 10.0 };
-        let (board, mux) = devices();
         let (stop_tx, stop_rx) = watch::channel(false);
-        let daemon = tokio::spawn(async move {
-            run(
-                &config,
-                FakeModel::default(),
-                board,
-                mux,
-                RunOptions::default(),
-                stop_rx,
-                |_| {},
-            )
-            .await
-        });
+        let daemon = spawn_run(config, RunOptions::default(), stop_rx, |_| {});
         tokio::time::sleep(Duration::from_secs(1)).await;
         stop_tx.send(true).unwrap();
         let summary = daemon.await.unwrap().unwrap();
         // 10 s in an ideal world; a loaded machine may slip a little (counted overruns).
         assert!(summary.sim_time_s >= 5.0, "1 s at speed 10: {summary:?}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The three stages on their own: after `start` the links exist before anything is
+    /// served; a service added with `spawn_service` runs beside them and is told to stop by
+    /// `finish`; `serve` returns when its shutdown future resolves, having published status.
+    #[tokio::test]
+    async fn start_serve_finish_run_a_service_beside_the_links() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-stages-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let run_dir = dir.join("run");
+        let config = config(&run_dir);
+        let (board, mux) = devices();
+        let mut daemon = Daemon::start(
+            &config,
+            FakeModel::default(),
+            board,
+            mux,
+            RunOptions::default(),
+        )
+        .await
+        .unwrap();
+        let names: Vec<&str> = daemon.links().iter().map(|l| l.name).collect();
+        assert_eq!(names, ["sonar", "sensor"]);
+        assert!(std::fs::symlink_metadata(run_dir.join("sensor")).is_ok());
+        assert_eq!(daemon.status_socket(), run_dir.join("status.sock"));
+        let (told_tx, told_rx) = tokio::sync::oneshot::channel();
+        daemon.spawn_service("test", |mut stop| async move {
+            let _ = stop.wait_for(|stop| *stop).await;
+            let _ = told_tx.send(());
+        });
+        let mut updates = daemon.status_updates();
+        daemon
+            .serve(tokio::time::sleep(STATUS_PERIOD * 2))
+            .await
+            .unwrap();
+        assert!(
+            updates.has_changed().unwrap(),
+            "status published while serving"
+        );
+        assert_eq!(updates.borrow_and_update().links.len(), 2);
+        let summary = daemon.finish().await.unwrap();
+        assert_eq!(
+            summary.sim_time_s, 0.0,
+            "lockstep without a client stays at 0"
+        );
+        tokio::time::timeout(Duration::from_secs(1), told_rx)
+            .await
+            .expect("the service stopped within its budget")
+            .expect("the service was told to stop");
+        for name in ["sonar", "sensor", "status.sock", feed::FEED_SOCKET] {
+            assert!(
+                std::fs::symlink_metadata(run_dir.join(name)).is_err(),
+                "{name} removed"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[tokio::test]
@@ -796,7 +940,6 @@ mod tests {
         let run_dir = dir.join("run");
         let record = dir.join("rec");
         let config = config(&run_dir);
-        let (board, mux) = devices();
         let (stop_tx, stop_rx) = watch::channel(false);
         let (ready_tx, mut ready_rx) = mpsc::unbounded_channel();
         let options = RunOptions {
@@ -806,19 +949,8 @@ mod tests {
             ..RunOptions::default()
         };
         std::fs::create_dir_all(&dir).unwrap();
-        let daemon = tokio::spawn(async move {
-            run(
-                &config,
-                FakeModel::default(),
-                board,
-                mux,
-                options,
-                stop_rx,
-                move |r| {
-                    let _ = ready_tx.send(r);
-                },
-            )
-            .await
+        let daemon = spawn_run(config, options, stop_rx, move |r| {
+            let _ = ready_tx.send(r);
         });
         let mut links = Vec::new();
         while let Readiness::Link { name, path } =
@@ -843,42 +975,18 @@ mod tests {
         )
         .unwrap();
         let (mut sbuf, mut sdec) = (BytesMut::new(), LineDecoder::new());
-        let send = |seq, message| {
-            let mut b = BytesMut::new();
-            Frame::new(seq, message).encode(&mut b);
-            b
-        };
-        sensor
-            .write_all(&send(1, Message::Hello { client_version: 1 }))
-            .await
-            .unwrap();
+        let mut sensor_link = (&mut sensor, &mut sbuf, &mut sdec);
         assert!(matches!(
-            read_item(&mut sensor, &mut sbuf, &mut sdec).await,
-            LineItem::Frame(Frame {
-                seq: 1,
-                message: Message::HelloReply { .. }
-            })
+            ask(&mut sensor_link, 1, Message::Hello { client_version: 1 }).await,
+            Message::HelloReply { .. }
         ));
         let mut select = BytesMut::new();
         SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
         sonar.write_all(&select).await.unwrap();
         // Give the select time to cross its pty before time moves on.
         tokio::time::sleep(Duration::from_millis(100)).await;
-        sensor
-            .write_all(&send(2, Message::TimeAdvance { ticks: 150 }))
-            .await
-            .unwrap();
-        let time = read_item(&mut sensor, &mut sbuf, &mut sdec).await;
-        assert!(
-            matches!(
-                time,
-                LineItem::Frame(Frame {
-                    seq: 2,
-                    message: Message::Time { ticks: 150, .. }
-                })
-            ),
-            "{time:?}"
-        );
+        let time = ask(&mut sensor_link, 2, Message::TimeAdvance { ticks: 150 }).await;
+        assert!(matches!(time, Message::Time { ticks: 150, .. }), "{time:?}");
         let (mut nbuf, mut ndec) = (BytesMut::new(), LineDecoder::new());
         assert!(matches!(
             read_item(&mut sonar, &mut nbuf, &mut ndec).await,
@@ -907,17 +1015,8 @@ mod tests {
         .await
         .unwrap();
         tokio::time::sleep(Duration::from_millis(200)).await;
-        sensor
-            .write_all(&send(3, Message::TimeAdvance { ticks: 50 }))
-            .await
-            .unwrap();
-        assert!(matches!(
-            read_item(&mut sensor, &mut sbuf, &mut sdec).await,
-            LineItem::Frame(Frame {
-                seq: 3,
-                message: Message::Time { ticks: 200, .. }
-            })
-        ));
+        let time = ask(&mut sensor_link, 3, Message::TimeAdvance { ticks: 50 }).await;
+        assert!(matches!(time, Message::Time { ticks: 200, .. }), "{time:?}");
         let fed = read_item(&mut sonar, &mut nbuf, &mut ndec).await;
         let LineItem::Nmea(firmware_protocol::Sentence::Dbt(dbt)) = fed else {
             panic!("expected the fed DBT, got {fed:?}")

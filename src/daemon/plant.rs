@@ -356,10 +356,7 @@ mod tests {
         let (board, mux) = devices(&config);
         let lines = [LineSpec {
             name: "sonar",
-            carries: Carries {
-                sonar: true,
-                sensor: false,
-            },
+            carries: Carries::SONAR,
             settings: LineSettings::n81(4800),
             tx_queue_bytes: 4096,
             release_quantum_ns: 1_000_000,
