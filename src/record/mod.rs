@@ -573,6 +573,16 @@ mod tests {
         .unwrap();
         let e = read_bytes(&dir).unwrap_err().to_string();
         assert!(e.contains("bytes.tsv line 2: unknown variant `up`"), "{e}");
+        std::fs::write(
+            dir.join("state.csv"),
+            format!("{good}NaN{}\n", ",0".repeat(17)),
+        )
+        .unwrap();
+        let e = read_state(&dir).unwrap_err().to_string();
+        assert!(
+            e.contains("state.csv line 3: column `t_s`: expected a finite"),
+            "{e}"
+        );
         std::fs::remove_dir_all(dir).unwrap();
     }
 
