@@ -1,7 +1,8 @@
 //! `--record DIR`: every byte on every link, and the ground-truth vehicle state.
 //!
-//! The files and their serde types are in [`format`](mod@format) (specified in `docs/recording.md`);
-//! `replay`, `gap convert` and the test harness read them through its readers. In short:
+//! The files and their serde types are in [`format`](mod@format) (specified in
+//! `docs/recording.md`); `replay`, `gap convert` and the test harness read them through its
+//! readers. In short:
 //!
 //! - `meta.toml` ([`Meta`]): what produced the recording (format, version, seed, time mode).
 //! - `config.toml`: the daemon configuration of the run, verbatim.
