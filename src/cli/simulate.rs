@@ -127,3 +127,35 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `simulate` writes the rows of a recording's `state.csv`: the state reader takes its
+    /// trace, one row per 10 ms step from t = 0, thrust in newtons once the motors run.
+    #[test]
+    fn the_trace_reads_back_as_state_rows() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-simulate-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("run.csv");
+        let args = SimulateArgs {
+            experiment: Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("configs/experiments/acceleration.toml"),
+            model: None,
+            world: None,
+            seed: 1,
+            out: out.clone(),
+        };
+        run(&args).unwrap();
+        let rows = crate::record::read_state_file(&out).unwrap();
+        assert!(rows.len() > 1000, "{} rows", rows.len());
+        assert_eq!(rows[0].t_s, 0.0);
+        assert!((rows[1].t_s - 0.01).abs() < 1e-12, "{:?}", rows[1]);
+        assert!(
+            rows.iter().any(|r| r.force_port_n > 1.0),
+            "the thrusters push"
+        );
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+}

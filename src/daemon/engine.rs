@@ -20,7 +20,7 @@ use crate::devices::Plant;
 use crate::devices::multiplexer::{Multiplexer, MultiplexerCounters};
 use crate::devices::sensor_board::{Output, SensorBoard};
 use crate::physics::state::VehicleState;
-use crate::record::{Direction, DropReason, Recorder};
+use crate::record::{Direction, Recorder};
 use crate::transport::LineSettings;
 use crate::transport::pacer::WirePacer;
 
@@ -525,23 +525,6 @@ impl<M: Model> Engine<M> {
             rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Tx, &data);
         }
         Some(data)
-    }
-
-    /// Counts (and records, in `drops.tsv`) released bytes the endpoint could not take.
-    pub fn note_dropped(&mut self, line: usize, data: &[u8], reason: DropReason) {
-        let Some(l) = self.lines.get_mut(line) else {
-            return;
-        };
-        l.counters.dropped_tx += data.len() as u64;
-        tracing::debug!(
-            line = l.name,
-            bytes = data.len(),
-            reason = reason.as_str(),
-            "dropped"
-        );
-        if let Some(rec) = &self.recorder {
-            rec.dropped(self.now as f64 * 1e-9, l.name, reason, data);
-        }
     }
 
     /// A handle on the recorder for the link tasks, when recording.

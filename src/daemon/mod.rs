@@ -114,10 +114,10 @@ pub struct LinkInfo {
 }
 
 struct LineRuntime {
-    name: &'static str,
+    /// The line's name, counters and recorder, shared with its link task.
+    cx: LineContext,
     describe: String,
     to_link: mpsc::Sender<Outbound>,
-    counters: Arc<LinkCounters>,
     /// Released bytes the link task has not taken yet, sent as one chunk when it has room.
     backlog: bytes::BytesMut,
     /// Beyond this many waiting bytes the client is taken for not reading: drop and count.
@@ -509,21 +509,20 @@ fn spawn_link_tasks(
         let cx = LineContext {
             line: index,
             name: spec.name,
-            counters: counters.clone(),
+            counters,
             recorder: recorder.clone(),
         };
         spawned.link_tasks.push(tokio::spawn(link::run_line(
-            cx,
+            cx.clone(),
             endpoint,
             in_tx.clone(),
             out_rx,
             stop.clone(),
         )));
         spawned.lines.push(LineRuntime {
-            name: spec.name,
+            cx,
             describe,
             to_link: out_tx,
-            counters,
             backlog: bytes::BytesMut::new(),
             backlog_limit: spec.tx_queue_bytes,
         });
@@ -620,10 +619,12 @@ fn flush_outputs<M: Model>(core: &mut Engine<M>, lines: &mut [LineRuntime]) {
             }
             Err(mpsc::error::TrySendError::Full(chunk)) => {
                 line.backlog.extend_from_slice(&chunk.data[..waiting]);
-                core.note_dropped(index, &chunk.data[waiting..], DropReason::NotRead);
+                line.cx
+                    .dropped(sim_s, DropReason::NotRead, &chunk.data[waiting..]);
             }
             Err(mpsc::error::TrySendError::Closed(chunk)) => {
-                core.note_dropped(index, &chunk.data, DropReason::EndpointGone);
+                line.cx
+                    .dropped(sim_s, DropReason::EndpointGone, &chunk.data);
             }
         }
     }
@@ -653,15 +654,15 @@ fn snapshot<M: Model>(
             .map(|(i, l)| {
                 let c = core.line_counters(i);
                 LinkStatus {
-                    name: l.name.to_string(),
+                    name: l.cx.name.to_string(),
                     path: l.describe.clone(),
-                    bytes_rx: l.counters.bytes_rx.load(Ordering::Relaxed),
-                    bytes_tx: l.counters.bytes_tx.load(Ordering::Relaxed),
+                    bytes_rx: l.cx.counters.bytes_rx.load(Ordering::Relaxed),
+                    bytes_tx: l.cx.counters.bytes_tx.load(Ordering::Relaxed),
                     frames_rx: c.frames_rx,
                     frames_tx: c.frames_tx,
-                    errors: c.errors + l.counters.io_errors.load(Ordering::Relaxed),
-                    dropped_tx: c.dropped_tx + l.counters.dropped_tx.load(Ordering::Relaxed),
-                    reconnects: l.counters.reconnects.load(Ordering::Relaxed),
+                    errors: c.errors + l.cx.counters.io_errors.load(Ordering::Relaxed),
+                    dropped_tx: c.dropped_tx + l.cx.counters.dropped_tx.load(Ordering::Relaxed),
+                    reconnects: l.cx.counters.reconnects.load(Ordering::Relaxed),
                 }
             })
             .collect(),
@@ -821,15 +822,22 @@ mod tests {
         // A link task that takes one chunk and then stalls: a channel with room for one.
         let (sonar_tx, _sonar_rx) = mpsc::channel(1);
         let (sensor_tx, mut sensor_rx) = mpsc::channel(1);
-        let runtime = |name, to_link| LineRuntime {
-            name,
+        let runtime = |line, name, to_link| LineRuntime {
+            cx: LineContext {
+                line,
+                name,
+                counters: Arc::default(),
+                recorder: None,
+            },
             describe: String::new(),
             to_link,
-            counters: Arc::default(),
             backlog: bytes::BytesMut::new(),
             backlog_limit: 4096,
         };
-        let mut lines = vec![runtime("sonar", sonar_tx), runtime("sensor", sensor_tx)];
+        let mut lines = vec![
+            runtime(0, "sonar", sonar_tx),
+            runtime(1, "sensor", sensor_tx),
+        ];
         let mut stream = BytesMut::new();
         Frame::new(
             1,
@@ -852,7 +860,7 @@ mod tests {
                 }
             }
         }
-        assert_eq!(core.line_counters(1).dropped_tx, 0);
+        assert_eq!(lines[1].cx.counters.dropped_tx.load(Ordering::Relaxed), 0);
         // The ACK and about 100 samples of 14 bytes, all delivered.
         assert!(delivered > 1300, "{delivered} bytes delivered");
     }

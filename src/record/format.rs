@@ -405,11 +405,13 @@ fn describe_csv_error(e: &csv::Error, headers: &csv::StringRecord) -> String {
     }
 }
 
-/// Reads every row of one of the recording's tables, checking the header first.
+/// Reads every row of one of the recording's tables, checking the header first and each row
+/// with `check` (which says what is wrong with a row that parsed).
 fn read_table<T: serde::de::DeserializeOwned>(
     path: &Path,
     delimiter: u8,
     header: &str,
+    check: impl Fn(&T) -> Result<(), String>,
 ) -> Result<Vec<T>, ReadError> {
     let file = std::fs::File::open(path).map_err(io_error(path))?;
     let mut reader = csv::ReaderBuilder::new()
@@ -439,26 +441,51 @@ fn read_table<T: serde::de::DeserializeOwned>(
         ));
     }
     let mut rows = Vec::new();
-    for row in reader.deserialize() {
-        match row {
-            Ok(row) => rows.push(row),
+    let mut record = csv::StringRecord::new();
+    loop {
+        match reader.read_record(&mut record) {
+            Ok(true) => {}
+            Ok(false) => return Ok(rows),
             Err(e) => {
                 let line = e.position().map_or(0, csv::Position::line);
                 return Err(line_error(line, describe_csv_error(&e, &headers)));
             }
         }
+        let line = record.position().map_or(0, csv::Position::line);
+        let row: T = record
+            .deserialize(Some(&headers))
+            .map_err(|e| line_error(line, describe_csv_error(&e, &headers)))?;
+        check(&row).map_err(|problem| line_error(line, problem))?;
+        rows.push(row);
     }
-    Ok(rows)
+}
+
+/// A simulated time must be a finite number of seconds.
+fn finite_time(column: &str, value: f64) -> Result<(), String> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(format!(
+            "column `{column}`: expected a finite time in seconds, found {value}"
+        ))
+    }
 }
 
 /// Reads `bytes.tsv` of the recording in `dir`, in the order the chunks crossed.
 pub fn read_bytes(dir: &Path) -> Result<Vec<ByteChunk>, ReadError> {
-    read_table(&dir.join(BYTES_FILE), b'\t', BYTES_HEADER)
+    read_table(
+        &dir.join(BYTES_FILE),
+        b'\t',
+        BYTES_HEADER,
+        |c: &ByteChunk| finite_time("sim_s", c.sim_s),
+    )
 }
 
 /// Reads `drops.tsv` of the recording in `dir`.
 pub fn read_drops(dir: &Path) -> Result<Vec<DropRow>, ReadError> {
-    read_table(&dir.join(DROPS_FILE), b'\t', DROPS_HEADER)
+    read_table(&dir.join(DROPS_FILE), b'\t', DROPS_HEADER, |d: &DropRow| {
+        finite_time("sim_s", d.sim_s)
+    })
 }
 
 /// Reads `state.csv` of the recording in `dir`.
@@ -468,7 +495,9 @@ pub fn read_state(dir: &Path) -> Result<Vec<StateRow>, ReadError> {
 
 /// Reads state rows from the file at `path` (a `state.csv`, or a `simulate` trace).
 pub fn read_state_file(path: &Path) -> Result<Vec<StateRow>, ReadError> {
-    read_table(path, b',', STATE_HEADER)
+    read_table(path, b',', STATE_HEADER, |r: &StateRow| {
+        finite_time("t_s", r.t_s)
+    })
 }
 
 /// A table writer of the recording's layout: `delimiter`-separated, the header written at

@@ -1,7 +1,8 @@
 //! `--record DIR`: every byte on every link, and the ground-truth vehicle state.
 //!
-//! The files and their serde types are in [`format`] (specified in `docs/recording.md`);
-//! `replay`, `gap convert` and the test harness read them through its readers. In short:
+//! The files and their serde types are in [`format`](mod@format) (specified in
+//! `docs/recording.md`); `replay`, `gap convert` and the test harness read them through its
+//! readers. In short:
 //!
 //! - `meta.toml` ([`Meta`]): what produced the recording (format, version, seed, time mode).
 //! - `config.toml`: the daemon configuration of the run, verbatim.
@@ -101,20 +102,44 @@ impl RecordHandle {
         }
     }
 
-    /// Records bytes put on `link` at simulated time `sim_s` that never reached the endpoint.
-    pub fn dropped(&self, sim_s: f64, link: &'static str, reason: DropReason, data: &[u8]) {
-        if data.is_empty() {
-            return;
+    /// Records bytes that crossed `link` at simulated time `sim_s` (`bytes.tsv`).
+    pub fn bytes(&self, sim_s: f64, link: &'static str, dir: Direction, data: &[u8]) {
+        if !data.is_empty() {
+            let (wall_unix_s, link, data) = (wall_unix_s(), link.to_string(), data.to_vec());
+            self.send_or_log(
+                Message::Bytes(ByteChunk {
+                    sim_s,
+                    wall_unix_s,
+                    link,
+                    dir,
+                    data,
+                }),
+                "bytes",
+            );
         }
-        let sent = self.send(Message::Dropped(DropRow {
-            sim_s,
-            wall_unix_s: wall_unix_s(),
-            link: link.to_string(),
-            reason,
-            data: data.to_vec(),
-        }));
-        if !sent {
-            tracing::error!("recorder thread is gone; drop not recorded");
+    }
+
+    /// Records bytes put on `link` at simulated time `sim_s` that never reached the endpoint
+    /// (`drops.tsv`).
+    pub fn dropped(&self, sim_s: f64, link: &'static str, reason: DropReason, data: &[u8]) {
+        if !data.is_empty() {
+            let (wall_unix_s, link, data) = (wall_unix_s(), link.to_string(), data.to_vec());
+            self.send_or_log(
+                Message::Dropped(DropRow {
+                    sim_s,
+                    wall_unix_s,
+                    link,
+                    reason,
+                    data,
+                }),
+                "drop",
+            );
+        }
+    }
+
+    fn send_or_log(&self, message: Message, what: &str) {
+        if !self.send(message) {
+            tracing::error!("recorder thread is gone; {what} not recorded");
         }
     }
 }
@@ -269,19 +294,7 @@ impl Recorder {
 
     /// Records bytes that crossed `link` at simulated time `sim_s`.
     pub fn bytes(&self, sim_s: f64, link: &'static str, dir: Direction, data: &[u8]) {
-        if data.is_empty() {
-            return;
-        }
-        let sent = self.handle.send(Message::Bytes(ByteChunk {
-            sim_s,
-            wall_unix_s: wall_unix_s(),
-            link: link.to_string(),
-            dir,
-            data: data.to_vec(),
-        }));
-        if !sent {
-            tracing::error!("recorder thread is gone; bytes not recorded");
-        }
+        self.handle.bytes(sim_s, link, dir, data);
     }
 
     /// Records bytes put on `link` that never reached the endpoint (`drops.tsv`).
@@ -291,9 +304,7 @@ impl Recorder {
 
     /// Records one ground-truth row.
     pub fn state(&self, row: StateRow) {
-        if !self.handle.send(Message::State(row)) {
-            tracing::error!("recorder thread is gone; state not recorded");
-        }
+        self.handle.send_or_log(Message::State(row), "state");
     }
 
     /// Flushes and syncs everything, stops the thread and returns what was written.
@@ -563,6 +574,16 @@ mod tests {
         .unwrap();
         let e = read_bytes(&dir).unwrap_err().to_string();
         assert!(e.contains("bytes.tsv line 2: unknown variant `up`"), "{e}");
+        std::fs::write(
+            dir.join("state.csv"),
+            format!("{good}NaN{}\n", ",0".repeat(17)),
+        )
+        .unwrap();
+        let e = read_state(&dir).unwrap_err().to_string();
+        assert!(
+            e.contains("state.csv line 3: column `t_s`: expected a finite"),
+            "{e}"
+        );
         std::fs::remove_dir_all(dir).unwrap();
     }
 

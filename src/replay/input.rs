@@ -549,15 +549,8 @@ impl Source {
             let text = trimmed.to_vec();
             self.comment(loc, &text, terminator);
         } else if form == TimestampForm::None {
-            self.queue.push_back(Event::Line(LogLine {
-                loc,
-                input: self.input,
-                time_ns: None,
-                bytes: std::mem::take(&mut p.bytes),
-                terminator,
-                overflow,
-                kind: LineKind::Data,
-            }));
+            let bytes = std::mem::take(&mut p.bytes);
+            self.push_data(loc, None, bytes, terminator, overflow);
         } else {
             let parsed = split_prefix(&p.bytes).and_then(|(prefix, rest)| {
                 let t = match form {
@@ -569,15 +562,7 @@ impl Source {
             match parsed {
                 Some((time_ns, bytes)) => {
                     self.check_time(&loc, time_ns);
-                    self.queue.push_back(Event::Line(LogLine {
-                        loc,
-                        input: self.input,
-                        time_ns: Some(time_ns),
-                        bytes,
-                        terminator,
-                        overflow,
-                        kind: LineKind::Data,
-                    }));
+                    self.push_data(loc, Some(time_ns), bytes, terminator, overflow);
                 }
                 None => {
                     let shown = p.bytes.iter().take(24).copied().collect::<Vec<u8>>();
@@ -594,6 +579,26 @@ impl Source {
         }
         self.buf = p.bytes;
         Ok(())
+    }
+
+    /// Queues a data line of this input.
+    fn push_data(
+        &mut self,
+        loc: Loc,
+        time_ns: Option<i64>,
+        bytes: Vec<u8>,
+        terminator: Terminator,
+        overflow: Option<usize>,
+    ) {
+        self.queue.push_back(Event::Line(LogLine {
+            loc,
+            input: self.input,
+            time_ns,
+            bytes,
+            terminator,
+            overflow,
+            kind: LineKind::Data,
+        }));
     }
 
     fn check_time(&mut self, loc: &Loc, time_ns: i64) {
@@ -687,15 +692,8 @@ impl Source {
             return;
         }
         self.check_time(&loc, time_ns);
-        self.queue.push_back(Event::Line(LogLine {
-            loc,
-            input: self.input,
-            time_ns: Some(time_ns),
-            bytes,
-            terminator,
-            overflow: (total > MAX_PHYSICAL_LINE).then_some(total),
-            kind: LineKind::Data,
-        }));
+        let overflow = (total > MAX_PHYSICAL_LINE).then_some(total);
+        self.push_data(loc, Some(time_ns), bytes, terminator, overflow);
     }
 }
 

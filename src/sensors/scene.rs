@@ -2,7 +2,7 @@
 //! rows (`thesis::sensors`, where a wall stands at a known distance) and of the sensor
 //! tests. The daemon uses the physics crate's rapier3d pool; all implement [`RayCaster`].
 //!
-//! [`BoxPool`], a stand-in for that pool in tests and benchmarks, is a test double: it is
+//! `BoxPool`, a stand-in for that pool in tests and benchmarks, is a test double: it is
 //! compiled for this crate's tests and, through the `test-support` feature, for other
 //! crates' tests and benchmarks, never into the binary.
 

@@ -138,3 +138,35 @@ impl Drop for WakeGuard {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn policy() -> i32 {
+        // SAFETY: a plain query of the calling thread's policy.
+        unsafe { libc::sched_getscheduler(0) }
+    }
+
+    /// The guard raises the acquiring thread and hands it back to the default scheduler when
+    /// dropped; without the privilege it says why and leaves the thread as it was.
+    #[test]
+    fn the_guard_raises_the_thread_and_hands_it_back() {
+        let before = policy();
+        let guard = WakeGuard::acquire(None, Some(1));
+        match guard.realtime_priority() {
+            Some(priority) => {
+                assert_eq!(priority, 1);
+                assert_eq!(policy(), libc::SCHED_FIFO);
+                assert!(guard.refusals().is_empty());
+            }
+            None => {
+                assert_eq!(policy(), before);
+                assert!(guard.refusals()[0].contains("SCHED_FIFO"), "{guard:?}");
+            }
+        }
+        assert_eq!(guard.cpu_latency_us(), None, "nothing asked, nothing held");
+        drop(guard);
+        assert_eq!(policy(), libc::SCHED_OTHER);
+    }
+}
