@@ -15,7 +15,14 @@
 //!   releasing replies byte by byte would cost.
 //! - `rss`: resident memory over one simulated hour at speed 100 with a client.
 //!
-//! `cargo bench -p pty-tests --bench daemon [-- adc|nmea|cpu|rss]` (all by default).
+//! The binary measured is the one `EYEBOT_HIL_BIN` names, built by the same command:
+//!
+//! ```sh
+//! cargo build --release --bin eyebot-hil
+//! EYEBOT_HIL_BIN=target/release/eyebot-hil cargo bench -p pty-tests --bench daemon [-- adc|nmea|cpu|rss]
+//! ```
+//!
+//! (all four by default).
 
 use std::io::{Read, Write};
 use std::os::fd::AsFd;
@@ -23,10 +30,25 @@ use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
 use eyebot_hil::record::Direction;
+use eyebot_test_support::clients::open_raw;
+use eyebot_test_support::daemon::link_status;
+use eyebot_test_support::process::clock_ticks_per_s;
+use eyebot_test_support::recording::read_chunks;
+use eyebot_test_support::{Daemon, RunningDaemon, TempDir};
 use firmware_protocol::Frame;
 use firmware_protocol::sensor_link::{AdcChannel, Message};
 use nix::sys::termios;
-use pty_tests::daemon::{DaemonProcess, TestDir, link_status, open_raw, read_chunks};
+
+/// The binary under measurement, from `EYEBOT_HIL_BIN` (see the crate doc).
+fn binary() -> String {
+    std::env::var("EYEBOT_HIL_BIN").unwrap_or_else(|_| {
+        panic!(
+            "set EYEBOT_HIL_BIN to the eyebot-hil binary to measure: cargo build --release \
+             --bin eyebot-hil && EYEBOT_HIL_BIN=target/release/eyebot-hil cargo bench -p \
+             pty-tests --bench daemon"
+        )
+    })
+}
 
 fn frame(seq: u8, message: Message) -> Vec<u8> {
     let mut b = BytesMut::new();
@@ -85,7 +107,7 @@ fn pty_echo_baseline() -> Vec<f64> {
 
 /// `--config` arguments for a run with `release_quantum_ms = quantum_ms` (None: the default)
 /// and the scheduler requests of [`scheduler_lines`].
-fn quantum_args(dir: &TestDir, quantum_ms: Option<f64>) -> Vec<String> {
+fn quantum_args(dir: &TempDir, quantum_ms: Option<f64>) -> Vec<String> {
     let mut args = vec!["--time-mode".to_string(), "realtime".to_string()];
     let extra = scheduler_lines();
     if quantum_ms.is_some() || !extra.is_empty() {
@@ -165,12 +187,12 @@ fn adc() {
 }
 
 fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
-    let dir = TestDir::new("bench-adc");
+    let dir = TempDir::new("bench-adc");
     let record = dir.join("rec");
     let mut args = quantum_args(&dir, quantum_ms);
     args.extend(["--record".to_string(), record.display().to_string()]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let mut daemon = DaemonProcess::start(dir, &args);
+    let mut daemon = Daemon::start(&binary(), dir, &args);
     let mut port = open_raw(&daemon.link("sensor"));
     // ADC_VALUE is 10 bytes: 10 x 10 bits at 115200 baud.
     let wire_us = 10.0 * 10.0 / 115_200.0 * 1e6;
@@ -313,7 +335,7 @@ fn nmea() {
 }
 
 fn nmea_at(speed: f64, wall_s: f64) {
-    let dir = TestDir::new("bench-nmea");
+    let dir = TempDir::new("bench-nmea");
     let config = dir.write_config(
         "near-wall.toml",
         &[
@@ -331,7 +353,8 @@ fn nmea_at(speed: f64, wall_s: f64) {
         ],
     );
     let record = dir.join("rec");
-    let mut daemon = DaemonProcess::start(
+    let mut daemon = Daemon::start(
+        &binary(),
         dir,
         &[
             "--config",
@@ -384,7 +407,7 @@ fn nmea_at(speed: f64, wall_s: f64) {
 }
 
 /// SIGTERM, and the wait for the daemon to finish its recording.
-fn stop(daemon: &mut DaemonProcess) {
+fn stop(daemon: &mut Daemon) {
     daemon.signal(nix::sys::signal::Signal::SIGTERM);
     daemon
         .wait(Duration::from_secs(5))
@@ -436,7 +459,7 @@ fn sentence_lateness_us(bytes: &[(u8, f64)], char_s: f64) -> (usize, Vec<f64>) {
     (sentences.len(), late_us)
 }
 
-fn cpu_percent(daemon: &DaemonProcess, over: Duration) -> f64 {
+fn cpu_percent(daemon: &Daemon, over: Duration) -> f64 {
     let c0 = daemon.cpu_time();
     let t0 = Instant::now();
     std::thread::sleep(over);
@@ -464,10 +487,10 @@ fn cpu() {
 /// write waiting for its reply.
 fn cpu_polled(quantum_ms: Option<f64>) -> f64 {
     const PERIOD: Duration = Duration::from_micros(1250);
-    let dir = TestDir::new("bench-cpu-poll");
+    let dir = TempDir::new("bench-cpu-poll");
     let args = quantum_args(&dir, quantum_ms);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let daemon = DaemonProcess::start(dir, &args);
+    let daemon = Daemon::start(&binary(), dir, &args);
     let mut port = open_raw(&daemon.link("sensor"));
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let client = {
@@ -508,10 +531,10 @@ fn cpu_polled(quantum_ms: Option<f64>) -> f64 {
 
 /// Prints and returns the CPU under the stream.
 fn cpu_with(quantum_ms: Option<f64>) -> f64 {
-    let dir = TestDir::new("bench-cpu");
+    let dir = TempDir::new("bench-cpu");
     let args = quantum_args(&dir, quantum_ms);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let daemon = DaemonProcess::start(dir, &args);
+    let daemon = Daemon::start(&binary(), dir, &args);
     std::thread::sleep(Duration::from_secs(1));
     let interval = Duration::from_secs(10);
     let idle = cpu_percent(&daemon, interval);
@@ -541,7 +564,7 @@ fn cpu_with(quantum_ms: Option<f64>) -> f64 {
     let quantum = quantum_ms.map_or("1.0 (default)".to_string(), |q| format!("{q:.1}"));
     println!(
         "daemon CPU over {interval:?}, release_quantum_ms {quantum} (ticks of {} Hz; /proc/PID/stat utime+stime)",
-        pty_tests::daemon::clock_ticks_per_s()
+        clock_ticks_per_s()
     );
     println!("  idle (realtime, speed 1, no client):          {idle:5.2} % of one core");
     println!(
@@ -552,9 +575,10 @@ fn cpu_with(quantum_ms: Option<f64>) -> f64 {
 }
 
 fn rss() {
-    let dir = TestDir::new("bench-rss");
+    let dir = TempDir::new("bench-rss");
     let record = dir.join("rec");
-    let daemon = DaemonProcess::start(
+    let daemon = Daemon::start(
+        &binary(),
         dir,
         &[
             "--time-mode",

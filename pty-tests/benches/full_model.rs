@@ -9,14 +9,14 @@
 //!   every 100 ms, and a sonar select every 3 s with its events polled;
 //! - **baseline**: the same physics alone ([`Simulation::step`]), same commands.
 //!
-//! Goal (issues 3 and 4): the full model at or above 5,000x real time.
+//! Target: the full model at or above 5,000x real time.
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use eyebot_hil::config::{ConfigSource, DEFAULT_CONFIG, Document, Embedded};
 use eyebot_hil::daemon::config::DaemonConfig;
-use eyebot_hil::daemon::core::Model as _;
+use eyebot_hil::daemon::engine::Model as _;
 use eyebot_hil::daemon::plant::MakoPlant;
 use eyebot_hil::devices::Plant;
 use eyebot_hil::physics::{InitialState, Simulation, load_model};

@@ -8,7 +8,7 @@
 //! - full model pressed against a wall (narrow-phase contact and impulse every step);
 //! - baseline: the rigid-body RK4 step alone (no thrusters, no contact query, no guard).
 //!
-//! Goal (issue 3): at least 5,000x real time for the full model.
+//! Target: at least 5,000x real time for the full model.
 
 use std::hint::black_box;
 use std::time::Instant;

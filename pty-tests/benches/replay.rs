@@ -146,10 +146,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // `cargo bench` passes `--bench`; `cargo test --benches` runs this as a smoke test with
     // only the 1 MB case.
     let smoke = !std::env::args().any(|a| a == "--bench");
-    let dir = std::env::temp_dir().join(format!("eyebot-hil-replay-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
+    let dir = eyebot_test_support::TempDir::new("replay-bench");
     let sizes: &[u64] = if smoke { &[1] } else { &[10, 100] };
-    let result = sizes.iter().try_for_each(|&mb| run_case(&dir, mb));
-    let _ = std::fs::remove_dir_all(&dir);
-    result
+    sizes.iter().try_for_each(|&mb| run_case(dir.path(), mb))
 }

@@ -16,12 +16,13 @@ reports as slower than that, from the client's `write` of the request (time 0):
 
 For the longest gap of each read it names the tasks on the CPUs meanwhile.
 
-The scheduler settings of the run come from the environment, as for the bench
-(EYEBOT_BENCH_CPU_LATENCY_US, EYEBOT_BENCH_RT_PRIORITY). Needs root and tracefs at
-/sys/kernel/tracing; leaves tracing off and the event list empty.
+The binary measured and the scheduler settings of the run come from the environment, as for
+the bench (EYEBOT_HIL_BIN, EYEBOT_BENCH_CPU_LATENCY_US, EYEBOT_BENCH_RT_PRIORITY). Needs root
+and tracefs at /sys/kernel/tracing; leaves tracing off and the event list empty.
 
-    sudo EYEBOT_BENCH_CPU_LATENCY_US=0 EYEBOT_BENCH_RT_PRIORITY=10 \\
-        python3 pty-tests/diagnostics/trace_daemon_adc.py [THRESHOLD_US]
+    cargo build --release --bin eyebot-hil
+    sudo EYEBOT_HIL_BIN=target/release/eyebot-hil EYEBOT_BENCH_CPU_LATENCY_US=0 \\
+        EYEBOT_BENCH_RT_PRIORITY=10 python3 pty-tests/diagnostics/trace_daemon_adc.py [THRESHOLD_US]
 """
 import os
 import re

@@ -22,7 +22,7 @@ use eyebot_hil::physics::state::{PORT, STARBOARD, VehicleState};
 use eyebot_hil::physics::{
     self, DEFAULT_VEHICLE, DEFAULT_WORLD, Model, VehicleConfig, WorldConfig,
 };
-use eyebot_hil::validate::physics::{
+use eyebot_hil::thesis::physics::{
     ACCELERATION, COAST_DOWN, TOP_SPEED_AVERAGE_FROM_S, TURN_ANTICLOCKWISE, TURN_CLOCKWISE,
     figures, load_experiment, rows_from,
 };
@@ -212,7 +212,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let fitted = fit.vehicle(&fit.log_p);
         let f = figures(&Model::new(fitted, world.clone()), &configs, SEED)?;
         println!("\nvalidate rows with the fitted parameters:");
-        print!("{}", eyebot_hil::validate::render_table(&rows_from(&f)));
+        print!("{}", eyebot_hil::thesis::render_table(&rows_from(&f)));
     }
 
     // Plots of the model as configured (run again after copying the fitted numbers).
@@ -247,6 +247,20 @@ fn labelled_line(
         .draw_series(LineSeries::new(points, style))?
         .label(label)
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
+    Ok(())
+}
+
+/// The legend of `chart`'s labelled series, at `position` (plotters' default if `None`).
+fn draw_legend<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
+    position: Option<SeriesLabelPosition>,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let mut legend = chart.configure_series_labels();
+    legend.background_style(WHITE.mix(0.8)).border_style(BLACK);
+    if let Some(position) = position {
+        legend.position(position);
+    }
+    legend.draw()?;
     Ok(())
 }
 
@@ -313,12 +327,7 @@ fn plot_speed_runs(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::er
         GREEN,
         "9.5 cm/s^2 from rest (thesis 4.6, upper bound)",
     )?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::LowerRight)
-        .draw()?;
+    draw_legend(&mut chart, Some(SeriesLabelPosition::LowerRight))?;
 
     let mut chart = ChartBuilder::on(&lower)
         .caption("Coast-down from 0.44 m/s, motors off", ("sans-serif", 18))
@@ -346,11 +355,7 @@ fn plot_speed_runs(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::er
         BLACK,
         "1.5 cm/s (\"at rest\")",
     )?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+    draw_legend(&mut chart, None)?;
     root.present()?;
     Ok(())
 }
@@ -408,12 +413,7 @@ fn plot_turns(model: &Model, e: &Experiments) -> Result<(), Box<dyn std::error::
         RED,
         "0.8 m circle (Mako, thesis 4.7)",
     )?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::LowerLeft)
-        .draw()?;
+    draw_legend(&mut chart, Some(SeriesLabelPosition::LowerLeft))?;
     root.present()?;
     Ok(())
 }

@@ -1,20 +1,17 @@
-//! Fixtures for end-to-end tests: pseudo-terminals, a daemon under test, and clean-up in `Drop`.
-//!
-//! - [`process`]: unique names, temporary directories, child processes killed in `Drop`,
-//!   readiness by polling with a timeout, and a loud failure when a system tool is missing.
-//! - [`pty`]: ptys made with the bridge's own `PtyMaster`, and a consumer that timestamps
-//!   every read on the slave side.
-//! - [`replay`]: what the replay pty tests share.
-//! - [`daemon`]: the bridge as the built binary or in-process, with a private run directory,
-//!   readiness by its `ready` line, recordings and status helpers.
-//! - [`eyebot_c`]: builds the EyeBot C library and examples (host and 68k) and runs them
-//!   against the daemon.
+//! The end-to-end tests over pseudo-terminals. The harness itself (temporary directories,
+//! the daemon under test, ptys, recordings, system tools) is the workspace's test-support
+//! crate, `eyebot-test-support` (`tests/support/`); this crate adds what its replay tests
+//! share ([`replay`]) and the path of its fixture files.
 
-pub mod daemon;
-pub mod eyebot_c;
-pub mod process;
-pub mod pty;
 pub mod replay;
+
+/// The harness's daemon fixtures under the names this crate's tests use.
+pub mod daemon {
+    pub use eyebot_test_support::TempDir as TestDir;
+    pub use eyebot_test_support::clients::{sensor_client, sonar_client};
+    pub use eyebot_test_support::config::{config_text, configs_dir};
+    pub use eyebot_test_support::daemon::InProcessDaemon;
+}
 
 /// The directory of fixture files, e.g. `fixtures/replay`.
 pub fn fixture_dir(name: &str) -> std::path::PathBuf {

@@ -8,9 +8,10 @@ use eyebot_hil::replay::{
     ByteSink, Loc, Observer, Options, Port, Problem, Replay, Sent, Shutdown, Summary,
 };
 
+use eyebot_test_support::TempDir;
+use eyebot_test_support::pty::{PtyFixture, TimedRead, TimedReader};
+
 use crate::fixture_dir;
-use crate::process::TempDir;
-use crate::pty::{PtyFixture, TimedRead, TimedReader};
 
 pub fn fixture(name: &str) -> PathBuf {
     fixture_dir("replay").join(name)
@@ -56,7 +57,7 @@ pub fn replay_to_pty(
     lead: Duration,
     reader_fifo: Option<i32>,
 ) -> Outcome {
-    let dir = TempDir::new("eyebot-replay");
+    let dir = TempDir::new("replay");
     let fixture = PtyFixture::new(dir.path(), "replay");
     let pty = fixture.open();
     let reader = TimedReader::spawn_with(&fixture.link, reader_fifo);

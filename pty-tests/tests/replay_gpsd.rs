@@ -7,9 +7,10 @@ use std::thread;
 use std::time::Duration;
 
 use eyebot_hil::replay::{ByteSink, Options, Pacing, Policy, Port, Quiet, Replay, Shutdown};
+use eyebot_test_support::process::{ChildGuard, free_tcp_port};
+use eyebot_test_support::pty::PtyFixture;
+use eyebot_test_support::{TempDir, require_tool, wait_for};
 use pty_tests::fixture_dir;
-use pty_tests::process::{ChildGuard, TempDir, free_tcp_port, require_tool, wait_for};
-use pty_tests::pty::PtyFixture;
 
 #[test]
 fn gpsd_reads_the_replayed_depth_sentences() {
@@ -21,7 +22,7 @@ fn gpsd_reads_the_replayed_depth_sentences() {
     let bad = all[5];
     let good: Vec<&str> = all.iter().copied().filter(|l| *l != bad).collect();
 
-    let dir = TempDir::new("eyebot-replay-gpsd");
+    let dir = TempDir::new("replay-gpsd");
     let fixture = PtyFixture::new(dir.path(), "depth");
     let pty = fixture.open();
     let socket = dir.join("gpsd.sock");
@@ -37,12 +38,9 @@ fn gpsd_reads_the_replayed_depth_sentences() {
             .stderr(Stdio::null()),
     )
     .remove_on_drop(&socket);
-    wait_for(
-        "gpsd to listen",
-        Duration::from_secs(10),
-        Duration::from_millis(20),
-        || std::net::TcpStream::connect(("127.0.0.1", port)).ok(),
-    );
+    wait_for("gpsd to listen", Duration::from_secs(10), || {
+        std::net::TcpStream::connect(("127.0.0.1", port)).ok()
+    });
     daemon.assert_running();
 
     // Replay in a loop at 20 sentences/s until gpspipe has what it wants.

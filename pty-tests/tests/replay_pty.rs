@@ -7,8 +7,8 @@
 use std::time::Duration;
 
 use eyebot_hil::replay::{Options, Pacing, Policy};
-use pty_tests::process::TempDir;
-use pty_tests::pty::concat;
+use eyebot_test_support::TempDir;
+use eyebot_test_support::pty::concat;
 use pty_tests::replay::{fixture, read_fixture, replay_to_pty};
 
 fn expected_problems() -> Vec<(u64, String, String)> {
@@ -101,7 +101,7 @@ fn merged_logs_keep_time_order_with_ties_by_file_order() {
 #[test]
 fn gzip_log_replays_like_the_plain_one() {
     use std::io::Write;
-    let dir = TempDir::new("eyebot-replay-gz");
+    let dir = TempDir::new("replay-gz");
     let gz = dir.join("timed-log-copy");
     let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
     enc.write_all(&read_fixture("timed.log")).unwrap();

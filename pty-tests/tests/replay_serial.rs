@@ -1,34 +1,20 @@
 //! `replay --serial DEVICE`: the real-serial output path (tokio-serial, termios applied),
 //! exercised on one end of a socat-linked pty pair, read on the other end.
 
-use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use eyebot_hil::replay::{ByteSink, Options, Pacing, Policy, Port, Quiet, Replay, Shutdown};
 use eyebot_hil::transport::serial;
+use eyebot_test_support::TempDir;
+use eyebot_test_support::process::socat_pair;
+use eyebot_test_support::pty::{PtyFixture, TimedReader, concat};
 use pty_tests::fixture_dir;
-use pty_tests::process::{ChildGuard, TempDir, require_tool, wait_for};
-use pty_tests::pty::{PtyFixture, TimedReader, concat};
 
 #[test]
 fn replay_onto_a_serial_device_reaches_the_other_end() {
-    let socat = require_tool("socat", "socat");
-    let dir = TempDir::new("eyebot-replay-serial");
+    let dir = TempDir::new("replay-serial");
     let (a, b) = (dir.join("a"), dir.join("b"));
-    let _socat = ChildGuard::spawn(
-        "socat",
-        Command::new(socat)
-            .arg(format!("pty,raw,echo=0,link={}", a.display()))
-            .arg(format!("pty,raw,echo=0,link={}", b.display()))
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    );
-    wait_for(
-        "socat's pty links",
-        Duration::from_secs(10),
-        Duration::from_millis(10),
-        || (a.exists() && b.exists()).then_some(()),
-    );
+    let _socat = socat_pair(&a, &b);
     let reader = TimedReader::spawn(&b);
 
     let expected = std::fs::read(fixture_dir("replay").join("expected-fix.bin")).unwrap();

@@ -71,7 +71,7 @@ pub enum CliError {
         source: crate::physics::PhysicsError,
     },
     #[error(transparent)]
-    Validate(#[from] crate::validate::ValidateError),
+    Validate(#[from] crate::thesis::ValidateError),
     #[error(transparent)]
     Replay(#[from] replay::ReplayCliError),
     #[error("{failed} of {total} validation rows failed")]

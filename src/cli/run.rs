@@ -1,26 +1,16 @@
 //! `eyebot-hil run`: the bridge daemon.
 
 use std::io::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use tokio::sync::watch;
 
 use super::CliError;
 use crate::cli::output::errln;
 use crate::config::{ConfigSource, DEFAULT_CONFIG, Directory, Document, Embedded};
-use crate::daemon::clock::TimeMode;
-use crate::daemon::config::DaemonConfig;
+use crate::daemon::config::{DaemonConfig, Overrides, TimeModeName};
 use crate::daemon::{self, Readiness, RunOptions};
-
-/// Time mode on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum TimeModeArg {
-    /// Follow the wall clock (times --speed): for a real EyeBot.
-    Realtime,
-    /// Advance only on the client's time frames: deterministic, as fast as the client.
-    Lockstep,
-}
 
 /// Run the bridge: simulate Mako and serve its devices on the sonar and sensor links.
 ///
@@ -40,7 +30,7 @@ pub struct RunArgs {
     pub seed: Option<u64>,
     /// Time mode (overrides run.time_mode).
     #[arg(long, value_enum)]
-    pub time_mode: Option<TimeModeArg>,
+    pub time_mode: Option<TimeModeName>,
     /// Realtime speed factor, >= 0.1 (overrides run.speed).
     #[arg(long, value_name = "X")]
     pub speed: Option<f64>,
@@ -52,77 +42,72 @@ pub struct RunArgs {
     pub pid_file: Option<PathBuf>,
 }
 
-/// Loads the daemon configuration: `--config FILE`, or the embedded default.
-pub fn load_config(
-    path: Option<&PathBuf>,
-) -> Result<(DaemonConfig, Box<dyn ConfigSource>, String), CliError> {
-    let (source, name): (Box<dyn ConfigSource>, String) = match path {
-        Some(path) => {
-            let (dir, name) = Directory::for_file(path);
-            (Box::new(dir), name)
+impl RunArgs {
+    /// The options that stand in for `[run]` keys.
+    pub fn overrides(&self) -> Overrides {
+        Overrides {
+            seed: self.seed,
+            time_mode: self.time_mode,
+            speed: self.speed,
+            run_dir: self.run_dir.clone(),
         }
-        None => (Box::new(Embedded), DEFAULT_CONFIG.to_string()),
+    }
+}
+
+/// A loaded daemon configuration with where it came from.
+pub struct Loaded {
+    pub config: DaemonConfig,
+    /// Where its model files are read.
+    pub source: Box<dyn ConfigSource>,
+    /// Its text, verbatim.
+    pub text: String,
+    /// Its name: the path given, or `<embedded>/default.toml`.
+    pub name: String,
+}
+
+/// Loads the daemon configuration, `--config FILE` or the embedded default, with
+/// `overrides` applied by [`DaemonConfig::resolve_with`].
+pub fn load_config(path: Option<&PathBuf>, overrides: &Overrides) -> Result<Loaded, CliError> {
+    let (source, file, base_dir): (Box<dyn ConfigSource>, String, Option<&Path>) = match path {
+        Some(path) => {
+            let (dir, file) = Directory::for_file(path);
+            (Box::new(dir), file, path.parent())
+        }
+        None => (Box::new(Embedded), DEFAULT_CONFIG.to_string(), None),
     };
-    let text = source.read(&name)?;
-    let config = DaemonConfig::resolve(&Document::new(source.describe(&name), &text))?;
-    Ok((config, source, text.into_owned()))
+    let text = source.read(&file)?.into_owned();
+    let config = DaemonConfig::resolve_with(
+        &Document::new(source.describe(&file), &text),
+        overrides,
+        base_dir,
+    )?;
+    let name = path.map_or_else(
+        || format!("<embedded>/{DEFAULT_CONFIG}"),
+        |p| p.display().to_string(),
+    );
+    Ok(Loaded {
+        config,
+        source,
+        text,
+        name,
+    })
 }
 
 pub fn main(args: RunArgs) -> Result<(), CliError> {
-    let (mut config, source, text) = load_config(args.config.as_ref())?;
-    if let Some(seed) = args.seed {
-        config.seed = seed;
-    }
-    let speed = match config.time_mode {
-        TimeMode::Realtime { speed } => speed,
-        TimeMode::Lockstep => 1.0,
-    };
-    let speed = match args.speed {
-        Some(s) if !(0.1..=1000.0).contains(&s) || !s.is_finite() => {
-            return Err(CliError::Usage(format!(
-                "--speed {s}: must be between 0.1 and 1000"
-            )));
-        }
-        Some(s) => s,
-        None => speed,
-    };
-    config.time_mode = match args.time_mode {
-        Some(TimeModeArg::Lockstep) => TimeMode::Lockstep,
-        Some(TimeModeArg::Realtime) => TimeMode::Realtime { speed },
-        None => match config.time_mode {
-            TimeMode::Realtime { .. } => TimeMode::Realtime { speed },
-            TimeMode::Lockstep => TimeMode::Lockstep,
-        },
-    };
-    if let Some(dir) = args.run_dir {
-        config.run_dir = dir;
-    }
-    // A sonar replay log named in a config file is relative to that file.
-    if let (Some(log), Some(file)) = (config.sonar_replay.as_mut(), args.config.as_ref())
-        && log.is_relative()
-        && let Some(dir) = file.parent()
-    {
-        *log = dir.join(&*log);
-    }
+    let Loaded {
+        config,
+        source,
+        text,
+        name,
+    } = load_config(args.config.as_ref(), &args.overrides())?;
     let model = crate::daemon::plant::MakoPlant::from_config(source.as_ref(), &config)?;
     let (board, mux) = crate::daemon::plant::devices(&config);
-    let meta = format!(
-        "# eyebot-hil recording\nversion = \"{}\"\nseed = {}\ntime_mode = \"{}\"\nspeed = {}\nconfig = \"{}\"\n\n# The daemon configuration used, verbatim:\n{}",
-        env!("CARGO_PKG_VERSION"),
-        config.seed,
-        config.time_mode.name(),
-        speed,
-        args.config.as_ref().map_or_else(
-            || format!("<embedded>/{DEFAULT_CONFIG}"),
-            |p| p.display().to_string()
-        ),
-        text.lines().map(|l| format!("# {l}\n")).collect::<String>()
-    );
     let leftovers = daemon::shutdown::Leftovers::default();
     let options = RunOptions {
         record: args.record,
         pid_file: args.pid_file,
-        record_meta: meta,
+        config_toml: text,
+        config_name: name,
         leftovers: leftovers.clone(),
     };
 

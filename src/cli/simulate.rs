@@ -1,6 +1,7 @@
 //! `eyebot-hil simulate EXPERIMENT.toml [--model VEHICLE.toml] [--world WORLD.toml] [--seed N]
 //! --out run.csv`: runs one experiment offline, as fast as the machine allows, and writes the
-//! state trace as CSV (one row per physics step).
+//! state trace as CSV (one row per physics step): the rows of a recording's `state.csv`
+//! ([`crate::record::StateRow`], `docs/recording.md`).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -9,12 +10,8 @@ use crate::cli::CliError;
 use crate::cli::output::{errln, outln};
 use crate::config::{ConfigSource, Directory, Document, Embedded};
 use crate::physics::experiment::{self, Experiment};
-use crate::physics::state::VehicleState;
 use crate::physics::{self, DEFAULT_VEHICLE, DEFAULT_WORLD, Model};
-
-/// The CSV header: units in every column name.
-pub const CSV_HEADER: &str = "t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg,u_mps,v_mps,w_mps,\
-p_degps,q_degps,r_degps,thrust_port_n,thrust_starboard_n,thrust_bow_n,thrust_stern_n,contact";
+use crate::record::StateRow;
 
 /// Arguments of `simulate`.
 #[derive(Debug, Clone, clap::Args)]
@@ -36,33 +33,12 @@ pub struct SimulateArgs {
     pub out: PathBuf,
 }
 
-/// One CSV row for a state.
-pub fn csv_row(s: &VehicleState) -> String {
-    let (roll, pitch, yaw) = s.euler_rad();
-    let v = s.velocity_body_mps;
-    let w = s.angular_velocity_body_radps;
-    let f = s.thruster_force_n;
-    format!(
-        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-        s.t_s,
-        s.position_m.x,
-        s.position_m.y,
-        s.position_m.z,
-        roll.to_degrees(),
-        pitch.to_degrees(),
-        yaw.to_degrees(),
-        v.x,
-        v.y,
-        v.z,
-        w.x.to_degrees(),
-        w.y.to_degrees(),
-        w.z.to_degrees(),
-        f[0],
-        f[1],
-        f[2],
-        f[3],
-        u8::from(s.in_contact)
-    )
+/// The I/O error inside a csv error, so a closed pipe is still seen as one.
+fn csv_io(e: csv::Error) -> std::io::Error {
+    match e.into_kind() {
+        csv::ErrorKind::Io(e) => e,
+        other => std::io::Error::other(format!("{other:?}")),
+    }
 }
 
 /// Loads a user-named config file of a kind, or the embedded default.
@@ -101,20 +77,19 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
             source: e,
         })?)
     };
-    let mut out = std::io::BufWriter::new(sink);
-    let mut io_error = None;
-    let mut rows = 0u64;
     let io = |e: std::io::Error| CliError::Io {
         path: args.out.clone(),
         source: e,
     };
-    writeln!(out, "{CSV_HEADER}").map_err(io)?;
+    let mut out = crate::record::format::state_writer(sink).map_err(|e| io(csv_io(e)))?;
+    let mut io_error = None;
+    let mut rows = 0u64;
     let started = std::time::Instant::now(); // CLI report only; the model never reads a clock
     let summary = experiment::run(&model, &exp, args.seed, |s| {
         if io_error.is_none() {
-            match writeln!(out, "{}", csv_row(s)) {
+            match out.serialize(StateRow::from_state(s)) {
                 Ok(()) => rows += 1,
-                Err(e) => io_error = Some(e),
+                Err(e) => io_error = Some(csv_io(e)),
             }
         }
     })
@@ -151,4 +126,36 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
         outln!("{line}");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `simulate` writes the rows of a recording's `state.csv`: the state reader takes its
+    /// trace, one row per 10 ms step from t = 0, thrust in newtons once the motors run.
+    #[test]
+    fn the_trace_reads_back_as_state_rows() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-simulate-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("run.csv");
+        let args = SimulateArgs {
+            experiment: Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("configs/experiments/acceleration.toml"),
+            model: None,
+            world: None,
+            seed: 1,
+            out: out.clone(),
+        };
+        run(&args).unwrap();
+        let rows = crate::record::read_state_file(&out).unwrap();
+        assert!(rows.len() > 1000, "{} rows", rows.len());
+        assert_eq!(rows[0].t_s, 0.0);
+        assert!((rows[1].t_s - 0.01).abs() < 1e-12, "{:?}", rows[1]);
+        assert!(
+            rows.iter().any(|r| r.force_port_n > 1.0),
+            "the thrusters push"
+        );
+        std::fs::remove_dir_all(dir).unwrap();
+    }
 }

@@ -7,15 +7,15 @@ use std::path::PathBuf;
 use crate::cli::CliError;
 use crate::cli::output::{out, outln};
 use crate::config::{ConfigSource, Directory, Embedded};
-use crate::validate::{Context, Row, ValidateError, render_table};
+use crate::thesis::{Context, Row, ValidateError, render_table};
 
 /// A producer of validation rows.
 pub type RowSource = fn(&Context<'_>) -> Result<Vec<Row>, ValidateError>;
 
 /// Every row source, in table order.
 pub const ROW_SOURCES: &[RowSource] = &[
-    crate::validate::physics::rows,
-    crate::validate::sensors::row_source,
+    crate::thesis::physics::rows,
+    crate::thesis::sensors::row_source,
 ];
 
 /// Arguments of `validate`.

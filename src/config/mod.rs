@@ -44,6 +44,14 @@ pub enum ConfigError {
         line: Option<usize>,
         message: String,
     },
+    /// A value given in place of a configuration key (a command-line option) is out of
+    /// range.
+    #[error("{option} (in place of `{key}`): {message}")]
+    Override {
+        option: String,
+        key: String,
+        message: String,
+    },
     /// A file named by the user, or referenced from another config file, cannot be read.
     #[error("{origin}: cannot read config `{name}`: {reason}")]
     Unreadable {

@@ -35,6 +35,14 @@ impl TimeMode {
             TimeMode::Lockstep => "lockstep",
         }
     }
+
+    /// The realtime speed factor; 1 in lockstep.
+    pub fn speed(&self) -> f64 {
+        match self {
+            TimeMode::Realtime { speed } => *speed,
+            TimeMode::Lockstep => 1.0,
+        }
+    }
 }
 
 /// Maps wall time elapsed since the daemon started to the simulated time to reach.

@@ -189,20 +189,79 @@ pub struct DaemonConfig {
     pub sonar_replay: Option<PathBuf>,
 }
 
+/// The realtime speed factors allowed, in `run.speed` and `--speed`.
+pub const SPEED_RANGE: std::ops::RangeInclusive<f64> = 0.1..=1000.0;
+
+/// A time mode by name, as `run.time_mode` and `--time-mode` give it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum TimeModeName {
+    /// Follow the wall clock (times --speed): for a real EyeBot.
+    Realtime,
+    /// Advance only on the client's time frames: deterministic, as fast as the client.
+    Lockstep,
+}
+
+/// Values given in place of the configuration's `[run]` keys (`eyebot-hil run`'s options),
+/// applied and checked by [`DaemonConfig::resolve_with`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Overrides {
+    pub seed: Option<u64>,
+    pub time_mode: Option<TimeModeName>,
+    pub speed: Option<f64>,
+    pub run_dir: Option<PathBuf>,
+}
+
 impl DaemonConfig {
     /// Parses and checks a daemon config document.
     pub fn resolve(doc: &Document<'_>) -> Result<Self, ConfigError> {
+        Self::resolve_with(doc, &Overrides::default(), None)
+    }
+
+    /// Parses and checks a daemon config document, then applies and checks `overrides`.
+    /// `base_dir` is the configuration file's directory: a relative file path inside the
+    /// configuration (the sonar replay log) is taken relative to it. `None` (an embedded
+    /// configuration) leaves such paths relative to the working directory.
+    pub fn resolve_with(
+        doc: &Document<'_>,
+        overrides: &Overrides,
+        base_dir: Option<&std::path::Path>,
+    ) -> Result<Self, ConfigError> {
         let raw: RawDaemon = doc.parse()?;
-        let speed = doc.check_range("run.speed", raw.run.speed, 0.1, 1000.0, "x real time")?;
-        let time_mode = match raw.run.time_mode.as_str() {
-            "realtime" => TimeMode::Realtime { speed },
-            "lockstep" => TimeMode::Lockstep,
+        let file_speed = doc.check_range(
+            "run.speed",
+            raw.run.speed,
+            *SPEED_RANGE.start(),
+            *SPEED_RANGE.end(),
+            "x real time",
+        )?;
+        let speed = match overrides.speed {
+            Some(speed) if !(speed.is_finite() && SPEED_RANGE.contains(&speed)) => {
+                return Err(ConfigError::Override {
+                    option: "--speed".into(),
+                    key: "run.speed".into(),
+                    message: format!(
+                        "{speed} is outside the allowed range {}..={} x real time",
+                        SPEED_RANGE.start(),
+                        SPEED_RANGE.end()
+                    ),
+                });
+            }
+            Some(speed) => speed,
+            None => file_speed,
+        };
+        let file_mode = match raw.run.time_mode.as_str() {
+            "realtime" => TimeModeName::Realtime,
+            "lockstep" => TimeModeName::Lockstep,
             other => {
                 return Err(doc.invalid(
                     "run.time_mode",
                     format!("`{other}` is not a time mode; expected `realtime` or `lockstep`"),
                 ));
             }
+        };
+        let time_mode = match overrides.time_mode.unwrap_or(file_mode) {
+            TimeModeName::Realtime => TimeMode::Realtime { speed },
+            TimeModeName::Lockstep => TimeMode::Lockstep,
         };
         let max_lag_ms =
             doc.check_range("run.max_lag_ms", raw.run.max_lag_ms, 1.0, 10_000.0, "ms")?;
@@ -325,13 +384,16 @@ impl DaemonConfig {
             vehicle: raw.vehicle,
             world: raw.world,
             sensors: raw.sensors,
-            seed: raw.run.seed,
+            seed: overrides.seed.unwrap_or(raw.run.seed),
             time_mode,
             max_lag: Duration::from_secs_f64(max_lag_ms / 1000.0),
             release_quantum: Duration::from_secs_f64(release_quantum_ms / 1000.0),
             cpu_latency_us,
             rt_priority,
-            run_dir: PathBuf::from(raw.run.run_dir),
+            run_dir: overrides
+                .run_dir
+                .clone()
+                .unwrap_or_else(|| PathBuf::from(raw.run.run_dir)),
             state_record_hz,
             start: Start {
                 position_m: nalgebra::Vector3::from(raw.start.position_m),
@@ -352,7 +414,10 @@ impl DaemonConfig {
                 .replay
                 .as_ref()
                 .filter(|p| !p.is_empty())
-                .map(PathBuf::from),
+                .map(|p| match base_dir {
+                    Some(dir) => dir.join(p),
+                    None => PathBuf::from(p),
+                }),
         })
     }
 }
@@ -499,6 +564,65 @@ mod tests {
             let err = at(bad).unwrap_err();
             assert!(
                 err.to_string().contains("run.rt_priority") && err.to_string().contains("1 to 99"),
+                "{err}"
+            );
+        }
+    }
+
+    fn with_overrides(
+        overrides: &Overrides,
+        base: Option<&str>,
+    ) -> Result<DaemonConfig, ConfigError> {
+        let text = Embedded.read(DEFAULT_CONFIG).unwrap().into_owned();
+        let text = text.replacen(
+            "[devices.multiplexer]",
+            "[devices.multiplexer]\nreplay = \"logs/a.nmea\"",
+            1,
+        );
+        DaemonConfig::resolve_with(
+            &Document::new("test.toml", &text),
+            overrides,
+            base.map(std::path::Path::new),
+        )
+    }
+
+    /// Command-line values replace the file's, are checked against the same range, and a
+    /// relative log path in the file is taken relative to the file.
+    #[test]
+    fn overrides_are_applied_and_checked_in_one_place() {
+        let plain = with_overrides(&Overrides::default(), Some("/etc/hil")).unwrap();
+        assert_eq!(
+            plain.sonar_replay,
+            Some(PathBuf::from("/etc/hil/logs/a.nmea"))
+        );
+        let embedded = with_overrides(&Overrides::default(), None).unwrap();
+        assert_eq!(embedded.sonar_replay, Some(PathBuf::from("logs/a.nmea")));
+        let given = Overrides {
+            seed: Some(99),
+            time_mode: Some(TimeModeName::Realtime),
+            speed: Some(10.0),
+            run_dir: Some(PathBuf::from("/tmp/x")),
+        };
+        let config = with_overrides(&given, None).unwrap();
+        assert_eq!(config.seed, 99);
+        assert_eq!(config.time_mode, TimeMode::Realtime { speed: 10.0 });
+        assert_eq!(config.run_dir, PathBuf::from("/tmp/x"));
+        let lockstep = Overrides {
+            time_mode: Some(TimeModeName::Lockstep),
+            ..Overrides::default()
+        };
+        assert_eq!(
+            with_overrides(&lockstep, None).unwrap().time_mode,
+            TimeMode::Lockstep
+        );
+        for bad in [0.05, 1000.5, f64::NAN] {
+            let over = Overrides {
+                speed: Some(bad),
+                ..Overrides::default()
+            };
+            let err = with_overrides(&over, None).unwrap_err().to_string();
+            assert!(
+                err.starts_with("--speed") && err.contains("0.1..=1000"),
                 "{err}"
             );
         }

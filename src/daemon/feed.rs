@@ -3,15 +3,15 @@
 //! Two ways in, one mechanism ([`crate::devices::multiplexer`]'s feed):
 //!
 //! - **`replay = "FILE"`** in `[devices.multiplexer]`: the daemon reads the log at start-up
-//!   through the replay module (formats, gzip, timestamps, checksum policy as `eyebot-hil
-//!   replay`), and forwards each sentence at its log time as simulated time from the start of
-//!   the run. Deterministic, so it works in lockstep too.
+//!   with replay's log reader ([`crate::replay::input::Source`]: the same formats, gzip and
+//!   timestamps as `eyebot-hil replay`, sentences checked under the `pass` policy), and
+//!   forwards each sentence at its log time as simulated time from the start of the run.
+//!   Deterministic, so it works in lockstep too.
 //! - **`eyebot-hil replay LOG --into-sonar`**: a replay process paces the log itself and
 //!   writes the sentences into the running daemon's `RUN_DIR/sonar-feed.sock` (owner-only);
 //!   each is forwarded at the simulated time it arrives. One feeder at a time.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use bytes::Bytes;
 use tokio::io::AsyncReadExt;
@@ -19,19 +19,23 @@ use tokio::net::UnixListener;
 use tokio::sync::{mpsc, watch};
 
 use crate::SimNanos;
-use crate::replay::{self, Options, Pacing, Sent, Shutdown, Sink, SinkError};
+use crate::replay::input::{CommentMode, Event, InputError, LineKind, Source};
+use crate::replay::sentence_check::{Policy, check_line};
 
 /// The live feed socket's name inside the run directory.
 pub const FEED_SOCKET: &str = "sonar-feed.sock";
+
+/// The sentence rate of a log without timestamps: the Navman's 1 Hz.
+pub const UNTIMED_PERIOD_NS: SimNanos = 1_000_000_000;
 
 /// Why a feed could not be set up.
 #[derive(Debug, thiserror::Error)]
 pub enum FeedError {
     #[error("sonar replay {path}: {source}")]
-    Replay {
+    Log {
         path: PathBuf,
         #[source]
-        source: replay::ReplayError,
+        source: InputError,
     },
     #[error("sonar feed socket {path}: {source}")]
     Socket {
@@ -41,59 +45,46 @@ pub enum FeedError {
     },
 }
 
-/// Collects the replay's schedule instead of sending it.
-#[derive(Debug, Default)]
-struct Collect {
-    schedule: Vec<(SimNanos, Bytes)>,
-}
-
-impl Sink for Collect {
-    fn begin(&mut self, _origin: Instant) {}
-
-    fn send(
-        &mut self,
-        sentence: &[u8],
-        due_ns: Option<u64>,
-        _stop: &Shutdown,
-    ) -> Result<Sent, SinkError> {
-        let at = due_ns.unwrap_or_else(|| self.schedule.last().map_or(0, |(t, _)| *t));
-        self.schedule.push((at, Bytes::copy_from_slice(sentence)));
-        Ok(Sent {
-            start_ns: due_ns,
-            end_ns: due_ns,
-            line_wait_ns: 0,
-            written_at: Instant::now(),
-            write_late_max_ns: 0,
-            write_call_max_ns: 0,
-        })
-    }
-
-    fn free_at_ns(&self) -> u64 {
-        self.schedule.last().map_or(0, |(t, _)| *t)
-    }
-}
-
-/// Reads a log into (simulated time, sentence) pairs, the first sentence at time 0. Logs
-/// without timestamps are paced at the Navman's 1 Hz.
+/// Reads a log into (simulated time, sentence) pairs, the first sentence at time 0: by the
+/// log's timestamps when it has them (a time that goes back is due with the sentence before),
+/// else one sentence per [`UNTIMED_PERIOD_NS`]. Sentences are checked as `replay --policy
+/// pass` does (sent as they are, with CR LF); comments and lines with problems the policy
+/// drops are left out.
 pub fn load_schedule(path: &Path) -> Result<Vec<(SimNanos, Bytes)>, FeedError> {
-    let fail = |source| FeedError::Replay {
+    let fail = |source| FeedError::Log {
         path: path.to_path_buf(),
         source,
     };
-    let probe = replay::Replay::open(Options::new(vec![path.to_path_buf()])).map_err(fail)?;
-    let mut opts = Options::new(vec![path.to_path_buf()]);
-    opts.pacing = Some(if probe.pacing() == Pacing::Timestamps {
-        Pacing::Timestamps
-    } else {
-        Pacing::Rate { per_s: 1.0 }
-    });
-    let replay = replay::Replay::open(opts).map_err(fail)?;
-    let mut sink = Collect::default();
-    let summary = replay
-        .run(&mut sink, &mut replay::Quiet, &Shutdown::new())
-        .map_err(fail)?;
-    tracing::info!(log = %path.display(), sentences = sink.schedule.len(), ?summary, "sonar replay loaded");
-    Ok(sink.schedule)
+    let mut source =
+        Source::open(path, 0, "sonar", CommentMode::Ignore, Default::default()).map_err(fail)?;
+    let timed = source.format().is_timed();
+    let mut schedule: Vec<(SimNanos, Bytes)> = Vec::new();
+    let mut first_ns = None;
+    let mut latest_ns: SimNanos = 0;
+    while let Some(event) = source.next_event().map_err(fail)? {
+        let Event::Line(line) = event else {
+            continue;
+        };
+        if line.kind != LineKind::Data {
+            continue;
+        }
+        let checked = check_line(&line.bytes, line.terminator, line.overflow, Policy::Pass);
+        let Some(out) = checked.out else {
+            continue;
+        };
+        let at = match (timed, line.time_ns) {
+            (true, Some(t)) => {
+                let since_first = t - *first_ns.get_or_insert(t);
+                latest_ns = latest_ns.max(since_first.max(0) as SimNanos);
+                latest_ns
+            }
+            (true, None) => schedule.last().map_or(0, |(t, _)| *t),
+            (false, _) => schedule.len() as SimNanos * UNTIMED_PERIOD_NS,
+        };
+        schedule.push((at, Bytes::from(out)));
+    }
+    tracing::info!(log = %path.display(), sentences = schedule.len(), timed, "sonar replay loaded");
+    Ok(schedule)
 }
 
 /// What a live feeder does.
@@ -106,23 +97,10 @@ pub enum FeedEvent {
 
 /// Binds `path` with owner-only permissions (replacing a stale socket).
 pub fn bind(path: &Path) -> Result<UnixListener, FeedError> {
-    use std::os::unix::fs::PermissionsExt;
-    let fail = |source| FeedError::Socket {
+    super::socket::bind_owner_only(path).map_err(|source| FeedError::Socket {
         path: path.to_path_buf(),
         source,
-    };
-    if std::fs::symlink_metadata(path).is_ok() {
-        if std::os::unix::net::UnixStream::connect(path).is_ok() {
-            return Err(fail(std::io::Error::new(
-                std::io::ErrorKind::AddrInUse,
-                "another daemon is serving this socket",
-            )));
-        }
-        std::fs::remove_file(path).map_err(fail)?;
-    }
-    let listener = UnixListener::bind(path).map_err(fail)?;
-    std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).map_err(fail)?;
-    Ok(listener)
+    })
 }
 
 /// Serves feeders one at a time until `shutdown`; the socket file is removed at the end.
@@ -178,20 +156,55 @@ pub async fn serve(
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_timestamped_log_becomes_a_schedule_from_time_zero() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-feed-{}", std::process::id()));
+    fn scratch(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let log = dir.join("log.nmea");
-        std::fs::write(
-            &log,
-            "100.000 $SDDBT,8.2,f,2.5,M,1.4,F*0E\n100.070 $PEBHS,1,2.5,90*71\n101.500 $SDDBT,9.9,f,3.0,M,1.6,F*02\n",
-        )
-        .unwrap();
-        let schedule = load_schedule(&log).unwrap();
-        let times: Vec<SimNanos> = schedule.iter().map(|(t, _)| *t).collect();
-        assert_eq!(times, vec![0, 70_000_000, 1_500_000_000]);
-        assert_eq!(&schedule[2].1[..], b"$SDDBT,9.9,f,3.0,M,1.6,F*02\r\n");
+        dir
+    }
+
+    /// The schedule's times for a log with this text.
+    fn times(dir: &Path, name: &str, text: &str) -> Vec<SimNanos> {
+        let log = dir.join(name);
+        std::fs::write(&log, text).unwrap();
+        load_schedule(&log)
+            .unwrap()
+            .iter()
+            .map(|(t, _)| *t)
+            .collect()
+    }
+
+    const DBT_A: &str = "$SDDBT,8.2,f,2.5,M,1.4,F*0E";
+    const DBT_B: &str = "$SDDBT,9.9,f,3.0,M,1.6,F*02";
+
+    /// A timestamped log plays from time 0 at its log times, and a time that goes back is
+    /// due with the sentence before (never reordered); a log without timestamps plays at
+    /// 1 Hz; a comment is not a sentence.
+    #[test]
+    fn a_log_becomes_a_schedule_from_time_zero() {
+        let dir = scratch("feed");
+        let second = UNTIMED_PERIOD_NS;
+        let cases = [
+            (
+                "timed.nmea",
+                format!("100.000 {DBT_A}\n100.070 $PEBHS,1,2.5,90*71\n101.500 {DBT_B}\n"),
+                vec![0, 70_000_000, 1_500_000_000],
+            ),
+            (
+                "back.nmea",
+                format!("10.0 {DBT_A}\n12.0 {DBT_B}\n11.0 {DBT_A}\n"),
+                vec![0, 2 * second, 2 * second],
+            ),
+            (
+                "plain.nmea",
+                format!("{DBT_A}\n# a comment\n{DBT_B}\n{DBT_A}\n"),
+                vec![0, second, 2 * second],
+            ),
+        ];
+        for (name, text, expected) in cases {
+            assert_eq!(times(&dir, name, &text), expected, "{name}");
+        }
+        let schedule = load_schedule(&dir.join("timed.nmea")).unwrap();
+        assert_eq!(&schedule[2].1[..], format!("{DBT_B}\r\n").as_bytes());
         let missing = load_schedule(&dir.join("nope.nmea")).unwrap_err();
         assert!(missing.to_string().contains("nope.nmea"), "{missing}");
         std::fs::remove_dir_all(dir).unwrap();

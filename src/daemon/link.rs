@@ -70,19 +70,27 @@ pub struct LineContext {
 }
 
 impl LineContext {
-    fn dropped(&self, sim_s: f64, reason: DropReason, data: &[u8]) {
+    /// Counts, logs and records (in `drops.tsv`) bytes put on the line at simulated time
+    /// `sim_s` that did not reach the endpoint: the one place for every drop, whether the
+    /// loop drops them (a client that does not read) or the link task (an endpoint gone).
+    pub fn dropped(&self, sim_s: f64, reason: DropReason, data: &[u8]) {
         if data.is_empty() {
             return;
         }
         self.counters
             .dropped_tx
             .fetch_add(data.len() as u64, Ordering::Relaxed);
-        tracing::warn!(
-            link = self.name,
-            bytes = data.len(),
-            reason = reason.as_str(),
-            "bytes put on the line did not reach the endpoint"
-        );
+        let (link, bytes, why) = (self.name, data.len(), reason.as_str());
+        match reason {
+            // A client that does not read drops at every release: counted, not shouted.
+            DropReason::NotRead => tracing::debug!(link, bytes, why, "not read: dropped"),
+            DropReason::EndpointGone | DropReason::Shutdown => tracing::warn!(
+                link,
+                bytes,
+                why,
+                "bytes put on the line did not reach the endpoint"
+            ),
+        }
         if let Some(rec) = &self.recorder {
             rec.dropped(sim_s, self.name, reason, data);
         }

@@ -1,19 +1,23 @@
 //! The bridge daemon (`eyebot-hil run`): links, device emulators, the time model, recording
 //! and the process life cycle around the simulation.
 //!
-//! [`run`] is a library function: it takes the resolved configuration, a model, the options
-//! and a shutdown signal, and reports readiness through a callback. `main.rs` (through
-//! `cli::run`) only parses arguments, installs tracing and signal handlers and calls it, so
-//! tests run the daemon in-process. Time comes from tokio's clock, which tests can pause and
-//! advance; the model itself never reads a clock.
+//! A run has three stages, each a library call: [`Daemon::start`] (the resolved
+//! configuration, a model, the devices and the options in; endpoints open, tasks running
+//! out), [`Daemon::serve`] (until a shutdown future resolves) and [`Daemon::finish`] (a
+//! [`Summary`] out). [`run`] composes them and reports readiness through a callback;
+//! `main.rs` (through `cli::run`) only parses arguments, installs tracing and signal handlers
+//! and calls it, so tests run the daemon in-process. Time comes from tokio's clock, which
+//! tests can pause and advance; the model itself never reads a clock.
 
 pub mod clock;
 pub mod config;
-pub mod core;
+pub mod engine;
 pub mod feed;
 pub mod link;
+pub mod pid_file;
 pub mod plant;
 pub mod shutdown;
+pub mod socket;
 pub mod status;
 
 use std::path::{Path, PathBuf};
@@ -26,8 +30,9 @@ use tokio::time::Instant;
 
 use self::clock::{RealtimeMap, TimeMode};
 use self::config::{DaemonConfig, Endpoint};
-use self::core::{Core, LineSpec, Model};
+use self::engine::{Carries, Engine, LineSpec, Model};
 use self::link::{EndpointError, Inbound, LineContext, LinkCounters, OpenEndpoint, Outbound};
+use self::pid_file::PidFile;
 use self::status::{LinkStatus, Pose, StatusServer, StatusSnapshot};
 use crate::record::{DropReason, RecordError, Recorder};
 
@@ -70,8 +75,11 @@ pub struct RunOptions {
     pub record: Option<PathBuf>,
     /// Write the daemon's PID here (removed at exit).
     pub pid_file: Option<PathBuf>,
-    /// Text of `meta.toml` in the recording.
-    pub record_meta: String,
+    /// The daemon configuration's text, copied verbatim into a recording as `config.toml`.
+    pub config_toml: String,
+    /// The configuration's name for the recording's `meta.toml` (a path, or
+    /// `<embedded>/default.toml`).
+    pub config_name: String,
     /// Filled with what the run creates (symlinks, sockets, pid file), for the process-level
     /// shutdown guard ([`shutdown::spawn_signal_guard`]).
     pub leftovers: shutdown::Leftovers,
@@ -88,24 +96,462 @@ pub enum Readiness {
 
 /// What a finished run did.
 #[derive(Debug, Clone, Default)]
-pub struct RunSummary {
+pub struct Summary {
     pub sim_time_s: f64,
     pub records: Option<crate::record::Stats>,
     pub overruns: u64,
 }
 
+/// The name [`Summary`] had when [`run`] was the only entry point.
+pub type RunSummary = Summary;
+
+/// An open link, as [`Daemon::links`] lists it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LinkInfo {
+    pub name: &'static str,
+    /// Where the EyeBot side connects (a symlink and its pty, a device, an address).
+    pub path: String,
+}
+
 struct LineRuntime {
-    name: &'static str,
+    /// The line's name, counters and recorder, shared with its link task.
+    cx: LineContext,
     describe: String,
     to_link: mpsc::Sender<Outbound>,
-    counters: Arc<LinkCounters>,
     /// Released bytes the link task has not taken yet, sent as one chunk when it has room.
     backlog: bytes::BytesMut,
     /// Beyond this many waiting bytes the client is taken for not reading: drop and count.
     backlog_limit: usize,
 }
 
-/// Runs the bridge until `shutdown` turns true.
+/// The bridge, started: endpoints open, link tasks and services running, recording begun.
+///
+/// [`Daemon::start`] brings it up, [`Daemon::serve`] runs the simulation loop until a
+/// shutdown future resolves, [`Daemon::finish`] flushes, closes and reports. Between them the
+/// caller can announce readiness ([`Daemon::links`], [`Daemon::status_socket`]). Services
+/// that run beside the links (the status socket, the sonar feed) are tokio tasks added with
+/// [`Daemon::spawn_service`], told to stop and joined in `finish`; a new one (a live view,
+/// reading [`Daemon::status_updates`]) is added the same way, in `start` or by the caller
+/// before `serve`.
+pub struct Daemon<M: Model> {
+    config: DaemonConfig,
+    engine: Engine<M>,
+    lines: Vec<LineRuntime>,
+    links: Vec<LinkInfo>,
+    link_tasks: Vec<tokio::task::JoinHandle<()>>,
+    inbound: mpsc::Receiver<Inbound>,
+    feed: mpsc::Receiver<feed::FeedEvent>,
+    status: watch::Sender<StatusSnapshot>,
+    /// Tasks beside the links (the status socket, the sonar feed), stopped by `stop`.
+    services: Vec<Service>,
+    status_socket: PathBuf,
+    /// Tells the link tasks and services to stop (sent by `finish`).
+    stop: watch::Sender<bool>,
+    pacing: LoopClock,
+    record_dir: Option<PathBuf>,
+    pid_file: Option<PidFile>,
+    leftovers: shutdown::Leftovers,
+}
+
+/// A task that runs beside the links for the life of the daemon.
+struct Service {
+    name: &'static str,
+    task: tokio::task::JoinHandle<()>,
+}
+
+/// The loop's view of wall time in realtime mode, and when it next reports status.
+struct LoopClock {
+    started: Instant,
+    /// `None` in lockstep: simulated time moves only on the client's frames.
+    map: Option<RealtimeMap>,
+    /// When the loop meant to wake next (wall time since start). Lag is measured against
+    /// it: the sleep between wakes is not an overrun, only waking late is.
+    planned_wake: Duration,
+    next_status: Instant,
+    timer: crate::transport::PreciseTimer,
+}
+
+impl<M: Model> Daemon<M> {
+    /// Opens every endpoint, binds the status and feed sockets, writes the pid file, starts
+    /// the recording and the link tasks. Must run inside a tokio runtime with I/O and time.
+    pub async fn start(
+        config: &DaemonConfig,
+        model: M,
+        board: crate::devices::sensor_board::SensorBoard,
+        mux: crate::devices::multiplexer::Multiplexer,
+        options: RunOptions,
+    ) -> Result<Self, DaemonError> {
+        let run_dir = config.run_dir.clone();
+        create_run_dir(&run_dir)?;
+        let lockstep = config.time_mode == TimeMode::Lockstep;
+        let leftovers = options.leftovers.clone();
+
+        let (specs, endpoints) = open_lines(config, &run_dir, &leftovers).await?;
+        let status_socket = run_dir.join("status.sock");
+        let status_server = StatusServer::bind(&status_socket)?;
+        leftovers.socket(&status_socket);
+        let pid_file = options
+            .pid_file
+            .as_deref()
+            .map(PidFile::create)
+            .transpose()?;
+        if let Some(pid) = &options.pid_file {
+            leftovers.pid_file(pid);
+        }
+
+        let mut engine = Engine::new(model, board, mux, &specs, lockstep);
+        if let Some(log) = &config.sonar_replay {
+            engine.set_feed_schedule(feed::load_schedule(log)?);
+        }
+        let feed_path = run_dir.join(feed::FEED_SOCKET);
+        let feed_listener = feed::bind(&feed_path)?;
+        leftovers.socket(&feed_path);
+        if let Some(dir) = &options.record {
+            let meta = crate::record::Meta::new(
+                config.seed,
+                config.time_mode.name(),
+                config.time_mode.speed(),
+                &options.config_name,
+            );
+            let recorder = Recorder::start(dir, &meta, &options.config_toml)?;
+            engine.set_recorder(recorder, (1e9 / config.state_record_hz) as u64);
+        }
+
+        let (stop, stop_rx) = watch::channel(false);
+        let Spawned {
+            lines,
+            links,
+            link_tasks,
+            inbound,
+        } = spawn_link_tasks(&specs, endpoints, engine.recorder_handle(), &stop_rx);
+
+        let (feed_tx, feed) = mpsc::channel(64);
+        let (status, status_rx) = watch::channel(StatusSnapshot::default());
+        let started = Instant::now();
+        let mut daemon = Self {
+            config: config.clone(),
+            engine,
+            lines,
+            links,
+            link_tasks,
+            inbound,
+            feed,
+            status,
+            services: Vec::new(),
+            status_socket,
+            stop,
+            pacing: LoopClock {
+                started,
+                map: match config.time_mode {
+                    TimeMode::Realtime { speed } => Some(RealtimeMap::new(speed, config.max_lag)),
+                    TimeMode::Lockstep => None,
+                },
+                planned_wake: Duration::ZERO,
+                next_status: started,
+                timer: crate::transport::PreciseTimer::new(),
+            },
+            record_dir: options.record,
+            pid_file,
+            leftovers,
+        };
+        daemon.spawn_service("sonar feed", |stop| {
+            feed::serve(feed_listener, feed_path, feed_tx, stop)
+        });
+        daemon.spawn_service("status", |stop| async move {
+            status_server.serve(status_rx, stop).await
+        });
+        Ok(daemon)
+    }
+
+    /// Runs a service beside the links: `service` is given the stop signal (it turns true
+    /// in [`Daemon::finish`]) and must end soon after; one still running after
+    /// [`shutdown::SERVICES_BUDGET`] is aborted. A view of the run subscribes to
+    /// [`Daemon::status_updates`].
+    pub fn spawn_service<F>(
+        &mut self,
+        name: &'static str,
+        service: impl FnOnce(watch::Receiver<bool>) -> F,
+    ) where
+        F: Future<Output = ()> + Send + 'static,
+    {
+        let task = tokio::spawn(service(self.stop.subscribe()));
+        self.services.push(Service { name, task });
+    }
+
+    /// The latest status snapshot, refreshed every [`STATUS_PERIOD`] while serving: a
+    /// latest-wins channel, so a slow reader never holds the simulation up.
+    pub fn status_updates(&self) -> watch::Receiver<StatusSnapshot> {
+        self.status.subscribe()
+    }
+
+    /// The open links, in line order.
+    pub fn links(&self) -> &[LinkInfo] {
+        &self.links
+    }
+
+    /// The status socket (`eyebot-hil status`).
+    pub fn status_socket(&self) -> &Path {
+        &self.status_socket
+    }
+
+    /// Runs the simulation until `shutdown` resolves, every link task has ended, or the model
+    /// fails. In realtime the calling thread holds the configured wake-up requests
+    /// (`run.rt_priority`, `run.cpu_latency_us`) while it serves.
+    pub async fn serve(&mut self, shutdown: impl Future<Output = ()>) -> Result<(), DaemonError> {
+        // Only this thread is raised: the recorder and signal threads were started before and
+        // keep the default scheduler. Lockstep has no wall-clock deadlines to protect.
+        let wake = self.pacing.map.is_some().then(|| {
+            crate::transport::WakeGuard::acquire(
+                self.config.cpu_latency_us,
+                self.config.rt_priority,
+            )
+        });
+        if let Some(wake) = &wake {
+            for refusal in wake.refusals() {
+                tracing::warn!("{refusal}");
+            }
+            if let Some(latency_us) = wake.cpu_latency_us() {
+                tracing::info!(latency_us, "holding a CPU latency request");
+            }
+            if let Some(priority) = wake.realtime_priority() {
+                tracing::info!(priority, "bridge thread runs under SCHED_FIFO");
+            }
+        }
+        let mut shutdown = std::pin::pin!(shutdown);
+        loop {
+            self.catch_up()?;
+            flush_outputs(&mut self.engine, &mut self.lines);
+            let now = Instant::now();
+            if now >= self.pacing.next_status {
+                self.status.send_replace(snapshot(
+                    &self.engine,
+                    &self.lines,
+                    self.pacing.started,
+                    &self.config,
+                    self.pacing.map.as_ref(),
+                    self.record_dir.as_deref(),
+                ));
+                self.pacing.next_status = now + STATUS_PERIOD;
+            }
+            let wake_at = self.pacing.next_wake(&self.engine, now);
+            tokio::select! {
+                inbound = self.inbound.recv() => match inbound {
+                    Some(inbound) => {
+                        self.advance_to_wall()?;
+                        self.engine.receive(inbound.line, &inbound.data).map_err(model_error)?;
+                    }
+                    None => return Ok(()),
+                },
+                Some(event) = self.feed.recv() => {
+                    self.advance_to_wall()?;
+                    match event {
+                        feed::FeedEvent::Connected => self.engine.set_feed_connected(true),
+                        feed::FeedEvent::Bytes(data) => self.engine.feed_bytes(&data),
+                        feed::FeedEvent::Closed => self.engine.set_feed_connected(false),
+                    }
+                }
+                _ = self.pacing.timer.sleep_until(wake_at) => {}
+                _ = &mut shutdown => return Ok(()),
+            }
+        }
+    }
+
+    /// In realtime: settles the overrun accounting for this wake-up and runs the model up to
+    /// the wall clock.
+    fn catch_up(&mut self) -> Result<(), DaemonError> {
+        let Some(map) = self.pacing.map.as_mut() else {
+            return Ok(());
+        };
+        let wall = self.pacing.started.elapsed();
+        let reached = self.engine.now().max(map.target(self.pacing.planned_wake));
+        if let Some(slip) = map.settle(reached, wall) {
+            tracing::warn!(
+                slip_ms = slip as f64 * 1e-6,
+                "overrun: simulated time slipped behind the wall clock"
+            );
+        }
+        self.engine
+            .advance_to(map.target(wall))
+            .map_err(model_error)
+    }
+
+    /// In realtime: runs the model up to the wall clock before an input is applied.
+    fn advance_to_wall(&mut self) -> Result<(), DaemonError> {
+        match self.pacing.map.as_ref() {
+            Some(map) => self
+                .engine
+                .advance_to(map.target(self.pacing.started.elapsed()))
+                .map_err(model_error),
+            None => Ok(()),
+        }
+    }
+
+    /// Flushes what is due, stops the link tasks (they write what was released, close their
+    /// endpoints and remove their symlinks) and the services, finishes the recording,
+    /// removes the pid file and the sockets.
+    pub async fn finish(mut self) -> Result<Summary, DaemonError> {
+        flush_outputs(&mut self.engine, &mut self.lines);
+        let sim_time_s = self.engine.now() as f64 * 1e-9;
+        let overruns = self.pacing.map.as_ref().map_or(0, RealtimeMap::overruns);
+        self.stop.send_replace(true);
+        drop(std::mem::take(&mut self.lines));
+        // Link tasks get `TASKS_BUDGET` between them; one that has not stopped by then is
+        // aborted, which drops its endpoint (and symlink). See `shutdown` for the whole bound.
+        let tasks_deadline = Instant::now() + shutdown::TASKS_BUDGET;
+        for mut task in std::mem::take(&mut self.link_tasks) {
+            if tokio::time::timeout_at(tasks_deadline, &mut task)
+                .await
+                .is_err()
+            {
+                tracing::warn!("a link task did not stop in time; aborting it");
+                task.abort();
+                let _ = tokio::time::timeout(Duration::from_millis(20), task).await;
+            }
+        }
+        // Input that arrived before the shutdown but was not processed (the loop may stop
+        // with chunks still queued, and the link tasks drain their endpoints as they stop) is
+        // recorded, not acted on: the run is over.
+        while let Ok(inbound) = self.inbound.try_recv() {
+            self.engine.record_unprocessed(inbound.line, &inbound.data);
+        }
+        let services_deadline = Instant::now() + shutdown::SERVICES_BUDGET;
+        for mut service in std::mem::take(&mut self.services) {
+            if tokio::time::timeout_at(services_deadline, &mut service.task)
+                .await
+                .is_err()
+            {
+                tracing::warn!(
+                    service = service.name,
+                    "a service did not stop in time; aborting it"
+                );
+                service.task.abort();
+            }
+        }
+        let records = match self.engine.take_recorder() {
+            Some(recorder) => Some(recorder.finish()?),
+            None => None,
+        };
+        drop(self.pid_file.take());
+        self.leftovers.remove_all();
+        Ok(Summary {
+            sim_time_s,
+            records,
+            overruns,
+        })
+    }
+}
+
+/// The lines the configuration asks for, each with its endpoint opened: the sonar line
+/// (carrying the sensor link too when it is shared), then the sensor line. Symlinks we own
+/// are noted in `leftovers`.
+async fn open_lines(
+    config: &DaemonConfig,
+    run_dir: &Path,
+    leftovers: &shutdown::Leftovers,
+) -> Result<(Vec<LineSpec>, Vec<OpenEndpoint>), DaemonError> {
+    let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;
+    let line_spec = |name, carries, link: &config::LinkConfig| LineSpec {
+        name,
+        carries,
+        settings: link.line,
+        tx_queue_bytes: link.tx_queue_bytes,
+        release_quantum_ns: config.release_quantum.as_nanos() as u64,
+    };
+    let mut specs = vec![if shared {
+        line_spec("shared", Carries::SHARED, &config.sonar)
+    } else {
+        line_spec("sonar", Carries::SONAR, &config.sonar)
+    }];
+    let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, run_dir).await?];
+    if !shared {
+        specs.push(line_spec("sensor", Carries::SENSOR, &config.sensor));
+        endpoints.push(OpenEndpoint::open("sensor", &config.sensor, run_dir).await?);
+    }
+    for endpoint in &endpoints {
+        if let Some((path, target)) = endpoint.owned_link() {
+            leftovers.symlink(path, target);
+        }
+    }
+    Ok((specs, endpoints))
+}
+
+/// What [`spawn_link_tasks`] started.
+struct Spawned {
+    lines: Vec<LineRuntime>,
+    links: Vec<LinkInfo>,
+    link_tasks: Vec<tokio::task::JoinHandle<()>>,
+    /// Everything the link tasks read, in arrival order.
+    inbound: mpsc::Receiver<Inbound>,
+}
+
+/// One link task per line, on its endpoint; the loop's side of each in `lines`.
+fn spawn_link_tasks(
+    specs: &[LineSpec],
+    endpoints: Vec<OpenEndpoint>,
+    recorder: Option<crate::record::RecordHandle>,
+    stop: &watch::Receiver<bool>,
+) -> Spawned {
+    let (in_tx, inbound) = mpsc::channel::<Inbound>(256);
+    let mut spawned = Spawned {
+        lines: Vec::new(),
+        links: Vec::new(),
+        link_tasks: Vec::new(),
+        inbound,
+    };
+    for ((index, endpoint), spec) in endpoints.into_iter().enumerate().zip(specs) {
+        let describe = endpoint.describe();
+        spawned.links.push(LinkInfo {
+            name: spec.name,
+            path: describe.clone(),
+        });
+        let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
+        let counters = Arc::new(LinkCounters::default());
+        let cx = LineContext {
+            line: index,
+            name: spec.name,
+            counters,
+            recorder: recorder.clone(),
+        };
+        spawned.link_tasks.push(tokio::spawn(link::run_line(
+            cx.clone(),
+            endpoint,
+            in_tx.clone(),
+            out_rx,
+            stop.clone(),
+        )));
+        spawned.lines.push(LineRuntime {
+            cx,
+            describe,
+            to_link: out_tx,
+            backlog: bytes::BytesMut::new(),
+            backlog_limit: spec.tx_queue_bytes,
+        });
+    }
+    spawned
+}
+
+impl LoopClock {
+    /// When the loop wakes next: at the engine's next deadline (realtime, at most
+    /// [`IDLE_WAKE`] away), or to refresh the status (lockstep).
+    fn next_wake<M: Model>(&mut self, engine: &Engine<M>, now: Instant) -> Instant {
+        match self.map.as_ref() {
+            Some(map) => {
+                let due = engine
+                    .next_deadline()
+                    .map_or(Duration::MAX, |t| map.wall_at(t));
+                let due = due.min(self.started.elapsed() + IDLE_WAKE);
+                self.planned_wake = due;
+                self.started + due
+            }
+            None => now + STATUS_PERIOD,
+        }
+    }
+}
+
+/// Runs the bridge until `shutdown` turns true (or its sender is dropped): [`Daemon::start`],
+/// readiness reported through `on_ready` (each link, then `Ready`), [`Daemon::serve`],
+/// [`Daemon::finish`]. The daemon is finished even when serving failed; the serving error is
+/// returned first.
 pub async fn run<M>(
     config: &DaemonConfig,
     model: M,
@@ -114,373 +560,29 @@ pub async fn run<M>(
     options: RunOptions,
     mut shutdown: watch::Receiver<bool>,
     mut on_ready: impl FnMut(Readiness),
-) -> Result<RunSummary, DaemonError>
+) -> Result<Summary, DaemonError>
 where
     M: Model,
 {
-    let run_dir = config.run_dir.clone();
-    create_run_dir(&run_dir)?;
-    let lockstep = config.time_mode == TimeMode::Lockstep;
-    // Held until `run` returns; lockstep has no wall-clock deadlines to protect.
-    let _cpu_latency = match config.cpu_latency_us {
-        Some(us) if !lockstep => match crate::transport::CpuLatencyRequest::hold(us) {
-            Ok(request) => {
-                tracing::info!(latency_us = us, "holding a CPU latency request");
-                Some(request)
-            }
-            Err(e) => {
-                tracing::warn!(
-                    "no CPU latency request ({}: {e}): wake-ups may be delayed by idle CPUs",
-                    crate::transport::CPU_LATENCY_QOS
-                );
-                None
-            }
-        },
-        _ => None,
-    };
-
-    // Endpoints first, so the readiness lines can name them.
-    let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;
-    let mut specs = vec![LineSpec {
-        name: if shared { "shared" } else { "sonar" },
-        carries: core::Carries {
-            sonar: true,
-            sensor: shared,
-        },
-        settings: config.sonar.line,
-        tx_queue_bytes: config.sonar.tx_queue_bytes,
-        release_quantum_ns: config.release_quantum.as_nanos() as u64,
-    }];
-    let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, &run_dir).await?];
-    if !shared {
-        specs.push(LineSpec {
-            name: "sensor",
-            carries: core::Carries {
-                sonar: false,
-                sensor: true,
-            },
-            settings: config.sensor.line,
-            tx_queue_bytes: config.sensor.tx_queue_bytes,
-            release_quantum_ns: config.release_quantum.as_nanos() as u64,
-        });
-        endpoints.push(OpenEndpoint::open("sensor", &config.sensor, &run_dir).await?);
-    }
-
-    for endpoint in &endpoints {
-        if let Some((path, target)) = endpoint.owned_link() {
-            options.leftovers.symlink(path, target);
-        }
-    }
-    let status_path = run_dir.join("status.sock");
-    let status_server = StatusServer::bind(&status_path)?;
-    options.leftovers.socket(&status_path);
-    let pid_guard = options
-        .pid_file
-        .as_deref()
-        .map(PidFile::create)
-        .transpose()?;
-    if let Some(pid) = &options.pid_file {
-        options.leftovers.pid_file(pid);
-    }
-
-    let mut core = Core::new(model, board, mux, &specs, lockstep);
-    if let Some(log) = &config.sonar_replay {
-        core.set_feed_schedule(feed::load_schedule(log)?);
-    }
-    let feed_path = run_dir.join(feed::FEED_SOCKET);
-    let feed_listener = feed::bind(&feed_path)?;
-    options.leftovers.socket(&feed_path);
-    if let Some(dir) = &options.record {
-        let recorder = Recorder::start(dir, &options.record_meta, crate::record::STATE_HEADER)?;
-        core.set_recorder(recorder, (1e9 / config.state_record_hz) as u64);
-    }
-
-    let (in_tx, mut in_rx) = mpsc::channel::<Inbound>(256);
-    let mut lines = Vec::new();
-    let mut tasks = Vec::new();
-    for (index, endpoint) in endpoints.into_iter().enumerate() {
-        let name = specs[index].name;
-        let describe = endpoint.describe();
+    let mut daemon = Daemon::start(config, model, board, mux, options).await?;
+    for link in daemon.links() {
         on_ready(Readiness::Link {
-            name,
-            path: describe.clone(),
-        });
-        let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
-        let counters = Arc::new(LinkCounters::default());
-        let cx = LineContext {
-            line: index,
-            name,
-            counters: counters.clone(),
-            recorder: core.recorder_handle(),
-        };
-        tasks.push(tokio::spawn(link::run_line(
-            cx,
-            endpoint,
-            in_tx.clone(),
-            out_rx,
-            shutdown.clone(),
-        )));
-        lines.push(LineRuntime {
-            name,
-            describe,
-            to_link: out_tx,
-            counters,
-            backlog: bytes::BytesMut::new(),
-            backlog_limit: specs[index].tx_queue_bytes,
+            name: link.name,
+            path: link.path.clone(),
         });
     }
-    drop(in_tx);
-
-    let (feed_tx, mut feed_rx) = mpsc::channel(64);
-    let feed_task = tokio::spawn(feed::serve(
-        feed_listener,
-        feed_path,
-        feed_tx,
-        shutdown.clone(),
-    ));
-    let (status_tx, status_rx) = watch::channel(StatusSnapshot::default());
-    let status_task = {
-        let shutdown = shutdown.clone();
-        tokio::spawn(async move { status_server.serve(status_rx, shutdown).await })
-    };
     on_ready(Readiness::Ready {
-        status_socket: status_path.clone(),
+        status_socket: daemon.status_socket().to_path_buf(),
     });
-
-    // From here on this thread only waits for deadlines and bytes; under SCHED_FIFO those
-    // wake-ups are not queued behind other processes' CPU time. The recorder and signal
-    // threads were started above and keep the default scheduler.
-    let realtime_policy = match config.rt_priority {
-        Some(priority) if !lockstep => match crate::transport::set_realtime_priority(priority) {
-            Ok(()) => {
-                tracing::info!(priority, "bridge thread runs under SCHED_FIFO");
-                true
-            }
-            Err(e) => {
-                tracing::warn!(
-                    priority,
-                    "no SCHED_FIFO ({e}): wake-ups may wait behind other processes"
-                );
-                false
-            }
-        },
-        _ => false,
-    };
-    let started = Instant::now();
-    let mut map = match config.time_mode {
-        TimeMode::Realtime { speed } => Some(RealtimeMap::new(speed, config.max_lag)),
-        TimeMode::Lockstep => None,
-    };
-    let mut next_status = started;
-    // When the loop meant to wake next (wall time since start). Lag is measured against it:
-    // the sleep between wakes is not an overrun, only waking late is.
-    let mut planned_wake = Duration::ZERO;
-    let timer = PreciseTimer::new();
-    let result: Result<(), DaemonError> = async {
-        loop {
-            if let Some(map) = map.as_mut() {
-                let wall = started.elapsed();
-                let reached = core.now().max(map.target(planned_wake));
-                if let Some(slip) = map.settle(reached, wall) {
-                    tracing::warn!(
-                        slip_ms = slip as f64 * 1e-6,
-                        "overrun: simulated time slipped behind the wall clock"
-                    );
-                }
-                core.advance_to(map.target(wall)).map_err(model_error)?;
-            }
-            flush_outputs(&mut core, &mut lines);
-            let now = Instant::now();
-            if now >= next_status {
-                status_tx.send_replace(snapshot(
-                    &core,
-                    &lines,
-                    started,
-                    config,
-                    map.as_ref(),
-                    options.record.as_deref(),
-                ));
-                next_status = now + STATUS_PERIOD;
-            }
-            let wake = match map.as_ref() {
-                Some(map) => {
-                    let due = core
-                        .next_deadline()
-                        .map_or(Duration::MAX, |t| map.wall_at(t));
-                    let due = due.min(started.elapsed() + IDLE_WAKE);
-                    planned_wake = due;
-                    started + due
-                }
-                None => now + STATUS_PERIOD,
-            };
-            tokio::select! {
-                inbound = in_rx.recv() => match inbound {
-                    Some(inbound) => {
-                        if let Some(map) = map.as_ref() {
-                            core.advance_to(map.target(started.elapsed())).map_err(model_error)?;
-                        }
-                        core.receive(inbound.line, &inbound.data).map_err(model_error)?;
-                    }
-                    None => return Ok(()),
-                },
-                Some(event) = feed_rx.recv() => {
-                    if let Some(map) = map.as_ref() {
-                        core.advance_to(map.target(started.elapsed())).map_err(model_error)?;
-                    }
-                    match event {
-                        feed::FeedEvent::Connected => core.set_feed_connected(true),
-                        feed::FeedEvent::Bytes(data) => core.feed_bytes(&data),
-                        feed::FeedEvent::Closed => core.set_feed_connected(false),
-                    }
-                }
-                _ = timer.sleep_until(wake) => {}
-                changed = shutdown.changed() => {
-                    if changed.is_err() || *shutdown.borrow() {
-                        return Ok(());
-                    }
-                }
-            }
-        }
-    }
-    .await;
-    if realtime_policy {
-        // `run` may be called on a caller's thread (the in-process tests): hand it back as
-        // it came.
-        crate::transport::clear_realtime_priority();
-    }
-
-    // Shut down: flush what is due, stop the link tasks (they remove their symlinks), finish
-    // the recording, remove the pid file.
-    flush_outputs(&mut core, &mut lines);
-    let sim_time_s = core.now() as f64 * 1e-9;
-    let overruns = map.as_ref().map_or(0, RealtimeMap::overruns);
-    drop(lines);
-    // Link tasks get `TASKS_BUDGET` between them; one that has not stopped by then is
-    // aborted, which drops its endpoint (and symlink). See `shutdown` for the whole bound.
-    let tasks_deadline = Instant::now() + shutdown::TASKS_BUDGET;
-    for mut task in tasks {
-        if tokio::time::timeout_at(tasks_deadline, &mut task)
-            .await
-            .is_err()
-        {
-            tracing::warn!("a link task did not stop in time; aborting it");
-            task.abort();
-            let _ = tokio::time::timeout(Duration::from_millis(20), task).await;
-        }
-    }
-    // Input that arrived before the shutdown but was not processed (the loop may stop with
-    // chunks still queued, and the link tasks drain their endpoints as they stop) is
-    // recorded, not acted on: the run is over.
-    while let Ok(inbound) = in_rx.try_recv() {
-        core.record_unprocessed(inbound.line, &inbound.data);
-    }
-    status_task.abort();
-    let _ = tokio::time::timeout(Duration::from_millis(200), feed_task).await;
-    let records = match core.take_recorder() {
-        Some(recorder) => Some(recorder.finish()?),
-        None => None,
-    };
-    drop(pid_guard);
-    options.leftovers.remove_all();
-    result?;
-    Ok(RunSummary {
-        sim_time_s,
-        records,
-        overruns,
-    })
-}
-
-/// Sleeps until a deadline with the precision of a Linux timerfd.
-///
-/// tokio's timer wheel rounds every deadline up to the next millisecond, so a paced byte
-/// (86.8 us at 115200 baud) would leave up to 1 ms after its wire time and an ADC reply
-/// would take about 1.2 ms instead of 0.87 ms. The timerfd wakes within microseconds. tokio's
-/// sleep still runs alongside, so a test that pauses tokio's clock wakes as before, and
-/// if the timerfd cannot be created or armed the daemon falls back to tokio's timer alone.
-struct PreciseTimer {
-    fd: Option<tokio::io::unix::AsyncFd<TimerFd>>,
-}
-
-struct TimerFd(nix::sys::timerfd::TimerFd);
-
-impl std::os::fd::AsRawFd for TimerFd {
-    fn as_raw_fd(&self) -> std::os::fd::RawFd {
-        use std::os::fd::AsFd;
-        self.0.as_fd().as_raw_fd()
-    }
-}
-
-impl PreciseTimer {
-    fn new() -> Self {
-        use nix::sys::timerfd::{ClockId, TimerFlags};
-        let fd = nix::sys::timerfd::TimerFd::new(
-            ClockId::CLOCK_MONOTONIC,
-            TimerFlags::TFD_NONBLOCK | TimerFlags::TFD_CLOEXEC,
-        )
-        .map_err(std::io::Error::from)
-        .and_then(|fd| {
-            // SAFETY: the timerfd is a valid open descriptor owned by the `TimerFd`, which
-            // returns the same descriptor from `as_raw_fd` for as long as the `AsyncFd` owns it.
-            unsafe {
-                tokio::io::unix::AsyncFd::register_with_interest(
-                    TimerFd(fd),
-                    tokio::io::Interest::READABLE,
-                )
-            }
-            .map_err(std::io::Error::from)
-        });
-        match fd {
-            Ok(fd) => Self { fd: Some(fd) },
-            Err(error) => {
-                tracing::warn!(%error, "no timerfd; timing falls back to tokio's 1 ms timer");
-                Self { fd: None }
-            }
-        }
-    }
-
-    async fn sleep_until(&self, deadline: Instant) {
-        use nix::sys::time::TimeSpec;
-        use nix::sys::timerfd::{Expiration, TimerSetTimeFlags};
-        let coarse = tokio::time::sleep_until(deadline);
-        let Some(fd) = &self.fd else {
-            return coarse.await;
-        };
-        let left = deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() {
-            // Already due: still take part in tokio's cooperative budget, as tokio's own
-            // sleep does, so a loop that keeps running late cannot starve the link tasks.
-            tokio::task::consume_budget().await;
-            return;
-        }
-        let armed = fd.get_ref().0.set(
-            Expiration::OneShot(TimeSpec::from_duration(left)),
-            TimerSetTimeFlags::empty(),
-        );
-        if armed.is_err() {
-            return coarse.await;
-        }
-        let fine = async {
-            loop {
-                let Ok(mut guard) = fd.readable().await else {
-                    return std::future::pending::<()>().await;
-                };
-                let mut expirations = [0u8; 8];
-                match guard.try_io(|f| {
-                    nix::unistd::read(&f.get_ref().0, &mut expirations)
-                        .map_err(std::io::Error::from)
-                }) {
-                    // Expired (an expiry left over from an earlier, abandoned sleep only
-                    // makes the loop wake once early, which it tolerates).
-                    Ok(_) => return,
-                    Err(_would_block) => continue,
-                }
-            }
-        };
-        tokio::select! {
-            _ = fine => {}
-            _ = coarse => {}
-        }
-    }
+    let served = daemon
+        .serve(async move {
+            // A dropped sender is a shutdown too.
+            let _ = shutdown.wait_for(|stop| *stop).await;
+        })
+        .await;
+    let summary = daemon.finish().await;
+    served?;
+    summary
 }
 
 fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonError {
@@ -494,7 +596,7 @@ fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonErro
 /// `tx_queue_bytes` (a client that does not read, or is gone) are the newly released bytes
 /// dropped, counted and recorded as drops (the older ones keep their place, as in a UART
 /// overrun); the daemon never blocks on a client.
-fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &mut [LineRuntime]) {
+fn flush_outputs<M: Model>(core: &mut Engine<M>, lines: &mut [LineRuntime]) {
     let sim_s = core.now() as f64 * 1e-9;
     for (index, line) in lines.iter_mut().enumerate() {
         let waiting = line.backlog.len();
@@ -517,17 +619,19 @@ fn flush_outputs<M: Model>(core: &mut Core<M>, lines: &mut [LineRuntime]) {
             }
             Err(mpsc::error::TrySendError::Full(chunk)) => {
                 line.backlog.extend_from_slice(&chunk.data[..waiting]);
-                core.note_dropped(index, &chunk.data[waiting..], DropReason::NotRead);
+                line.cx
+                    .dropped(sim_s, DropReason::NotRead, &chunk.data[waiting..]);
             }
             Err(mpsc::error::TrySendError::Closed(chunk)) => {
-                core.note_dropped(index, &chunk.data, DropReason::EndpointGone);
+                line.cx
+                    .dropped(sim_s, DropReason::EndpointGone, &chunk.data);
             }
         }
     }
 }
 
 fn snapshot<M: Model>(
-    core: &Core<M>,
+    core: &Engine<M>,
     lines: &[LineRuntime],
     started: Instant,
     config: &DaemonConfig,
@@ -550,15 +654,15 @@ fn snapshot<M: Model>(
             .map(|(i, l)| {
                 let c = core.line_counters(i);
                 LinkStatus {
-                    name: l.name.to_string(),
+                    name: l.cx.name.to_string(),
                     path: l.describe.clone(),
-                    bytes_rx: l.counters.bytes_rx.load(Ordering::Relaxed),
-                    bytes_tx: l.counters.bytes_tx.load(Ordering::Relaxed),
+                    bytes_rx: l.cx.counters.bytes_rx.load(Ordering::Relaxed),
+                    bytes_tx: l.cx.counters.bytes_tx.load(Ordering::Relaxed),
                     frames_rx: c.frames_rx,
                     frames_tx: c.frames_tx,
-                    errors: c.errors + l.counters.io_errors.load(Ordering::Relaxed),
-                    dropped_tx: c.dropped_tx + l.counters.dropped_tx.load(Ordering::Relaxed),
-                    reconnects: l.counters.reconnects.load(Ordering::Relaxed),
+                    errors: c.errors + l.cx.counters.io_errors.load(Ordering::Relaxed),
+                    dropped_tx: c.dropped_tx + l.cx.counters.dropped_tx.load(Ordering::Relaxed),
+                    reconnects: l.cx.counters.reconnects.load(Ordering::Relaxed),
                 }
             })
             .collect(),
@@ -591,28 +695,6 @@ fn create_run_dir(dir: &Path) -> Result<(), DaemonError> {
         })
 }
 
-/// `--pid-file`: written at start, removed at exit.
-#[derive(Debug)]
-struct PidFile(PathBuf);
-
-impl PidFile {
-    fn create(path: &Path) -> Result<Self, DaemonError> {
-        std::fs::write(path, format!("{}\n", std::process::id())).map_err(|source| {
-            DaemonError::PidFile {
-                path: path.to_path_buf(),
-                source,
-            }
-        })?;
-        Ok(Self(path.to_path_buf()))
-    }
-}
-
-impl Drop for PidFile {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use bytes::BytesMut;
@@ -623,7 +705,7 @@ mod tests {
 
     use super::*;
     use crate::config::{ConfigSource, DEFAULT_CONFIG, Document, Embedded};
-    use crate::daemon::core::fake::FakeModel;
+    use crate::daemon::engine::fake::FakeModel;
     use crate::devices::multiplexer::{
         DepthSentence, InvalidEcho, Multiplexer, MultiplexerSettings,
     };
@@ -674,6 +756,47 @@ mod tests {
         }
     }
 
+    /// `run` on a fake model with the test devices, as a task.
+    fn spawn_run(
+        config: DaemonConfig,
+        options: RunOptions,
+        stop: watch::Receiver<bool>,
+        on_ready: impl FnMut(Readiness) + Send + 'static,
+    ) -> tokio::task::JoinHandle<Result<Summary, DaemonError>> {
+        let (board, mux) = devices();
+        tokio::spawn(async move {
+            run(
+                &config,
+                FakeModel::default(),
+                board,
+                mux,
+                options,
+                stop,
+                on_ready,
+            )
+            .await
+        })
+    }
+
+    /// Sends `message` as frame `seq` on the sensor link and returns the reply to it.
+    async fn ask(
+        (port, buf, decoder): &mut (
+            &mut tokio_serial::SerialStream,
+            &mut BytesMut,
+            &mut LineDecoder,
+        ),
+        seq: u8,
+        message: Message,
+    ) -> Message {
+        let mut frame = BytesMut::new();
+        Frame::new(seq, message).encode(&mut frame);
+        port.write_all(&frame).await.unwrap();
+        match read_item(port, buf, decoder).await {
+            LineItem::Frame(reply) if reply.seq == seq => reply.message,
+            other => panic!("expected the reply to frame {seq}, got {other:?}"),
+        }
+    }
+
     /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
     /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
     /// the time; shutdown removes the links and finishes the recording.
@@ -683,7 +806,6 @@ mod tests {
     /// in the one-hour run at speed 100 of `bench daemon rss`). Now they wait in a backlog.
     #[test]
     fn released_bytes_wait_for_a_busy_link_task_instead_of_being_dropped() {
-        use crate::daemon::core::Carries;
         let (board, mux) = devices();
         let spec = |name, sonar, baud| LineSpec {
             name,
@@ -696,19 +818,26 @@ mod tests {
             release_quantum_ns: 1_000_000,
         };
         let specs = [spec("sonar", true, 4800), spec("sensor", false, 115_200)];
-        let mut core = Core::new(FakeModel::default(), board, mux, &specs, false);
+        let mut core = Engine::new(FakeModel::default(), board, mux, &specs, false);
         // A link task that takes one chunk and then stalls: a channel with room for one.
         let (sonar_tx, _sonar_rx) = mpsc::channel(1);
         let (sensor_tx, mut sensor_rx) = mpsc::channel(1);
-        let runtime = |name, to_link| LineRuntime {
-            name,
+        let runtime = |line, name, to_link| LineRuntime {
+            cx: LineContext {
+                line,
+                name,
+                counters: Arc::default(),
+                recorder: None,
+            },
             describe: String::new(),
             to_link,
-            counters: Arc::default(),
             backlog: bytes::BytesMut::new(),
             backlog_limit: 4096,
         };
-        let mut lines = vec![runtime("sonar", sonar_tx), runtime("sensor", sensor_tx)];
+        let mut lines = vec![
+            runtime(0, "sonar", sonar_tx),
+            runtime(1, "sensor", sensor_tx),
+        ];
         let mut stream = BytesMut::new();
         Frame::new(
             1,
@@ -731,7 +860,7 @@ mod tests {
                 }
             }
         }
-        assert_eq!(core.line_counters(1).dropped_tx, 0);
+        assert_eq!(lines[1].cx.counters.dropped_tx.load(Ordering::Relaxed), 0);
         // The ACK and about 100 samples of 14 bytes, all delivered.
         assert!(delivered > 1300, "{delivered} bytes delivered");
     }
@@ -746,26 +875,70 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         let mut config = config(&dir.join("run"));
         config.time_mode = TimeMode::Realtime { speed: 10.0 };
-        let (board, mux) = devices();
         let (stop_tx, stop_rx) = watch::channel(false);
-        let daemon = tokio::spawn(async move {
-            run(
-                &config,
-                FakeModel::default(),
-                board,
-                mux,
-                RunOptions::default(),
-                stop_rx,
-                |_| {},
-            )
-            .await
-        });
+        let daemon = spawn_run(config, RunOptions::default(), stop_rx, |_| {});
         tokio::time::sleep(Duration::from_secs(1)).await;
         stop_tx.send(true).unwrap();
         let summary = daemon.await.unwrap().unwrap();
         // 10 s in an ideal world; a loaded machine may slip a little (counted overruns).
         assert!(summary.sim_time_s >= 5.0, "1 s at speed 10: {summary:?}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The three stages on their own: after `start` the links exist before anything is
+    /// served; a service added with `spawn_service` runs beside them and is told to stop by
+    /// `finish`; `serve` returns when its shutdown future resolves, having published status.
+    #[tokio::test]
+    async fn start_serve_finish_run_a_service_beside_the_links() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-stages-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let run_dir = dir.join("run");
+        let config = config(&run_dir);
+        let (board, mux) = devices();
+        let mut daemon = Daemon::start(
+            &config,
+            FakeModel::default(),
+            board,
+            mux,
+            RunOptions::default(),
+        )
+        .await
+        .unwrap();
+        let names: Vec<&str> = daemon.links().iter().map(|l| l.name).collect();
+        assert_eq!(names, ["sonar", "sensor"]);
+        assert!(std::fs::symlink_metadata(run_dir.join("sensor")).is_ok());
+        assert_eq!(daemon.status_socket(), run_dir.join("status.sock"));
+        let (told_tx, told_rx) = tokio::sync::oneshot::channel();
+        daemon.spawn_service("test", |mut stop| async move {
+            let _ = stop.wait_for(|stop| *stop).await;
+            let _ = told_tx.send(());
+        });
+        let mut updates = daemon.status_updates();
+        daemon
+            .serve(tokio::time::sleep(STATUS_PERIOD * 2))
+            .await
+            .unwrap();
+        assert!(
+            updates.has_changed().unwrap(),
+            "status published while serving"
+        );
+        assert_eq!(updates.borrow_and_update().links.len(), 2);
+        let summary = daemon.finish().await.unwrap();
+        assert_eq!(
+            summary.sim_time_s, 0.0,
+            "lockstep without a client stays at 0"
+        );
+        tokio::time::timeout(Duration::from_secs(1), told_rx)
+            .await
+            .expect("the service stopped within its budget")
+            .expect("the service was told to stop");
+        for name in ["sonar", "sensor", "status.sock", feed::FEED_SOCKET] {
+            assert!(
+                std::fs::symlink_metadata(run_dir.join(name)).is_err(),
+                "{name} removed"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[tokio::test]
@@ -775,29 +948,17 @@ mod tests {
         let run_dir = dir.join("run");
         let record = dir.join("rec");
         let config = config(&run_dir);
-        let (board, mux) = devices();
         let (stop_tx, stop_rx) = watch::channel(false);
         let (ready_tx, mut ready_rx) = mpsc::unbounded_channel();
         let options = RunOptions {
             record: Some(record.clone()),
             pid_file: Some(dir.join("pid")),
-            record_meta: "seed = 1\n".into(),
+            config_toml: "seed = 1\n".into(),
             ..RunOptions::default()
         };
         std::fs::create_dir_all(&dir).unwrap();
-        let daemon = tokio::spawn(async move {
-            run(
-                &config,
-                FakeModel::default(),
-                board,
-                mux,
-                options,
-                stop_rx,
-                move |r| {
-                    let _ = ready_tx.send(r);
-                },
-            )
-            .await
+        let daemon = spawn_run(config, options, stop_rx, move |r| {
+            let _ = ready_tx.send(r);
         });
         let mut links = Vec::new();
         while let Readiness::Link { name, path } =
@@ -822,42 +983,18 @@ mod tests {
         )
         .unwrap();
         let (mut sbuf, mut sdec) = (BytesMut::new(), LineDecoder::new());
-        let send = |seq, message| {
-            let mut b = BytesMut::new();
-            Frame::new(seq, message).encode(&mut b);
-            b
-        };
-        sensor
-            .write_all(&send(1, Message::Hello { client_version: 1 }))
-            .await
-            .unwrap();
+        let mut sensor_link = (&mut sensor, &mut sbuf, &mut sdec);
         assert!(matches!(
-            read_item(&mut sensor, &mut sbuf, &mut sdec).await,
-            LineItem::Frame(Frame {
-                seq: 1,
-                message: Message::HelloReply { .. }
-            })
+            ask(&mut sensor_link, 1, Message::Hello { client_version: 1 }).await,
+            Message::HelloReply { .. }
         ));
         let mut select = BytesMut::new();
         SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
         sonar.write_all(&select).await.unwrap();
         // Give the select time to cross its pty before time moves on.
         tokio::time::sleep(Duration::from_millis(100)).await;
-        sensor
-            .write_all(&send(2, Message::TimeAdvance { ticks: 150 }))
-            .await
-            .unwrap();
-        let time = read_item(&mut sensor, &mut sbuf, &mut sdec).await;
-        assert!(
-            matches!(
-                time,
-                LineItem::Frame(Frame {
-                    seq: 2,
-                    message: Message::Time { ticks: 150, .. }
-                })
-            ),
-            "{time:?}"
-        );
+        let time = ask(&mut sensor_link, 2, Message::TimeAdvance { ticks: 150 }).await;
+        assert!(matches!(time, Message::Time { ticks: 150, .. }), "{time:?}");
         let (mut nbuf, mut ndec) = (BytesMut::new(), LineDecoder::new());
         assert!(matches!(
             read_item(&mut sonar, &mut nbuf, &mut ndec).await,
@@ -886,17 +1023,8 @@ mod tests {
         .await
         .unwrap();
         tokio::time::sleep(Duration::from_millis(200)).await;
-        sensor
-            .write_all(&send(3, Message::TimeAdvance { ticks: 50 }))
-            .await
-            .unwrap();
-        assert!(matches!(
-            read_item(&mut sensor, &mut sbuf, &mut sdec).await,
-            LineItem::Frame(Frame {
-                seq: 3,
-                message: Message::Time { ticks: 200, .. }
-            })
-        ));
+        let time = ask(&mut sensor_link, 3, Message::TimeAdvance { ticks: 50 }).await;
+        assert!(matches!(time, Message::Time { ticks: 200, .. }), "{time:?}");
         let fed = read_item(&mut sonar, &mut nbuf, &mut ndec).await;
         let LineItem::Nmea(firmware_protocol::Sentence::Dbt(dbt)) = fed else {
             panic!("expected the fed DBT, got {fed:?}")

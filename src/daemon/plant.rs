@@ -11,7 +11,7 @@ use firmware_protocol::sensor_link::{
 use nalgebra::{UnitQuaternion, Vector3};
 
 use super::config::DaemonConfig;
-use super::core::Model;
+use super::engine::Model;
 use crate::SimNanos;
 use crate::config::{ConfigError, ConfigSource};
 use crate::devices::multiplexer::Multiplexer;
@@ -339,7 +339,7 @@ pub fn devices(config: &DaemonConfig) -> (SensorBoard, Multiplexer) {
 mod tests {
     use super::*;
     use crate::config::{DEFAULT_CONFIG, Document, Embedded};
-    use crate::daemon::core::{Carries, Core, LineSpec};
+    use crate::daemon::engine::{Carries, Engine, LineSpec};
     use crate::transport::LineSettings;
 
     /// Regression: a ping's sentence is known only after the physics step that covers the
@@ -356,15 +356,12 @@ mod tests {
         let (board, mux) = devices(&config);
         let lines = [LineSpec {
             name: "sonar",
-            carries: Carries {
-                sonar: true,
-                sensor: false,
-            },
+            carries: Carries::SONAR,
             settings: LineSettings::n81(4800),
             tx_queue_bytes: 4096,
             release_quantum_ns: 1_000_000,
         }];
-        let mut core = Core::new(plant, board, mux, &lines, false);
+        let mut core = Engine::new(plant, board, mux, &lines, false);
         core.receive(0, b"@S1\r").unwrap();
         // The daemon's realtime loop at speed 10: wake at the next deadline, or after the
         // idle wake of 20 ms wall = 200 ms simulated.

@@ -1,14 +1,14 @@
 //! Shutdown within [`SHUTDOWN_LIMIT`], even when part of the daemon hangs.
 //!
 //! A clean shutdown (SIGINT/SIGTERM) stops the loop, flushes what is due, stops the link
-//! tasks (they write what the core released, take what the EyeBot side sent, close their
+//! tasks (they write what the engine released, take what the EyeBot side sent, close their
 //! endpoints and remove their symlinks), finishes the recording (flush + `fsync`) and removes
 //! the sockets and the pid file. Normally that takes a few milliseconds. Two things bound it
 //! when something hangs:
 //!
-//! - inside [`super::run`], link tasks that have not stopped after [`TASKS_BUDGET`] are
-//!   aborted (dropping their endpoints), and everything we created is removed through
-//!   [`Leftovers`];
+//! - inside [`super::Daemon::finish`], link tasks that have not stopped after
+//!   [`TASKS_BUDGET`] are aborted (dropping their endpoints), services after
+//!   [`SERVICES_BUDGET`], and everything we created is removed through [`Leftovers`];
 //! - the process-level guard started by [`spawn_signal_guard`] watches the signals on a
 //!   thread of its own, so it fires even when the daemon's runtime is blocked (a recorder
 //!   waiting on a disk that stopped taking data, a serial `close` waiting for the line to
@@ -28,6 +28,9 @@ pub const SHUTDOWN_LIMIT: Duration = Duration::from_secs(1);
 pub const HARD_EXIT_AFTER: Duration = Duration::from_millis(800);
 /// How long link tasks may take to stop before they are aborted.
 pub const TASKS_BUDGET: Duration = Duration::from_millis(300);
+/// How long the services beside the links (status, feed) get, between them, to stop before
+/// they are aborted.
+pub const SERVICES_BUDGET: Duration = Duration::from_millis(200);
 /// Exit status when shutdown had to be cut short.
 pub const EXIT_SHUTDOWN_HUNG: i32 = 3;
 

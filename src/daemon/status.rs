@@ -6,7 +6,6 @@
 //! closes. There is no request to parse, so a client cannot confuse the daemon.
 
 use std::io;
-use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -140,22 +139,10 @@ pub struct StatusServer {
 impl StatusServer {
     /// Binds `path` (replacing a stale socket file) with mode 0600.
     pub fn bind(path: &Path) -> Result<Self, StatusError> {
-        let io_err = |source| StatusError::Io {
+        let listener = super::socket::bind_owner_only(path).map_err(|source| StatusError::Io {
             path: path.to_path_buf(),
             source,
-        };
-        if std::fs::symlink_metadata(path).is_ok() {
-            // A live daemon answers; a stale socket file refuses the connection.
-            if std::os::unix::net::UnixStream::connect(path).is_ok() {
-                return Err(io_err(io::Error::new(
-                    io::ErrorKind::AddrInUse,
-                    "another daemon is serving this socket",
-                )));
-            }
-            std::fs::remove_file(path).map_err(io_err)?;
-        }
-        let listener = UnixListener::bind(path).map_err(io_err)?;
-        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).map_err(io_err)?;
+        })?;
         Ok(Self {
             listener,
             path: path.to_path_buf(),
@@ -235,13 +222,20 @@ pub async fn query(path: &Path, timeout: Duration) -> Result<StatusSnapshot, Sta
 
 #[cfg(test)]
 mod tests {
+    use std::os::unix::fs::PermissionsExt;
+
     use super::*;
+
+    fn scratch(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
 
     #[tokio::test]
     async fn a_client_reads_the_latest_snapshot_from_an_owner_only_socket() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-status-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = scratch("status");
         let path = dir.join("status.sock");
         let server = StatusServer::bind(&path).unwrap();
         let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
@@ -271,9 +265,7 @@ mod tests {
 
     #[tokio::test]
     async fn a_stale_socket_file_is_replaced_but_a_live_one_is_not() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-status2-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = scratch("status2");
         let path = dir.join("status.sock");
         {
             let live = StatusServer::bind(&path).unwrap();

@@ -60,26 +60,6 @@ pub struct Conversion {
     pub notices: Vec<String>,
 }
 
-/// Top-level `key = "value"` of the daemon configuration copied as comments into
-/// `meta.toml` (`docs/recording.md`).
-fn recorded_key(meta: &str, key: &str) -> Option<String> {
-    for line in meta.lines() {
-        let l = line.trim_start_matches('#').trim();
-        if l.starts_with('[') {
-            break; // keys after the first table belong to it
-        }
-        if let Some((k, v)) = l.split_once('=')
-            && k.trim() == key
-        {
-            let v = v.split('#').next().unwrap_or("").trim().trim_matches('"');
-            if !v.is_empty() {
-                return Some(v.to_string());
-            }
-        }
-    }
-    None
-}
-
 /// MOTORDrive percent for a duty and direction: the inverse of `hdt_command` (table
 /// decreasing from 0 % to 100 %). Duties inside the first segment (the deadband) come back as
 /// fractions of 10 %, which map to the same duty again.
@@ -103,106 +83,48 @@ pub fn percent_from_duty(table: &[f64; 11], duty: u8, direction: WireDirection) 
     }
 }
 
-fn csv_err(origin: &Path, line: usize, column: &str, message: impl Into<String>) -> GapError {
-    GapError::Csv {
-        origin: origin.display().to_string(),
-        line,
-        column: column.to_string(),
-        message: message.into(),
-    }
-}
-
-/// One ground-truth row: (t_s, columns by name).
-type StateRow = (f64, BTreeMap<String, f64>);
-
-/// Ground-truth rows of `state.csv`.
-fn read_state(path: &Path) -> Result<Vec<StateRow>, GapError> {
-    let text = std::fs::read_to_string(path).map_err(|source| GapError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let mut lines = text.lines().enumerate();
-    let Some((_, header)) = lines.next() else {
-        return Err(csv_err(path, 1, "", "empty file, expected a header"));
-    };
-    let names: Vec<&str> = header.split(',').collect();
-    if names.first() != Some(&"t_s") {
-        return Err(csv_err(path, 1, "t_s", "the first column must be t_s"));
-    }
-    let mut rows = Vec::new();
-    for (i, l) in lines {
-        if l.trim().is_empty() {
-            continue;
-        }
-        let mut row = BTreeMap::new();
-        for (name, cell) in names.iter().zip(l.split(',')) {
-            let v: f64 = cell
-                .trim()
-                .parse()
-                .map_err(|_| csv_err(path, i + 1, name, format!("`{cell}` is not a number")))?;
-            row.insert((*name).to_string(), v);
-        }
-        let t = row.get("t_s").copied().unwrap_or(f64::NAN);
-        if !t.is_finite() {
-            return Err(csv_err(path, i + 1, "t_s", "missing or not finite"));
-        }
-        rows.push((t, row));
-    }
-    if rows.is_empty() {
-        return Err(csv_err(
-            path,
-            2,
-            "t_s",
-            "no ground-truth rows: nothing to start from",
-        ));
-    }
-    Ok(rows)
+/// A recording that cannot be read, as the gap workflow reports it.
+fn recording_error(e: record::ReadError) -> GapError {
+    GapError::Data(e.to_string())
 }
 
 /// Converts the recording in `dir`.
 pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError> {
-    let meta = std::fs::read_to_string(dir.join("meta.toml")).unwrap_or_default();
-    let pick = |given: &Option<String>, key: &str, default: &str| {
-        given
-            .clone()
-            .or_else(|| recorded_key(&meta, key))
-            .unwrap_or_else(|| default.to_string())
+    let recorded = record::read_model_files(dir).map_err(recording_error)?;
+    let pick = |given: &Option<String>, recorded: &str| {
+        given.clone().unwrap_or_else(|| recorded.to_string())
     };
-    let vehicle_ref = pick(&opts.vehicle, "vehicle", crate::physics::DEFAULT_VEHICLE);
-    let sensors_ref = pick(&opts.sensors, "sensors", "sensors/mako-2008.toml");
-    let world_ref = pick(&opts.world, "world", crate::physics::DEFAULT_WORLD);
+    let vehicle_ref = pick(&opts.vehicle, &recorded.vehicle);
+    let sensors_ref = pick(&opts.sensors, &recorded.sensors);
+    let world_ref = pick(&opts.world, &recorded.world);
     let (o, t) = read_ref(dir, &vehicle_ref)?;
     let vehicle = VehicleConfig::from_document(&Document::new(o, &t))?;
     let (o, t) = read_ref(dir, &sensors_ref)?;
     let sensors = SensorsConfig::from_text(o, &t)?;
     let tables: [[f64; 11]; 4] = std::array::from_fn(|k| vehicle.thrusters[k].hdt_duty);
 
-    let state_path = dir.join("state.csv");
-    let states = read_state(&state_path)?;
-    let (t0, first) = &states[0];
-    let t0 = *t0;
-    let get = |k: &str| -> Result<f64, GapError> {
-        first
-            .get(k)
-            .copied()
-            .ok_or_else(|| csv_err(&state_path, 2, k, "missing column"))
+    let states = record::read_state(dir).map_err(recording_error)?;
+    let state_path = dir.join(record::format::STATE_FILE);
+    let Some(first) = states.first() else {
+        return Err(GapError::Data(format!(
+            "{}: no ground-truth rows: nothing to start from",
+            state_path.display()
+        )));
     };
+    let t0 = first.t_s;
     let initial = Initial {
-        x_m: get("x_m")?,
-        y_m: get("y_m")?,
-        z_m: Some(get("z_m")?),
-        heading_deg: get("yaw_rad")?.to_degrees(),
-        roll_deg: get("roll_rad")?.to_degrees(),
-        pitch_deg: get("pitch_rad")?.to_degrees(),
-        surge_mps: get("u_mps")?,
+        x_m: first.x_m,
+        y_m: first.y_m,
+        z_m: Some(first.z_m),
+        heading_deg: first.yaw_rad.to_degrees(),
+        roll_deg: first.roll_rad.to_degrees(),
+        pitch_deg: first.pitch_rad.to_degrees(),
+        surge_mps: first.u_mps,
     };
 
     // Decode every link and direction in order.
-    let bytes_path = dir.join("bytes.tsv");
-    let text = std::fs::read_to_string(&bytes_path).map_err(|source| GapError::Io {
-        path: bytes_path.clone(),
-        source,
-    })?;
+    let bytes_path = dir.join(record::format::BYTES_FILE);
+    let chunks = record::read_bytes(dir).map_err(recording_error)?;
     let mut notices = Vec::new();
     let mut decoders: BTreeMap<(String, &'static str), (LineDecoder, BytesMut)> = BTreeMap::new();
     let mut percent = [0.0; 4];
@@ -213,12 +135,7 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
     let mut velocity_codes: Vec<(f64, f64)> = Vec::new();
     let (mut ambiguous_sonar, mut raw_compass, mut link_errors) = (0usize, 0usize, 0usize);
     let adc_name = |ch: u8| -> Option<AdcSource> { *sensors.adc.channels.get(usize::from(ch))? };
-    for (i, line) in text.lines().enumerate().skip(1) {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let chunk = record::parse_chunk(line, i + 1)
-            .map_err(|e| GapError::Data(format!("{}: {e}", bytes_path.display())))?;
+    for chunk in &chunks {
         let t = chunk.sim_s - t0;
         let key = (chunk.link.clone(), chunk.dir.as_str());
         let (decoder, buf) = decoders.entry(key).or_default();
@@ -340,7 +257,7 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
     if let Some(speed) = paddle_speed(&velocity_codes, &sensors) {
         samples.insert("paddle_speed_mps".into(), speed);
     }
-    let last_state = states.last().map_or(t0, |(t, _)| *t);
+    let last_state = states.last().map_or(t0, |row| row.t_s);
     let duration_s = last_state - t0;
     if duration_s <= 0.0 {
         return Err(GapError::Data(format!(
@@ -360,17 +277,15 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
         let (mut xs, mut ys) = (Vec::new(), Vec::new());
         // The thesis's camera: a frame every 200 ms (4.5).
         let mut next = 0.0;
-        for (t, row) in &states {
-            let ts = t - t0;
+        for row in &states {
+            let ts = row.t_s - t0;
             if ts + 1e-9 < next {
                 continue;
             }
             next = ts + 0.2;
-            if let (Some(x), Some(y)) = (row.get("x_m"), row.get("y_m")) {
-                let (nx, ny): (f64, f64) = (cam.sample(StandardNormal), cam.sample(StandardNormal));
-                xs.push((ts, x + std * nx));
-                ys.push((ts, y + std * ny));
-            }
+            let (nx, ny): (f64, f64) = (cam.sample(StandardNormal), cam.sample(StandardNormal));
+            xs.push((ts, row.x_m + std * nx));
+            ys.push((ts, row.y_m + std * ny));
         }
         samples.insert("x_m".into(), xs);
         samples.insert("y_m".into(), ys);
@@ -513,14 +428,20 @@ mod tests {
         );
     }
 
+    /// A recording made by an earlier version (format 1: the configuration as comments in
+    /// `meta.toml`) converts, with the model files its configuration named.
     #[test]
-    fn recorded_keys_are_read_from_the_commented_configuration() {
-        let meta = "version = \"0.1.0\"\nseed = 3\n# The daemon configuration used, verbatim:\n# vehicle = \"vehicles/x.toml\"   # note\n# [run]\n# sensors = \"no\"\n";
-        assert_eq!(
-            recorded_key(meta, "vehicle").as_deref(),
-            Some("vehicles/x.toml")
-        );
-        assert_eq!(recorded_key(meta, "sensors"), None);
+    fn a_format_1_recording_converts() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/recording-format-1");
+        let conv = convert(&dir, &ConvertOptions::default()).unwrap();
+        let names: Vec<&str> = conv
+            .measurement
+            .channels
+            .iter()
+            .map(|c| c.name.as_str())
+            .collect();
+        assert!(names.contains(&"compass_deg"), "{names:?}");
+        assert!(names.contains(&"depth_adc"), "{names:?}");
     }
 
     #[test]
@@ -584,7 +505,14 @@ mod tests {
 
         fn write(dir: &Path, bytes: &str) {
             std::fs::create_dir_all(dir).unwrap();
-            std::fs::write(dir.join("meta.toml"), "seed = 1\n").unwrap();
+            let meta = record::Meta::new(1, "lockstep", 1.0, "test");
+            std::fs::write(dir.join("meta.toml"), toml::to_string(&meta).unwrap()).unwrap();
+            std::fs::write(
+                dir.join("config.toml"),
+                "vehicle = \"vehicles/mako.toml\"\nworld = \"worlds/pool.toml\"\n\
+                 sensors = \"sensors/mako-2008.toml\"\n",
+            )
+            .unwrap();
             std::fs::write(
                 dir.join("bytes.tsv"),
                 format!("{}\n{bytes}", record::BYTES_HEADER),
@@ -729,7 +657,7 @@ mod tests {
                 .unwrap_err()
                 .to_string();
             assert!(
-                err.contains("bytes.tsv: bytes.tsv line 11: wall_unix_s"),
+                err.contains("bytes.tsv line 11: 2 fields, expected 5"),
                 "{err}"
             );
             let _ = std::fs::remove_dir_all(&dir);

@@ -27,67 +27,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use crate::record::{BYTES_HEADER, Direction, parse_chunk};
 use crate::transport::LineSettings;
 
-use super::validate::{Action, Problem, ProblemKind};
-
-/// The longest physical line kept from an input. Longer lines are cut here and dropped by
-/// validation (they are at least 50 times the NMEA limit of 82 characters).
-pub const MAX_PHYSICAL_LINE: usize = 4096;
+pub use super::line::{Loc, MAX_PHYSICAL_LINE, Terminator, TimestampForm};
+use super::problem::{Action, Problem, ProblemKind};
 
 /// How many data lines at the start of a file decide its timestamp form.
 pub const DETECT_LINES: usize = 8;
-
-/// Where a line came from.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub struct Loc {
-    pub file: Arc<Path>,
-    /// 1-based.
-    pub line: u64,
-}
-
-impl fmt::Display for Loc {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}", self.file.display(), self.line)
-    }
-}
-
-/// How a line ended in the log.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Terminator {
-    CrLf,
-    /// LF without CR: normalised to CR LF on output, and reported.
-    Lf,
-    /// The file ended without a line feed.
-    Eof,
-}
-
-/// The timestamp prefix of an NMEA text log.
-///
-/// **Detection rule.** The first [`DETECT_LINES`] data lines (not blank, not `#`) are
-/// classified: a line starting with `$` has no prefix; otherwise the text before the first
-/// run of spaces or tabs is the prefix, provided a `$` follows that run. A prefix of digits
-/// with at most one `.` is [`Seconds`](Self::Seconds); a prefix that parses as an ISO 8601
-/// date-time (`2024-05-01T12:00:00.250Z`, `...+02:00`, or without offset, taken as UTC) is
-/// [`Iso8601`](Self::Iso8601). Lines that fit no form (junk) do not vote. The form with most
-/// votes wins; a tie between two forms is an error naming the file. A later line that does
-/// not carry the file's form is reported and dropped, since it cannot be placed in time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TimestampForm {
-    None,
-    /// Seconds, e.g. `12.250` (relative) or `1714564800.250` (Unix time).
-    Seconds,
-    /// ISO 8601 date-time, converted to Unix time.
-    Iso8601,
-}
-
-impl fmt::Display for TimestampForm {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            TimestampForm::None => "no timestamps",
-            TimestampForm::Seconds => "timestamps in seconds",
-            TimestampForm::Iso8601 => "ISO 8601 timestamps",
-        })
-    }
-}
 
 /// What kind of input a file turned out to be.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -605,15 +549,8 @@ impl Source {
             let text = trimmed.to_vec();
             self.comment(loc, &text, terminator);
         } else if form == TimestampForm::None {
-            self.queue.push_back(Event::Line(LogLine {
-                loc,
-                input: self.input,
-                time_ns: None,
-                bytes: std::mem::take(&mut p.bytes),
-                terminator,
-                overflow,
-                kind: LineKind::Data,
-            }));
+            let bytes = std::mem::take(&mut p.bytes);
+            self.push_data(loc, None, bytes, terminator, overflow);
         } else {
             let parsed = split_prefix(&p.bytes).and_then(|(prefix, rest)| {
                 let t = match form {
@@ -625,15 +562,7 @@ impl Source {
             match parsed {
                 Some((time_ns, bytes)) => {
                     self.check_time(&loc, time_ns);
-                    self.queue.push_back(Event::Line(LogLine {
-                        loc,
-                        input: self.input,
-                        time_ns: Some(time_ns),
-                        bytes,
-                        terminator,
-                        overflow,
-                        kind: LineKind::Data,
-                    }));
+                    self.push_data(loc, Some(time_ns), bytes, terminator, overflow);
                 }
                 None => {
                     let shown = p.bytes.iter().take(24).copied().collect::<Vec<u8>>();
@@ -650,6 +579,26 @@ impl Source {
         }
         self.buf = p.bytes;
         Ok(())
+    }
+
+    /// Queues a data line of this input.
+    fn push_data(
+        &mut self,
+        loc: Loc,
+        time_ns: Option<i64>,
+        bytes: Vec<u8>,
+        terminator: Terminator,
+        overflow: Option<usize>,
+    ) {
+        self.queue.push_back(Event::Line(LogLine {
+            loc,
+            input: self.input,
+            time_ns,
+            bytes,
+            terminator,
+            overflow,
+            kind: LineKind::Data,
+        }));
     }
 
     fn check_time(&mut self, loc: &Loc, time_ns: i64) {
@@ -743,15 +692,8 @@ impl Source {
             return;
         }
         self.check_time(&loc, time_ns);
-        self.queue.push_back(Event::Line(LogLine {
-            loc,
-            input: self.input,
-            time_ns: Some(time_ns),
-            bytes,
-            terminator,
-            overflow: (total > MAX_PHYSICAL_LINE).then_some(total),
-            kind: LineKind::Data,
-        }));
+        let overflow = (total > MAX_PHYSICAL_LINE).then_some(total);
+        self.push_data(loc, Some(time_ns), bytes, terminator, overflow);
     }
 }
 

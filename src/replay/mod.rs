@@ -2,10 +2,10 @@
 //!
 //! ```text
 //! LOG... ──► input::Source (format, gzip, timestamps, comments) ──► merge::Merger (by time)
-//!        ──► validate::check_line (policy pass/drop/fix, one Problem per fault)
+//!        ──► sentence_check::check_line (policy pass/drop/fix, one Problem per fault)
 //!        ──► pacing::Scheduler (deadline from one start instant) ──► output::Sink
-//!                                    ByteSink: pty | serial | stdout, bytes at the baud rate
-//!                                    (pending, issue 5: the daemon's sonar multiplexer)
+//!                                    ByteSink: pty | serial | stdout | the daemon's sonar
+//!                                    feed socket (`--into-sonar`), bytes at the baud rate
 //! ```
 //!
 //! Build a [`Replay`] from [`Options`] with [`Replay::open`] (it reads each input's head to
@@ -14,11 +14,13 @@
 //! The format rules are in `docs/replay.md`.
 
 pub mod input;
+pub mod line;
 pub mod merge;
 pub mod output;
 pub mod pacing;
+pub mod problem;
+pub mod sentence_check;
 pub mod stats;
-pub mod validate;
 
 use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
@@ -30,8 +32,9 @@ pub use input::{CommentMode, Event, Format, InputError, Loc, Source, TimestampFo
 pub use merge::{MergeMode, Merger};
 pub use output::{ByteSink, NullSink, Port, Sent, Shutdown, Sink, SinkError};
 pub use pacing::{Pacing, Placement, Scheduler};
+pub use problem::{Action, Problem, ProblemKind};
+pub use sentence_check::Policy;
 pub use stats::Summary;
-pub use validate::{Action, Policy, Problem, ProblemKind};
 
 use crate::transport::LineSettings;
 
@@ -295,34 +298,19 @@ impl Replay {
         stop: &Shutdown,
     ) -> Result<Summary, ReplayError> {
         let opts = &self.opts;
-        let mut realtime = false;
-        if let Some(priority) = opts.realtime_priority
-            && self.pacing != Pacing::Fast
-        {
-            match crate::transport::set_realtime_priority(priority) {
-                Ok(()) => realtime = true,
-                Err(e) => observer.note(&format!(
-                    "no real-time priority ({e}): byte timing is subject to CPU load"
-                )),
-            }
-        }
-        let mut qos = None;
-        if let Some(latency_us) = opts.cpu_latency_us
-            && self.pacing != Pacing::Fast
-        {
-            match crate::transport::CpuLatencyRequest::hold(latency_us) {
-                Ok(request) => qos = Some(request),
-                Err(e) => observer.note(&format!(
-                    "no CPU latency request ({}: {e}): an idle CPU may be slow to wake",
-                    crate::transport::CPU_LATENCY_QOS
-                )),
-            }
+        let timed = self.pacing != Pacing::Fast;
+        let wake = timed.then(|| {
+            crate::transport::WakeGuard::acquire(opts.cpu_latency_us, opts.realtime_priority)
+        });
+        for refusal in wake.iter().flat_map(|w| w.refusals()) {
+            observer.note(refusal);
         }
         let result = self.run_inner(sink, observer, stop);
-        let cpu_latency_us = qos.take().map(|q| q.latency_us);
-        if realtime {
-            crate::transport::clear_realtime_priority();
-        }
+        let realtime = wake
+            .as_ref()
+            .is_some_and(|w| w.realtime_priority().is_some());
+        let cpu_latency_us = wake.as_ref().and_then(|w| w.cpu_latency_us());
+        drop(wake);
         result.map(|mut s| {
             s.realtime = realtime;
             s.cpu_latency_us = cpu_latency_us;
@@ -404,13 +392,13 @@ impl Replay {
                             summary.lines_read += 1;
                         }
                         let checked = match line.kind {
-                            input::LineKind::Data => validate::check_line(
+                            input::LineKind::Data => sentence_check::check_line(
                                 &line.bytes,
                                 line.terminator,
                                 line.overflow,
                                 opts.policy,
                             ),
-                            input::LineKind::Comment => validate::Checked {
+                            input::LineKind::Comment => sentence_check::Checked {
                                 out: Some([&line.bytes[..], b"\r\n"].concat()),
                                 ..Default::default()
                             },
@@ -583,7 +571,8 @@ mod tests {
         let dir =
             std::env::temp_dir().join(format!("eyebot-hil-replay-rec-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let rec = Recorder::start(&dir, "seed = 1\n", "t_s").unwrap();
+        let meta = crate::record::Meta::new(1, "lockstep", 1.0, "test");
+        let rec = Recorder::start(&dir, &meta, "").unwrap();
         let a = b"$SDDBT,6.6,f,2.0,M,1.1,F*04\r\n";
         let b = b"$SDDPT,2.0,0.5*50\r\n";
         rec.bytes(0.100, "sonar", Direction::Rx, b"@S1\r");

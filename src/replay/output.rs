@@ -7,9 +7,10 @@
 //! character, at the configured baud). Writes block when the consumer does not read: that
 //! blocking is the back-pressure, there are no hand-tuned delays.
 //!
-//! *Pending (issue 5):* `--into-sonar` will be another `Sink`, a handle into a running
-//! daemon's sonar multiplexer that queues `(deadline, sentence)` for the multiplexer to
-//! forward through select/ack; the daemon's own link pacer then times the bytes.
+//! `--into-sonar` is a [`ByteSink`] too, over [`Port::Writer`] on a running daemon's sonar
+//! feed socket (`crate::daemon::feed`): the replay paces the sentences, the daemon's
+//! multiplexer forwards each at the simulated time it arrives, through select/ack, and the
+//! daemon's own link pacer times the bytes to the EyeBot.
 
 use std::io::{self, Write};
 use std::os::fd::{AsRawFd, BorrowedFd};

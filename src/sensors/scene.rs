@@ -1,6 +1,10 @@
-//! Simple analytic worlds for sonar tests, validation and benchmarks: an infinite plane wall
-//! and a rectangular box pool. The daemon uses the physics crate's rapier3d pool instead;
-//! both implement [`RayCaster`].
+//! Analytic worlds: plane walls and open water, the geometry of the thesis table's sonar
+//! rows (`thesis::sensors`, where a wall stands at a known distance) and of the sensor
+//! tests. The daemon uses the physics crate's rapier3d pool; all implement [`RayCaster`].
+//!
+//! `BoxPool`, a stand-in for that pool in tests and benchmarks, is a test double: it is
+//! compiled for this crate's tests and, through the `test-support` feature, for other
+//! crates' tests and benchmarks, never into the binary.
 
 use nalgebra::{Point3, Unit, Vector3};
 
@@ -46,11 +50,13 @@ impl RayCaster for PlaneWall {
 
 /// A box pool in NED: walls at x = 0 and x = length, y = 0 and y = width, floor at z = depth.
 /// The water surface is not a reflector here.
+#[cfg(any(test, feature = "test-support"))]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BoxPool {
     walls: [PlaneWall; 5],
 }
 
+#[cfg(any(test, feature = "test-support"))]
 impl BoxPool {
     pub fn new(length_m: f64, width_m: f64, depth_m: f64) -> Self {
         let wall = |p: [f64; 3], n: [f64; 3]| PlaneWall {
@@ -69,6 +75,7 @@ impl BoxPool {
     }
 }
 
+#[cfg(any(test, feature = "test-support"))]
 impl RayCaster for BoxPool {
     fn cast_ray(
         &self,

@@ -61,9 +61,112 @@ pub fn set_realtime_priority(priority: i32) -> io::Result<()> {
     }
 }
 
-/// Returns the calling thread to the default scheduler.
-pub fn clear_realtime_priority() {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: as above; failure leaves the thread as it was, which is harmless.
-    let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+/// The wake-up requests of a timed run, held together and released together: a CPU latency
+/// QoS request ([`CpuLatencyRequest`]) and `SCHED_FIFO` for the thread that acquired the
+/// guard ([`set_realtime_priority`]). What the system refuses is listed in
+/// [`WakeGuard::refusals`] and the run goes on without it. Dropping the guard ends the
+/// latency request and returns that thread (whichever thread drops it) to the default
+/// scheduler. The daemon and `replay` both use it; neither needs it when nothing is timed
+/// (lockstep, `--pacing fast`).
+#[derive(Debug)]
+pub struct WakeGuard {
+    cpu_latency: Option<CpuLatencyRequest>,
+    /// The kernel thread id that runs under `SCHED_FIFO`, if any.
+    realtime_tid: Option<libc::pid_t>,
+    realtime_priority: Option<i32>,
+    refusals: Vec<String>,
+}
+
+impl WakeGuard {
+    /// Asks for what is given: `cpu_latency_us` (a latency QoS request) and
+    /// `realtime_priority` (1-99, for the calling thread). `None` asks for nothing.
+    pub fn acquire(cpu_latency_us: Option<u32>, realtime_priority: Option<i32>) -> Self {
+        let mut refusals = Vec::new();
+        let cpu_latency = cpu_latency_us.and_then(|us| match CpuLatencyRequest::hold(us) {
+            Ok(request) => Some(request),
+            Err(e) => {
+                refusals.push(format!(
+                    "no CPU latency request ({CPU_LATENCY_QOS}: {e}): an idle CPU may be slow \
+                     to wake"
+                ));
+                None
+            }
+        });
+        let realtime_tid =
+            realtime_priority.and_then(|priority| match set_realtime_priority(priority) {
+                // SAFETY: gettid has no preconditions.
+                Ok(()) => Some(unsafe { libc::gettid() }),
+                Err(e) => {
+                    refusals.push(format!(
+                        "no SCHED_FIFO at priority {priority} ({e}): wake-ups may wait behind \
+                         other processes"
+                    ));
+                    None
+                }
+            });
+        Self {
+            cpu_latency,
+            realtime_priority: realtime_tid.and(realtime_priority),
+            realtime_tid,
+            refusals,
+        }
+    }
+
+    /// The CPU latency request held, in µs.
+    pub fn cpu_latency_us(&self) -> Option<u32> {
+        self.cpu_latency.as_ref().map(|r| r.latency_us)
+    }
+
+    /// The `SCHED_FIFO` priority the acquiring thread runs at.
+    pub fn realtime_priority(&self) -> Option<i32> {
+        self.realtime_priority
+    }
+
+    /// What the system refused, one sentence each.
+    pub fn refusals(&self) -> &[String] {
+        &self.refusals
+    }
+}
+
+impl Drop for WakeGuard {
+    fn drop(&mut self) {
+        if let Some(tid) = self.realtime_tid {
+            let param = libc::sched_param { sched_priority: 0 };
+            // SAFETY: a plain syscall with a valid parameter struct; a thread that has ended
+            // makes it fail, which is harmless.
+            let _ = unsafe { libc::sched_setscheduler(tid, libc::SCHED_OTHER, &param) };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn policy() -> i32 {
+        // SAFETY: a plain query of the calling thread's policy.
+        unsafe { libc::sched_getscheduler(0) }
+    }
+
+    /// The guard raises the acquiring thread and hands it back to the default scheduler when
+    /// dropped; without the privilege it says why and leaves the thread as it was.
+    #[test]
+    fn the_guard_raises_the_thread_and_hands_it_back() {
+        let before = policy();
+        let guard = WakeGuard::acquire(None, Some(1));
+        match guard.realtime_priority() {
+            Some(priority) => {
+                assert_eq!(priority, 1);
+                assert_eq!(policy(), libc::SCHED_FIFO);
+                assert!(guard.refusals().is_empty());
+            }
+            None => {
+                assert_eq!(policy(), before);
+                assert!(guard.refusals()[0].contains("SCHED_FIFO"), "{guard:?}");
+            }
+        }
+        assert_eq!(guard.cpu_latency_us(), None, "nothing asked, nothing held");
+        drop(guard);
+        assert_eq!(policy(), libc::SCHED_OTHER);
+    }
 }

@@ -7,8 +7,8 @@ pub mod pacer;
 pub mod pty;
 pub mod serial;
 pub mod symlink;
+pub mod timer;
 
-pub use latency::{
-    CPU_LATENCY_QOS, CpuLatencyRequest, clear_realtime_priority, set_realtime_priority,
-};
+pub use latency::{CPU_LATENCY_QOS, CpuLatencyRequest, WakeGuard, set_realtime_priority};
 pub use line::{FlowControl, LineSettings, Parity};
+pub use timer::PreciseTimer;

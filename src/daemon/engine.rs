@@ -1,0 +1,903 @@
+//! The bridge engine: the model, the device emulators and the wire, in simulated time.
+//!
+//! Sans-IO like the devices it holds. The daemon hands it bytes that arrived on a line
+//! ([`Engine::receive`]), tells it how far simulated time may run ([`Engine::advance_to`]), and
+//! takes the bytes due on each line ([`Engine::take_output`]). The same calls serve both time
+//! modes; only who chooses the target differs (the wall clock, or the client's time frames).
+//!
+//! Ordering within one call is fixed: inputs are decoded in arrival order, the model steps
+//! up to each device deadline before the device is polled, and device outputs are queued on
+//! their line in deadline order. So a run is a pure function of the seed, the configuration
+//! and the client's bytes with their arrival times: in lockstep, where arrival times are
+//! themselves simulated, of the bytes alone.
+
+use bytes::{Bytes, BytesMut};
+use firmware_protocol::error::LinkError;
+use firmware_protocol::{LineDecoder, LineItem};
+
+use crate::SimNanos;
+use crate::devices::Plant;
+use crate::devices::multiplexer::{Multiplexer, MultiplexerCounters};
+use crate::devices::sensor_board::{Output, SensorBoard};
+use crate::physics::state::VehicleState;
+use crate::record::{Direction, Recorder};
+use crate::transport::LineSettings;
+use crate::transport::pacer::WirePacer;
+
+/// The simulated vehicle with its sensors, as the core drives it.
+pub trait Model: Plant {
+    type Error: std::error::Error + Send + Sync + 'static;
+    /// Steps the model in fixed steps up to simulated time `t` (the last whole step at or
+    /// before `t`). Fails only when the model diverges.
+    fn advance_to(&mut self, t: SimNanos) -> Result<(), Self::Error>;
+    /// The vehicle after the last step.
+    fn state(&self) -> VehicleState;
+    /// How many wall/floor contacts began so far.
+    fn contacts(&self) -> u64;
+}
+
+/// Which link a line carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Carries {
+    pub sonar: bool,
+    pub sensor: bool,
+}
+
+impl Carries {
+    /// The sonar link alone.
+    pub const SONAR: Self = Self {
+        sonar: true,
+        sensor: false,
+    };
+    /// The sensor link alone.
+    pub const SENSOR: Self = Self {
+        sonar: false,
+        sensor: true,
+    };
+    /// Both links on one line, told apart by the first byte.
+    pub const SHARED: Self = Self {
+        sonar: true,
+        sensor: true,
+    };
+}
+
+/// Per-line counters for the status snapshot.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LineCounters {
+    pub frames_rx: u64,
+    pub frames_tx: u64,
+    pub errors: u64,
+    pub dropped_tx: u64,
+}
+
+struct Line {
+    name: &'static str,
+    carries: Carries,
+    decoder: LineDecoder,
+    inbox: BytesMut,
+    pacer: WirePacer,
+    outbox: Vec<u8>,
+    counters: LineCounters,
+    last_rx_ns: SimNanos,
+    idle_flush_ns: u64,
+    /// The decoder consumed garbage it has not reported yet (it reports a run of garbage
+    /// only before the next item, or at the idle flush): the inbox can be empty while a
+    /// report is owed.
+    garbage_pending: bool,
+}
+
+/// A partial message is dropped after this much silence on a line that carries the sensor
+/// link (a whole frame takes at most 6.2 ms at 115200 baud; PROTOCOL.md section 3).
+pub const SENSOR_IDLE_FLUSH_NS: u64 = 50_000_000;
+/// The same for a sonar-only line (a whole sentence takes at most 171 ms at 4800 baud).
+pub const SONAR_IDLE_FLUSH_NS: u64 = 200_000_000;
+
+/// One line's construction parameters.
+#[derive(Debug, Clone)]
+pub struct LineSpec {
+    pub name: &'static str,
+    pub carries: Carries,
+    pub settings: LineSettings,
+    pub tx_queue_bytes: usize,
+    /// Longest a complete byte waits for its hand-over to the port (`transport::pacer`).
+    pub release_quantum_ns: u64,
+}
+
+/// The core.
+pub struct Engine<M: Model> {
+    model: M,
+    board: SensorBoard,
+    mux: Multiplexer,
+    lines: Vec<Line>,
+    now: SimNanos,
+    lockstep: bool,
+    recorder: Option<Recorder>,
+    state_period_ns: u64,
+    next_state_ns: SimNanos,
+    device_out: Vec<(SimNanos, firmware_protocol::Frame)>,
+    mux_out: Vec<(SimNanos, Bytes)>,
+    receiving: Option<usize>,
+    feed_decoder: LineDecoder,
+    feed_inbox: BytesMut,
+    feed_schedule: std::collections::VecDeque<(SimNanos, Bytes)>,
+    feed_errors: u64,
+}
+
+impl<M: Model> Engine<M> {
+    /// `lines` must carry the sonar link exactly once and the sensor link exactly once.
+    pub fn new(
+        model: M,
+        board: SensorBoard,
+        mux: Multiplexer,
+        lines: &[LineSpec],
+        lockstep: bool,
+    ) -> Self {
+        let lines = lines
+            .iter()
+            .map(|spec| Line {
+                name: spec.name,
+                carries: spec.carries,
+                decoder: LineDecoder::new(),
+                inbox: BytesMut::new(),
+                pacer: WirePacer::new(&spec.settings, spec.tx_queue_bytes)
+                    .with_quantum(spec.release_quantum_ns),
+                outbox: Vec::new(),
+                counters: LineCounters::default(),
+                last_rx_ns: 0,
+                garbage_pending: false,
+                idle_flush_ns: if spec.carries.sensor {
+                    SENSOR_IDLE_FLUSH_NS
+                } else {
+                    SONAR_IDLE_FLUSH_NS
+                },
+            })
+            .collect();
+        Self {
+            model,
+            board,
+            mux,
+            lines,
+            now: 0,
+            lockstep,
+            recorder: None,
+            state_period_ns: 20_000_000,
+            next_state_ns: 0,
+            device_out: Vec::new(),
+            mux_out: Vec::new(),
+            receiving: None,
+            feed_decoder: LineDecoder::new(),
+            feed_inbox: BytesMut::new(),
+            feed_schedule: std::collections::VecDeque::new(),
+            feed_errors: 0,
+        }
+    }
+
+    /// Captured sentences to forward as the sonar controllers' output, each at its simulated
+    /// time (`replay = "FILE"`): deterministic in both time modes.
+    pub fn set_feed_schedule(&mut self, schedule: Vec<(SimNanos, Bytes)>) {
+        self.mux.set_feed_active(!schedule.is_empty());
+        self.feed_schedule = schedule.into();
+    }
+
+    /// A live feed (`replay --into-sonar`) connected or left.
+    pub fn set_feed_connected(&mut self, connected: bool) {
+        self.mux
+            .set_feed_active(connected || !self.feed_schedule.is_empty());
+        self.feed_inbox.clear();
+        self.feed_decoder = LineDecoder::new();
+    }
+
+    /// Bytes from a live feed, taken as arriving at the current simulated time.
+    pub fn feed_bytes(&mut self, data: &[u8]) {
+        self.feed_inbox.extend_from_slice(data);
+        loop {
+            let d = self.feed_decoder.decode_slice(&self.feed_inbox);
+            let raw = self.feed_inbox.split_to(d.consumed).freeze();
+            match d.item {
+                None => break,
+                Some(LineItem::Nmea(sentence)) => {
+                    let start = raw.iter().position(|&b| b == b'$').unwrap_or(0);
+                    self.forward_fed(&sentence, raw.slice(start..));
+                }
+                Some(other) => {
+                    self.feed_errors += 1;
+                    tracing::debug!(item = ?other, "feed input that is not an NMEA sentence");
+                }
+            }
+        }
+    }
+
+    /// Feed input that was not a valid sentence (garbage, bad checksum, unknown sentence).
+    pub fn feed_errors(&self) -> u64 {
+        self.feed_errors
+    }
+
+    fn forward_fed(&mut self, sentence: &firmware_protocol::Sentence, raw: Bytes) {
+        if let Some(out) = self.mux.feed(sentence, raw, self.now) {
+            let line = self.sonar_line();
+            self.queue(line, self.now, out, false);
+        }
+    }
+
+    fn poll_feed(&mut self) {
+        while self
+            .feed_schedule
+            .front()
+            .is_some_and(|(t, _)| *t <= self.now)
+        {
+            let Some((_, raw)) = self.feed_schedule.pop_front() else {
+                break;
+            };
+            match firmware_protocol::nmea::parse_line(&raw) {
+                Ok(sentence) => self.forward_fed(&sentence, raw),
+                Err(e) => {
+                    self.feed_errors += 1;
+                    tracing::debug!(error = %e, "scheduled feed line is not a sentence");
+                }
+            }
+        }
+        if let Some(out) = self.mux.poll_feed(self.now) {
+            let line = self.sonar_line();
+            self.queue(line, self.now, out, false);
+        }
+    }
+
+    /// Records every byte and the ground truth every `state_period_ns`.
+    pub fn set_recorder(&mut self, recorder: Recorder, state_period_ns: u64) {
+        self.recorder = Some(recorder);
+        self.state_period_ns = state_period_ns.max(1);
+        self.next_state_ns = self.now;
+        self.record_state();
+    }
+
+    /// Stops recording and returns the recorder (to finish it).
+    pub fn take_recorder(&mut self) -> Option<Recorder> {
+        self.recorder.take()
+    }
+
+    pub fn now(&self) -> SimNanos {
+        self.now
+    }
+
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    pub fn board(&self) -> &SensorBoard {
+        &self.board
+    }
+
+    pub fn mux_counters(&self) -> MultiplexerCounters {
+        self.mux.counters()
+    }
+
+    pub fn line_counters(&self, line: usize) -> LineCounters {
+        self.lines.get(line).map(|l| l.counters).unwrap_or_default()
+    }
+
+    pub fn line_name(&self, line: usize) -> &'static str {
+        self.lines.get(line).map_or("?", |l| l.name)
+    }
+
+    fn sonar_line(&self) -> usize {
+        self.lines.iter().position(|l| l.carries.sonar).unwrap_or(0)
+    }
+
+    fn sensor_line(&self) -> usize {
+        self.lines
+            .iter()
+            .position(|l| l.carries.sensor)
+            .unwrap_or(0)
+    }
+
+    /// Bytes from the EyeBot side arrived on `line` at the current simulated time.
+    pub fn receive(&mut self, line: usize, data: &[u8]) -> Result<(), M::Error> {
+        let Some(l) = self.lines.get_mut(line) else {
+            return Ok(());
+        };
+        if let Some(rec) = &self.recorder {
+            rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Rx, data);
+        }
+        l.inbox.extend_from_slice(data);
+        // Bytes behind a TIME_ADVANCE in this chunk are handled after the advance, in order;
+        // the idle flush must not take them early.
+        self.receiving = Some(line);
+        let result = self.drain_inbox(line);
+        self.receiving = None;
+        self.lines[line].last_rx_ns = self.now;
+        result
+    }
+
+    /// Records bytes that arrived on `line` but will not be processed (the daemon is
+    /// stopping): the recording still holds every byte the EyeBot sent.
+    pub fn record_unprocessed(&mut self, line: usize, data: &[u8]) {
+        if let (Some(rec), Some(l)) = (&self.recorder, self.lines.get(line)) {
+            rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Rx, data);
+        }
+    }
+
+    fn drain_inbox(&mut self, line: usize) -> Result<(), M::Error> {
+        loop {
+            let l = &mut self.lines[line];
+            let before = l.inbox.len();
+            let Some(item) = l.decoder.decode(&mut l.inbox) else {
+                // Bytes consumed without an item: garbage, counted inside the decoder.
+                l.garbage_pending |= l.inbox.len() < before;
+                return Ok(());
+            };
+            // The decoder reports pending garbage before any other item.
+            l.garbage_pending = false;
+            self.route(line, item)?;
+        }
+    }
+
+    fn route(&mut self, line: usize, item: LineItem) -> Result<(), M::Error> {
+        let carries = self.lines[line].carries;
+        let now = self.now;
+        match item {
+            LineItem::Frame(frame) if carries.sensor => {
+                self.lines[line].counters.frames_rx += 1;
+                match self.board.handle(frame, now, &mut self.model) {
+                    Some(Output::Send(reply)) => self.queue_reply(line, reply),
+                    Some(Output::Advance { to, seq }) => {
+                        self.advance_to(to)?;
+                        let reply = self.board.finish_advance(seq, self.now);
+                        self.queue_reply(line, reply);
+                    }
+                    None => {}
+                }
+            }
+            LineItem::Sonar(command) if carries.sonar => {
+                self.lines[line].counters.frames_rx += 1;
+                if let Some(reply) = self.mux.handle(command, now, &mut self.model) {
+                    self.queue(line, now, reply, true);
+                }
+            }
+            LineItem::Error(error) => {
+                self.lines[line].counters.errors += 1;
+                tracing::debug!(line = self.lines[line].name, %error, "bad input");
+                let to_sonar =
+                    carries.sonar && !matches!(error, LinkError::Frame(_) | LinkError::Message(_));
+                if carries.sensor
+                    && let Some(Output::Send(nak)) = self.board.handle_error(&error)
+                {
+                    self.queue_reply(line, nak);
+                }
+                if to_sonar && let Some(nak) = self.mux.handle_error(&error) {
+                    self.queue(line, now, nak, true);
+                }
+            }
+            // A frame on a sonar-only line, a command on a sensor-only line, or NMEA sent by
+            // the EyeBot: nothing on Mako would answer it.
+            other => {
+                self.lines[line].counters.errors += 1;
+                tracing::debug!(line = self.lines[line].name, item = ?other, "message not expected on this line");
+            }
+        }
+        Ok(())
+    }
+
+    fn queue_reply(&mut self, line: usize, frame: firmware_protocol::Frame) {
+        let mut buf = BytesMut::new();
+        frame.encode(&mut buf);
+        self.queue(line, self.now, buf.freeze(), true);
+    }
+
+    /// Puts bytes on the wire at `at`. In lockstep a reply is released at once: the client
+    /// is waiting for it and simulated time will not move until it gets it (the reply's wire
+    /// time is still charged to the line, so later bytes queue behind it).
+    fn queue(&mut self, line: usize, at: SimNanos, data: Bytes, is_reply: bool) {
+        let l = &mut self.lines[line];
+        l.counters.frames_tx += 1;
+        match l.pacer.push(at, data) {
+            Ok(end) => {
+                if is_reply && self.lockstep {
+                    l.pacer.release(end, &mut l.outbox);
+                }
+            }
+            Err(full) => {
+                l.counters.dropped_tx += full.dropped as u64;
+                tracing::warn!(line = l.name, %full, "transmit queue full");
+            }
+        }
+    }
+
+    /// Runs simulated time forward to `target`, stepping the model to each device deadline
+    /// and queueing what the devices emit.
+    pub fn advance_to(&mut self, target: SimNanos) -> Result<(), M::Error> {
+        while self.now < target {
+            let idle = self
+                .lines
+                .iter()
+                .enumerate()
+                .filter(|(i, l)| {
+                    (!l.inbox.is_empty() || l.garbage_pending) && self.receiving != Some(*i)
+                })
+                .map(|(_, l)| l)
+                .map(|l| l.last_rx_ns + l.idle_flush_ns);
+            let next = [
+                self.board.poll_timeout(),
+                self.mux.poll_timeout(&self.model),
+                self.mux.feed_timeout(),
+                self.feed_schedule.front().map(|(t, _)| *t),
+                self.recorder.as_ref().map(|_| self.next_state_ns),
+            ]
+            .into_iter()
+            .flatten()
+            .chain(idle)
+            .filter(|&t| t > self.now)
+            .fold(target, SimNanos::min);
+            self.model.advance_to(next)?;
+            self.now = next;
+            self.flush_idle_lines()?;
+            self.poll_devices();
+            self.record_state();
+            // What is complete leaves the pacer as time passes, so a long lockstep advance
+            // does not count a stream's earlier samples against the transmit queue.
+            self.release_due();
+        }
+        self.poll_devices();
+        self.release_due();
+        Ok(())
+    }
+
+    /// Drops partial messages that have waited longer than their line's idle limit.
+    fn flush_idle_lines(&mut self) -> Result<(), M::Error> {
+        for line in 0..self.lines.len() {
+            let l = &self.lines[line];
+            if self.receiving == Some(line)
+                || (l.inbox.is_empty() && !l.garbage_pending)
+                || self.now < l.last_rx_ns + l.idle_flush_ns
+            {
+                continue;
+            }
+            self.lines[line].garbage_pending = false;
+            loop {
+                let l = &mut self.lines[line];
+                let Some(item) = l.decoder.decode_eof(&mut l.inbox) else {
+                    break;
+                };
+                self.route(line, item)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn poll_devices(&mut self) {
+        let now = self.now;
+        self.device_out.clear();
+        self.board.poll(now, &mut self.model, &mut self.device_out);
+        let sensor_line = self.sensor_line();
+        for i in 0..self.device_out.len() {
+            let (at, frame) = self.device_out[i];
+            let mut buf = BytesMut::new();
+            frame.encode(&mut buf);
+            self.queue(sensor_line, at, buf.freeze(), false);
+        }
+        self.poll_feed();
+        self.mux_out.clear();
+        self.mux.poll(now, &mut self.model, &mut self.mux_out);
+        let sonar_line = self.sonar_line();
+        for (at, bytes) in std::mem::take(&mut self.mux_out) {
+            self.queue(sonar_line, at, bytes, false);
+        }
+    }
+
+    fn record_state(&mut self) {
+        let Some(rec) = &self.recorder else {
+            return;
+        };
+        if self.now >= self.next_state_ns {
+            rec.state(crate::record::StateRow::from_state(&self.model.state()));
+            // Rows fall on the period's grid; a gap (none in normal stepping) is skipped.
+            let periods = (self.now - self.next_state_ns) / self.state_period_ns + 1;
+            self.next_state_ns += periods * self.state_period_ns;
+        }
+    }
+
+    fn release_due(&mut self) {
+        for l in &mut self.lines {
+            l.pacer.release(self.now, &mut l.outbox);
+        }
+    }
+
+    /// When something next becomes due: a device deadline or a byte completing on a line.
+    pub fn next_deadline(&self) -> Option<SimNanos> {
+        let lines = self.lines.iter().filter_map(|l| l.pacer.next_release_ns());
+        [
+            self.board.poll_timeout(),
+            self.mux.poll_timeout(&self.model),
+        ]
+        .into_iter()
+        .flatten()
+        .chain(lines)
+        .min()
+    }
+
+    /// The bytes due on `line`, in order; recorded as they leave.
+    pub fn take_output(&mut self, line: usize) -> Option<Bytes> {
+        let l = self.lines.get_mut(line)?;
+        if l.outbox.is_empty() {
+            return None;
+        }
+        let data = Bytes::from(std::mem::take(&mut l.outbox));
+        if let Some(rec) = &self.recorder {
+            rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Tx, &data);
+        }
+        Some(data)
+    }
+
+    /// A handle on the recorder for the link tasks, when recording.
+    pub fn recorder_handle(&self) -> Option<crate::record::RecordHandle> {
+        self.recorder.as_ref().map(Recorder::handle)
+    }
+}
+
+/// A scripted model for core and daemon tests.
+#[cfg(test)]
+pub(crate) mod fake {
+    use nalgebra::{UnitQuaternion, Vector3};
+
+    use super::*;
+    use crate::devices::fake::FakePlant;
+    use crate::devices::{CalibrationProgress, CalibrationRefused, CompassSample, SonarEvent};
+
+    const MS: u64 = 1_000_000;
+
+    /// A plant whose "physics" only counts steps of 1 ms.
+    #[derive(Default)]
+    pub struct FakeModel {
+        pub plant: FakePlant,
+        pub t: SimNanos,
+    }
+
+    impl Plant for FakeModel {
+        fn adc(&mut self, channel: u8, now: SimNanos) -> u16 {
+            // A value that changes with time, so ordering mistakes show.
+            (self.plant.adc(channel, now) + (now / MS) as u16) & 0x3FF
+        }
+        fn compass(&mut self, now: SimNanos) -> CompassSample {
+            self.plant.compass(now)
+        }
+        fn compass_calibrate(
+            &mut self,
+            action: firmware_protocol::sensor_link::CalibrationAction,
+            now: SimNanos,
+        ) -> Result<CalibrationProgress, CalibrationRefused> {
+            self.plant.compass_calibrate(action, now)
+        }
+        fn compass_reset(&mut self, now: SimNanos) {
+            self.plant.compass_reset(now)
+        }
+        fn set_thrusters(
+            &mut self,
+            commands: [firmware_protocol::sensor_link::ThrusterCommand; 4],
+            now: SimNanos,
+        ) {
+            self.plant.set_thrusters(commands, now)
+        }
+        fn sonar_select(&mut self, transducer: u8, now: SimNanos) {
+            self.plant.sonar_select(transducer, now);
+            self.plant
+                .sonar
+                .push((now + 50 * MS, SonarEvent::Switched { transducer }));
+            self.plant.sonar.push((
+                now + 1_000 * MS,
+                SonarEvent::Reading {
+                    transducer,
+                    range_m: Some(2.5),
+                    quality_pct: 90,
+                },
+            ));
+        }
+        fn sonar_poll(&mut self, now: SimNanos, out: &mut Vec<(SimNanos, SonarEvent)>) {
+            self.plant.sonar_poll(now, out)
+        }
+        fn sonar_timeout(&self) -> Option<SimNanos> {
+            self.plant.sonar_timeout()
+        }
+    }
+
+    impl Model for FakeModel {
+        type Error = std::convert::Infallible;
+        fn advance_to(&mut self, t: SimNanos) -> Result<(), Self::Error> {
+            self.t = t - t % MS;
+            Ok(())
+        }
+        fn state(&self) -> VehicleState {
+            VehicleState {
+                t_s: self.t as f64 * 1e-9,
+                position_m: Vector3::zeros(),
+                attitude: UnitQuaternion::identity(),
+                velocity_body_mps: Vector3::zeros(),
+                angular_velocity_body_radps: Vector3::zeros(),
+                velocity_water_body_mps: Vector3::zeros(),
+                specific_force_body_mps2: Vector3::new(0.0, 0.0, -9.81),
+                thruster_force_n: [0.0; 4],
+                thruster_effort: [0.0; 4],
+                in_contact: false,
+            }
+        }
+        fn contacts(&self) -> u64 {
+            0
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use firmware_protocol::sensor_link::{AdcChannel, Message};
+    use firmware_protocol::sonar_link::SonarCommand;
+    use firmware_protocol::{Frame, Transducer};
+
+    use super::fake::FakeModel;
+    use super::*;
+    use crate::devices::multiplexer::{DepthSentence, InvalidEcho, MultiplexerSettings};
+    use crate::devices::sensor_board::BoardSettings;
+
+    const MS: u64 = 1_000_000;
+
+    fn core(lockstep: bool, shared: bool) -> Engine<FakeModel> {
+        let board = SensorBoard::new(BoardSettings {
+            tick_ns: 10 * MS,
+            lockstep,
+            compass_period_ns: 400 * MS,
+            line_chars_per_s: 11_520.0,
+            watchdog_ns: None,
+            sonar_on_this_line: shared,
+        });
+        let mux = Multiplexer::new(MultiplexerSettings {
+            sentence: DepthSentence::Dbt,
+            talker: firmware_protocol::Talker::SOUNDER,
+            invalid_echo: InvalidEcho::Omit,
+            proprietary: false,
+        });
+        let lines = if shared {
+            vec![LineSpec {
+                name: "shared",
+                carries: Carries::SHARED,
+                settings: LineSettings::n81(115_200),
+                tx_queue_bytes: 4096,
+                release_quantum_ns: MS,
+            }]
+        } else {
+            vec![
+                LineSpec {
+                    name: "sonar",
+                    carries: Carries::SONAR,
+                    settings: LineSettings::n81(4800),
+                    tx_queue_bytes: 4096,
+                    release_quantum_ns: MS,
+                },
+                LineSpec {
+                    name: "sensor",
+                    carries: Carries::SENSOR,
+                    settings: LineSettings::n81(115_200),
+                    tx_queue_bytes: 4096,
+                    release_quantum_ns: MS,
+                },
+            ]
+        };
+        Engine::new(FakeModel::default(), board, mux, &lines, lockstep)
+    }
+
+    fn frame_bytes(seq: u8, message: Message) -> Vec<u8> {
+        let mut buf = BytesMut::new();
+        Frame::new(seq, message).encode(&mut buf);
+        buf.to_vec()
+    }
+
+    /// An ADC_READ of `channel`.
+    fn adc_read(seq: u8, channel: u8) -> Vec<u8> {
+        let channel = AdcChannel::new(channel).expect("a test's channel is 0-7");
+        frame_bytes(seq, Message::AdcRead { channel })
+    }
+
+    /// An ADC_STREAM of the `channels` mask every 10 ms.
+    fn adc_stream(seq: u8, channels: u8) -> Vec<u8> {
+        frame_bytes(
+            seq,
+            Message::AdcStream {
+                channels,
+                period_ms: 10,
+            },
+        )
+    }
+
+    fn decode(bytes: &[u8]) -> Vec<LineItem> {
+        LineDecoder::decode_all(bytes)
+    }
+
+    #[test]
+    fn realtime_replies_wait_for_their_wire_time() {
+        let mut c = core(false, false);
+        let read = adc_read(5, 1);
+        c.receive(1, &read).unwrap();
+        assert_eq!(c.take_output(1), None, "no byte before one character time");
+        // The reply (9 bytes) takes 9 x 86.8 us at 115200 baud.
+        c.advance_to(c.next_deadline().unwrap()).unwrap();
+        c.advance_to(MS).unwrap();
+        let out = c.take_output(1).unwrap();
+        let items = decode(&out);
+        assert!(
+            matches!(&items[..], [LineItem::Frame(f)] if f.seq == 5),
+            "{items:?}"
+        );
+    }
+
+    #[test]
+    fn lockstep_advance_releases_stream_samples_before_the_time_reply() {
+        let mut c = core(true, false);
+        c.receive(1, &adc_stream(1, 0b1)).unwrap();
+        let ack = c
+            .take_output(1)
+            .expect("a lockstep reply is released at once");
+        assert_eq!(decode(&ack).len(), 1);
+        c.receive(1, &frame_bytes(2, Message::TimeAdvance { ticks: 5 }))
+            .unwrap();
+        let out = c.take_output(1).unwrap();
+        let items = decode(&out);
+        // Samples at 10..=40 ms are complete by 50 ms; the one due at 50 ms is still on the
+        // wire, and the TIME reply follows it.
+        let kinds: Vec<u8> = items
+            .iter()
+            .map(|i| match i {
+                LineItem::Frame(f) => f.message.msg_type(),
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        use firmware_protocol::sensor_link::msg_type::{ADC_SAMPLES, TIME};
+        assert_eq!(
+            kinds,
+            vec![
+                ADC_SAMPLES,
+                ADC_SAMPLES,
+                ADC_SAMPLES,
+                ADC_SAMPLES,
+                ADC_SAMPLES,
+                TIME
+            ]
+        );
+        assert_eq!(c.now(), 50 * MS);
+    }
+
+    /// Regression: within one advance nothing left the pacer until the end, so a lockstep
+    /// TIME_ADVANCE of 4 s with a 100 Hz stream queued 400 samples against the 4 KiB
+    /// transmit queue and dropped most of them, although the line had time for all.
+    #[test]
+    fn a_long_lockstep_advance_delivers_every_stream_sample() {
+        let mut c = core(true, false);
+        c.receive(1, &adc_stream(1, 0xFF)).unwrap();
+        let _ack = c.take_output(1);
+        c.receive(1, &frame_bytes(2, Message::TimeAdvance { ticks: 400 }))
+            .unwrap();
+        let items = decode(&c.take_output(1).unwrap());
+        let samples = items
+            .iter()
+            .filter(|i| matches!(i, LineItem::Frame(f) if f.message.msg_type() == firmware_protocol::sensor_link::msg_type::ADC_SAMPLES))
+            .count();
+        // Samples at 10..=4000 ms (the last one goes out ahead of the TIME reply).
+        assert_eq!(samples, 400, "{} items", items.len());
+        assert_eq!(c.line_counters(1).dropped_tx, 0);
+    }
+
+    /// The same client bytes give the same output bytes, however the input is chunked.
+    #[test]
+    fn lockstep_output_does_not_depend_on_input_chunking() {
+        let mut script = Vec::new();
+        script.extend(adc_stream(1, 0b11));
+        script.extend(frame_bytes(2, Message::TimeAdvance { ticks: 7 }));
+        script.extend(b"junk\x00");
+        script.extend(adc_read(3, 0));
+        script.extend(frame_bytes(4, Message::TimeAdvance { ticks: 3 }));
+        let run = |chunk: usize| {
+            let mut c = core(true, false);
+            let mut out = Vec::new();
+            for piece in script.chunks(chunk) {
+                c.receive(1, piece).unwrap();
+                if let Some(b) = c.take_output(1) {
+                    out.extend_from_slice(&b);
+                }
+            }
+            (out, c.line_counters(1))
+        };
+        let (whole, counters) = run(script.len());
+        assert_eq!(counters.errors, 1, "the junk is one error item");
+        for chunk in 1..script.len() {
+            assert_eq!(run(chunk).0, whole, "chunk size {chunk}");
+        }
+    }
+
+    /// An EyeBot that vanished mid-frame leaves a partial frame behind; after the idle limit
+    /// it is dropped and reported, and the next request is answered normally.
+    #[test]
+    fn a_partial_frame_is_dropped_after_the_idle_limit() {
+        let mut c = core(true, false);
+        let read = adc_read(1, 0);
+        c.receive(1, &read[..4]).unwrap();
+        let advance = frame_bytes(2, Message::TimeAdvance { ticks: 10 });
+        // The advance arrives glued to the partial frame: the CRC fails, the rescan finds it.
+        c.receive(1, &advance).unwrap();
+        let items = decode(&c.take_output(1).unwrap());
+        assert!(
+            items
+                .iter()
+                .any(|i| matches!(i, LineItem::Frame(f) if f.seq == 2)),
+            "{items:?}"
+        );
+        // Another half frame, then silence: dropped once 50 ms have passed.
+        c.receive(1, &read[..5]).unwrap();
+        let before = c.line_counters(1).errors;
+        c.receive(1, &frame_bytes(3, Message::TimeAdvance { ticks: 0 }))
+            .unwrap();
+        let _ = c.take_output(1);
+        assert!(c.line_counters(1).errors > before);
+    }
+
+    /// `replay = "FILE"`: logged sentences are forwarded at their simulated times in place of
+    /// the model's, only for the selected transducer when the log names transducers.
+    #[test]
+    fn a_scheduled_feed_forwards_the_selected_transducers_logged_ranges() {
+        let mut c = core(true, false);
+        let line = |text: &str| Bytes::from(format!("{text}\r\n"));
+        c.set_feed_schedule(vec![
+            (200 * MS, line("$SDDBT,8.2,f,2.5,M,1.4,F*0E")),
+            (270 * MS, line("$PEBHS,1,2.5,90*71")),
+            (1_200 * MS, line("$SDDBT,9.9,f,3.0,M,1.6,F*02")),
+            (1_270 * MS, line("$PEBHS,2,3.0,90*76")),
+            (2_200 * MS, line("$SDDBT,8.2,f,2.5,M,1.4,F*0E")),
+        ]);
+        let mut select = BytesMut::new();
+        SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
+        c.receive(0, &select).unwrap();
+        c.receive(1, &frame_bytes(1, Message::TimeAdvance { ticks: 300 }))
+            .unwrap();
+        let sonar = c.take_output(0).unwrap();
+        let text = String::from_utf8_lossy(&sonar);
+        assert_eq!(
+            text, "@A1\r\n$SDDBT,8.2,f,2.5,M,1.4,F*0E\r\n$SDDBT,8.2,f,2.5,M,1.4,F*0E\r\n",
+            "transducer 2's 3.0 m is withheld; the last, unmapped one goes out after its wait"
+        );
+        assert_eq!(c.mux_counters().fed_withheld, 1);
+    }
+
+    /// Regression: garbage after the last frame was consumed by the decoder (which reports a
+    /// run of garbage only before the next item) and, with the inbox empty, the idle flush
+    /// never ran: the error was never counted while the EyeBot stayed quiet.
+    #[test]
+    fn trailing_garbage_is_reported_after_the_idle_limit() {
+        let mut c = core(false, false);
+        let mut input = frame_bytes(1, Message::TimeGet);
+        input.extend_from_slice(b"\x00\x01garbage");
+        c.receive(1, &input).unwrap();
+        assert_eq!(c.line_counters(1).frames_rx, 1);
+        assert_eq!(
+            c.line_counters(1).errors,
+            0,
+            "not reported before the idle limit"
+        );
+        c.advance_to(SENSOR_IDLE_FLUSH_NS + MS).unwrap();
+        assert_eq!(
+            c.line_counters(1).errors,
+            1,
+            "one report for the run of garbage"
+        );
+    }
+
+    #[test]
+    fn a_shared_line_serves_the_multiplexer_and_the_board() {
+        let mut c = core(true, true);
+        let mut select = BytesMut::new();
+        SonarCommand::Select(Transducer::new(3).unwrap()).encode(&mut select);
+        c.receive(0, &select).unwrap();
+        c.receive(0, &frame_bytes(9, Message::TimeAdvance { ticks: 110 }))
+            .unwrap();
+        let items = decode(&c.take_output(0).unwrap());
+        assert!(
+            matches!(items[0], LineItem::Sonar(SonarCommand::Ack(t)) if t.get() == 3),
+            "{items:?}"
+        );
+        assert!(matches!(items[1], LineItem::Nmea(_)), "{items:?}");
+        assert!(matches!(&items[2], LineItem::Frame(f) if f.seq == 9));
+    }
+}

@@ -1,0 +1,60 @@
+//! EyeBot-side clients of a running daemon's links.
+
+use std::path::Path;
+use std::time::Duration;
+
+use eyebot_hil::probe::{RetryPolicy, SensorClient, SonarClient};
+use firmware_protocol::sensor_link::Message;
+
+/// Opens a pty or serial device with `line` (`"115200 8N1"`) as the EyeBot side does
+/// (termios applied). Must be called inside a tokio runtime.
+pub fn open_line(path: &Path, line: &str) -> tokio_serial::SerialStream {
+    let settings: eyebot_hil::transport::LineSettings = line.parse().expect("line settings");
+    eyebot_hil::transport::serial::open(path, &settings)
+        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
+}
+
+/// A sensor-link client with one attempt and a long timeout: in lockstep a retry would
+/// change the transcript, and a loaded machine may be slow.
+pub fn sensor_client(path: &Path) -> SensorClient {
+    let mut client = SensorClient::open(path, &"115200 8N1".parse().expect("line"))
+        .unwrap_or_else(|e| panic!("open the sensor link {}: {e}", path.display()));
+    client.set_policy(RetryPolicy {
+        timeout: Duration::from_secs(10),
+        retries: 0,
+    });
+    client
+}
+
+/// A sonar-link client at 4800 8N1.
+pub fn sonar_client(path: &Path) -> SonarClient {
+    SonarClient::open(path, &"4800 8N1".parse().expect("line"))
+        .unwrap_or_else(|e| panic!("open the sonar link {}: {e}", path.display()))
+}
+
+/// Sends HELLO on the sensor link at `path` and checks the reply; `context` says what the
+/// answer shows (in the panic message).
+pub async fn expect_hello(path: &Path, context: &str) {
+    let mut client = sensor_client(path);
+    let reply = client
+        .request(
+            "hello",
+            Message::Hello { client_version: 1 },
+            Duration::ZERO,
+        )
+        .await
+        .unwrap_or_else(|e| panic!("{context}: {e}"));
+    assert!(
+        matches!(reply, Message::HelloReply { .. }),
+        "{context}: {reply:?}"
+    );
+}
+
+/// Opens a link as a raw file (blocking), as a plain C program would.
+pub fn open_raw(path: &Path) -> std::fs::File {
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
+}
