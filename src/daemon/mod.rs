@@ -161,7 +161,10 @@ struct Service {
 
 /// The loop's view of wall time in realtime mode, and when it next reports status.
 struct LoopClock {
+    /// When serving began: wall time since then maps to simulated time.
     started: Instant,
+    /// Whether `serve` has run, so a second call keeps the anchor.
+    anchored: bool,
     /// `None` in lockstep: simulated time moves only on the client's frames.
     map: Option<RealtimeMap>,
     /// When the loop meant to wake next (wall time since start). Lag is measured against
@@ -246,6 +249,7 @@ impl<M: Model> Daemon<M> {
                     TimeMode::Realtime { speed } => Some(RealtimeMap::new(speed, config.max_lag)),
                     TimeMode::Lockstep => None,
                 },
+                anchored: false,
                 planned_wake: Duration::ZERO,
                 next_status: started,
                 timer: crate::transport::PreciseTimer::new(),
@@ -316,6 +320,13 @@ impl<M: Model> Daemon<M> {
             if let Some(priority) = wake.realtime_priority() {
                 tracing::info!(priority, "bridge thread runs under SCHED_FIFO");
             }
+        }
+        if !self.pacing.anchored {
+            // Wall time spent between `start` and `serve` (announcing readiness) is not
+            // simulated time the model has fallen behind.
+            self.pacing.started = Instant::now();
+            self.pacing.next_status = self.pacing.started;
+            self.pacing.anchored = true;
         }
         let mut shutdown = std::pin::pin!(shutdown);
         loop {
@@ -938,6 +949,30 @@ mod tests {
                 "{name} removed"
             );
         }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Realtime counts from `serve`, not from `start`: time the caller spends in between
+    /// (announcing readiness) is neither simulated nor an overrun.
+    #[tokio::test]
+    async fn realtime_starts_counting_when_serving_begins() {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-anchor-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut config = config(&dir.join("run"));
+        config.time_mode = TimeMode::Realtime { speed: 1.0 };
+        let (board, mux) = devices();
+        let options = RunOptions::default();
+        let mut daemon = Daemon::start(&config, FakeModel::default(), board, mux, options)
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        daemon
+            .serve(tokio::time::sleep(Duration::from_millis(100)))
+            .await
+            .unwrap();
+        let summary = daemon.finish().await.unwrap();
+        assert_eq!(summary.overruns, 0, "{summary:?}");
+        assert!(summary.sim_time_s < 0.4, "{summary:?}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
