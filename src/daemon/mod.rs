@@ -731,6 +731,16 @@ mod tests {
         config
     }
 
+    /// A fresh scratch directory (removed by the test at its end) and the default
+    /// configuration in `time_mode` with its run directory inside.
+    fn scratch(tag: &str, time_mode: TimeMode) -> (PathBuf, DaemonConfig) {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut config = config(&dir.join("run"));
+        config.time_mode = time_mode;
+        (dir, config)
+    }
+
     fn devices() -> (SensorBoard, Multiplexer) {
         let board = SensorBoard::new(BoardSettings {
             tick_ns: 10_000_000,
@@ -882,10 +892,7 @@ mod tests {
     /// wake and simulated time never advanced without client traffic.
     #[tokio::test]
     async fn realtime_at_speed_10_advances_without_a_client() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-rt10-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut config = config(&dir.join("run"));
-        config.time_mode = TimeMode::Realtime { speed: 10.0 };
+        let (dir, config) = scratch("rt10", TimeMode::Realtime { speed: 10.0 });
         let (stop_tx, stop_rx) = watch::channel(false);
         let daemon = spawn_run(config, RunOptions::default(), stop_rx, |_| {});
         tokio::time::sleep(Duration::from_secs(1)).await;
@@ -901,10 +908,8 @@ mod tests {
     /// `finish`; `serve` returns when its shutdown future resolves, having published status.
     #[tokio::test]
     async fn start_serve_finish_run_a_service_beside_the_links() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-stages-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let run_dir = dir.join("run");
-        let config = config(&run_dir);
+        let (dir, config) = scratch("stages", TimeMode::Lockstep);
+        let run_dir = config.run_dir.clone();
         let (board, mux) = devices();
         let mut daemon = Daemon::start(
             &config,
@@ -956,10 +961,7 @@ mod tests {
     /// (announcing readiness) is neither simulated nor an overrun.
     #[tokio::test]
     async fn realtime_starts_counting_when_serving_begins() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-anchor-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut config = config(&dir.join("run"));
-        config.time_mode = TimeMode::Realtime { speed: 1.0 };
+        let (dir, config) = scratch("anchor", TimeMode::Realtime { speed: 1.0 });
         let (board, mux) = devices();
         let options = RunOptions::default();
         let mut daemon = Daemon::start(&config, FakeModel::default(), board, mux, options)
@@ -978,11 +980,9 @@ mod tests {
 
     #[tokio::test]
     async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-daemon-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let run_dir = dir.join("run");
+        let (dir, config) = scratch("daemon", TimeMode::Lockstep);
+        let run_dir = config.run_dir.clone();
         let record = dir.join("rec");
-        let config = config(&run_dir);
         let (stop_tx, stop_rx) = watch::channel(false);
         let (ready_tx, mut ready_rx) = mpsc::unbounded_channel();
         let options = RunOptions {
