@@ -161,7 +161,10 @@ struct Service {
 
 /// The loop's view of wall time in realtime mode, and when it next reports status.
 struct LoopClock {
+    /// When serving began: wall time since then maps to simulated time.
     started: Instant,
+    /// Whether `serve` has run, so a second call keeps the anchor.
+    anchored: bool,
     /// `None` in lockstep: simulated time moves only on the client's frames.
     map: Option<RealtimeMap>,
     /// When the loop meant to wake next (wall time since start). Lag is measured against
@@ -246,6 +249,7 @@ impl<M: Model> Daemon<M> {
                     TimeMode::Realtime { speed } => Some(RealtimeMap::new(speed, config.max_lag)),
                     TimeMode::Lockstep => None,
                 },
+                anchored: false,
                 planned_wake: Duration::ZERO,
                 next_status: started,
                 timer: crate::transport::PreciseTimer::new(),
@@ -316,6 +320,13 @@ impl<M: Model> Daemon<M> {
             if let Some(priority) = wake.realtime_priority() {
                 tracing::info!(priority, "bridge thread runs under SCHED_FIFO");
             }
+        }
+        if !self.pacing.anchored {
+            // Wall time spent between `start` and `serve` (announcing readiness) is not
+            // simulated time the model has fallen behind.
+            self.pacing.started = Instant::now();
+            self.pacing.next_status = self.pacing.started;
+            self.pacing.anchored = true;
         }
         let mut shutdown = std::pin::pin!(shutdown);
         loop {
@@ -720,6 +731,16 @@ mod tests {
         config
     }
 
+    /// A fresh scratch directory (removed by the test at its end) and the default
+    /// configuration in `time_mode` with its run directory inside.
+    fn scratch(tag: &str, time_mode: TimeMode) -> (PathBuf, DaemonConfig) {
+        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut config = config(&dir.join("run"));
+        config.time_mode = time_mode;
+        (dir, config)
+    }
+
     fn devices() -> (SensorBoard, Multiplexer) {
         let board = SensorBoard::new(BoardSettings {
             tick_ns: 10_000_000,
@@ -871,10 +892,7 @@ mod tests {
     /// wake and simulated time never advanced without client traffic.
     #[tokio::test]
     async fn realtime_at_speed_10_advances_without_a_client() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-rt10-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut config = config(&dir.join("run"));
-        config.time_mode = TimeMode::Realtime { speed: 10.0 };
+        let (dir, config) = scratch("rt10", TimeMode::Realtime { speed: 10.0 });
         let (stop_tx, stop_rx) = watch::channel(false);
         let daemon = spawn_run(config, RunOptions::default(), stop_rx, |_| {});
         tokio::time::sleep(Duration::from_secs(1)).await;
@@ -890,10 +908,8 @@ mod tests {
     /// `finish`; `serve` returns when its shutdown future resolves, having published status.
     #[tokio::test]
     async fn start_serve_finish_run_a_service_beside_the_links() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-stages-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let run_dir = dir.join("run");
-        let config = config(&run_dir);
+        let (dir, config) = scratch("stages", TimeMode::Lockstep);
+        let run_dir = config.run_dir.clone();
         let (board, mux) = devices();
         let mut daemon = Daemon::start(
             &config,
@@ -941,13 +957,32 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// Realtime counts from `serve`, not from `start`: time the caller spends in between
+    /// (announcing readiness) is neither simulated nor an overrun.
+    #[tokio::test]
+    async fn realtime_starts_counting_when_serving_begins() {
+        let (dir, config) = scratch("anchor", TimeMode::Realtime { speed: 1.0 });
+        let (board, mux) = devices();
+        let options = RunOptions::default();
+        let mut daemon = Daemon::start(&config, FakeModel::default(), board, mux, options)
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        daemon
+            .serve(tokio::time::sleep(Duration::from_millis(100)))
+            .await
+            .unwrap();
+        let summary = daemon.finish().await.unwrap();
+        assert_eq!(summary.overruns, 0, "{summary:?}");
+        assert!(summary.sim_time_s < 0.4, "{summary:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[tokio::test]
     async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-daemon-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let run_dir = dir.join("run");
+        let (dir, config) = scratch("daemon", TimeMode::Lockstep);
+        let run_dir = config.run_dir.clone();
         let record = dir.join("rec");
-        let config = config(&run_dir);
         let (stop_tx, stop_rx) = watch::channel(false);
         let (ready_tx, mut ready_rx) = mpsc::unbounded_channel();
         let options = RunOptions {
