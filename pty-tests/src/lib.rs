@@ -5,14 +5,6 @@
 
 pub mod replay;
 
-/// The harness's daemon fixtures under the names this crate's tests use.
-pub mod daemon {
-    pub use eyebot_test_support::TempDir as TestDir;
-    pub use eyebot_test_support::clients::{sensor_client, sonar_client};
-    pub use eyebot_test_support::config::{config_text, configs_dir};
-    pub use eyebot_test_support::daemon::InProcessDaemon;
-}
-
 /// The directory of fixture files, e.g. `fixtures/replay`.
 pub fn fixture_dir(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

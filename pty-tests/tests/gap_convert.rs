@@ -13,11 +13,12 @@ use eyebot_hil::gap::{self, Verdict, resim};
 use eyebot_hil::physics::{Direction as PhysDirection, hdt_command};
 use eyebot_hil::probe::SensorClient;
 use eyebot_hil::sensors::{AdcBoard, AdcSource, DepthSensor};
+use eyebot_test_support::TempDir as TestDir;
+use eyebot_test_support::clients::{sensor_client, sonar_client};
+use eyebot_test_support::config::{config_text, configs_dir};
+use eyebot_test_support::daemon::InProcessDaemon;
 use firmware_protocol::sensor_link::{
     CompassMode, CompassOutput, Direction, Message, ThrusterCommand,
-};
-use pty_tests::daemon::{
-    InProcessDaemon, TestDir, config_text, configs_dir, sensor_client, sonar_client,
 };
 
 /// Mako's HDT table (configs/vehicles/mako.toml, all four motors alike).

@@ -28,7 +28,8 @@
 //! Significance with few numbers ([`winner`]): a candidate is named only when (1) the data hold
 //! more observations than it has parameters, (2) `delta_BIC > fit::BIC_MARGIN`, and (3) at
 //! least `fit::SIGNATURE_MIN_SHARE` of its chi-square reduction comes from the observations it
-//! should move ([`signature_kinds`]). With fewer than [`FEW_OBSERVATIONS`] observations the
+//! should move ([`signature_kinds`]), and (4) its parameters lie strictly inside their
+//! physical bounds with finite 95 % intervals, one clear of zero. With fewer than [`FEW_OBSERVATIONS`] observations the
 //! report says that the BIC's large-sample footing is weak there and the verdict is a lead,
 //! not a proof. After fitting, the remaining chi-square is compared with the chi-square 95 %
 //! point for `n - k` degrees of freedom: above it, the model still disagrees beyond the stated
@@ -806,11 +807,22 @@ fn fit_one(
     }
 }
 
-/// The winner of a round, if any (see the module doc for the rule).
+/// The winner of a round, if any (see the module doc for the rule): besides the margin and
+/// the signature, every parameter strictly inside its physical bounds and every 95 %
+/// interval finite, one of them clear of zero. A parameter the observations cannot move (a
+/// scale of a term the model does not have) has an infinite interval, and an effect that
+/// holds one is not named.
 pub fn winner(results: &[SummaryCandidate]) -> Option<&SummaryCandidate> {
-    results
-        .iter()
-        .find(|r| r.testable && r.delta_bic > fit::BIC_MARGIN && r.signature_pass)
+    results.iter().find(|r| {
+        let values: Vec<f64> = r.parameters.iter().map(|(_, v)| *v).collect();
+        let inside = effects::by_name(&r.name).is_some_and(|e| effects::inside_bounds(e, &values));
+        let finite = r
+            .ci95
+            .iter()
+            .all(|(_, c)| c[0].is_finite() && c[1].is_finite());
+        let clear = r.ci95.iter().any(|(_, c)| c[0] > 0.0 || c[1] < 0.0);
+        r.testable && r.delta_bic > fit::BIC_MARGIN && r.signature_pass && inside && finite && clear
+    })
 }
 
 /// Runs the summary workflow with `model` (experiments' world: the model's, or the default

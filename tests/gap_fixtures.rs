@@ -17,9 +17,9 @@ use eyebot_hil::gap::{self, Verdict, format::Measurement, model::GapModel};
 
 fn analyse(case: &str) -> gap::Analysis {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let dir = root.join("fixtures/gap").join(case);
+    let dir = root.join("pty-tests/fixtures/gap").join(case);
     let m = Measurement::load(&dir).expect("fixture loads");
-    let model = GapModel::load(&root.join("../configs/models/mako.toml")).expect("model loads");
+    let model = GapModel::load(&root.join("configs/models/mako.toml")).expect("model loads");
     // The fixtures are open-loop experiments (commands fixed in advance) of the model's own
     // form: the whole run is replayed at once (`--segment-s 0`).
     let options = gap::Options {
@@ -217,7 +217,10 @@ fn weak_compass_tilt_leads_the_ranking_but_is_not_named() {
     assert_eq!(lead.name, "compass_tilt");
     let ci = lead.ci95[0].1;
     assert!(ci[0] <= 30.0 && 30.0 <= ci[1], "interval {ci:?}");
-    assert!(ci[0] <= 0.0, "interval {ci:?} excludes zero: the guard should have named it");
+    assert!(
+        ci[0] <= 0.0,
+        "interval {ci:?} excludes zero: the guard should have named it"
+    );
     assert!(!lead.guards.interval_excludes_zero);
 }
 
@@ -278,8 +281,9 @@ fn hidden_sonar_incidence_dropout_is_named_and_fitted() {
     let fitted = first.parameters[0].1;
     let err = (fitted - truth[0]).abs() / truth[0].abs();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let held = Measurement::load(&root.join("fixtures/gap/sonar-incidence-dropout-heldout"))
-        .expect("held-out fixture loads");
+    let held =
+        Measurement::load(&root.join("pty-tests/fixtures/gap/sonar-incidence-dropout-heldout"))
+            .expect("held-out fixture loads");
     let mut t = a.configs_before.clone();
     let effect = gap::effects::by_name("sonar_incidence_dropout").expect("in the library");
     gap::effects::apply(effect, &truth, &mut t);

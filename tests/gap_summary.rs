@@ -14,7 +14,7 @@ use eyebot_hil::gap::summary::{self, Summary, SummaryAnalysis};
 use eyebot_hil::gap::{Verdict, format::ExperimentInfo, format::Initial};
 
 fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
 fn mako_numbers() -> Summary {
