@@ -24,6 +24,8 @@ pub mod physics;
 pub mod probe;
 pub mod record;
 pub mod replay;
+#[cfg(test)]
+mod scratch;
 pub mod sensors;
 pub mod thesis;
 pub mod transport;
