@@ -24,15 +24,11 @@ pub mod physics;
 pub mod probe;
 pub mod record;
 pub mod replay;
+#[cfg(test)]
+mod scratch;
 pub mod sensors;
 pub mod thesis;
 pub mod transport;
-
-/// The name [`thesis`] had before it and `cli::validate` (the subcommand) got distinct
-/// names. Kept only until its last users (`gap::summary`, the pty-tests' physics test and
-/// calibrate example) say `thesis`.
-#[doc(hidden)]
-pub use thesis as validate;
 
 /// Simulated time in nanoseconds since the start of a run. Integer, so the same inputs give
 /// the same times bit for bit at any speed.

@@ -136,9 +136,8 @@ mod tests {
     /// trace, one row per 10 ms step from t = 0, thrust in newtons once the motors run.
     #[test]
     fn the_trace_reads_back_as_state_rows() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-simulate-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let out = dir.join("run.csv");
+        let tmp = crate::scratch::dir("simulate");
+        let out = tmp.path().join("run.csv");
         let args = SimulateArgs {
             experiment: Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("configs/experiments/acceleration.toml"),
@@ -156,6 +155,5 @@ mod tests {
             rows.iter().any(|r| r.force_port_n > 1.0),
             "the thrusters push"
         );
-        std::fs::remove_dir_all(dir).unwrap();
     }
 }

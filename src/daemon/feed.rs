@@ -156,12 +156,6 @@ pub async fn serve(
 mod tests {
     use super::*;
 
-    fn scratch(tag: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
-
     /// The schedule's times for a log with this text.
     fn times(dir: &Path, name: &str, text: &str) -> Vec<SimNanos> {
         let log = dir.join(name);
@@ -181,7 +175,8 @@ mod tests {
     /// 1 Hz; a comment is not a sentence.
     #[test]
     fn a_log_becomes_a_schedule_from_time_zero() {
-        let dir = scratch("feed");
+        let tmp = crate::scratch::dir("feed");
+        let dir = tmp.path();
         let second = UNTIMED_PERIOD_NS;
         let cases = [
             (
@@ -201,12 +196,11 @@ mod tests {
             ),
         ];
         for (name, text, expected) in cases {
-            assert_eq!(times(&dir, name, &text), expected, "{name}");
+            assert_eq!(times(dir, name, &text), expected, "{name}");
         }
         let schedule = load_schedule(&dir.join("timed.nmea")).unwrap();
         assert_eq!(&schedule[2].1[..], format!("{DBT_B}\r\n").as_bytes());
         let missing = load_schedule(&dir.join("nope.nmea")).unwrap_err();
         assert!(missing.to_string().contains("nope.nmea"), "{missing}");
-        std::fs::remove_dir_all(dir).unwrap();
     }
 }

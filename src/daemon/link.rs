@@ -536,16 +536,16 @@ mod tests {
         stop: watch::Sender<bool>,
         task: tokio::task::JoinHandle<()>,
         client_path: PathBuf,
-        _dir: PathBuf,
+        /// Holds the run directory of the link's symlink; removed when the test ends.
+        _dir: tempfile::TempDir,
     }
 
     async fn start(tag: &str) -> Running {
-        let dir =
-            std::env::temp_dir().join(format!("eyebot-hil-link-{}-{tag}", std::process::id()));
-        let endpoint = OpenEndpoint::open("sonar", &pty_config(), &dir)
+        let dir = crate::scratch::dir(&format!("link-{tag}"));
+        let endpoint = OpenEndpoint::open("sonar", &pty_config(), dir.path())
             .await
             .unwrap();
-        let client_path = dir.join("sonar");
+        let client_path = dir.path().join("sonar");
         assert!(
             endpoint
                 .describe()

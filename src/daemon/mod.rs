@@ -731,12 +731,11 @@ mod tests {
         config
     }
 
-    /// A fresh scratch directory (removed by the test at its end) and the default
-    /// configuration in `time_mode` with its run directory inside.
-    fn scratch(tag: &str, time_mode: TimeMode) -> (PathBuf, DaemonConfig) {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut config = config(&dir.join("run"));
+    /// A fresh scratch directory (removed when it drops) and the default configuration in
+    /// `time_mode` with its run directory inside.
+    fn scratch(tag: &str, time_mode: TimeMode) -> (tempfile::TempDir, DaemonConfig) {
+        let dir = crate::scratch::dir(tag);
+        let mut config = config(&dir.path().join("run"));
         config.time_mode = time_mode;
         (dir, config)
     }
@@ -892,7 +891,7 @@ mod tests {
     /// wake and simulated time never advanced without client traffic.
     #[tokio::test]
     async fn realtime_at_speed_10_advances_without_a_client() {
-        let (dir, config) = scratch("rt10", TimeMode::Realtime { speed: 10.0 });
+        let (_dir, config) = scratch("rt10", TimeMode::Realtime { speed: 10.0 });
         let (stop_tx, stop_rx) = watch::channel(false);
         let daemon = spawn_run(config, RunOptions::default(), stop_rx, |_| {});
         tokio::time::sleep(Duration::from_secs(1)).await;
@@ -900,7 +899,6 @@ mod tests {
         let summary = daemon.await.unwrap().unwrap();
         // 10 s in an ideal world; a loaded machine may slip a little (counted overruns).
         assert!(summary.sim_time_s >= 5.0, "1 s at speed 10: {summary:?}");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// The three stages on their own: after `start` the links exist before anything is
@@ -908,7 +906,7 @@ mod tests {
     /// `finish`; `serve` returns when its shutdown future resolves, having published status.
     #[tokio::test]
     async fn start_serve_finish_run_a_service_beside_the_links() {
-        let (dir, config) = scratch("stages", TimeMode::Lockstep);
+        let (_dir, config) = scratch("stages", TimeMode::Lockstep);
         let run_dir = config.run_dir.clone();
         let (board, mux) = devices();
         let mut daemon = Daemon::start(
@@ -954,14 +952,13 @@ mod tests {
                 "{name} removed"
             );
         }
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Realtime counts from `serve`, not from `start`: time the caller spends in between
     /// (announcing readiness) is neither simulated nor an overrun.
     #[tokio::test]
     async fn realtime_starts_counting_when_serving_begins() {
-        let (dir, config) = scratch("anchor", TimeMode::Realtime { speed: 1.0 });
+        let (_dir, config) = scratch("anchor", TimeMode::Realtime { speed: 1.0 });
         let (board, mux) = devices();
         let options = RunOptions::default();
         let mut daemon = Daemon::start(&config, FakeModel::default(), board, mux, options)
@@ -975,12 +972,12 @@ mod tests {
         let summary = daemon.finish().await.unwrap();
         assert_eq!(summary.overruns, 0, "{summary:?}");
         assert!(summary.sim_time_s < 0.4, "{summary:?}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[tokio::test]
     async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
-        let (dir, config) = scratch("daemon", TimeMode::Lockstep);
+        let (tmp, config) = scratch("daemon", TimeMode::Lockstep);
+        let dir = tmp.path();
         let run_dir = config.run_dir.clone();
         let record = dir.join("rec");
         let (stop_tx, stop_rx) = watch::channel(false);
@@ -991,7 +988,6 @@ mod tests {
             config_toml: "seed = 1\n".into(),
             ..RunOptions::default()
         };
-        std::fs::create_dir_all(&dir).unwrap();
         let daemon = spawn_run(config, options, stop_rx, move |r| {
             let _ = ready_tx.send(r);
         });
@@ -1094,6 +1090,5 @@ mod tests {
             );
         }
         assert!(!dir.join("pid").exists());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

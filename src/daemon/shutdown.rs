@@ -143,9 +143,8 @@ mod tests {
 
     #[test]
     fn leftovers_removes_only_what_is_still_ours() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-left-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::scratch::dir("left");
+        let dir = tmp.path();
         let ours = dir.join("sonar");
         let taken = dir.join("sensor");
         std::os::unix::fs::symlink("/dev/null", &ours).unwrap();
@@ -169,6 +168,5 @@ mod tests {
         );
         assert!(!sock.exists());
         assert!(pid.exists(), "a pid file naming another process is kept");
-        std::fs::remove_dir_all(dir).unwrap();
     }
 }

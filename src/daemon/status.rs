@@ -226,16 +226,10 @@ mod tests {
 
     use super::*;
 
-    fn scratch(tag: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
-
     #[tokio::test]
     async fn a_client_reads_the_latest_snapshot_from_an_owner_only_socket() {
-        let dir = scratch("status");
+        let tmp = crate::scratch::dir("status");
+        let dir = tmp.path();
         let path = dir.join("status.sock");
         let server = StatusServer::bind(&path).unwrap();
         let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
@@ -260,12 +254,12 @@ mod tests {
         stop_tx.send(true).unwrap();
         serving.await.unwrap();
         assert!(!path.exists(), "socket file removed when the server stops");
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[tokio::test]
     async fn a_stale_socket_file_is_replaced_but_a_live_one_is_not() {
-        let dir = scratch("status2");
+        let tmp = crate::scratch::dir("status2");
+        let dir = tmp.path();
         let path = dir.join("status.sock");
         {
             let live = StatusServer::bind(&path).unwrap();
@@ -284,6 +278,5 @@ mod tests {
             .await
             .unwrap_err();
         assert!(err.to_string().contains("nothing.sock"));
-        std::fs::remove_dir_all(dir).unwrap();
     }
 }

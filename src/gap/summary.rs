@@ -61,7 +61,7 @@ pub const ENSEMBLE: u64 = 4;
 /// Below this many observations the report warns that the BIC is a rough guide.
 pub const FEW_OBSERVATIONS: usize = 10;
 /// Default start of the top-speed average (s): the vehicle has settled (as `validate`).
-pub const TOP_SPEED_FROM_S: f64 = crate::validate::physics::TOP_SPEED_AVERAGE_FROM_S;
+pub const TOP_SPEED_FROM_S: f64 = crate::thesis::physics::TOP_SPEED_AVERAGE_FROM_S;
 
 /// What an observation measured. Speeds are read like the thesis's pool-side camera (200 ms
 /// progress samples along the experiment's initial heading, thesis 4.5); turns like its

@@ -375,12 +375,6 @@ fn write_loop(rx: mpsc::Receiver<Message>, mut files: Files) -> Result<Stats, Re
 mod tests {
     use super::*;
 
-    fn scratch(tag: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        dir
-    }
-
     fn state_row(t_s: f64, contact: bool) -> StateRow {
         StateRow {
             t_s,
@@ -408,10 +402,11 @@ mod tests {
     /// meta, the configuration verbatim, every byte value, drops and state rows.
     #[test]
     fn a_recording_reads_back_exactly() {
-        let dir = scratch("rec");
+        let tmp = crate::scratch::dir("rec");
+        let dir = tmp.path();
         let meta = Meta::new(7, "lockstep", 1.0, "<embedded>/default.toml");
         let config = "# a comment survives\nvehicle = \"vehicles/mako.toml\"\n";
-        let rec = Recorder::start(&dir, &meta, config).unwrap();
+        let rec = Recorder::start(dir, &meta, config).unwrap();
         let all: Vec<u8> = (0..=255u8).collect();
         rec.bytes(0.25, "sensor", Direction::Rx, &all);
         rec.bytes(1.5, "sonar", Direction::Tx, b"$SDDBT,,f,2.0,M,,F*00\r\n");
@@ -433,9 +428,9 @@ mod tests {
                 stalls: 0,
             }
         );
-        assert_eq!(read_meta(&dir).unwrap(), meta);
-        assert_eq!(read_config(&dir).unwrap(), config);
-        let chunks = read_bytes(&dir).unwrap();
+        assert_eq!(read_meta(dir).unwrap(), meta);
+        assert_eq!(read_config(dir).unwrap(), config);
+        let chunks = read_bytes(dir).unwrap();
         assert_eq!(chunks.len(), 2);
         assert_eq!(chunks[0].data, all);
         assert_eq!(chunks[0].dir, Direction::Rx);
@@ -443,14 +438,14 @@ mod tests {
         assert_eq!(chunks[1].link, "sonar");
         assert_eq!(chunks[1].dir, Direction::Tx);
         assert_eq!(chunks[1].data, b"$SDDBT,,f,2.0,M,,F*00\r\n");
-        let drops = read_drops(&dir).unwrap();
+        let drops = read_drops(dir).unwrap();
         assert_eq!(drops.len(), 1);
         assert_eq!(
             (drops[0].sim_s, drops[0].link.as_str(), drops[0].reason),
             (1.75, "sensor", DropReason::NotRead)
         );
         assert_eq!(drops[0].data, [0xEB, 0x90]);
-        let states = read_state(&dir).unwrap();
+        let states = read_state(dir).unwrap();
         assert_eq!(states.len(), 2);
         for (got, want) in states.iter().zip(&rows) {
             // Bit for bit, including the sign of -0.0.
@@ -464,7 +459,6 @@ mod tests {
         let fields: Vec<&str> = lines.next().unwrap().split('\t').collect();
         assert_eq!(fields[0], "1.750000000");
         assert_eq!(fields[2..], ["sensor", "not-read", "eb90"]);
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     /// The header constants are the serde field names, so a renamed field cannot leave the
@@ -503,11 +497,11 @@ mod tests {
     /// configuration, model files, bytes and state.
     #[test]
     fn a_format_1_recording_still_reads() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/recording-format-1");
-        let meta = read_meta(&dir).unwrap();
+        let dir = &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/recording-format-1");
+        let meta = read_meta(dir).unwrap();
         assert_eq!(meta.format, format::FORMAT_COMMENTED_CONFIG);
         assert_eq!(meta.time_mode, "lockstep");
-        let config = read_config(&dir).unwrap();
+        let config = read_config(dir).unwrap();
         use crate::config::ConfigSource as _;
         let embedded = crate::config::Embedded
             .read(crate::config::DEFAULT_CONFIG)
@@ -517,54 +511,55 @@ mod tests {
             "the commented copy is the configuration verbatim"
         );
         assert_eq!(
-            read_model_files(&dir).unwrap(),
+            read_model_files(dir).unwrap(),
             ModelFiles {
                 vehicle: "vehicles/mako.toml".into(),
                 world: "worlds/pool.toml".into(),
                 sensors: "sensors/mako-2008.toml".into(),
             }
         );
-        let chunks = read_bytes(&dir).unwrap();
+        let chunks = read_bytes(dir).unwrap();
         assert!(chunks.iter().any(|c| c.dir == Direction::Rx));
         assert!(chunks.iter().any(|c| c.dir == Direction::Tx));
-        assert!(!read_state(&dir).unwrap().is_empty());
-        assert!(read_drops(&dir).unwrap().is_empty());
+        assert!(!read_state(dir).unwrap().is_empty());
+        assert!(read_drops(dir).unwrap().is_empty());
     }
 
     /// A `meta.toml` of neither format names the file and says it may be older.
     #[test]
     fn an_unreadable_meta_says_it_may_be_from_an_older_version() {
-        let dir = scratch("rec-oldmeta");
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::scratch::dir("rec-oldmeta");
+        let dir = tmp.path();
+        std::fs::create_dir_all(dir).unwrap();
         std::fs::write(dir.join("meta.toml"), "seed = 1\n").unwrap();
-        let e = read_meta(&dir).unwrap_err().to_string();
+        let e = read_meta(dir).unwrap_err().to_string();
         assert!(e.contains("meta.toml"), "{e}");
         assert!(e.contains("recorded by an older version"), "{e}");
         let newer = "format = 99\nversion = \"9.0.0\"\nseed = 1\ntime_mode = \"lockstep\"\n\
                      speed = 1.0\nconfig = \"x\"\n";
         std::fs::write(dir.join("meta.toml"), newer).unwrap();
-        let e = read_meta(&dir).unwrap_err().to_string();
+        let e = read_meta(dir).unwrap_err().to_string();
         assert!(e.contains("newer version"), "{e}");
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     /// Table errors name the file, the line and the column or header that was expected.
     #[test]
     fn a_bad_table_names_file_line_and_what_was_expected() {
-        let dir = scratch("rec-bad");
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::scratch::dir("rec-bad");
+        let dir = tmp.path();
+        std::fs::create_dir_all(dir).unwrap();
         // `simulate`'s earlier columns (degrees, thrust_*) are not state rows.
         std::fs::write(
             dir.join("state.csv"),
             "t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,0,0,0,0\n",
         )
         .unwrap();
-        let e = read_state(&dir).unwrap_err().to_string();
+        let e = read_state(dir).unwrap_err().to_string();
         assert!(e.contains("state.csv line 1: expected the header"), "{e}");
         let good = format!("{STATE_HEADER}\n{}\n", "0,".repeat(17) + "0");
         let bad_cell = good.clone() + &"0,".repeat(17) + "2\n";
         std::fs::write(dir.join("state.csv"), &bad_cell).unwrap();
-        let e = read_state(&dir).unwrap_err().to_string();
+        let e = read_state(dir).unwrap_err().to_string();
         assert!(e.contains("state.csv line 3"), "{e}");
         assert!(e.contains("column `contact`"), "{e}");
         std::fs::write(
@@ -572,19 +567,18 @@ mod tests {
             format!("{BYTES_HEADER}\n1.0\t2.0\tsonar\tup\t00\n"),
         )
         .unwrap();
-        let e = read_bytes(&dir).unwrap_err().to_string();
+        let e = read_bytes(dir).unwrap_err().to_string();
         assert!(e.contains("bytes.tsv line 2: unknown variant `up`"), "{e}");
         std::fs::write(
             dir.join("state.csv"),
             format!("{good}NaN{}\n", ",0".repeat(17)),
         )
         .unwrap();
-        let e = read_state(&dir).unwrap_err().to_string();
+        let e = read_state(dir).unwrap_err().to_string();
         assert!(
             e.contains("state.csv line 3: column `t_s`: expected a finite"),
             "{e}"
         );
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     /// A disk that stops taking data (here a FIFO nobody reads) makes the caller wait once
@@ -594,9 +588,8 @@ mod tests {
     fn a_stalled_disk_blocks_the_caller_and_loses_nothing() {
         use std::io::Read;
         use std::os::unix::fs::OpenOptionsExt;
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-rec-fifo-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::scratch::dir("rec-fifo");
+        let dir = tmp.path();
         let fifo = dir.join("bytes.tsv");
         nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
         let mut reader = std::fs::OpenOptions::new()
@@ -604,7 +597,7 @@ mod tests {
             .custom_flags(nix::libc::O_NONBLOCK)
             .open(&fifo)
             .unwrap();
-        let rec = Recorder::start(&dir, &Meta::new(1, "lockstep", 1.0, "test"), "").unwrap();
+        let rec = Recorder::start(dir, &Meta::new(1, "lockstep", 1.0, "test"), "").unwrap();
         let chunk = vec![0x5A_u8; 1024];
         let total = 3 * QUEUE_MESSAGES;
         let (done_tx, done_rx) = mpsc::channel();
@@ -652,7 +645,6 @@ mod tests {
         assert!(stats.stalls > 0);
         let text = String::from_utf8(got).unwrap();
         assert_eq!(text.lines().count(), total + 1, "header + every chunk");
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]

@@ -703,14 +703,6 @@ mod tests {
 
     use super::*;
 
-    pub(crate) fn scratch(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("eyebot-hil-replay-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
-
     fn events(path: &Path) -> (Format, Vec<Event>) {
         let mut s = Source::open(
             path,
@@ -789,7 +781,8 @@ mod tests {
 
     #[test]
     fn timestamped_log_with_comments_lf_and_junk() {
-        let dir = scratch("timed");
+        let tmp = crate::scratch::dir("timed");
+        let dir = tmp.path();
         let path = dir.join("a.log");
         std::fs::write(
             &path,
@@ -828,12 +821,12 @@ mod tests {
             })
             .collect();
         assert_eq!(bad, vec![6, 7], "the untimed line and the junk line");
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
     fn gzip_is_detected_by_magic_not_extension() {
-        let dir = scratch("gzip");
+        let tmp = crate::scratch::dir("gzip");
+        let dir = tmp.path();
         let plain = b"$SDDBT,1*00\r\n$SDDBT,2*00\r\n";
         let path = dir.join("log.txt"); // no .gz extension
         let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
@@ -857,12 +850,12 @@ mod tests {
         std::fs::write(&fake, plain).unwrap();
         let (_, ev) = events(&fake);
         assert_eq!(lines(&ev).len(), 2);
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
     fn recorded_sentences_are_reassembled_across_chunks() {
-        let dir = scratch("record");
+        let tmp = crate::scratch::dir("record");
+        let dir = tmp.path();
         let rec = dir.join("run1");
         std::fs::create_dir_all(&rec).unwrap();
         let sentence = b"$SDDBT,6.6,f,2.0,M,1.1,F*3A\r\n";
@@ -905,12 +898,12 @@ mod tests {
         assert!(ev.iter().any(
             |e| matches!(e, Event::Problem(p) if p.loc.line == 7 && matches!(p.kind, ProblemKind::BadRecordLine { .. }))
         ));
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
     fn a_line_without_line_feeds_is_cut_at_the_cap() {
-        let dir = scratch("cap");
+        let tmp = crate::scratch::dir("cap");
+        let dir = tmp.path();
         let path = dir.join("junk.log");
         let mut data = vec![0xFFu8; 3 * MAX_PHYSICAL_LINE];
         data.extend_from_slice(b"\n$SDDBT,1*00\r\n");
@@ -924,6 +917,5 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert!(matches!(&ev[1], Event::Line(l) if l.bytes == b"$SDDBT,1*00" && l.loc.line == 2));
-        std::fs::remove_dir_all(dir).unwrap();
     }
 }

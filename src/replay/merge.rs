@@ -118,13 +118,8 @@ mod tests {
     use crate::replay::input::CommentMode;
 
     fn order(files: &[&str]) -> (MergeMode, Vec<(String, u64)>) {
-        let dir = std::env::temp_dir().join(format!(
-            "eyebot-hil-merge-{}-{}",
-            std::process::id(),
-            files.len() * 7 + files[0].len()
-        ));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::scratch::dir("merge");
+        let dir = tmp.path();
         let sources = files
             .iter()
             .enumerate()
@@ -155,7 +150,6 @@ mod tests {
                 out.push((name, l.loc.line));
             }
         }
-        std::fs::remove_dir_all(dir).unwrap();
         (m.mode(), out)
     }
 

@@ -568,9 +568,8 @@ mod tests {
     /// reassembled across chunk boundaries, without the select/ack traffic or other links.
     #[test]
     fn a_recording_made_by_the_recorder_replays_its_sonar_sentences() {
-        let dir =
-            std::env::temp_dir().join(format!("eyebot-hil-replay-rec-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let tmp = crate::scratch::dir("replay-rec");
+        let dir = tmp.path().join("rec");
         let meta = crate::record::Meta::new(1, "lockstep", 1.0, "test");
         let rec = Recorder::start(&dir, &meta, "").unwrap();
         let a = b"$SDDBT,6.6,f,2.0,M,1.1,F*04\r\n";
@@ -594,7 +593,6 @@ mod tests {
         assert_eq!(summary.problem_count(), 0);
         assert_eq!(summary.first_time_ns, Some(101_000_000));
         assert_eq!(summary.last_time_ns, Some(103_000_000));
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     /// `--start`/`--end` and the speed factor act on log time. Checked on the modelled line
@@ -608,8 +606,8 @@ mod tests {
                 self.0.push((loc.line, sent.start_ns.unwrap()));
             }
         }
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-replay-se-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::scratch::dir("replay-se");
+        let dir = tmp.path();
         let log = dir.join("t.log");
         let text: String = (0..6)
             .map(|i| format!("{}.000 $SDDPT,1.{i},0.3*00\r\n", 100 + i))
@@ -631,7 +629,6 @@ mod tests {
         // Lines 2..=4 (log 1 s, 2 s, 3 s) at 20 ms intervals (speed 50).
         assert_eq!(times.0, vec![(2, 0), (3, 20_000_000), (4, 40_000_000)]);
         assert_eq!(summary.skipped_before_start, 1);
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     /// `--loop` starts the next pass when the line is free, and keeps the schedule of the
@@ -650,9 +647,8 @@ mod tests {
                 self.3 += 1;
             }
         }
-        let dir =
-            std::env::temp_dir().join(format!("eyebot-hil-replay-loop-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::scratch::dir("replay-loop");
+        let dir = tmp.path();
         let log = dir.join("l.log");
         std::fs::write(&log, "0.0 $A*41\r\n0.01 $B*00\r\n").unwrap();
         let mut opts = Options::new(vec![log]);
@@ -677,15 +673,14 @@ mod tests {
             "the bad checksum of $B is listed once, not every pass"
         );
         assert_eq!(summary.problems.get("checksum mismatch"), Some(&1));
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     /// `--comments send` passes comments through as lines, in file order, as gpsfake does;
     /// `#Serial:` is never sent, and a conflicting later one is reported.
     #[test]
     fn comments_are_sent_in_place_when_asked() {
-        let dir = std::env::temp_dir().join(format!("eyebot-hil-replay-cm-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::scratch::dir("replay-cm");
+        let dir = tmp.path();
         let log = dir.join("c.log");
         std::fs::write(
             &log,
@@ -704,6 +699,5 @@ mod tests {
         assert_eq!(summary.comments_sent, 1);
         assert_eq!(summary.sentences_sent, 2);
         assert_eq!(summary.problems.get("#Serial conflict"), Some(&1));
-        std::fs::remove_dir_all(dir).unwrap();
     }
 }

@@ -153,17 +153,10 @@ pub fn remove_if_ours(path: &Path, target: &Path) {
 mod tests {
     use super::*;
 
-    fn scratch(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("eyebot-hil-link-{}-{name}", std::process::id()));
-        let _ = fs::remove_dir_all(&dir);
-        fs::create_dir_all(&dir).unwrap();
-        dir
-    }
-
     #[test]
     fn creates_and_removes_its_link() {
-        let dir = scratch("create");
+        let tmp = crate::scratch::dir("create");
+        let dir = tmp.path();
         let link = dir.join("run/sonar");
         {
             let owned = OwnedLink::create(&link, Path::new("/dev/null")).unwrap();
@@ -171,12 +164,12 @@ mod tests {
         }
         assert!(fs::symlink_metadata(&link).is_err(), "link removed on drop");
         assert!(!owner_file_for(&link).exists());
-        fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
     fn never_replaces_a_file_or_a_foreign_symlink() {
-        let dir = scratch("foreign");
+        let tmp = crate::scratch::dir("foreign");
+        let dir = tmp.path();
         let file = dir.join("sonar");
         fs::write(&file, "user data").unwrap();
         assert!(matches!(
@@ -192,12 +185,12 @@ mod tests {
             Err(LinkError::Occupied { .. })
         ));
         assert_eq!(fs::read_link(&foreign).unwrap(), Path::new("/etc/hostname"));
-        fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
     fn replaces_a_stale_link_of_a_dead_daemon_but_not_a_live_one() {
-        let dir = scratch("stale");
+        let tmp = crate::scratch::dir("stale");
+        let dir = tmp.path();
         let link = dir.join("sonar");
         std::os::unix::fs::symlink("/dev/pts/999", &link).unwrap();
         // PID 1 is alive (init); a link it owns is in use.
@@ -211,6 +204,5 @@ mod tests {
         let owned = OwnedLink::create(&link, Path::new("/dev/null")).unwrap();
         assert_eq!(fs::read_link(&link).unwrap(), Path::new("/dev/null"));
         drop(owned);
-        fs::remove_dir_all(dir).unwrap();
     }
 }
