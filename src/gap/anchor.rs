@@ -117,7 +117,7 @@ pub fn invert_compass(
     reading_deg: f64,
 ) -> f64 {
     let (roll, pitch, _) = state.euler_rad();
-    let mut probe = state.clone();
+    let mut probe = *state;
     let read = |probe: &mut VehicleState, yaw: f64| {
         probe.attitude = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
         compass_heading_deg(c, earth_ned_ut, probe)

@@ -533,9 +533,8 @@ mod tests {
         /// echo report and an unattributable DBT.
         #[test]
         fn a_hand_made_recording_converts_channel_by_channel() {
-            let dir =
-                std::env::temp_dir().join(format!("eyebot-hil-convert-{}", std::process::id()));
-            let _ = std::fs::remove_dir_all(&dir);
+            let scratch = crate::scratch::dir("gap-convert");
+            let dir = scratch.path().join("rec");
             let heading = frame(Message::CompassHeading {
                 word: HeadingWord::encode(124, HeadingFormat::Bcd).unwrap(),
             });
@@ -660,7 +659,6 @@ mod tests {
                 err.contains("bytes.tsv line 11: 2 fields, expected 5"),
                 "{err}"
             );
-            let _ = std::fs::remove_dir_all(&dir);
         }
     }
 }

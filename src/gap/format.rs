@@ -554,11 +554,11 @@ mod tests {
             ),
         )
         .unwrap();
-        let dir = std::env::temp_dir().join(format!("gap-format-{}", std::process::id()));
+        let scratch = crate::scratch::dir("gap-format");
+        let dir = scratch.path().join("m");
         m.write(&dir).unwrap();
         let back = Measurement::load(&dir).unwrap();
         assert_eq!(back.channels, m.channels);
         assert_eq!(back.commands, m.commands);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -42,14 +42,12 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
 /// Ensemble size for the process-noise floor (and the null deviations each candidate's
 /// significance is calibrated on, `fit`).
 ///
-/// 96, not the earlier 24: the thrust fluctuation excites the lightly damped pitch/heave
-/// motion at the free surface (60-80 s of the benchmark manoeuvre), whose phase wanders
-/// from run to run, so a few modes carry most of the process noise in `depth_adc` and
-/// `accel_x_adc`. 24 fixed members under-estimated that spread (on 40 generated nulls the
-/// mean squared normalised depth residual was 1.51 over 70-75 s instead of 1) and
-/// under-sampled the null deviations along a lag fit's path, so a `thruster_lag` fit gained
-/// up to 3x what the null calibration allowed: the null false alarms of issue 8
-/// (`docs/gap.md`, "Null false alarms"). A run costs about 6 ms in a release build.
+/// 96: the thrust fluctuation excites the lightly damped pitch/heave motion at the free
+/// surface, whose phase wanders from run to run, so a few modes carry most of the process
+/// noise in `depth_adc` and `accel_x_adc`. 24 members under-estimated that spread (on 40
+/// generated nulls the mean squared normalised depth residual was 1.51 over 70-75 s instead
+/// of 1) and under-sampled the null deviations along a lag fit's path, so a `thruster_lag`
+/// fit gained up to 3x what the null calibration allowed and null data named a lag.
 pub const ENSEMBLE: u64 = 96;
 
 /// One re-simulated run: the state after every step (index 0 = start) and the commands.
@@ -462,7 +460,7 @@ mod tests {
         )
     }
 
-    /// Regression (issue 8, null false alarms): with a 24-run ensemble these two null
+    /// Regression (null false alarms): with a 24-run ensemble these two null
     /// measurements named `thruster_lag` (the free-surface pitch/heave oscillation's phase
     /// wander, under-sampled by the ensemble, looked like a lag); with [`super::ENSEMBLE`]
     /// runs they name nothing.
