@@ -217,7 +217,10 @@ fn weak_compass_tilt_leads_the_ranking_but_is_not_named() {
     assert_eq!(lead.name, "compass_tilt");
     let ci = lead.ci95[0].1;
     assert!(ci[0] <= 30.0 && 30.0 <= ci[1], "interval {ci:?}");
-    assert!(ci[0] <= 0.0, "interval {ci:?} excludes zero: the guard should have named it");
+    assert!(
+        ci[0] <= 0.0,
+        "interval {ci:?} excludes zero: the guard should have named it"
+    );
     assert!(!lead.guards.interval_excludes_zero);
 }
 

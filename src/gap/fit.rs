@@ -460,17 +460,17 @@ fn fit_part(
 ) -> Option<Scored> {
     let k = effect.parameters.len();
     let scales = effect.scales;
-    let to_params = |x: &DVector<f64>| -> Vec<f64> {
-        x.iter().zip(scales).map(|(v, s)| v * s).collect()
-    };
+    let to_params =
+        |x: &DVector<f64>| -> Vec<f64> { x.iter().zip(scales).map(|(v, s)| v * s).collect() };
     let select = |r: Residuals| -> DVector<f64> {
         match part {
             Some(_) => r.training_vector(),
             None => DVector::from_vec(r.values),
         }
     };
-    let objective =
-        |x: &DVector<f64>| -> Option<DVector<f64>> { setup.eval(effect, &to_params(x)).map(select) };
+    let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
+        setup.eval(effect, &to_params(x)).map(select)
+    };
     let bounds = Bounds::scaled(effect.bounds, scales);
     let fit = lsq::minimize(&objective, &bounds, starts)?;
     tracing::debug!(
@@ -540,9 +540,18 @@ fn fit_part(
 /// fitted to, the values estimated from everything).
 fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> CandidateResult {
     let k = effect.parameters.len();
-    let Some(train) = fit_part(setup, effect, r0, Some(true), &lsq::axis_scan(k, &START_SCAN))
-    else {
-        return failed(effect, r0.chi2(true), "the fit left the model's valid range");
+    let Some(train) = fit_part(
+        setup,
+        effect,
+        r0,
+        Some(true),
+        &lsq::axis_scan(k, &START_SCAN),
+    ) else {
+        return failed(
+            effect,
+            r0.chi2(true),
+            "the fit left the model's valid range",
+        );
     };
     let heldout_chi2_before = r0.chi2(false);
     let heldout_chi2_after = train.residuals.chi2(false);
