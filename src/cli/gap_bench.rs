@@ -159,10 +159,10 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
     if let Some(GapBenchCommand::Merge { parts, out }) = &args.command {
         let mut read = Vec::new();
         for p in parts {
-            let part = Part::read(p).map_err(|e| CliError::Output(e.to_string()))?;
+            let part = Part::read(p)?;
             read.push((p.clone(), part));
         }
-        let (key, outcome) = bench::merge(&read).map_err(|e| CliError::Output(e.to_string()))?;
+        let (key, outcome) = bench::merge(&read)?;
         return print(key.source, &outcome, out.as_ref());
     }
     if args.out_part.is_some() && args.shard.is_none() {
@@ -184,13 +184,10 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
         bar.set_message(label.to_string());
-    })
-    .map_err(|e| CliError::Output(e.to_string()))?;
+    })?;
     bar.finish_and_clear();
     if let Some(path) = &args.out_part {
-        Part::new(opts.key(), shard, bench::case_count(&opts), outcome.clone())
-            .write(path)
-            .map_err(|e| CliError::Output(e.to_string()))?;
+        Part::new(opts.key(), shard, bench::case_count(&opts), outcome.clone()).write(path)?;
     }
     print(opts.source, &outcome, args.out.as_ref())
 }
