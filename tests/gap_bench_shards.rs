@@ -3,7 +3,7 @@
 //! unsharded run. Wall time differs run to run: the comparison leaves it out (the `seconds`
 //! field of each case is zeroed and the table's last column, s/case, is cut off); every other
 //! column and field must be equal. And the bad inputs of a merge (a missing part, overlapping
-//! shards, parts from other options) and of `--shard` (0/3, 4/3) are clear errors.
+//! shards, parts from other options or another calibration) and of `--shard` (0/3, 4/3) are clear errors.
 
 use std::path::PathBuf;
 
@@ -103,6 +103,21 @@ fn three_merged_shards_equal_the_unsharded_run() {
     let err = bench::merge(&mixed).unwrap_err().to_string();
     assert!(
         err.contains("other-seed.json") && err.contains("other options"),
+        "{err}"
+    );
+    // A part whose calibration differs (another build or model) names its file.
+    let mut recal = parts[1].clone();
+    recal.0 = dir.path().join("recalibrated.json");
+    recal.1.calibration = Some(bench::CalibrationGap {
+        gap_before: 5.0,
+        gap_after: 1.0,
+        reduction_pct: 80.0,
+        seconds: 1.0,
+    });
+    let mixed = vec![parts[0].clone(), recal, parts[2].clone()];
+    let err = bench::merge(&mixed).unwrap_err().to_string();
+    assert!(
+        err.contains("recalibrated.json") && err.contains("calibration"),
         "{err}"
     );
     // A part file that holds another shard's cases is refused on reading.

@@ -168,6 +168,19 @@ pub fn merge(parts: &[(PathBuf, Part)]) -> Result<(OptionsKey, Outcome), GapErro
                 first.shard.n
             )));
         }
+        // Every shard calibrates on the same runs, deterministically: other figures mean
+        // another calibration (another build or independent model).
+        let figures = |c: &Option<CalibrationGap>| c.as_ref().map(|c| (c.gap_before, c.gap_after));
+        if figures(&p.calibration) != figures(&first.calibration) {
+            return Err(GapError::Data(format!(
+                "{}: its calibration ({:?}) differs from {}'s ({:?}): made by another build or \
+                 independent model",
+                path.display(),
+                figures(&p.calibration),
+                first_path.display(),
+                figures(&first.calibration)
+            )));
+        }
         let slot = &mut seen[p.shard.k - 1];
         if let Some(other) = slot {
             return Err(GapError::Data(format!(
