@@ -1,5 +1,7 @@
-//! `eyebot-hil gap-bench [--cases N] [--seed S] [--effects a,b] [--out FILE]`: the
-//! hidden-effect benchmark of the reality-gap workflow ([`crate::gap::bench`]).
+//! `eyebot-hil gap-bench [--source simulator|independent] [--cases N] [--seed S]
+//! [--effects a,b] [--shard K/N --out-part FILE] [--out FILE]`: the hidden-effect benchmark of
+//! the reality-gap workflow ([`crate::gap::bench`]); `eyebot-hil gap-bench merge PART...
+//! [--out FILE]` combines the parts of a sharded run into the table an unsharded run prints.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -8,93 +10,184 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::cli::CliError;
 use crate::cli::output::out;
-use crate::gap::bench::{self, BenchOptions};
+use crate::gap::bench::{self, BenchOptions, CaseResult, Outcome, Part, Shard, Source};
 use crate::gap::effects::{self, Effect};
 
 #[derive(Debug, Clone, clap::Args)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct GapBenchArgs {
+    #[command(subcommand)]
+    pub command: Option<GapBenchCommand>,
+    /// Where the data come from: this project's simulator, or the independent Python
+    /// vehicle model (`pty-tests/independent`), analysed after calibration.
+    #[arg(long, value_enum, default_value_t = SourceArg::Simulator)]
+    pub source: SourceArg,
     /// Cases per effect, and null cases.
     #[arg(long, default_value_t = 10)]
     pub cases: usize,
     /// Seed of the case draws (sizes, directions, noise seeds).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Comma-separated effect names (default: the whole library).
+    /// Comma-separated effect names (default: the whole library, or for the independent
+    /// source every effect of the independent model that the benchmark runs).
     #[arg(long, value_delimiter = ',')]
     pub effects: Vec<String>,
+    /// The independent model's program (default: the one shipped with the crate).
+    #[arg(long, value_name = "PATH")]
+    pub independent: Option<PathBuf>,
+    /// Run only shard K of N: the cases whose index i in the fixed case order has
+    /// i % N == K - 1. Needs --out-part.
+    #[arg(long, value_name = "K/N", requires = "out_part")]
+    pub shard: Option<Shard>,
+    /// Write this run's results (JSON) for `gap-bench merge`.
+    #[arg(long, value_name = "FILE")]
+    pub out_part: Option<PathBuf>,
     /// Also write the table (markdown) and one line per case (CSV-like) to this file.
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
 
-pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
-    let selected: Vec<&'static Effect> = if args.effects.is_empty() {
-        effects::LIBRARY.iter().collect()
-    } else {
-        args.effects
-            .iter()
-            .map(|n| {
-                effects::by_name(n.trim()).ok_or_else(|| {
-                    CliError::Usage(format!(
-                        "--effects: unknown effect `{n}`; known: {}",
-                        effects::LIBRARY
-                            .iter()
-                            .map(|e| e.name)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ))
-                })
-            })
-            .collect::<Result<_, _>>()?
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SourceArg {
+    Simulator,
+    Independent,
+}
+
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum GapBenchCommand {
+    /// Combine the part files of a sharded run into the table an unsharded run prints.
+    Merge {
+        /// The part files (`--out-part`), one per shard.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Also write the table and one line per case to this file.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+}
+
+fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
+    let source = match args.source {
+        SourceArg::Simulator => Source::Simulator,
+        SourceArg::Independent => Source::Independent,
     };
-    let opts = BenchOptions {
+    let names: Vec<&str> = args.effects.iter().map(|n| n.trim()).collect();
+    let mut opts = BenchOptions {
+        source,
         cases: args.cases,
         seed: args.seed,
-        effects: selected,
+        effects: Vec::new(),
+        independent_effects: Vec::new(),
+        independent_path: args
+            .independent
+            .clone()
+            .unwrap_or_else(bench::independent::default_path),
     };
-    let total = (opts.cases * (opts.effects.len() + 1)) as u64;
+    let usage = |e: crate::gap::GapError| CliError::Usage(e.to_string());
+    match source {
+        Source::Simulator => {
+            opts.effects = if names.is_empty() {
+                effects::LIBRARY.iter().collect::<Vec<&'static Effect>>()
+            } else {
+                names
+                    .iter()
+                    .map(|n| bench::library_effect(n))
+                    .collect::<Result<_, _>>()
+                    .map_err(usage)?
+            }
+        }
+        Source::Independent => {
+            opts.independent_effects = if names.is_empty() {
+                bench::independent::HIDDEN.iter().collect()
+            } else {
+                names
+                    .iter()
+                    .map(|n| bench::independent::by_name(n))
+                    .collect::<Result<_, _>>()
+                    .map_err(usage)?
+            }
+        }
+    }
+    Ok(opts)
+}
+
+/// The table followed by one line per case, as `--out` writes it.
+fn report(table: &str, results: &[CaseResult]) -> String {
+    let mut text = table.to_string();
+    text.push_str(
+        "\nindex,effect,seed,size_sigma,named,truth,fitted,ci95,parameter_error,ci_covers,held_out_reduction_pct,held_out_truth_reduction_pct,held_out_grew,seconds\n",
+    );
+    for r in results {
+        text.push_str(&format!(
+            "{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:.2}\n",
+            r.index,
+            r.label,
+            r.seed,
+            r.size_sigma.map_or("-".to_string(), |s| format!("{s:.2}")),
+            r.named.as_deref().unwrap_or("none"),
+            r.truth,
+            r.fitted,
+            r.ci95,
+            r.parameter_error,
+            r.ci_covers,
+            r.held_out_reduction_pct,
+            r.held_out_truth_reduction_pct,
+            r.held_out_grew,
+            r.seconds
+        ));
+    }
+    text
+}
+
+fn write(path: &PathBuf, text: &str) -> Result<(), CliError> {
+    std::fs::write(path, text).map_err(|source| CliError::Io {
+        path: path.clone(),
+        source,
+    })
+}
+
+fn print(source: Source, outcome: &Outcome, out_file: Option<&PathBuf>) -> Result<(), CliError> {
+    let table = bench::table(source, &outcome.results, outcome.calibration.as_ref());
+    out!("{table}");
+    if let Some(path) = out_file {
+        write(path, &report(&table, &outcome.results))?;
+    }
+    Ok(())
+}
+
+pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
+    if let Some(GapBenchCommand::Merge { parts, out }) = &args.command {
+        let mut read = Vec::new();
+        for p in parts {
+            let part = Part::read(p)?;
+            read.push((p.clone(), part));
+        }
+        let (key, outcome) = bench::merge(&read)?;
+        return print(key.source, &outcome, out.as_ref());
+    }
+    if args.out_part.is_some() && args.shard.is_none() {
+        return Err(CliError::Usage(
+            "--out-part: give the shard too (--shard K/N; 1/1 for the whole benchmark)".into(),
+        ));
+    }
+    let opts = options(args)?;
+    let shard = args.shard.unwrap_or(Shard::WHOLE);
     let bar = if std::io::stderr().is_terminal() {
-        ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+        ProgressBar::with_draw_target(Some(0), ProgressDrawTarget::stderr())
     } else {
         ProgressBar::hidden()
     };
     if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} ({eta})") {
         bar.set_style(style);
     }
-    let results = bench::run(&opts, &mut |done, _, label| {
+    let outcome = bench::run(&opts, Some(shard), &mut |done, total, label| {
+        bar.set_length(total as u64);
         bar.set_position(done as u64);
         bar.set_message(label.to_string());
-    })
-    .map_err(|e| CliError::Output(e.to_string()))?;
+    })?;
     bar.finish_and_clear();
-    let table = bench::table(&results);
-    out!("{table}");
-    if let Some(path) = &args.out {
-        let mut text = table.clone();
-        text.push_str(
-            "\neffect,seed,size_sigma,named,truth,fitted,ci95,parameter_error,ci_covers,held_out_reduction_pct,held_out_truth_reduction_pct,seconds\n",
-        );
-        for r in &results {
-            text.push_str(&format!(
-                "{},{},{:.2},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:.2}\n",
-                r.label,
-                r.seed,
-                r.size_sigma,
-                r.named.as_deref().unwrap_or("none"),
-                r.truth,
-                r.fitted,
-                r.ci95,
-                r.parameter_error,
-                r.ci_covers,
-                r.held_out_reduction_pct,
-                r.held_out_truth_reduction_pct,
-                r.seconds
-            ));
-        }
-        std::fs::write(path, text).map_err(|source| CliError::Io {
-            path: path.clone(),
-            source,
-        })?;
+    if let Some(path) = &args.out_part {
+        Part::new(opts.key(), shard, bench::case_count(&opts), outcome.clone()).write(path)?;
     }
-    Ok(())
+    print(opts.source, &outcome, args.out.as_ref())
 }

@@ -33,6 +33,7 @@ use std::time::Instant;
 use rand::RngExt;
 
 use crate::config::{ConfigSource, Document, Embedded};
+use crate::gap::bench::{BenchOptions, CaseResult, Shard};
 use crate::gap::effects::{self, Configs, Effect, Kind};
 use crate::gap::format::Measurement;
 use crate::gap::model::GapModel;
@@ -51,50 +52,6 @@ pub const SONAR_SCHEDULE: &str = "experiments/gap-sonar-wall-sweep.toml";
 pub const CAMERA_STD_M: f64 = 0.01;
 /// Case sizes are drawn uniformly from this range (noise-floor units).
 pub const SIZE_RANGE: (f64, f64) = (1.0, 10.0);
-
-/// What the benchmark runs.
-#[derive(Debug, Clone)]
-pub struct BenchOptions {
-    /// Cases per effect, and null cases.
-    pub cases: usize,
-    pub seed: u64,
-    pub effects: Vec<&'static Effect>,
-}
-
-/// One case and how the workflow did on it.
-#[derive(Debug, Clone)]
-pub struct CaseResult {
-    /// The hidden effect (`None`: a null case).
-    pub effect: Option<&'static str>,
-    /// The table row: the effect, `null`, or `null (sonar)` for nulls on the sonar schedule.
-    pub label: &'static str,
-    pub seed: u64,
-    pub truth: Vec<f64>,
-    /// Measured size in noise-floor units.
-    pub size_sigma: f64,
-    /// The first effect the workflow named, if any.
-    pub named: Option<String>,
-    pub fitted: Vec<f64>,
-    pub ci95: Vec<[f64; 2]>,
-    /// |fitted - truth| / |truth| (Euclidean over the parameters), when named correctly.
-    pub parameter_error: Option<f64>,
-    /// Every truth value inside its 95 % interval, when named correctly.
-    pub ci_covers: Option<bool>,
-    /// Held-out reduction of the gap (%) measured on the held-out data, for hidden-effect
-    /// cases.
-    pub held_out_reduction_pct: Option<f64>,
-    /// Held-out reduction of the gap (%) against the truth's noise-free prediction on the
-    /// held-out manoeuvre (no noise realisation in the way), for hidden-effect cases.
-    pub held_out_truth_reduction_pct: Option<f64>,
-    /// Wall time of the workflow on the training data (s).
-    pub seconds: f64,
-}
-
-impl CaseResult {
-    pub fn correct(&self) -> bool {
-        self.effect.is_some() && self.named.as_deref() == self.effect
-    }
-}
 
 fn embedded_schedule(path: &str) -> Result<Experiment, GapError> {
     let text = Embedded.read(path)?;
@@ -445,6 +402,7 @@ fn sonar_calibration(
 /// Runs the benchmark; `progress(done, total, label)` after each case.
 pub fn run(
     opts: &BenchOptions,
+    shard: Shard,
     progress: &mut dyn FnMut(usize, usize, &str),
 ) -> Result<Vec<CaseResult>, GapError> {
     let model_text = Embedded.read(MODEL)?;
@@ -480,20 +438,15 @@ pub fn run(
     if let Some(s) = &sonar_scene {
         kinds.push((None, s));
     }
-    let total = opts.cases * kinds.len();
-    let mut done = 0;
-    let mut out = Vec::new();
+    // Every case's draws, in the fixed case order, whichever shard runs it.
+    let mut plan = Vec::new();
     for (kind, scene) in kinds {
-        let base = &scene.base;
         for _ in 0..opts.cases {
             let seed: u64 = rng.random();
             let hold_seed: u64 = rng.random();
-            let mut truth_cfg = base.clone();
-            let mut truth = Vec::new();
-            let mut size = 0.0;
+            let (mut dir, mut target) = (Vec::new(), 0.0);
             if let Some(effect) = kind {
-                let k = effect.parameters.len();
-                let dir: Vec<f64> = if k == 1 {
+                dir = if effect.parameters.len() == 1 {
                     vec![if positive_only(effect) || rng.random::<bool>() {
                         1.0
                     } else {
@@ -503,7 +456,25 @@ pub fn run(
                     let a = rng.random_range(0.0..std::f64::consts::TAU);
                     vec![a.cos(), a.sin()]
                 };
-                let target = rng.random_range(SIZE_RANGE.0..SIZE_RANGE.1);
+                target = rng.random_range(SIZE_RANGE.0..SIZE_RANGE.1);
+            }
+            plan.push((plan.len(), kind, scene, seed, hold_seed, dir, target));
+        }
+    }
+    let total = shard.count(plan.len());
+    let mut done = 0;
+    let mut out = Vec::new();
+    for (index, kind, scene, seed, hold_seed, dir, target) in plan {
+        if !shard.contains(index) {
+            continue;
+        }
+        let base = &scene.base;
+        {
+            let mut truth_cfg = base.clone();
+            let mut truth = Vec::new();
+            let mut size = 0.0;
+            if let Some(effect) = kind {
+                let k = effect.parameters.len();
                 if scene.sonar && k == 1 {
                     // The cut stays inside its physical range 0..90 deg (apply clamps it,
                     // which would make the truth's parameter a lie).
@@ -629,11 +600,13 @@ pub fn run(
                 None => "null",
             };
             out.push(CaseResult {
-                effect: kind.map(|e| e.name),
-                label,
+                index,
+                effect: kind.map(|e| e.name.to_string()),
+                expected: kind.map(|e| e.name.to_string()),
+                label: label.to_string(),
                 seed,
                 truth,
-                size_sigma: size,
+                size_sigma: Some(size),
                 named,
                 fitted,
                 ci95,
@@ -641,6 +614,7 @@ pub fn run(
                 ci_covers,
                 held_out_reduction_pct,
                 held_out_truth_reduction_pct,
+                held_out_grew: None,
                 seconds,
             });
             done += 1;
@@ -650,159 +624,9 @@ pub fn run(
     Ok(out)
 }
 
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
-}
-
-fn pct(num: usize, den: usize) -> String {
-    if den == 0 {
-        "-".to_string()
-    } else {
-        format!("{:.0} % ({num}/{den})", 100.0 * num as f64 / den as f64)
-    }
-}
-
-fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
-    v.map_or("-".to_string(), f)
-}
-
-fn row(label: &str, cases: &[&CaseResult]) -> String {
-    let hidden: Vec<&&CaseResult> = cases.iter().filter(|c| c.effect.is_some()).collect();
-    let nulls: Vec<&&CaseResult> = cases.iter().filter(|c| c.effect.is_none()).collect();
-    let big: Vec<&&&CaseResult> = hidden.iter().filter(|c| c.size_sigma >= 3.0).collect();
-    let perr = median(hidden.iter().filter_map(|c| c.parameter_error).collect());
-    let cover: Vec<bool> = hidden.iter().filter_map(|c| c.ci_covers).collect();
-    let held = median(
-        hidden
-            .iter()
-            .filter_map(|c| c.held_out_reduction_pct)
-            .collect(),
-    );
-    let held_truth = median(
-        hidden
-            .iter()
-            .filter_map(|c| c.held_out_truth_reduction_pct)
-            .collect(),
-    );
-    let secs = median(cases.iter().map(|c| c.seconds).collect());
-    format!(
-        "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-        cases.len(),
-        pct(hidden.iter().filter(|c| c.correct()).count(), hidden.len()),
-        pct(big.iter().filter(|c| c.correct()).count(), big.len()),
-        pct(
-            nulls.iter().filter(|c| c.named.is_some()).count(),
-            nulls.len()
-        ),
-        opt(perr, |v| format!("{:.1} %", 100.0 * v)),
-        pct(cover.iter().filter(|c| **c).count(), cover.len()),
-        opt(held, |v| format!("{v:.0} %")),
-        opt(held_truth, |v| format!("{v:.0} %")),
-        opt(secs, |v| format!("{v:.2}")),
-    )
-}
-
-/// The effects whose parameters are gains (multiplying a configured value: per-motor and
-/// common thrust, the reverse ratio, the drag coefficients, the paddle-wheel scale, the
-/// soft-iron matrix), offsets (added to one: hard iron, the field inclination) or the water
-/// current: what issue 8's "parameter error for gains, offsets and current" target covers.
-/// Left out: added mass, the two delays, the EMI amplitude and the sonar incidence limit.
-pub const GAINS_OFFSETS_CURRENT: [&str; 9] = [
-    "thruster_imbalance",
-    "reverse_thrust_asymmetry",
-    "drag_mismatch",
-    "thrust_gain",
-    "velocity_sensor_scale",
-    "compass_soft_iron",
-    "compass_hard_iron",
-    "compass_tilt",
-    "water_current",
-];
-
-/// The benchmark table (markdown): per effect, nulls, the gains-offsets-current group and
-/// overall.
-pub fn table(results: &[CaseResult]) -> String {
-    let mut s = String::from(
-        "| effect | cases | correct name | correct name >= 3 sigma | false alarm | median param error | CI95 covers truth | held-out reduction (data) | held-out reduction (vs truth) | s/case |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
-    );
-    let mut names: Vec<&str> = Vec::new();
-    for r in results {
-        if !names.contains(&r.label) {
-            names.push(r.label);
-        }
-    }
-    for n in names {
-        let cases: Vec<&CaseResult> = results.iter().filter(|r| r.label == n).collect();
-        s.push_str(&row(n, &cases));
-        s.push('\n');
-    }
-    // The issue's parameter-error target is for gains, offsets and the current.
-    let target: Vec<&CaseResult> = results
-        .iter()
-        .filter(|r| r.effect.is_some_and(|e| GAINS_OFFSETS_CURRENT.contains(&e)))
-        .collect();
-    if !target.is_empty() {
-        s.push_str(&row("gains, offsets and current", &target));
-        s.push('\n');
-    }
-    let all: Vec<&CaseResult> = results.iter().collect();
-    s.push_str(&row("overall", &all));
-    s.push('\n');
-    s
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn case(effect: Option<&'static str>, error: Option<f64>) -> CaseResult {
-        CaseResult {
-            effect,
-            label: effect.unwrap_or("null"),
-            seed: 0,
-            truth: vec![1.0],
-            size_sigma: 5.0,
-            named: effect.map(str::to_string),
-            fitted: vec![1.0],
-            ci95: vec![[0.0, 2.0]],
-            parameter_error: error,
-            ci_covers: error.map(|_| true),
-            held_out_reduction_pct: effect.map(|_| 90.0),
-            held_out_truth_reduction_pct: effect.map(|_| 90.0),
-            seconds: 1.0,
-        }
-    }
-
-    /// The group row takes exactly the gains, offsets and current cases: here the median of
-    /// 0.02 and 0.04 (water current, hard iron), not the lag's 0.5.
-    #[test]
-    fn the_gains_offsets_current_row_holds_only_its_effects() {
-        let results = [
-            case(Some("water_current"), Some(0.02)),
-            case(Some("compass_hard_iron"), Some(0.04)),
-            case(Some("thruster_lag"), Some(0.5)),
-            case(None, None),
-        ];
-        let t = table(&results);
-        let group = t
-            .lines()
-            .find(|l| l.starts_with("| gains, offsets and current |"))
-            .expect("the group row");
-        assert!(group.contains("| 2 | 100 % (2/2) |"), "{group}");
-        assert!(group.contains("| 3.0 % |"), "{group}");
-        let overall = t.lines().find(|l| l.starts_with("| overall |")).unwrap();
-        assert!(overall.contains("| 4 |"), "{overall}");
-    }
 
     /// The sonar size must reduce to the Gaussian `(difference / sigma)^2` for a small change
     /// of the echo probability (sigma^2 = p (1 - p)), be zero for no change and grow with it.
