@@ -70,7 +70,7 @@ fn simulator_row(label: &str, cases: &[&CaseResult]) -> String {
 /// The effects whose parameters are gains (multiplying a configured value: per-motor and
 /// common thrust, the reverse ratio, the drag coefficients, the paddle-wheel scale, the
 /// soft-iron matrix), offsets (added to one: hard iron, the field inclination) or the water
-/// current: what issue 8's "parameter error for gains, offsets and current" target covers.
+/// current: the effects whose parameter error the benchmark's target covers.
 /// Left out: added mass, the two delays, the EMI amplitude and the sonar incidence limit.
 pub const GAINS_OFFSETS_CURRENT: [&str; 9] = [
     "thruster_imbalance",
@@ -120,7 +120,7 @@ pub fn simulator_table(results: &[CaseResult]) -> String {
         s.push_str(&simulator_row(n, &cases));
         s.push('\n');
     }
-    // The issue's parameter-error target is for gains, offsets and the current.
+    // The parameter-error target is for gains, offsets and the current.
     let target: Vec<&CaseResult> = results
         .iter()
         .filter(|r| {
