@@ -697,6 +697,17 @@ class Program:
     def begin(self):
         """Called once the start heading is known."""
 
+    def floating(self, eb, t):
+        """Motors off at the surface before the dive and after the run, the depth channel's
+        only absolute reference; True while floating."""
+        if t < FLOAT_START_S or t >= eb.duration_s - FLOAT_END_S:
+            eb.depth_adc()
+            self.t0 = t
+            self.note_target(t, 0.0)
+            eb.motor_drive(0, 0, 0, 0)
+            return True
+        return False
+
     def note_target(self, t, target):
         """Keeps (start, end, depth target) stretches for the summary."""
         if not hasattr(self, "log"):
@@ -788,13 +799,7 @@ class DepthHold(Program):
 
     def step(self, eb, t):
         self.hc.update(eb)
-        if t < FLOAT_START_S or t >= eb.duration_s - FLOAT_END_S:
-            # floating at the surface before the dive and after the run: the depth channel's
-            # only absolute reference
-            eb.depth_adc()
-            self.t0 = t
-            self.note_target(t, 0.0)
-            eb.motor_drive(0, 0, 0, 0)
+        if self.floating(eb, t):
             return
         if t - self.t0 >= self.targets[self.k][0]:
             self.k, self.t0 = self.k + 1, t
@@ -909,11 +914,7 @@ class Mixed(Program):
 
     def step(self, eb, t):
         self.hc.update(eb)
-        if t < FLOAT_START_S or t >= eb.duration_s - FLOAT_END_S:
-            eb.depth_adc()
-            self.t0 = t
-            self.note_target(t, 0.0)
-            eb.motor_drive(0, 0, 0, 0)
+        if self.floating(eb, t):
             return
         dt = t - self.t0
         self.note_target(t, 0.7 if self.phase >= 6 else 1.0)
