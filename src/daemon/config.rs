@@ -300,27 +300,32 @@ impl DaemonConfig {
                     })?,
             ),
         };
-        let state_record_hz = doc.check_range(
-            "run.state_record_hz",
-            raw.run.state_record_hz,
-            0.1,
-            1000.0,
-            "Hz",
-        )?;
-        let watchdog_s = doc.check_range(
-            "devices.motor_driver.watchdog_s",
-            raw.devices.motor_driver.watchdog_s,
-            0.0,
-            3600.0,
-            "s",
-        )?;
-        let tick_s = doc.check_range(
-            "devices.lockstep.tick_s",
-            raw.devices.lockstep.tick_s,
-            1e-4,
-            1.0,
-            "s",
-        )?;
+        // (key, value, min, max, unit); the first out of range is reported.
+        let [state_record_hz, watchdog_s, tick_s] = [
+            (
+                "run.state_record_hz",
+                raw.run.state_record_hz,
+                0.1,
+                1000.0,
+                "Hz",
+            ),
+            (
+                "devices.motor_driver.watchdog_s",
+                raw.devices.motor_driver.watchdog_s,
+                0.0,
+                3600.0,
+                "s",
+            ),
+            (
+                "devices.lockstep.tick_s",
+                raw.devices.lockstep.tick_s,
+                1e-4,
+                1.0,
+                "s",
+            ),
+        ]
+        .map(|(key, value, min, max, unit)| doc.check_range(key, value, min, max, unit));
+        let (state_record_hz, watchdog_s, tick_s) = (state_record_hz?, watchdog_s?, tick_s?);
         if raw.run.run_dir.is_empty() {
             return Err(doc.invalid("run.run_dir", "must not be empty"));
         }
