@@ -18,34 +18,33 @@
 //! Everything else (velocities, roll, pitch, thruster lag) carries over from the end of the
 //! previous segment: the model's own estimate, driven by the measured commands.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
 
 use crate::gap::effects::Configs;
 use crate::gap::format::{Channel, Measurement};
-use crate::gap::resim::{compass_heading_deg, wrap_deg};
 use crate::physics::Anchor;
 use crate::physics::state::VehicleState;
 use crate::sensors::AdcBoard;
 
-/// How the re-simulation is cut.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Shooting {
-    /// Segment length (s); `None` = one open-loop run (what `gap generate` uses to make data).
-    pub segment_s: Option<f64>,
+pub use crate::gap::run::Shooting;
+
+/// Wraps an angle difference into -180..180 deg.
+pub fn wrap_deg(a: f64) -> f64 {
+    (a + 180.0).rem_euclid(360.0) - 180.0
 }
 
-impl Shooting {
-    /// Open loop: no re-anchoring.
-    pub const OPEN_LOOP: Self = Self { segment_s: None };
-
-    /// The default for analysing measured data. 5 s: long enough for the thrust and drag
-    /// dynamics (surge time constant about 3 s, yaw about 2 s) to show inside a segment,
-    /// short enough that a small yaw-rate error does not carry the track away (0.5 deg/s
-    /// over 5 s moves a 0.4 m/s track 9 cm sideways, against a camera noise of 1 cm).
-    /// `docs/gap.md` ("Re-simulation") has the comparison behind it.
-    pub const DEFAULT: Self = Self {
-        segment_s: Some(5.0),
-    };
+/// The compass heading the model predicts for a state (deg, 0..360, not rounded).
+pub fn compass_heading_deg(c: &Configs, earth_ned_ut: &Vector3<f64>, s: &VehicleState) -> f64 {
+    let k = &c.sensors.compass;
+    let soft = Matrix2::new(
+        k.soft_iron[0][0],
+        k.soft_iron[0][1],
+        k.soft_iron[1][0],
+        k.soft_iron[1][1],
+    );
+    let b = s.attitude.inverse_transform_vector(earth_ned_ut);
+    let m = soft * Vector2::new(b.x, b.y) + Vector2::from(k.hard_iron_ut);
+    ((-m.y).atan2(m.x).to_degrees() + k.errors.bias).rem_euclid(360.0)
 }
 
 /// The 1-sigma error of each anchored quantity, from the measurement noise of the channel it
@@ -59,23 +58,6 @@ pub struct AnchorNoise {
 }
 
 impl AnchorNoise {
-    pub fn of(c: &Configs, m: &Measurement, run: &crate::gap::resim::Run) -> Self {
-        let first = |name: &str| -> f64 {
-            m.channel(name)
-                .and_then(|ch| {
-                    let s = crate::gap::resim::measurement_std(c, m, run, ch);
-                    s.iter().copied().reduce(f64::min)
-                })
-                .unwrap_or(0.0)
-        };
-        let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
-        Self {
-            position_m: m.experiment.camera_position_std_m,
-            heading_rad: first("compass_deg").to_radians(),
-            depth_m: first("depth_adc") * lsb / c.sensors.depth.volts_per_m.max(1e-9),
-        }
-    }
-
     /// `anchor` with each anchored quantity moved by its error times a standard normal draw.
     pub fn perturb(&self, anchor: &mut Anchor, draw: &mut dyn FnMut() -> f64) {
         if let Some(x) = anchor.north_m.as_mut() {

@@ -6,7 +6,7 @@
 //! Every extension changes existing configuration parameters; nothing in `physics` or
 //! `sensors` had to change for the library.
 
-use crate::gap::anchor::Shooting;
+use crate::gap::run::Shooting;
 use crate::physics::state::{PORT, STARBOARD};
 use crate::physics::{VehicleConfig, WorldConfig};
 use crate::sensors::SensorsConfig;

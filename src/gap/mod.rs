@@ -37,6 +37,7 @@ pub mod model;
 pub mod report;
 pub mod residuals;
 pub mod resim;
+pub mod run;
 pub mod sonar;
 pub mod summary;
 

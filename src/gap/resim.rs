@@ -3,15 +3,17 @@
 //! comes from the sensor settings (measurement noise) and from an ensemble of runs with the
 //! model's process noise switched on (thrust fluctuation).
 
-use nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 use rand::RngExt;
 use rand_distr::StandardNormal;
 
 use crate::gap::GapError;
 use crate::gap::anchor;
+pub use crate::gap::anchor::{compass_heading_deg, wrap_deg};
 use crate::gap::effects::Configs;
 use crate::gap::format::{Channel, Measurement};
-use crate::physics::state::{STERN, VehicleState};
+pub use crate::gap::run::{ENSEMBLE, Floor, Run};
+use crate::physics::state::STERN;
 use crate::physics::{InitialState, Model, ThrusterCommand, hdt_command};
 use crate::sensors::accelerometer::G0_MPS2;
 use crate::sensors::{AdcBoard, Compass, DepthSensor, rng};
@@ -36,38 +38,6 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
         "accel_y_adc" => Some(1),
         "accel_z_adc" => Some(2),
         _ => None,
-    }
-}
-
-/// Ensemble size for the process-noise floor (and the null deviations each candidate's
-/// significance is calibrated on, `fit`).
-///
-/// 96: the thrust fluctuation excites the lightly damped pitch/heave motion at the free
-/// surface, whose phase wanders from run to run, so a few modes carry most of the process
-/// noise in `depth_adc` and `accel_x_adc`. 24 members under-estimated that spread (on 40
-/// generated nulls the mean squared normalised depth residual was 1.51 over 70-75 s instead
-/// of 1) and under-sampled the null deviations along a lag fit's path, so a `thruster_lag`
-/// fit gained up to 3x what the null calibration allowed and null data named a lag.
-pub const ENSEMBLE: u64 = 96;
-
-/// One re-simulated run: the state after every step (index 0 = start) and the commands.
-#[derive(Debug, Clone)]
-pub struct Run {
-    pub dt_s: f64,
-    pub states: Vec<VehicleState>,
-    pub percent: Vec<[f64; 4]>,
-}
-
-impl Run {
-    /// The state nearest `t_s` (clamped to the run).
-    pub fn at(&self, t_s: f64) -> &VehicleState {
-        let i = (t_s / self.dt_s).round().max(0.0) as usize;
-        &self.states[i.min(self.states.len() - 1)]
-    }
-
-    pub fn percent_at(&self, t_s: f64) -> [f64; 4] {
-        let i = (t_s / self.dt_s).round().max(0.0) as usize;
-        self.percent[i.min(self.percent.len() - 1)]
     }
 }
 
@@ -115,7 +85,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                 states: vec![model.vehicle_state(&state)],
                 percent: vec![p],
             };
-            anchor::AnchorNoise::of(c, m, &probe)
+            anchor_noise(c, m, &probe)
         });
         (noise.unwrap_or_default(), rng::stream(seed, "gap-anchor"))
     });
@@ -157,23 +127,20 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     })
 }
 
-/// Wraps an angle difference into -180..180 deg.
-pub fn wrap_deg(a: f64) -> f64 {
-    (a + 180.0).rem_euclid(360.0) - 180.0
-}
-
-/// The compass heading the model predicts for a state (deg, 0..360, not rounded).
-pub fn compass_heading_deg(c: &Configs, earth_ned_ut: &Vector3<f64>, s: &VehicleState) -> f64 {
-    let k = &c.sensors.compass;
-    let soft = Matrix2::new(
-        k.soft_iron[0][0],
-        k.soft_iron[0][1],
-        k.soft_iron[1][0],
-        k.soft_iron[1][1],
-    );
-    let b = s.attitude.inverse_transform_vector(earth_ned_ut);
-    let m = soft * Vector2::new(b.x, b.y) + Vector2::from(k.hard_iron_ut);
-    ((-m.y).atan2(m.x).to_degrees() + k.errors.bias).rem_euclid(360.0)
+/// The 1-sigma error of each anchored quantity, from the measurement noise of the channel it
+/// is read from (the smallest over the channel's samples).
+fn anchor_noise(c: &Configs, m: &Measurement, run: &Run) -> anchor::AnchorNoise {
+    let least = |name: &str| -> f64 {
+        m.channel(name)
+            .and_then(|ch| measurement_std(c, m, run, ch).into_iter().reduce(f64::min))
+            .unwrap_or(0.0)
+    };
+    let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
+    anchor::AnchorNoise {
+        position_m: m.experiment.camera_position_std_m,
+        heading_rad: least("compass_deg").to_radians(),
+        depth_m: least("depth_adc") * lsb / c.sensors.depth.volts_per_m.max(1e-9),
+    }
 }
 
 /// The compass heading at `t_s`, linearly interpolated between physics steps (so a latency
@@ -326,20 +293,6 @@ pub fn measurement_std(c: &Configs, m: &Measurement, run: &Run, channel: &Channe
         }
         _ => vec![1.0; n],
     }
-}
-
-/// The model's noise floor for one channel.
-#[derive(Debug, Clone)]
-pub struct Floor {
-    /// Per-sample 1-sigma spread (measurement and process noise together).
-    pub sigma: Vec<f64>,
-    /// Integrated autocorrelation time in samples: `n / tau` samples are independent.
-    pub tau: f64,
-    /// White measurement noise (1 sigma) per sample.
-    pub measurement_std: Vec<f64>,
-    /// Process-noise deviations of each ensemble run from the noise-free prediction: null
-    /// residuals the model itself produces (without measurement noise).
-    pub null: Vec<Vec<f64>>,
 }
 
 /// Noise floors of every modelled channel: measurement noise from the settings plus the

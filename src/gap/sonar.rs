@@ -23,7 +23,7 @@
 
 use crate::gap::effects::Configs;
 use crate::gap::format::Channel;
-use crate::gap::resim::{Floor, Run};
+use crate::gap::run::{Floor, Run};
 use crate::physics::state::RayCaster;
 use crate::physics::world::Pool;
 use crate::sensors::config::SonarSettings;
@@ -225,7 +225,7 @@ pub fn floor(c: &Configs, duration_s: f64, channel: &Channel) -> Option<Floor> {
         sigma: vec![1.0; n],
         tau: 1.0,
         measurement_std: vec![1.0; n],
-        null: vec![vec![0.0; n]; crate::gap::resim::ENSEMBLE as usize],
+        null: vec![vec![0.0; n]; crate::gap::run::ENSEMBLE as usize],
     })
 }
 
