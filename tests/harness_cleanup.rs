@@ -76,7 +76,10 @@ fn run_fixtures() -> Vec<PathBuf> {
     assert!(fixture.link.exists());
     made.push(pty_dir.path().to_path_buf());
 
-    // A C build goes to the target directory, not the temporary directory.
+    // A C build goes to cargo's own scratch directory under the target directory (which
+    // `cargo clean` removes), not to the system's temporary directory. The checkout itself
+    // may live under the temporary directory, so the check is where the build is, not where
+    // it is not.
     let build = eyebot_c::build(
         env!("CARGO_TARGET_TMPDIR"),
         "cleanup",
@@ -85,9 +88,10 @@ fn run_fixtures() -> Vec<PathBuf> {
         &[],
     );
     assert!(
-        !build.starts_with(std::env::temp_dir()),
-        "a C build in {}",
-        build.display()
+        build.starts_with(env!("CARGO_TARGET_TMPDIR")),
+        "a C build in {}, outside {}",
+        build.display(),
+        env!("CARGO_TARGET_TMPDIR")
     );
 
     for path in &made {
