@@ -52,17 +52,13 @@ fn generate(dir: &Path, name: &str, seed: u64, hidden: &str, size: Option<&str>)
     out
 }
 
-struct Calibrated {
-    /// Holds the generated runs and the calibrated model until the test binary ends.
-    dir: TempDir,
-    calibration: Calibration,
-}
-
-/// The shared calibration: baseline runs 7301 and 7302, validated on 7303.
-fn calibrated() -> &'static Calibrated {
-    static CAL: OnceLock<Calibrated> = OnceLock::new();
+/// The shared calibration: baseline runs 7301 and 7302, validated on 7303. The runs are
+/// read into memory and their directory is removed before the calibration is shared (a
+/// static is never dropped, so it must not hold a temporary directory).
+fn calibrated() -> &'static Calibration {
+    static CAL: OnceLock<Calibration> = OnceLock::new();
     CAL.get_or_init(|| {
-        let dir = TempDir::new("gap-independent");
+        let dir = TempDir::new("gap-calibration");
         let base: Vec<Run> = [7301, 7302]
             .iter()
             .map(|s| {
@@ -73,18 +69,17 @@ fn calibrated() -> &'static Calibrated {
         let v = generate(dir.path(), "validate-7303", 7303, "none", None);
         let validate = vec![Run::load(&v).expect("validation run loads")];
         let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
-        let calibration =
-            calibrate::calibrate(&model, &base, &validate, &mut |_| {}).expect("calibrates");
-        Calibrated { dir, calibration }
+        calibrate::calibrate(&model, &base, &validate, &mut |_| {}).expect("calibrates")
     })
 }
 
 /// `gap` with the calibrated model on a fresh run.
 fn discover(name: &str, seed: u64, hidden: &str, size: Option<&str>) -> Analysis {
     let c = calibrated();
-    let dir = generate(c.dir.path(), name, seed, hidden, size);
+    let scratch = TempDir::new("gap-discover");
+    let dir = generate(scratch.path(), name, seed, hidden, size);
     let m = Measurement::load(&dir).expect("run loads");
-    let a = gap::analyse(&c.calibration.model, &m, &dir, &mut |_, _| {}).expect("gap runs");
+    let a = gap::analyse(&c.model, &m, &dir, &mut |_, _| {}).expect("gap runs");
     // Whatever the verdict: an accepted fit never grows the gap on the blocks it was not
     // fitted to.
     if !a.accepted.is_empty() {
@@ -106,7 +101,7 @@ fn names(a: &Analysis) -> Vec<&str> {
 /// Calibration on two baseline runs more than halves the gap on a third run it never saw.
 #[test]
 fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
-    let c = &calibrated().calibration;
+    let c = calibrated();
     let held: Vec<_> = c.runs.iter().filter(|r| !r.fitted).collect();
     assert_eq!(held.len(), 1);
     let r = held[0];
