@@ -386,11 +386,7 @@ pub fn calibrate(
                 fitted,
                 gap_before: gb,
                 gap_after: ga,
-                reduction_pct: if gb > 0.0 {
-                    100.0 * (1.0 - ga / gb)
-                } else {
-                    0.0
-                },
+                reduction_pct: crate::gap::reduction_pct(gb, ga),
                 channels: before
                     .iter()
                     .map(|(i, b)| {

@@ -220,7 +220,8 @@ fn heldout_excess(setup: &fit::Setup<'_>, c: &Configs, run: &resim::Run) -> f64 
     (r.chi2(false) / n - 1.0).max(0.0).sqrt()
 }
 
-fn reduction_pct(before: f64, after: f64) -> f64 {
+/// How much smaller `after` is than `before`, in percent (0 when there was no gap).
+pub(crate) fn reduction_pct(before: f64, after: f64) -> f64 {
     if before > 0.0 {
         100.0 * (1.0 - after / before)
     } else {

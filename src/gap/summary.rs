@@ -1007,11 +1007,7 @@ pub fn analyse(
         },
         gap_before: gb,
         gap_after: ga,
-        gap_reduction_pct: if gb > 0.0 {
-            100.0 * (1.0 - ga / gb)
-        } else {
-            0.0
-        },
+        gap_reduction_pct: crate::gap::reduction_pct(gb, ga),
         observations,
         rounds,
         accepted,
