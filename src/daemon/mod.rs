@@ -20,6 +20,7 @@ pub mod run_dir;
 pub mod shutdown;
 pub mod socket;
 pub mod status;
+pub mod warn_limit;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -454,6 +455,7 @@ impl<M: Model> Daemon<M> {
         drop(self.pid_file.take());
         self.leftovers.remove_all();
         drop(self.run_dir_lock.take());
+        warn_limit::flush();
         Ok(Summary {
             sim_time_s,
             records,

@@ -238,7 +238,7 @@ impl Plant for MakoPlant {
         // The wire numbers transducers 1..=4, the sensor model 0..=3.
         let index = usize::from(transducer.saturating_sub(1));
         if let Err(e) = self.sensors.sonar.select(index, Self::t_s(now)) {
-            tracing::warn!(error = %e, "sonar select refused");
+            crate::warn_limited!("sonar select refused", error = %e, "sonar select refused");
         }
         self.pull_sonar();
         // PROTOCOL.md 1.2: on a select the master stops forwarding until it acknowledges.
