@@ -349,5 +349,5 @@ fn examples_include_only_eyebot_h_and_standard_headers() {
         }
         checked += 1;
     }
-    assert_eq!(checked, 5, "examples found in {}", dir.display());
+    assert_eq!(checked, 6, "examples found in {}", dir.display());
 }

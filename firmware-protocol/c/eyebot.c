@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "eb_core.h"
 #include "eb_hdt.h"
 #include "eb_port.h"
 
@@ -87,6 +88,8 @@ static struct {
     int mode;
     uint8_t seq;
     uint32_t tick_us;      /* the bridge's tick */
+    uint32_t now_bridge;   /* lockstep: the bridge's time in its ticks, from its last TIME */
+    int serial_written;    /* lockstep: bytes went out on a serial port since the last advance */
     uint16_t capabilities;
     long timeout_ms;
     int retries;
@@ -328,6 +331,13 @@ static void session_open(void) {
     r = request(T_TIME_MODE, p, 1, 0);
     if (r == T_ACK) {
         S.mode = p[0];
+        /* In lockstep only this client's TIME_ADVANCE moves time, so after one TIME_GET the
+         * library knows the bridge's time from the TIME replies it receives. */
+        if (S.mode == MODE_LOCKSTEP) {
+            r = request(T_TIME_GET, NULL, 0, 0);
+            if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+            S.now_bridge = get_be32(S.f_payload);
+        }
     } else if (r == T_NAK && strcmp(mode, "auto") == 0) {
         S.mode = MODE_REALTIME;
     } else if (r == T_NAK) {
@@ -346,12 +356,6 @@ static void ensure_session(void) {
 /* Program ticks <-> bridge ticks. */
 static uint32_t to_bridge_ticks(uint32_t program_ticks) {
     return (uint32_t)(((uint64_t)program_ticks * PROGRAM_TICK_US + S.tick_us / 2) / S.tick_us);
-}
-
-static uint32_t bridge_now_ticks(void) {
-    int r = request(T_TIME_GET, NULL, 0, 0);
-    if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
-    return get_be32(S.f_payload);
 }
 
 /* Reads what the serial ports' drivers hold into their rings (no waiting). */
@@ -379,12 +383,21 @@ static void advance(uint32_t program_ticks) {
     uint8_t p[4];
     uint32_t n = to_bridge_ticks(program_ticks);
     int r;
+    if (S.serial_written) {
+        /* The bridge stamps a serial byte with the simulated time at which it reads it from
+         * its own port. One round trip on the sensor link before time moves gives it that
+         * read at the current tick, as it had when every OSGetCount was a TIME_GET. */
+        S.serial_written = 0;
+        r = request(T_TIME_GET, NULL, 0, 0);
+        if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+    }
     put_be32(p, n);
     /* the bridge needs time to simulate n ticks: allow 1 ms per tick on top */
     r = request(T_TIME_ADVANCE, p, 4, (long)(n > 100000 ? 100000 : n));
     if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_ADVANCE");
+    S.now_bridge = get_be32(S.f_payload);
     if (S.stop_ticks) {
-        uint64_t now_us = (uint64_t)get_be32(S.f_payload) * S.tick_us;
+        uint64_t now_us = (uint64_t)S.now_bridge * S.tick_us;
         if (now_us >= (uint64_t)S.stop_ticks * PROGRAM_TICK_US) {
             int i;
             uint8_t off[3];
@@ -400,31 +413,80 @@ static void advance(uint32_t program_ticks) {
 }
 
 /* ---- timing ---------------------------------------------------------------------------- */
+void eb_session(void) { ensure_session(); }
+
+int eb_lockstep(void) {
+    ensure_session();
+    return S.mode == MODE_LOCKSTEP;
+}
+
+static void realtime_stop_check(void) {
+    if (S.stop_ticks && (uint32_t)eb_now_ticks() >= S.stop_ticks)
+        eb_exit(0, "eyebot: EYEBOT_STOP_S reached");
+}
+
+/* 1 when the program opened a serial port (the sonar line). */
+static int serial_open(void) {
+    int port;
+    for (port = 1; port < EB_LINKS; port++)
+        if (ring[port].open) return 1;
+    return 0;
+}
+
+long eb_now_ticks(void) {
+    ensure_session();
+    if (S.mode == MODE_LOCKSTEP) {
+        uint64_t us;
+        /* The bridge's time is known from its last TIME reply. A program with a serial port
+         * open still asks (TIME_GET): bytes between the program and the bridge's serial
+         * ports travel on their own line, and the round trip gives those the bridge wrote
+         * during the last advance the time to arrive before the program looks for them. */
+        if (serial_open()) {
+            int r = request(T_TIME_GET, NULL, 0, 0);
+            if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+            S.now_bridge = get_be32(S.f_payload);
+        }
+        us = (uint64_t)S.now_bridge * S.tick_us;
+        return (long)(us / PROGRAM_TICK_US);
+    }
+    return (eb_clock_ms() - S.start_ms) / 10;
+}
+
+void eb_time_until(long tick) {
+    long now = eb_now_ticks();
+    if (tick <= now) return;
+    if (S.mode == MODE_LOCKSTEP) {
+        advance((uint32_t)(tick - now));
+    } else {
+        long left = S.start_ms + tick * 10 - eb_clock_ms();
+        eb_sleep_ms(left);
+        realtime_stop_check();
+    }
+}
+
+void eb_time_sleep(long n) {
+    ensure_session();
+    eb_sleep_ms(n * 10);
+    realtime_stop_check();
+}
+
+#ifdef EYEBOT_BACKEND_ROBIOS
+/* On a real EyeBot RoBIOS keeps its own timers and threads; the POSIX back-end's OSWait,
+ * with timers and threads, is in eb_os.c. */
 void OSWait(int n) {
     ensure_session();
     if (n < 0) n = 0;
-    if (S.mode == MODE_LOCKSTEP) {
-        advance((uint32_t)n);
-    } else {
-        eb_sleep_ms((long)n * 10);
-        if (S.stop_ticks && (uint32_t)OSGetCount() >= S.stop_ticks)
-            eb_exit(0, "eyebot: EYEBOT_STOP_S reached");
-    }
+    if (S.mode == MODE_LOCKSTEP) advance((uint32_t)n);
+    else eb_time_sleep(n);
 }
 
 int OSSleep(int n) {
     OSWait(n);
     return 0;
 }
+#endif
 
-int OSGetCount(void) {
-    ensure_session();
-    if (S.mode == MODE_LOCKSTEP) {
-        uint64_t us = (uint64_t)bridge_now_ticks() * S.tick_us;
-        return (int)(us / PROGRAM_TICK_US);
-    }
-    return (int)((eb_clock_ms() - S.start_ms) / 10);
-}
+int OSGetCount(void) { return (int)eb_now_ticks(); }
 
 /* ---- serial ports ----------------------------------------------------------------------- */
 static int valid_port(int port) { return port >= 1 && port <= 3; }
@@ -443,6 +505,7 @@ int OSInitRS232(int baud, int handshake, int port) {
 int OSSendCharRS232(char chr, int port) {
     uint8_t b = (uint8_t)chr;
     if (!valid_port(port) || !ring[port].open) return -1;
+    S.serial_written = 1;
     return eb_port_write(port == S.shared_port ? EB_LINK_SENSOR : port, &b, 1) == 0 ? 0 : -1;
 }
 
@@ -495,6 +558,20 @@ int OSFlushInRS232(int port) {
     ring[port].head = 0;
     return 0;
 }
+
+#ifndef EYEBOT_BACKEND_ROBIOS
+/* Bytes the program wrote that the port has not sent yet are in the host driver's queue. */
+int OSFlushOutRS232(int port) {
+    if (!valid_port(port) || !ring[port].open) return -1;
+    eb_port_flush_out(port == S.shared_port ? EB_LINK_SENSOR : port);
+    return 0;
+}
+
+int OSCheckOutRS232(int port) {
+    if (!valid_port(port) || !ring[port].open) return -1;
+    return (int)eb_port_out_pending(port == S.shared_port ? EB_LINK_SENSOR : port);
+}
+#endif
 
 /* ---- analog input ------------------------------------------------------------------------ */
 int OSGetAD(int channel) {
@@ -613,9 +690,28 @@ static int thruster_of(DeviceSemantics semantics) {
 #define HANDLE_OF(i) ((MotorHandle)(intptr_t)((i) + 1))
 #define INDEX_OF(h) ((int)(intptr_t)(h)-1)
 
+/* A motor call on a handle MOTORInit did not return (or MOTORRelease gave back) is a bug
+ * in the program that would otherwise do nothing at all: it is reported, naming the call,
+ * and the program ends (status 4). */
+static void motor_misuse(const char *call, MotorHandle handle) {
+    snprintf(msgbuf, sizeof msgbuf,
+             "eyebot: %s(handle %ld): not a motor handle from MOTORInit (call MOTORInit "
+             "first, and check its result is not 0)",
+             call, (long)(intptr_t)handle);
+    eb_exit(4, msgbuf);
+}
+
 MotorHandle MOTORInit(DeviceSemantics semantics) {
     int i = thruster_of(semantics);
-    if (i < 0) return HANDLE_OF(-1);
+    if (i < 0) {
+        snprintf(msgbuf, sizeof msgbuf,
+                 "eyebot: MOTORInit(0x%x): not a thruster semantics (MOTOR_PORT, "
+                 "MOTOR_STARBOARD, MOTOR_BOW, MOTOR_STERN or MOTOR_LEFT/RIGHT/FRONT/BACK); "
+                 "returns 0",
+                 (unsigned)semantics);
+        eb_report(msgbuf);
+        return HANDLE_OF(-1);
+    }
     ensure_session();
     S.motor_open[i] = 1;
     if (MOTORDrive(HANDLE_OF(i), 0) != 0) return HANDLE_OF(-1);
@@ -625,7 +721,7 @@ MotorHandle MOTORInit(DeviceSemantics semantics) {
 int MOTORDrive(MotorHandle handle, int speed) {
     int i = INDEX_OF(handle);
     uint8_t p[3];
-    if (i < 0 || i > 3 || !S.motor_open[i]) return -1;
+    if (i < 0 || i > 3 || !S.motor_open[i]) motor_misuse("MOTORDrive", handle);
     if (speed > 100) speed = 100;
     if (speed < -100) speed = -100;
     p[0] = (uint8_t)i;
@@ -637,7 +733,7 @@ int MOTORDrive(MotorHandle handle, int speed) {
 int MOTORRelease(MotorHandle handle) {
     int i = INDEX_OF(handle);
     int r;
-    if (i < 0 || i > 3 || !S.motor_open[i]) return -1;
+    if (i < 0 || i > 3 || !S.motor_open[i]) motor_misuse("MOTORRelease", handle);
     r = MOTORDrive(handle, 0);
     S.motor_open[i] = 0;
     return r;
