@@ -335,3 +335,50 @@ fn a_timer_control_loop_runs_on_the_host_clock_in_real_time() {
         "{steps} steps in {ticks} ticks: the timer is not running every tick"
     );
 }
+
+/// On demand: lockstep speed (simulated seconds per wall second) of the shipped examples and
+/// where the wall time goes: requests the program sent on the sensor link per 10 ms tick, and
+/// wall time per request. Figures in docs/performance.md ("Lockstep speed of C programs").
+#[test]
+#[ignore = "a benchmark: cargo test --release --test eyebot_c_mk4 lockstep_speed -- --ignored \
+            --nocapture"]
+fn lockstep_speed() {
+    let host = eyebot_c::build(TMP, "speed", Target::Host, &[], &[]);
+    let wall_start = Some(([2.0, 1.5, 0.5], 0.0));
+    eprintln!(
+        "{:<14} {:>7} {:>7} {:>7} {:>9} {:>9} {:>8}",
+        "program", "sim s", "wall s", "x real", "requests", "req/tick", "us/req"
+    );
+    for (program, start) in [
+        ("dive_hold", None),
+        ("heading_hold", None),
+        ("spot_turn", None),
+        ("sonar_three", wall_start),
+        ("wall_follower", wall_start),
+        ("timer_square", None),
+    ] {
+        let mut daemon = start_daemon(BIN, &format!("speed-{program}"), start, 1);
+        let started = Instant::now();
+        let run = run_program(&daemon, Target::Host, &host.join(program), &[], TIMEOUT);
+        let wall = started.elapsed().as_secs_f64();
+        // the status snapshot is refreshed every 100 ms
+        std::thread::sleep(Duration::from_millis(250));
+        let status = daemon.status_command(&[]);
+        let rec = stop_daemon(&mut daemon);
+        assert!(run.status.success(), "{program}: {}", run.stderr);
+        let sim = rec.states.last().map_or(0.0, |s| s.t_s);
+        let requests: f64 = status
+            .lines()
+            .find(|l| l.starts_with("sensor"))
+            // name, path "A -> B", rx bytes, tx bytes, rx frames
+            .and_then(|l| l.split_whitespace().nth(6))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no sensor rx frames in {status}"));
+        eprintln!(
+            "{program:<14} {sim:>7.1} {wall:>7.2} {:>7.0} {requests:>9.0} {:>9.2} {:>8.1}",
+            sim / wall,
+            requests / (sim * 100.0),
+            wall * 1e6 / requests
+        );
+    }
+}
