@@ -340,7 +340,7 @@ fn a_timer_control_loop_runs_on_the_host_clock_in_real_time() {
 /// where the wall time goes: requests the program sent on the sensor link per 10 ms tick, and
 /// wall time per request. Figures in docs/performance.md ("Lockstep speed of C programs").
 #[test]
-#[ignore = "a benchmark: cargo test --release --test eyebot_c_mk4 lockstep_speed -- --ignored \
+#[ignore = "a benchmark: cargo test --test eyebot_c_mk4 lockstep_speed -- --ignored \
             --nocapture"]
 fn lockstep_speed() {
     let host = eyebot_c::build(TMP, "speed", Target::Host, &[], &[]);

@@ -8,7 +8,7 @@
  * and computes the speed once a second. Depth: channel DEPTH_CHANNEL, 1 V per metre.
  * The pilot reads depth and compass every tick (10 ms), holds DEPTH_M with the vertical
  * thrusters (on a 0.1 s moving average: one conversion is too noisy to differentiate over
- * 10 ms) and flies LEGS legs: turn on the spot to the leg's heading (left by 90 degrees each
+ * 10 ms) and flies LEGS legs: turn on the spot to the leg's heading (right by 90 degrees each
  * time), then LEG_S seconds ahead.
  */
 #include <stdio.h>
@@ -111,7 +111,7 @@ static void pilot(void) {
             MOTORDrive(starboard, clamp(CRUISE - diff));
             OSWait(1);
         }
-        target = (target + 270) % 360; /* turn left */
+        target = (target + 90) % 360; /* turn right */
     }
     MOTORDrive(port, 0);
     MOTORDrive(starboard, 0);
