@@ -39,14 +39,14 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{DMatrix, DVector, Dyn, Owned, Vector3};
+use nalgebra::{DVector, Vector3};
 use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use crate::config::Document;
 use crate::gap::effects::{self, Configs, Effect};
+use crate::gap::lsq::{self, Bounds};
 use crate::gap::model::{EnabledEffect, GapModel, read_ref};
 use crate::gap::{GapError, Verdict, fit, residuals};
 use crate::physics::Model;
@@ -157,7 +157,9 @@ impl Quantity {
 /// sensors move none.
 pub fn signature_kinds(effect: &Effect) -> &'static [Behaviour] {
     match effect.name {
-        "thruster_imbalance" | "reverse_thrust_asymmetry" | "yaw_damping" => &[Behaviour::Turn],
+        "thruster_imbalance" | "reverse_thrust_asymmetry" | "yaw_damping" | "sway_yaw_coupling" => {
+            &[Behaviour::Turn]
+        }
         "drag_mismatch" | "added_mass" | "thruster_lag" => &[Behaviour::Speed],
         "water_current" | "thrust_gain" => &[Behaviour::Speed, Behaviour::Turn],
         _ => &[],
@@ -533,24 +535,30 @@ pub struct Prior {
 
 /// One candidate fitted jointly with the effects accepted before it: the parameter vector is
 /// the priors' parameters followed by the candidate's, each in units of its scale.
-struct Problem<'a, 'b> {
+struct Joint<'a, 'b> {
     ctx: &'a Context<'b>,
     start: &'a Configs,
     prior: &'a [Prior],
     effect: &'static Effect,
-    x: DVector<f64>,
-    r: Option<DVector<f64>>,
-    evaluations: usize,
-    /// The best point seen (LM stops when a trial point is undefined; we keep the best).
-    best: Option<(f64, DVector<f64>, DVector<f64>)>,
 }
 
-impl Problem<'_, '_> {
-    fn scales(&self) -> Vec<f64> {
+impl Joint<'_, '_> {
+    fn effects(&self) -> impl Iterator<Item = &'static Effect> + '_ {
         self.prior
             .iter()
-            .flat_map(|p| p.effect.scales.iter().copied())
-            .chain(self.effect.scales.iter().copied())
+            .map(|p| p.effect)
+            .chain(std::iter::once(self.effect))
+    }
+
+    fn scales(&self) -> Vec<f64> {
+        self.effects()
+            .flat_map(|e| e.scales.iter().copied())
+            .collect()
+    }
+
+    fn bounds(&self) -> Vec<(f64, f64)> {
+        self.effects()
+            .flat_map(|e| e.bounds.iter().copied())
             .collect()
     }
 
@@ -579,82 +587,6 @@ impl Problem<'_, '_> {
         effects::apply(self.effect, &own, &mut c);
         self.ctx.z(&c).map(DVector::from_vec)
     }
-}
-
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
-        self.evaluations += 1;
-        self.r = self.residuals_at(x);
-        if let Some(r) = &self.r {
-            let c = r.norm_squared();
-            if self.best.as_ref().is_none_or(|(b, _, _)| c < *b) {
-                self.best = Some((c, x.clone(), r.clone()));
-            }
-        }
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        self.r.clone()
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        jacobian(self, &self.x, self.r.as_ref()?)
-    }
-}
-
-/// Forward differences of 2 % of a parameter's typical size (as `fit`); where the forward
-/// step changes nothing (a parameter at the edge of its physical range, e.g. a reverse ratio
-/// of 1 that can only go down), the backward difference.
-fn jacobian(p: &Problem<'_, '_>, x: &DVector<f64>, r0: &DVector<f64>) -> Option<DMatrix<f64>> {
-    let n = x.len();
-    let mut j = DMatrix::zeros(r0.len(), n);
-    for k in 0..n {
-        let h = 0.02;
-        let mut xk = x.clone();
-        xk[k] += h;
-        let mut col = (p.residuals_at(&xk)? - r0) / h;
-        if col.iter().all(|v| *v == 0.0) {
-            let mut xb = x.clone();
-            xb[k] -= h;
-            if let Some(r) = p.residuals_at(&xb) {
-                col = (r0 - r) / h;
-            }
-        }
-        j.set_column(k, &col);
-    }
-    Some(j)
-}
-
-/// 95 % intervals from (J^T J)^-1 over the parameters the data move (a parameter whose
-/// Jacobian column is zero, e.g. scaling a term the model does not have, gets an unbounded
-/// interval and does not spoil the others).
-fn intervals(j: Option<DMatrix<f64>>, values: &[f64], scales: &[f64]) -> Vec<[f64; 2]> {
-    let m = values.len();
-    let mut out = vec![[f64::NEG_INFINITY, f64::INFINITY]; m];
-    let Some(j) = j else { return out };
-    let live: Vec<usize> = (0..m)
-        .filter(|&c| j.column(c).iter().any(|v| *v != 0.0))
-        .collect();
-    if live.is_empty() {
-        return out;
-    }
-    let jl = j.select_columns(&live);
-    if let Some(cov) = (jl.transpose() * &jl).try_inverse() {
-        for (a, &i) in live.iter().enumerate() {
-            let sd = cov[(a, a)].max(0.0).sqrt() * scales[i];
-            out[i] = [values[i] - 1.96 * sd, values[i] + 1.96 * sd];
-        }
-    }
-    out
 }
 
 fn names(effect: &Effect) -> impl Iterator<Item = String> + '_ {
@@ -707,40 +639,33 @@ fn fit_one(
             format!("not testable: no observation of its behaviour ({kinds:?})"),
         );
     }
-    let mut problem = Problem {
+    let joint = Joint {
         ctx,
         start,
         prior,
         effect,
-        x: DVector::zeros(0),
-        r: None,
-        evaluations: 0,
-        best: None,
     };
     let x0: Vec<f64> = prior
         .iter()
         .flat_map(|p| p.values.iter().zip(p.effect.scales).map(|(v, s)| v / s))
         .chain(std::iter::repeat_n(0.0, k))
         .collect();
-    let x0 = DVector::from_vec(x0);
-    problem.x = x0.clone();
-    problem.set_params(&x0);
-    let (problem, _report) = LevenbergMarquardt::new()
-        .with_patience(30)
-        .with_stepbound(5.0)
-        .minimize(problem);
-    let Some((chi2_after, x, r1)) = problem.best.clone() else {
+    let scales = joint.scales();
+    let bounds = Bounds::scaled(&joint.bounds(), &scales);
+    let objective = |x: &DVector<f64>| joint.residuals_at(x);
+    let Some(result) = lsq::minimize(&objective, &bounds, &[DVector::from_vec(x0)]) else {
         return untestable(
             effect,
             chi2_before,
             "the model's quantities are undefined even without the effect".into(),
         );
     };
-    let all = problem.values(&x);
-    let scales = problem.scales();
+    let (x, r1) = (&result.x, &result.residuals);
+    let chi2_after = result.chi2();
+    let all = joint.values(x);
     let m = all.len();
-    let ci_all = intervals(jacobian(&problem, &x, &r1), &all, &scales);
-    let (prior_values, params) = problem.split(&all);
+    let ci_all = lsq::intervals(x, result.covariance().as_ref(), &scales, 1.0);
+    let (prior_values, params) = joint.split(&all);
     let ci = ci_all[m - k..].to_vec();
     let mut at = 0;
     let refitted = prior
@@ -765,7 +690,7 @@ fn fit_one(
     let z_mid: Vec<f64> = if prior.is_empty() {
         z0.to_vec()
     } else {
-        problem
+        joint
             .residuals_at(&x_without)
             .map_or_else(|| z0.to_vec(), |r| r.iter().copied().collect())
     };
@@ -803,7 +728,7 @@ fn fit_one(
             format!("not identifiable: {m} parameters in all, {n} observations")
         },
         testable: true,
-        evaluations: problem.evaluations,
+        evaluations: result.evaluations,
     }
 }
 

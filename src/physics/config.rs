@@ -84,6 +84,8 @@ struct RawAddedMass {
 struct RawDamping {
     linear: [f64; 6],
     quadratic: [f64; 6],
+    #[serde(default)]
+    sway_yaw: [f64; 2],
 }
 
 #[derive(Debug, Deserialize)]
@@ -159,6 +161,11 @@ pub struct VehicleConfig {
     pub added_mass: [f64; 6],
     pub damping_linear: [f64; 6],
     pub damping_quadratic: [f64; 6],
+    /// Linear sway-yaw cross damping `[Y_r, N_v]`: the sway force per unit yaw rate (N per
+    /// rad/s) and the yaw moment per unit sway speed (N m per m/s), both opposing the motion
+    /// with a positive sign, as the diagonal terms do (the off-diagonal sway-yaw entries of Fossen's linear damping
+    /// matrix `D`). Zero unless the vehicle file sets `damping.sway_yaw`.
+    pub damping_sway_yaw: [f64; 2],
     pub thruster_common: ThrusterCommon,
     pub thrusters: [ThrusterConfig; 4],
 }
@@ -297,6 +304,22 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
             "N/(m/s)^2 or N m/(rad/s)^2",
         )?;
     }
+    let damping_sway_yaw = [
+        doc.check_range(
+            "damping.sway_yaw.0",
+            raw.damping.sway_yaw[0],
+            -1e3,
+            1e3,
+            "N/(rad/s)",
+        )?,
+        doc.check_range(
+            "damping.sway_yaw.1",
+            raw.damping.sway_yaw[1],
+            -1e3,
+            1e3,
+            "N m/(m/s)",
+        )?,
+    ];
     if damping_linear
         .iter()
         .zip(&damping_quadratic)
@@ -445,6 +468,7 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
         added_mass,
         damping_linear,
         damping_quadratic,
+        damping_sway_yaw,
         thruster_common,
         thrusters,
     })
