@@ -32,6 +32,7 @@
 #define T_COMPASS_CALIBRATE 0x22
 #define T_COMPASS_RESET 0x23
 #define T_THRUSTER_SET 0x30
+#define T_THRUSTER_SET_ALL 0x31
 #define T_TIME_GET 0x40
 #define T_TIME_ADVANCE 0x41
 #define T_TIME_MODE 0x42
@@ -140,7 +141,10 @@ static int ring_pop(int port, uint8_t *b) {
 
 static char msgbuf[200];
 
+static int link_failed;
+
 static void fail(const char *what) {
+    link_failed = 1;
     snprintf(msgbuf, sizeof msgbuf, "eyebot: sensor link: %s", what);
     eb_exit(3, msgbuf);
 }
@@ -255,12 +259,23 @@ static int read_frame(long timeout_ms) {
 }
 
 static void session_open(void);
+static void flush_thrusters(void);
+static void flush_at_exit(void);
+
+/* Lockstep: thruster commands wait here until the next request, and consecutive ones go out
+ * as one THRUSTER_SET_ALL. No simulated time passes between requests in lockstep, so the
+ * bridge applies them at the same tick as one by one, and before any reading that follows. */
+static struct {
+    int pending;
+    uint8_t duty[4], direction[4];
+} M = {0, {0xFF, 0xFF, 0xFF, 0xFF}, {0, 0, 0, 0}};
 
 /* Sends a request and waits for its reply (same seq): returns the reply type (payload in
  * S.f_payload), or -1 after the retries. A NAK returns T_NAK with S.nak_code set. */
 static int request(uint8_t type, const uint8_t *payload, uint8_t len, long extra_ms) {
     int attempt;
     if (S.state == 0) session_open();
+    if (M.pending) flush_thrusters();
     S.seq = (uint8_t)(S.seq + 1);
     for (attempt = 0; attempt <= S.retries; attempt++) {
         long deadline;
@@ -299,6 +314,7 @@ static void session_open(void) {
     stop_s = config_long("EYEBOT_STOP_S", 0);
     S.stop_ticks = stop_s > 0 ? (uint32_t)stop_s * 100U : 0;
     S.compass_latest = -1;
+    atexit(flush_at_exit);
     if (S.shared_port < 0 || S.shared_port > 3) eb_exit(2, "eyebot: EYEBOT_SHARED_PORT must be 0..3");
     if (eb_port_open(EB_LINK_SENSOR, -1) != 0) eb_exit(3, "eyebot: cannot open the sensor link");
     eb_port_flush_in(EB_LINK_SENSOR);
@@ -346,6 +362,31 @@ static void session_open(void) {
         eb_exit(3, msgbuf);
     } else {
         fail("no reply to TIME_MODE");
+    }
+}
+
+/* Sends the collected thruster commands; the reply type. */
+static int send_thrusters(void) {
+    uint8_t p[8];
+    int i;
+    M.pending = 0;
+    for (i = 0; i < 4; i++) {
+        p[2 * i] = M.duty[i];
+        p[2 * i + 1] = M.direction[i];
+    }
+    return request(T_THRUSTER_SET_ALL, p, 8, 0);
+}
+
+static void flush_thrusters(void) {
+    if (send_thrusters() != T_ACK) fail("no ACK to THRUSTER_SET_ALL");
+}
+
+/* A program that ends right after a thruster command still sends it (best effort: the
+ * program is ending either way). */
+static void flush_at_exit(void) {
+    if (M.pending && !link_failed && S.state == 1) {
+        link_failed = 1; /* a failure inside must not exit again */
+        (void)send_thrusters();
     }
 }
 
@@ -727,6 +768,12 @@ int MOTORDrive(MotorHandle handle, int speed) {
     p[0] = (uint8_t)i;
     p[1] = eb_hdt_duty(i, speed < 0 ? -speed : speed);
     p[2] = speed < 0 ? 1 : 0;
+    M.duty[i] = p[1];
+    M.direction[i] = p[2];
+    if (S.mode == MODE_LOCKSTEP) {
+        M.pending = 1; /* sent with the next request (see M) */
+        return 0;
+    }
     return request(T_THRUSTER_SET, p, 3, 0) == T_ACK ? 0 : -1;
 }
 
