@@ -11,6 +11,7 @@
 
 pub mod clock;
 pub mod config;
+pub mod course;
 pub mod engine;
 pub mod feed;
 pub mod link;

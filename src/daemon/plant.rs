@@ -56,6 +56,14 @@ impl MakoPlant {
         config: &DaemonConfig,
     ) -> Result<Self, ConfigError> {
         let model = physics::load_model(source, &config.vehicle, &config.world)?;
+        if let Some(why) = model.world().outside_pool(&config.start.position_m) {
+            return Err(ConfigError::Invalid {
+                origin: "the daemon configuration".into(),
+                key: "start.position_m".into(),
+                line: None,
+                message: format!("{why} (world `{}`)", config.world),
+            });
+        }
         let sensors_config = SensorsConfig::load(source, &config.sensors)?;
         let initial = InitialState {
             position_m: config.start.position_m,
