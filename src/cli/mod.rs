@@ -14,6 +14,7 @@ pub mod run;
 pub mod simulate;
 pub mod status;
 pub mod validate;
+pub mod view;
 
 /// Hardware-in-the-loop bridge for the EyeBot MK4 controller of the Mako AUV.
 #[derive(Debug, Parser)]
@@ -52,6 +53,8 @@ pub enum Command {
     Gap(gap::GapArgs),
     /// Benchmark the reality-gap workflow on generated hidden-effect and null cases.
     GapBench(gap_bench::GapBenchArgs),
+    /// Show a recording in the browser: the live view's page with a time slider.
+    View(view::ViewArgs),
 }
 
 /// Errors that end a CLI command.
@@ -92,6 +95,8 @@ pub enum CliError {
     Usage(String),
     #[error("cannot format output: {0}")]
     Output(String),
+    #[error(transparent)]
+    View(#[from] crate::view::ViewError),
     #[error("cannot start the async runtime: {0}")]
     Runtime(#[source] std::io::Error),
 }
@@ -115,5 +120,6 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
         Command::Replay(args) => Ok(replay::main(args)?),
         Command::Gap(args) => gap::run(&args),
         Command::GapBench(args) => gap_bench::run(&args),
+        Command::View(args) => view::main(args),
     }
 }
