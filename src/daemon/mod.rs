@@ -249,7 +249,14 @@ impl<M: Model> Daemon<M> {
                 let bound = crate::view::bind(view.addr, view.public).await?;
                 let url = bound.url().to_string();
                 let (side, service) = crate::view::live(bound, view.scene, status.subscribe());
-                Some((ViewHook { side, url, next_state: Instant::now() }, service))
+                Some((
+                    ViewHook {
+                        side,
+                        url,
+                        next_state: Instant::now(),
+                    },
+                    service,
+                ))
             }
             None => None,
         };
@@ -373,7 +380,9 @@ impl<M: Model> Daemon<M> {
                 && now >= view.next_state
             {
                 let state = self.engine.model().state();
-                view.side.tap.state(crate::record::StateRow::from_state(&state));
+                view.side
+                    .tap
+                    .state(crate::record::StateRow::from_state(&state));
                 view.next_state = now + crate::view::tap::VIEW_PERIOD;
             }
             if now >= self.pacing.next_status {
@@ -438,7 +447,10 @@ impl<M: Model> Daemon<M> {
         let done = match control {
             Control::Pause | Control::Resume | Control::Speed { .. } => {
                 let Some(map) = self.pacing.map.as_mut() else {
-                    return Err(format!("{lockstep}; there is no clock to {}", control.name()));
+                    return Err(format!(
+                        "{lockstep}; there is no clock to {}",
+                        control.name()
+                    ));
                 };
                 match control {
                     Control::Pause => map.pause(wall),
@@ -473,7 +485,9 @@ impl<M: Model> Daemon<M> {
                     heading_deg: *heading_deg,
                 };
                 self.engine.place(&placement)?;
-                format!("vehicle at x {x_m} m, y {y_m} m, depth {depth_m} m, heading {heading_deg} deg, at rest")
+                format!(
+                    "vehicle at x {x_m} m, y {y_m} m, depth {depth_m} m, heading {heading_deg} deg, at rest"
+                )
             }
             Control::Current {
                 north_mps,
@@ -740,14 +754,20 @@ fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonErro
 /// `tx_queue_bytes` (a client that does not read, or is gone) are the newly released bytes
 /// dropped, counted and recorded as drops (the older ones keep their place, as in a UART
 /// overrun); the daemon never blocks on a client.
-fn flush_outputs<M: Model>(core: &mut Engine<M>, lines: &mut [LineRuntime], view: Option<&ViewHook>) {
+fn flush_outputs<M: Model>(
+    core: &mut Engine<M>,
+    lines: &mut [LineRuntime],
+    view: Option<&ViewHook>,
+) {
     let sim_s = core.now() as f64 * 1e-9;
     for (index, line) in lines.iter_mut().enumerate() {
         let waiting = line.backlog.len();
         while let Some(data) = core.take_output(index) {
             line.backlog.extend_from_slice(&data);
             if let Some(view) = view {
-                view.side.tap.bytes(sim_s, line.cx.name, crate::record::Direction::Tx, data);
+                view.side
+                    .tap
+                    .bytes(sim_s, line.cx.name, crate::record::Direction::Tx, data);
             }
         }
         if line.backlog.is_empty() {

@@ -333,19 +333,21 @@ impl Model for MakoPlant {
             ("depth_m", p.depth_m, pool.z),
         ] {
             if !(value.is_finite() && (0.0..=max).contains(&value)) {
-                return Err(format!(
-                    "{name} {value}: outside the pool (0 to {max} m)"
-                ));
+                return Err(format!("{name} {value}: outside the pool (0 to {max} m)"));
             }
         }
         if !p.heading_deg.is_finite() {
-            return Err(format!("heading_deg {}: expected a number of degrees", p.heading_deg));
+            return Err(format!(
+                "heading_deg {}: expected a number of degrees",
+                p.heading_deg
+            ));
         }
         self.sim.place(
             Vector3::new(p.x_m, p.y_m, p.depth_m),
             p.heading_deg.to_radians(),
         );
-        self.sensors.update(&self.sim.state(), self.sim.ray_caster());
+        self.sensors
+            .update(&self.sim.state(), self.sim.ray_caster());
         Ok(())
     }
 
@@ -364,7 +366,8 @@ impl Model for MakoPlant {
     fn reset_pose(&mut self) -> Result<(), String> {
         let (position, heading) = self.start;
         self.sim.place(position, heading);
-        self.sensors.update(&self.sim.state(), self.sim.ray_caster());
+        self.sensors
+            .update(&self.sim.state(), self.sim.ray_caster());
         Ok(())
     }
 }

@@ -34,10 +34,9 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 pub use self::format::{
-    BYTES_HEADER, ByteChunk, DROPS_HEADER, Direction, DropReason, DropRow, EVENTS_HEADER,
-    EventRow, Meta, ModelFiles, ParseChunkError, ReadError, STATE_HEADER, StateRow, parse_chunk,
-    read_bytes, read_config, read_drops, read_events, read_meta, read_model_files, read_state,
-    read_state_file,
+    BYTES_HEADER, ByteChunk, DROPS_HEADER, Direction, DropReason, DropRow, EVENTS_HEADER, EventRow,
+    Meta, ModelFiles, ParseChunkError, ReadError, STATE_HEADER, StateRow, parse_chunk, read_bytes,
+    read_config, read_drops, read_events, read_meta, read_model_files, read_state, read_state_file,
 };
 
 /// The longest a recorded chunk may wait in memory before it reaches the file.
@@ -464,7 +463,11 @@ mod tests {
         let events = read_events(dir).unwrap();
         assert_eq!(events.len(), 1);
         assert_eq!(
-            (events[0].sim_s, events[0].event.as_str(), events[0].detail.as_str()),
+            (
+                events[0].sim_s,
+                events[0].event.as_str(),
+                events[0].detail.as_str()
+            ),
             (1.8, "pose", "x_m=2 y_m=3 depth_m=1 heading_deg=90")
         );
         assert_eq!(read_meta(dir).unwrap(), meta);

@@ -48,10 +48,7 @@ pub fn service(
     mut tap: TapReceiver,
     mut status: watch::Receiver<StatusSnapshot>,
     mut stop: watch::Receiver<bool>,
-) -> (
-    LiveShared,
-    impl Future<Output = ()> + Send + 'static,
-) {
+) -> (LiveShared, impl Future<Output = ()> + Send + 'static) {
     let (publish, latest) = watch::channel(Published::default());
     let history = Arc::new(Mutex::new(History::default()));
     let shared = LiveShared {

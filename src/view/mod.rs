@@ -132,16 +132,18 @@ pub struct DaemonSide {
 /// Controls that may wait for the loop before the page is told the bridge is busy.
 pub const CONTROL_QUEUE: usize = 8;
 
+/// A service to run beside the links: given the daemon's stop signal, the future to spawn.
+pub type LiveService = Box<
+    dyn FnOnce(watch::Receiver<bool>) -> std::pin::Pin<Box<dyn Future<Output = ()> + Send>> + Send,
+>;
+
 /// Serves the view of a running daemon: returns the daemon's side and the service to spawn
 /// beside the links (given the daemon's status updates and stop signal).
 pub fn live(
     bound: Bound,
     scene: Scene,
     status: watch::Receiver<crate::daemon::status::StatusSnapshot>,
-) -> (
-    DaemonSide,
-    impl FnOnce(watch::Receiver<bool>) -> std::pin::Pin<Box<dyn Future<Output = ()> + Send>>,
-) {
+) -> (DaemonSide, LiveService) {
     let (tap, tap_rx) = tap::tap();
     let (controls_tx, controls) = mpsc::channel(CONTROL_QUEUE);
     let service = move |stop: watch::Receiver<bool>| {
@@ -155,7 +157,7 @@ pub fn live(
         });
         fut
     };
-    (DaemonSide { tap, controls }, service)
+    (DaemonSide { tap, controls }, Box::new(service))
 }
 
 /// Serves the view of the recording in `dir` until `stop` turns true; `on_ready` runs once

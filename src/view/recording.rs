@@ -62,13 +62,17 @@ impl RecordingView {
         let mut next_chunk = chunks.iter().peekable();
         for row in &states {
             while let Some(c) = next_chunk.next_if(|c| c.sim_s <= row.t_s) {
-                wire.feed(c.sim_s, &c.link, c.dir, &c.data, |m| messages.push(m.clone()));
+                wire.feed(c.sim_s, &c.link, c.dir, &c.data, |m| {
+                    messages.push(m.clone())
+                });
             }
             samples.push(Sample::new(row, wire.readings()));
             readings.push(wire.readings().clone());
         }
         for c in next_chunk {
-            wire.feed(c.sim_s, &c.link, c.dir, &c.data, |m| messages.push(m.clone()));
+            wire.feed(c.sim_s, &c.link, c.dir, &c.data, |m| {
+                messages.push(m.clone())
+            });
         }
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -144,5 +148,58 @@ impl RecordingView {
             "messages": messages,
         });
         answer.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::{Direction, Recorder, StateRow};
+
+    /// The answer at a time is the state row at or before it, with the minute before it and
+    /// the messages decoded up to it; a recording with a control holds its event.
+    #[test]
+    fn a_recording_answers_with_the_row_at_or_before_the_time() {
+        let tmp = crate::scratch::dir("viewrec");
+        let dir = tmp.path();
+        let meta = Meta::new(3, "lockstep", 1.0, "<embedded>/default.toml");
+        let rec = Recorder::start(
+            dir,
+            &meta,
+            "vehicle = \"vehicles/mako.toml\"\nworld = \"worlds/pool.toml\"\nsensors = \"sensors/mako-2008.toml\"\n",
+        )
+        .unwrap();
+        for i in 0..100 {
+            rec.state(StateRow {
+                t_s: f64::from(i) * 0.02,
+                x_m: f64::from(i),
+                ..StateRow::default()
+            });
+        }
+        rec.bytes(
+            0.5,
+            "sonar",
+            Direction::Tx,
+            b"@A2\r\n$SDDBT,8.2,f,2.5,M,1.4,F*0E\r\n",
+        );
+        rec.event(1.0, "pose", "x_m=1 y_m=1 depth_m=1 heading_deg=0");
+        rec.finish().unwrap();
+        let view = RecordingView::load(dir).unwrap();
+        assert_eq!(view.span_s(), (0.0, 1.98));
+        assert_eq!(view.sample_at(0.05).map(|s| s.x_m), Some(2.0));
+        assert_eq!(view.sample_at(0.06).map(|s| s.x_m), Some(3.0));
+        assert_eq!(view.sample_at(-1.0).map(|s| s.x_m), Some(0.0));
+        assert_eq!(view.sample_at(99.0).map(|s| s.x_m), Some(99.0));
+        let early: serde_json::Value = serde_json::from_str(&view.at(0.4)).unwrap();
+        assert_eq!(early["messages"].as_array().unwrap().len(), 0);
+        assert_eq!(
+            early["frame"]["readings"]["echoes"][1],
+            serde_json::Value::Null
+        );
+        let late: serde_json::Value = serde_json::from_str(&view.at(0.6)).unwrap();
+        assert_eq!(late["messages"].as_array().unwrap().len(), 2);
+        assert_eq!(late["frame"]["readings"]["echoes"][1]["range_m"], 2.5);
+        assert_eq!(late["history"].as_array().unwrap().len(), 31);
+        assert_eq!(view.describe().events.len(), 1);
     }
 }

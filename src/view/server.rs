@@ -81,7 +81,12 @@ impl Guard {
     }
 
     /// `Ok` or why the request is refused.
-    pub fn check(&self, method: &Method, headers: &HeaderMap, query: Option<&str>) -> Result<(), &'static str> {
+    pub fn check(
+        &self,
+        method: &Method,
+        headers: &HeaderMap,
+        query: Option<&str>,
+    ) -> Result<(), &'static str> {
         let host = headers
             .get(header::HOST)
             .and_then(|h| h.to_str().ok())
@@ -138,7 +143,10 @@ async fn guard(State(guard): State<Arc<Guard>>, request: Request, next: Next) ->
     let h = response.headers_mut();
     h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
     // The token is in the URL: never send it on as a referrer.
-    h.insert(header::REFERRER_POLICY, HeaderValue::from_static("no-referrer"));
+    h.insert(
+        header::REFERRER_POLICY,
+        HeaderValue::from_static("no-referrer"),
+    );
     h.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
     h.insert(
         header::CONTENT_SECURITY_POLICY,
@@ -295,8 +303,15 @@ async fn control(State(app): State<AppState>, body: axum::body::Bytes) -> Respon
         }
     };
     let (reply, answer) = oneshot::channel();
-    if controls.try_send(ControlRequest { control, reply }).is_err() {
-        return (StatusCode::SERVICE_UNAVAILABLE, "the bridge is busy with earlier controls\n").into_response();
+    if controls
+        .try_send(ControlRequest { control, reply })
+        .is_err()
+    {
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the bridge is busy with earlier controls\n",
+        )
+            .into_response();
     }
     match tokio::time::timeout(CONTROL_TIMEOUT, answer).await {
         Ok(Ok(Ok(done))) => (StatusCode::OK, format!("{done}\n")).into_response(),
@@ -306,5 +321,66 @@ async fn control(State(app): State<AppState>, body: axum::body::Bytes) -> Respon
             "the bridge did not take the control (stopping?)\n",
         )
             .into_response(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn headers(pairs: &[(&'static str, &str)]) -> HeaderMap {
+        let mut h = HeaderMap::new();
+        for (k, v) in pairs {
+            h.insert(*k, HeaderValue::from_str(v).unwrap());
+        }
+        h
+    }
+
+    /// The token is required and compared whole; on loopback only loopback names are taken
+    /// as `Host`; a foreign `Origin` is refused on any request, `Sec-Fetch-Site: cross-site`
+    /// on anything but GET; `--view-public` accepts any `Host` but still wants the token.
+    #[test]
+    fn the_guard_wants_the_token_a_loopback_host_and_the_same_origin() {
+        let addr: SocketAddr = "127.0.0.1:4321".parse().unwrap();
+        let guard = Guard::new(addr, false).unwrap();
+        assert_eq!(guard.token().len(), 48);
+        assert_ne!(guard.token(), Guard::new(addr, false).unwrap().token());
+        let query = format!("token={}", guard.token());
+        let ok = |h: &[(&'static str, &str)], m: Method, q: Option<&str>| {
+            guard.check(&m, &headers(h), q)
+        };
+        let host = [("host", "127.0.0.1:4321")];
+        assert_eq!(ok(&host, Method::GET, Some(&query)), Ok(()));
+        assert_eq!(
+            ok(&[("host", "LOCALHOST:4321")], Method::GET, Some(&query)),
+            Ok(())
+        );
+        assert!(ok(&host, Method::GET, None).is_err());
+        assert!(ok(&host, Method::GET, Some("token=")).is_err());
+        let short = &query[..query.len() - 1];
+        assert!(ok(&host, Method::GET, Some(short)).is_err());
+        assert!(ok(&[], Method::GET, Some(&query)).is_err(), "no Host");
+        assert!(ok(&[("host", "evil.example:4321")], Method::GET, Some(&query)).is_err());
+        assert!(ok(&[("host", "127.0.0.1:80")], Method::GET, Some(&query)).is_err());
+        let same = [
+            ("host", "127.0.0.1:4321"),
+            ("origin", "http://127.0.0.1:4321"),
+        ];
+        assert_eq!(ok(&same, Method::POST, Some(&query)), Ok(()));
+        let foreign = [
+            ("host", "127.0.0.1:4321"),
+            ("origin", "http://evil.example"),
+        ];
+        assert!(ok(&foreign, Method::GET, Some(&query)).is_err());
+        assert!(ok(&foreign, Method::POST, Some(&query)).is_err());
+        let cross = [("host", "127.0.0.1:4321"), ("sec-fetch-site", "cross-site")];
+        assert!(ok(&cross, Method::POST, Some(&query)).is_err());
+        assert_eq!(ok(&cross, Method::GET, Some(&query)), Ok(()));
+
+        let public = Guard::new("0.0.0.0:4321".parse().unwrap(), true).unwrap();
+        let query = format!("token={}", public.token());
+        let h = headers(&[("host", "bridge.lab:4321")]);
+        assert_eq!(public.check(&Method::GET, &h, Some(&query)), Ok(()));
+        assert!(public.check(&Method::GET, &h, None).is_err());
     }
 }

@@ -108,7 +108,9 @@ pub enum Control {
     Pause,
     Resume,
     /// Realtime speed factor.
-    Speed { factor: f64 },
+    Speed {
+        factor: f64,
+    },
     /// Put the vehicle at rest at this pose.
     Pose {
         x_m: f64,
@@ -117,7 +119,10 @@ pub enum Control {
         heading_deg: f64,
     },
     /// The steady water current, world frame (north, east, down), m/s.
-    Current { north_mps: f64, east_mps: f64 },
+    Current {
+        north_mps: f64,
+        east_mps: f64,
+    },
     /// Back to the configured start pose, at rest.
     Reset,
 }

@@ -296,23 +296,36 @@ mod tests {
             let mut w = WireWatch::new();
             let mut kinds = Vec::new();
             for part in rx.chunks(split) {
-                w.feed(1.0, "sensor", Direction::Rx, part, |m| kinds.push(m.kind.clone()));
+                w.feed(1.0, "sensor", Direction::Rx, part, |m| {
+                    kinds.push(m.kind.clone())
+                });
             }
             for part in sonar_tx.chunks(split) {
-                w.feed(2.0, "sonar", Direction::Tx, part, |m| kinds.push(m.kind.clone()));
+                w.feed(2.0, "sonar", Direction::Tx, part, |m| {
+                    kinds.push(m.kind.clone())
+                });
             }
             assert_eq!(kinds[0], "ThrusterSetAll", "split {split}");
             assert!(kinds.contains(&"Ack".to_string()), "{kinds:?}");
             assert_eq!(kinds.last().map(String::as_str), Some("Dbt"));
             let r = w.readings();
-            assert_eq!(r.thrusters[3].map(|t| (t.duty, t.reverse)), Some((0x40, true)));
+            assert_eq!(
+                r.thrusters[3].map(|t| (t.duty, t.reverse)),
+                Some((0x40, true))
+            );
             assert_eq!(r.selected, Some(2));
             assert_eq!(r.echoes[1].and_then(|e| e.range_m), Some(2.5));
             assert_eq!(r.echoes[0], None);
         }
         let mut w = WireWatch::new();
         for i in 0..250u8 {
-            w.feed(0.0, "sensor", Direction::Rx, &frame(i, Message::TimeGet), |_| {});
+            w.feed(
+                0.0,
+                "sensor",
+                Direction::Rx,
+                &frame(i, Message::TimeGet),
+                |_| {},
+            );
         }
         assert_eq!(w.recent().len(), MESSAGES_KEPT);
         assert_eq!(w.recent().front().map(|m| m.seq), Some(50));
