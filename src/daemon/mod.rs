@@ -494,6 +494,9 @@ impl<M: Model> Daemon<M> {
                 east_mps,
             } => {
                 self.engine.set_current(*north_mps, *east_mps)?;
+                if let Some(view) = &self.view {
+                    view.side.tap.current(*north_mps, *east_mps);
+                }
                 format!("water current {north_mps} m/s north, {east_mps} m/s east")
             }
             Control::Reset => {

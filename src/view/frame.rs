@@ -66,6 +66,8 @@ pub struct StatusView {
     pub links: Vec<LinkStatus>,
     /// Link chunks the view missed because it fell behind (live only).
     pub view_dropped: u64,
+    /// The water current set from the page (north, east, m/s), if it was.
+    pub current_mps: Option<[f64; 2]>,
 }
 
 /// Everything the page shows at one moment.

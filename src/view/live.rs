@@ -87,7 +87,9 @@ pub fn service(
                         view.links.clone_from(&s.links);
                     }
                     view.sim_time_s = row.t_s;
-                    view.paused = *tap.paused.borrow();
+                    let settings = *tap.settings.borrow();
+                    view.paused = settings.paused;
+                    view.current_mps = settings.current_mps;
                     view.view_dropped = tap.dropped.load(Ordering::Relaxed);
                     if wire.seq() != sent_seq {
                         sent_seq = wire.seq();

@@ -132,6 +132,7 @@ impl RecordingView {
             overruns: 0,
             links: wire_links(readings),
             view_dropped: 0,
+            current_mps: None,
         };
         let from = self.samples[..=i].partition_point(|s| s.t_s < sample.t_s - HISTORY_S);
         let window = &self.samples[from..=i];

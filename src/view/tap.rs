@@ -37,7 +37,16 @@ pub struct Tap {
     chunks: mpsc::Sender<TapChunk>,
     dropped: Arc<AtomicU64>,
     state: watch::Sender<StateRow>,
-    paused: watch::Sender<bool>,
+    settings: watch::Sender<Settings>,
+}
+
+/// What the page's controls last set, for pages that open later.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Settings {
+    /// Realtime is paused.
+    pub paused: bool,
+    /// The water current set from the page (north, east, m/s); `None`: the world file's.
+    pub current_mps: Option<[f64; 2]>,
 }
 
 /// Held by the view.
@@ -47,8 +56,7 @@ pub struct TapReceiver {
     /// Chunks the loop dropped because the view had not taken the earlier ones.
     pub dropped: Arc<AtomicU64>,
     pub state: watch::Receiver<StateRow>,
-    /// Whether realtime is paused from the page.
-    pub paused: watch::Receiver<bool>,
+    pub settings: watch::Receiver<Settings>,
 }
 
 /// A connected pair.
@@ -56,19 +64,19 @@ pub fn tap() -> (Tap, TapReceiver) {
     let (chunks_tx, chunks) = mpsc::channel(TAP_CHUNKS);
     let dropped = Arc::new(AtomicU64::new(0));
     let (state_tx, state) = watch::channel(StateRow::default());
-    let (paused_tx, paused) = watch::channel(false);
+    let (settings_tx, settings) = watch::channel(Settings::default());
     (
         Tap {
             chunks: chunks_tx,
             dropped: dropped.clone(),
             state: state_tx,
-            paused: paused_tx,
+            settings: settings_tx,
         },
         TapReceiver {
             chunks,
             dropped,
             state,
-            paused,
+            settings,
         },
     )
 }
@@ -96,7 +104,12 @@ impl Tap {
     }
 
     pub fn paused(&self, paused: bool) {
-        self.paused.send_replace(paused);
+        self.settings.send_modify(|s| s.paused = paused);
+    }
+
+    pub fn current(&self, north_mps: f64, east_mps: f64) {
+        self.settings
+            .send_modify(|s| s.current_mps = Some([north_mps, east_mps]));
     }
 }
 
