@@ -15,6 +15,7 @@ pub mod run;
 pub mod simulate;
 pub mod status;
 pub mod validate;
+pub mod view;
 
 /// Hardware-in-the-loop bridge for the EyeBot MK4 controller of the Mako AUV.
 #[derive(Debug, Parser)]
@@ -55,6 +56,8 @@ pub enum Command {
     GapBench(gap_bench::GapBenchArgs),
     /// Run a control program against a private lockstep daemon and judge it by a scenario.
     Check(check::CheckArgs),
+    /// Show a recording in the browser: the live view's page with a time slider.
+    View(view::ViewArgs),
 }
 
 /// Errors that end a CLI command.
@@ -97,6 +100,8 @@ pub enum CliError {
     Usage(String),
     #[error("cannot format output: {0}")]
     Output(String),
+    #[error(transparent)]
+    View(#[from] crate::view::ViewError),
     #[error("cannot start the async runtime: {0}")]
     Runtime(#[source] std::io::Error),
 }
@@ -121,5 +126,6 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
         Command::Gap(args) => gap::run(&args),
         Command::GapBench(args) => gap_bench::run(&args),
         Command::Check(args) => check::main(args),
+        Command::View(args) => view::main(args),
     }
 }

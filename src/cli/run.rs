@@ -45,6 +45,13 @@ pub struct RunArgs {
     /// (`wall_following`, ...) or NORTH,EAST,HEADING in m, m, deg (depth from [start]).
     #[arg(long, value_name = "NAME|N,E,HEADING")]
     pub start: Option<StartChoice>,
+    /// Serve a live page of the run (default 127.0.0.1, a port the system picks); prints
+    /// `view: URL` (the URL carries the access token) before `ready`.
+    #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDR)]
+    pub view: Option<std::net::SocketAddr>,
+    /// Allow --view on an address other than loopback (anyone with the URL can steer the run).
+    #[arg(long, requires = "view")]
+    pub view_public: bool,
 }
 
 impl RunArgs {
@@ -115,12 +122,26 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
     let model = crate::daemon::plant::MakoPlant::from_config(source.as_ref(), &config)?;
     let (board, mux) = crate::daemon::plant::devices(&config);
     let leftovers = daemon::shutdown::Leftovers::default();
+    let view = match args.view {
+        Some(addr) => Some(crate::view::ViewOptions {
+            addr,
+            public: args.view_public,
+            scene: crate::view::Scene::load(
+                source.as_ref(),
+                &config.vehicle,
+                &config.world,
+                &config.sensors,
+            )?,
+        }),
+        None => None,
+    };
     let options = RunOptions {
         record: args.record,
         pid_file: args.pid_file,
         config_toml: text,
         config_name: name,
         leftovers: leftovers.clone(),
+        view,
     };
 
     let runtime = super::runtime()?;
@@ -136,6 +157,9 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
             match event {
                 Readiness::Link { name, path } => {
                     let _ = writeln!(out, "link {name}: {path}");
+                }
+                Readiness::View { url } => {
+                    let _ = writeln!(out, "view: {url}");
                 }
                 Readiness::Ready { status_socket } => {
                     let _ = writeln!(out, "ready (status: {})", status_socket.display());
