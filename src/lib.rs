@@ -29,6 +29,7 @@ mod scratch;
 pub mod sensors;
 pub mod thesis;
 pub mod transport;
+pub mod view;
 
 /// Simulated time in nanoseconds since the start of a run. Integer, so the same inputs give
 /// the same times bit for bit at any speed.

@@ -14,6 +14,9 @@
 //!   the same two settings under a client polling 800 `ADC_READ`s a second, which is what
 //!   releasing replies byte by byte would cost.
 //! - `rss`: resident memory over one simulated hour at speed 100 with a client.
+//! - `view`: what one live page costs (`run --view`): daemon CPU under the 100 Hz ADC stream
+//!   with a page reading the 20 Hz event stream, against the same daemon without a page,
+//!   measured before and after it (baseline: the mean of those two).
 //!
 //! The binary measured is the one `EYEBOT_HIL_BIN` names, built by the same command:
 //!
@@ -22,7 +25,8 @@
 //! EYEBOT_HIL_BIN=target/release/eyebot-hil cargo bench -p pty-tests --bench daemon [-- adc|nmea|cpu|rss]
 //! ```
 //!
-//! (all four by default).
+//! (all five by default). With `EYEBOT_BENCH_VIEW=1` every daemon of `adc`, `nmea`, `cpu`
+//! and `rss` also serves `--view` with one page reading its event stream.
 
 use std::io::{Read, Write};
 use std::os::fd::AsFd;
@@ -103,6 +107,32 @@ fn pty_echo_baseline() -> Vec<f64> {
     }
     drop(echo.join().unwrap());
     out
+}
+
+/// Starts the binary with `args`; with `EYEBOT_BENCH_VIEW` set, also with `--view` and one
+/// page reading its event stream for the daemon's whole life (the benchmarks with a page
+/// open).
+fn start_daemon(dir: TempDir, args: &[&str]) -> Daemon {
+    if std::env::var_os("EYEBOT_BENCH_VIEW").is_none() {
+        return Daemon::start(&binary(), dir, args);
+    }
+    let mut args = args.to_vec();
+    args.push("--view");
+    let daemon = Daemon::start(&binary(), dir, &args);
+    let url = daemon.view_url.clone().expect("run --view prints its URL");
+    let (addr, token) = eyebot_test_support::browser::split_view_url(&url);
+    // Detached: it ends when the daemon closes the stream.
+    std::thread::spawn(move || {
+        let mut stream = std::net::TcpStream::connect(addr).unwrap();
+        write!(
+            stream,
+            "GET /api/stream?token={token} HTTP/1.1\r\nHost: {addr}\r\n\r\n"
+        )
+        .unwrap();
+        let mut buf = [0u8; 65536];
+        while matches!(stream.read(&mut buf), Ok(n) if n > 0) {}
+    });
+    daemon
 }
 
 /// `--config` arguments for a run with `release_quantum_ms = quantum_ms` (None: the default)
@@ -192,7 +222,7 @@ fn adc_with(baseline: &[f64], quantum_ms: Option<f64>) {
     let mut args = quantum_args(&dir, quantum_ms);
     args.extend(["--record".to_string(), record.display().to_string()]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let mut daemon = Daemon::start(&binary(), dir, &args);
+    let mut daemon = start_daemon(dir, &args);
     let mut port = open_raw(&daemon.link("sensor"));
     // ADC_VALUE is 10 bytes: 10 x 10 bits at 115200 baud.
     let wire_us = 10.0 * 10.0 / 115_200.0 * 1e6;
@@ -340,7 +370,7 @@ fn nmea_at(speed: f64, wall_s: f64) {
         "near-wall.toml",
         &[
             (
-                "position_m = [3.0, 6.25, 0.3]",
+                "position_m = [3.0, 2.5, 0.3]",
                 "position_m = [3.0, 1.5, 0.5]",
             ),
             // Every ping gives a sentence (empty fields without a valid echo), so the
@@ -353,8 +383,7 @@ fn nmea_at(speed: f64, wall_s: f64) {
         ],
     );
     let record = dir.join("rec");
-    let mut daemon = Daemon::start(
-        &binary(),
+    let mut daemon = start_daemon(
         dir,
         &[
             "--config",
@@ -490,7 +519,7 @@ fn cpu_polled(quantum_ms: Option<f64>) -> f64 {
     let dir = TempDir::new("bench-cpu-poll");
     let args = quantum_args(&dir, quantum_ms);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let daemon = Daemon::start(&binary(), dir, &args);
+    let daemon = start_daemon(dir, &args);
     let mut port = open_raw(&daemon.link("sensor"));
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let client = {
@@ -534,7 +563,7 @@ fn cpu_with(quantum_ms: Option<f64>) -> f64 {
     let dir = TempDir::new("bench-cpu");
     let args = quantum_args(&dir, quantum_ms);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let daemon = Daemon::start(&binary(), dir, &args);
+    let daemon = start_daemon(dir, &args);
     std::thread::sleep(Duration::from_secs(1));
     let interval = Duration::from_secs(10);
     let idle = cpu_percent(&daemon, interval);
@@ -574,11 +603,86 @@ fn cpu_with(quantum_ms: Option<f64>) -> f64 {
     streaming
 }
 
+/// The CPU a reading page adds: 10 s without a page, 10 s with one, 10 s without again, all
+/// under the 100 Hz stream.
+fn view() {
+    let dir = TempDir::new("bench-view");
+    let mut args = quantum_args(&dir, None);
+    args.push("--view".into());
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let daemon = Daemon::start(&binary(), dir, &args);
+    let url = daemon.view_url.clone().expect("run --view prints its URL");
+    let (addr, token) = eyebot_test_support::browser::split_view_url(&url);
+    let interval = Duration::from_secs(10);
+    let mut port = open_raw(&daemon.link("sensor"));
+    port.write_all(&frame(
+        1,
+        Message::AdcStream {
+            channels: 0xFF,
+            period_ms: 10,
+        },
+    ))
+    .unwrap();
+    let mut reader = port.try_clone().unwrap();
+    let drain = std::thread::spawn(move || {
+        let mut buf = [0u8; 4096];
+        let started = Instant::now();
+        while started.elapsed() < Duration::from_secs(33) {
+            let _ = reader.read(&mut buf);
+        }
+    });
+    std::thread::sleep(Duration::from_secs(1));
+    let before = cpu_percent(&daemon, interval);
+    let page = std::thread::spawn(move || {
+        let mut stream = std::net::TcpStream::connect(addr).unwrap();
+        write!(
+            stream,
+            "GET /api/stream?token={token} HTTP/1.1\r\nHost: {addr}\r\n\r\n"
+        )
+        .unwrap();
+        stream
+            .set_read_timeout(Some(Duration::from_millis(100)))
+            .unwrap();
+        let (mut bytes, mut frames) = (0usize, 0usize);
+        let mut buf = [0u8; 65536];
+        let started = Instant::now();
+        while started.elapsed() < interval + Duration::from_millis(500) {
+            if let Ok(n) = stream.read(&mut buf) {
+                bytes += n;
+                frames += buf[..n]
+                    .windows(12)
+                    .filter(|w| w == b"event: frame")
+                    .count();
+            }
+        }
+        (bytes, frames)
+    });
+    std::thread::sleep(Duration::from_millis(250));
+    let with_page = cpu_percent(&daemon, interval);
+    let (bytes, frames) = page.join().unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let after = cpu_percent(&daemon, interval);
+    drain.join().unwrap();
+    let baseline = (before + after) / 2.0;
+    println!(
+        "daemon CPU over {interval:?} each, 100 Hz ADC stream, run --view (/proc/PID/stat utime+stime)"
+    );
+    println!("  no page:  {before:5.2} % before, {after:5.2} % after (baseline {baseline:5.2} %)");
+    println!(
+        "  one page reading the event stream: {with_page:5.2} % ({frames} frames, {bytes} bytes in {:.1} s)",
+        (interval + Duration::from_millis(500)).as_secs_f64()
+    );
+    println!(
+        "  a page costs {:+.2} % of one core (target < 2 %); ratio with / without {:.2}x",
+        with_page - baseline,
+        with_page / baseline
+    );
+}
+
 fn rss() {
     let dir = TempDir::new("bench-rss");
     let record = dir.join("rec");
-    let daemon = Daemon::start(
-        &binary(),
+    let daemon = start_daemon(
         dir,
         &[
             "--time-mode",
@@ -687,5 +791,8 @@ fn main() {
     }
     if run("rss") {
         rss();
+    }
+    if run("view") {
+        view();
     }
 }

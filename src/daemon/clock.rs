@@ -54,6 +54,8 @@ pub struct RealtimeMap {
     max_lag_ns: SimNanos,
     overruns: u64,
     slipped_ns: SimNanos,
+    /// While paused: the speed to resume at.
+    paused: Option<f64>,
 }
 
 impl RealtimeMap {
@@ -67,9 +69,11 @@ impl RealtimeMap {
             max_lag_ns: u64::try_from(max_lag.as_nanos()).unwrap_or(u64::MAX),
             overruns: 0,
             slipped_ns: 0,
+            paused: None,
         }
     }
 
+    /// The speed factor (0 while paused).
     pub fn speed(&self) -> f64 {
         self.speed
     }
@@ -80,10 +84,45 @@ impl RealtimeMap {
         self.anchor_sim_ns + (elapsed * self.speed) as SimNanos
     }
 
-    /// The wall time at which simulated time `sim_ns` is due.
+    /// The wall time at which simulated time `sim_ns` is due (never, while paused).
     pub fn wall_at(&self, sim_ns: SimNanos) -> Duration {
+        if self.speed <= 0.0 {
+            return Duration::MAX;
+        }
         let ahead = sim_ns.saturating_sub(self.anchor_sim_ns) as f64 / self.speed;
         self.anchor_wall + Duration::from_nanos(ahead as u64)
+    }
+
+    /// From `wall` on, simulated time runs at `speed` (a paused map stays paused and
+    /// resumes at `speed`).
+    pub fn set_speed(&mut self, speed: f64, wall: Duration) {
+        if self.paused.is_some() {
+            self.paused = Some(speed);
+            return;
+        }
+        self.anchor_sim_ns = self.target(wall);
+        self.anchor_wall = wall;
+        self.speed = speed;
+    }
+
+    /// Holds simulated time where it is at `wall` until [`resume`](Self::resume).
+    pub fn pause(&mut self, wall: Duration) {
+        if self.paused.is_none() {
+            let speed = self.speed;
+            self.set_speed(0.0, wall);
+            self.paused = Some(speed);
+        }
+    }
+
+    /// Simulated time follows the wall clock again from `wall`, at the speed before the pause.
+    pub fn resume(&mut self, wall: Duration) {
+        if let Some(speed) = self.paused.take() {
+            self.set_speed(speed, wall);
+        }
+    }
+
+    pub fn is_paused(&self) -> bool {
+        self.paused.is_some()
     }
 
     /// Tells the map the loop has reached `reached` at `wall`. If that is more than `max_lag`
@@ -123,6 +162,21 @@ mod tests {
         let map = RealtimeMap::new(10.0, Duration::from_millis(100));
         assert_eq!(map.target(Duration::from_millis(250)), 2_500 * MS);
         assert_eq!(map.wall_at(2_500 * MS), Duration::from_millis(250));
+    }
+
+    /// Paused, simulated time holds; resumed, it goes on from there at the old speed; a
+    /// speed change takes effect from the moment it is made, without a jump.
+    #[test]
+    fn pause_holds_time_and_speed_changes_do_not_jump() {
+        let mut map = RealtimeMap::new(2.0, Duration::from_millis(100));
+        map.pause(Duration::from_secs(1));
+        assert!(map.is_paused());
+        assert_eq!(map.target(Duration::from_secs(5)), 2_000 * MS);
+        assert_eq!(map.wall_at(3_000 * MS), Duration::MAX);
+        map.resume(Duration::from_secs(5));
+        assert_eq!(map.target(Duration::from_secs(6)), 4_000 * MS);
+        map.set_speed(10.0, Duration::from_secs(6));
+        assert_eq!(map.target(Duration::from_millis(6_100)), 5_000 * MS);
     }
 
     #[test]

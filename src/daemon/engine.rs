@@ -34,6 +34,31 @@ pub trait Model: Plant {
     fn state(&self) -> VehicleState;
     /// How many wall/floor contacts began so far.
     fn contacts(&self) -> u64;
+    /// Puts the vehicle at rest at `placement` (the live view's control); `Err` says why
+    /// not, and nothing changed.
+    fn place(&mut self, placement: &Placement) -> Result<(), String> {
+        let _ = placement;
+        Err("this model cannot be moved".into())
+    }
+    /// Sets the steady water current (world frame, m/s); `Err` says why not.
+    fn set_current(&mut self, north_mps: f64, east_mps: f64) -> Result<(), String> {
+        let _ = (north_mps, east_mps);
+        Err("this model has no water current to set".into())
+    }
+    /// Puts the vehicle back at its start pose, at rest.
+    fn reset_pose(&mut self) -> Result<(), String> {
+        Err("this model cannot be moved".into())
+    }
+}
+
+/// Where the live view puts the vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// North, east and depth of the centre of mass, m.
+    pub x_m: f64,
+    pub y_m: f64,
+    pub depth_m: f64,
+    pub heading_deg: f64,
 }
 
 /// Which link a line carries.
@@ -525,6 +550,21 @@ impl<M: Model> Engine<M> {
             rec.bytes(self.now as f64 * 1e-9, l.name, Direction::Tx, &data);
         }
         Some(data)
+    }
+
+    /// Puts the vehicle at rest at `placement` now (the model checks it).
+    pub fn place(&mut self, placement: &Placement) -> Result<(), String> {
+        self.model.place(placement)
+    }
+
+    /// Sets the water current now.
+    pub fn set_current(&mut self, north_mps: f64, east_mps: f64) -> Result<(), String> {
+        self.model.set_current(north_mps, east_mps)
+    }
+
+    /// The vehicle back at its start pose now.
+    pub fn reset_pose(&mut self) -> Result<(), String> {
+        self.model.reset_pose()
     }
 
     /// A handle on the recorder for the link tasks, when recording.

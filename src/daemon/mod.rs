@@ -11,6 +11,7 @@
 
 pub mod clock;
 pub mod config;
+pub mod course;
 pub mod engine;
 pub mod feed;
 pub mod link;
@@ -66,6 +67,8 @@ pub enum DaemonError {
     },
     #[error(transparent)]
     Feed(#[from] feed::FeedError),
+    #[error(transparent)]
+    View(#[from] crate::view::ViewError),
     #[error("the simulation stopped: {0}")]
     Model(#[source] Box<dyn std::error::Error + Send + Sync>),
 }
@@ -85,6 +88,8 @@ pub struct RunOptions {
     /// Filled with what the run creates (symlinks, sockets, pid file), for the process-level
     /// shutdown guard ([`shutdown::spawn_signal_guard`]).
     pub leftovers: shutdown::Leftovers,
+    /// Serve the live view (`run --view`).
+    pub view: Option<crate::view::ViewOptions>,
 }
 
 /// What the daemon reports as it comes up.
@@ -92,6 +97,8 @@ pub struct RunOptions {
 pub enum Readiness {
     /// A link is open; the EyeBot side connects at `path`.
     Link { name: &'static str, path: String },
+    /// The live view is served at `url` (it carries the token).
+    View { url: String },
     /// Everything is up.
     Ready { status_socket: PathBuf },
 }
@@ -155,6 +162,14 @@ pub struct Daemon<M: Model> {
     leftovers: shutdown::Leftovers,
     /// Held until `finish` has removed what the run made.
     run_dir_lock: Option<run_dir::RunDirLock>,
+    view: Option<ViewHook>,
+}
+
+/// The loop's side of a live view.
+struct ViewHook {
+    side: crate::view::DaemonSide,
+    url: String,
+    next_state: Instant,
 }
 
 /// A task that runs beside the links for the life of the daemon.
@@ -239,6 +254,26 @@ impl<M: Model> Daemon<M> {
 
         let (feed_tx, feed) = mpsc::channel(64);
         let (status, status_rx) = watch::channel(StatusSnapshot::default());
+        let view = match options.view {
+            Some(view) => {
+                let bound = crate::view::bind(view.addr, view.public).await?;
+                let url = bound.url().to_string();
+                let (side, service) = crate::view::live(bound, view.scene, status.subscribe());
+                Some((
+                    ViewHook {
+                        side,
+                        url,
+                        next_state: Instant::now(),
+                    },
+                    service,
+                ))
+            }
+            None => None,
+        };
+        let (view, view_service) = match view {
+            Some((hook, service)) => (Some(hook), Some(service)),
+            None => (None, None),
+        };
         let started = Instant::now();
         let mut daemon = Self {
             config: config.clone(),
@@ -267,7 +302,11 @@ impl<M: Model> Daemon<M> {
             pid_file,
             leftovers,
             run_dir_lock: Some(run_dir_lock),
+            view,
         };
+        if let Some(service) = view_service {
+            daemon.spawn_service("view", service);
+        }
         daemon.spawn_service("sonar feed", |stop| {
             feed::serve(feed_listener, feed_path, feed_tx, stop)
         });
@@ -308,6 +347,11 @@ impl<M: Model> Daemon<M> {
         &self.status_socket
     }
 
+    /// The live view's URL (with its token), when serving one.
+    pub fn view_url(&self) -> Option<&str> {
+        self.view.as_ref().map(|v| v.url.as_str())
+    }
+
     /// Runs the simulation until `shutdown` resolves, every link task has ended, or the model
     /// fails. In realtime the calling thread holds the configured wake-up requests
     /// (`run.rt_priority`, `run.cpu_latency_us`) while it serves.
@@ -341,8 +385,17 @@ impl<M: Model> Daemon<M> {
         let mut shutdown = std::pin::pin!(shutdown);
         loop {
             self.catch_up()?;
-            flush_outputs(&mut self.engine, &mut self.lines);
+            flush_outputs(&mut self.engine, &mut self.lines, self.view.as_ref());
             let now = Instant::now();
+            if let Some(view) = self.view.as_mut()
+                && now >= view.next_state
+            {
+                let state = self.engine.model().state();
+                view.side
+                    .tap
+                    .state(crate::record::StateRow::from_state(&state));
+                view.next_state = now + crate::view::tap::VIEW_PERIOD;
+            }
             if now >= self.pacing.next_status {
                 self.status.send_replace(snapshot(
                     &self.engine,
@@ -354,15 +407,34 @@ impl<M: Model> Daemon<M> {
                 ));
                 self.pacing.next_status = now + STATUS_PERIOD;
             }
-            let wake_at = self.pacing.next_wake(&self.engine, now);
+            let mut wake_at = self.pacing.next_wake(&self.engine, now);
+            if let Some(view) = &self.view {
+                wake_at = wake_at.min(view.next_state.max(now));
+            }
+            let control = async {
+                match self.view.as_mut() {
+                    Some(view) => view.side.controls.recv().await,
+                    None => std::future::pending().await,
+                }
+            };
             tokio::select! {
                 inbound = self.inbound.recv() => match inbound {
                     Some(inbound) => {
                         self.advance_to_wall()?;
+                        if let Some(view) = &self.view {
+                            let name = self.engine.line_name(inbound.line);
+                            let t_s = self.engine.now() as f64 * 1e-9;
+                            view.side.tap.bytes(t_s, name, crate::record::Direction::Rx, inbound.data.clone());
+                        }
                         self.engine.receive(inbound.line, &inbound.data).map_err(model_error)?;
                     }
                     None => return Ok(()),
                 },
+                Some(request) = control => {
+                    self.advance_to_wall()?;
+                    let answer = self.apply_control(&request.control);
+                    let _ = request.reply.send(answer);
+                }
                 Some(event) = self.feed.recv() => {
                     self.advance_to_wall()?;
                     match event {
@@ -375,6 +447,80 @@ impl<M: Model> Daemon<M> {
                 _ = &mut shutdown => return Ok(()),
             }
         }
+    }
+
+    /// Applies a control from the live view at the current simulated time and records it as
+    /// an event; `Err` says why it was refused (nothing changed then).
+    fn apply_control(&mut self, control: &crate::view::tap::Control) -> Result<String, String> {
+        use crate::view::tap::Control;
+        let wall = self.pacing.started.elapsed();
+        let lockstep = "lockstep: simulated time moves only on the client's time frames";
+        let done = match control {
+            Control::Pause | Control::Resume | Control::Speed { .. } => {
+                let Some(map) = self.pacing.map.as_mut() else {
+                    return Err(format!(
+                        "{lockstep}; there is no clock to {}",
+                        control.name()
+                    ));
+                };
+                match control {
+                    Control::Pause => map.pause(wall),
+                    Control::Resume => map.resume(wall),
+                    Control::Speed { factor } => {
+                        if !(factor.is_finite() && config::SPEED_RANGE.contains(factor)) {
+                            return Err(format!(
+                                "speed factor {factor}: expected {} to {}",
+                                config::SPEED_RANGE.start(),
+                                config::SPEED_RANGE.end()
+                            ));
+                        }
+                        map.set_speed(*factor, wall);
+                    }
+                    _ => {}
+                }
+                if let Some(view) = &self.view {
+                    view.side.tap.paused(map.is_paused());
+                }
+                format!("{} (speed {})", control.name(), map.speed())
+            }
+            Control::Pose {
+                x_m,
+                y_m,
+                depth_m,
+                heading_deg,
+            } => {
+                let placement = engine::Placement {
+                    x_m: *x_m,
+                    y_m: *y_m,
+                    depth_m: *depth_m,
+                    heading_deg: *heading_deg,
+                };
+                self.engine.place(&placement)?;
+                format!(
+                    "vehicle at x {x_m} m, y {y_m} m, depth {depth_m} m, heading {heading_deg} deg, at rest"
+                )
+            }
+            Control::Current {
+                north_mps,
+                east_mps,
+            } => {
+                self.engine.set_current(*north_mps, *east_mps)?;
+                if let Some(view) = &self.view {
+                    view.side.tap.current(*north_mps, *east_mps);
+                }
+                format!("water current {north_mps} m/s north, {east_mps} m/s east")
+            }
+            Control::Reset => {
+                self.engine.reset_pose()?;
+                "vehicle back at its start pose, at rest".to_string()
+            }
+        };
+        let t_s = self.engine.now() as f64 * 1e-9;
+        if let Some(recorder) = self.engine.recorder_handle() {
+            recorder.event(t_s, control.name(), &control.detail());
+        }
+        tracing::info!(sim_s = t_s, control = control.name(), "{done}");
+        Ok(done)
     }
 
     /// In realtime: settles the overrun accounting for this wake-up and runs the model up to
@@ -411,7 +557,7 @@ impl<M: Model> Daemon<M> {
     /// endpoints and remove their symlinks) and the services, finishes the recording,
     /// removes the pid file and the sockets.
     pub async fn finish(mut self) -> Result<Summary, DaemonError> {
-        flush_outputs(&mut self.engine, &mut self.lines);
+        flush_outputs(&mut self.engine, &mut self.lines, self.view.as_ref());
         let sim_time_s = self.engine.now() as f64 * 1e-9;
         let overruns = self.pacing.map.as_ref().map_or(0, RealtimeMap::overruns);
         self.stop.send_replace(true);
@@ -594,6 +740,11 @@ where
             path: link.path.clone(),
         });
     }
+    if let Some(url) = daemon.view_url() {
+        on_ready(Readiness::View {
+            url: url.to_string(),
+        });
+    }
     on_ready(Readiness::Ready {
         status_socket: daemon.status_socket().to_path_buf(),
     });
@@ -619,12 +770,21 @@ fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonErro
 /// `tx_queue_bytes` (a client that does not read, or is gone) are the newly released bytes
 /// dropped, counted and recorded as drops (the older ones keep their place, as in a UART
 /// overrun); the daemon never blocks on a client.
-fn flush_outputs<M: Model>(core: &mut Engine<M>, lines: &mut [LineRuntime]) {
+fn flush_outputs<M: Model>(
+    core: &mut Engine<M>,
+    lines: &mut [LineRuntime],
+    view: Option<&ViewHook>,
+) {
     let sim_s = core.now() as f64 * 1e-9;
     for (index, line) in lines.iter_mut().enumerate() {
         let waiting = line.backlog.len();
         while let Some(data) = core.take_output(index) {
             line.backlog.extend_from_slice(&data);
+            if let Some(view) = view {
+                view.side
+                    .tap
+                    .bytes(sim_s, line.cx.name, crate::record::Direction::Tx, data);
+            }
         }
         if line.backlog.is_empty() {
             continue;
@@ -868,12 +1028,12 @@ mod tests {
         let mut delivered = 0;
         for step in 1..=100u64 {
             core.advance_to(step * 10_000_000).unwrap();
-            flush_outputs(&mut core, &mut lines);
+            flush_outputs(&mut core, &mut lines, None);
             if step % 25 == 0 {
                 // The link task catches up now and then.
                 while let Ok(chunk) = sensor_rx.try_recv() {
                     delivered += chunk.data.len();
-                    flush_outputs(&mut core, &mut lines);
+                    flush_outputs(&mut core, &mut lines, None);
                 }
             }
         }

@@ -35,6 +35,8 @@ pub struct MakoPlant {
     /// The controller whose sentences the master forwards: the one that owns the last
     /// acknowledged transducer; `None` from a select until its ack (PROTOCOL.md 1.2).
     forwarding: Option<usize>,
+    /// The configured start: position and heading (rad), for a reset from the live view.
+    start: (Vector3<f64>, f64),
 }
 
 impl std::fmt::Debug for MakoPlant {
@@ -73,6 +75,14 @@ impl MakoPlant {
         let world =
             physics::load_world(source, &config.world).map_err(named_by("world", &config.world))?;
         let model = physics::Model::new(vehicle, world);
+        if let Some(why) = model.world().outside_pool(&config.start.position_m) {
+            return Err(ConfigError::Invalid {
+                origin: "the daemon configuration".into(),
+                key: "start.position_m".into(),
+                line: None,
+                message: format!("{why} (world `{}`)", config.world),
+            });
+        }
         let sensors_config = SensorsConfig::load(source, &config.sensors)
             .map_err(named_by("sensors", &config.sensors))?;
         let initial = InitialState {
@@ -85,16 +95,23 @@ impl MakoPlant {
             velocity_body_mps: Vector3::zeros(),
             angular_velocity_body_radps: Vector3::zeros(),
         };
-        Ok(Self::new(
+        let mut plant = Self::new(
             Simulation::new(model, &initial, config.seed),
             &sensors_config,
             config.seed,
-        ))
+        );
+        plant.start = (
+            config.start.position_m,
+            config.start.heading_deg.to_radians(),
+        );
+        Ok(plant)
     }
 
     /// A plant from an already built simulation and sensor settings.
     pub fn new(sim: Simulation, sensors_config: &SensorsConfig, seed: u64) -> Self {
         let step_ns = ns(sim.model().step_s());
+        let state = sim.state();
+        let start = (state.position_m, state.euler_rad().2);
         let mut sensors = SensorSuite::new(sensors_config, seed);
         // The Vector 2X on Mako runs free (master mode, about 2.5 readings a second); the
         // device emulator hands out its latest completed reading.
@@ -123,6 +140,7 @@ impl MakoPlant {
                 .iter()
                 .map(|t| t.controller)
                 .collect(),
+            start,
         }
     }
 
@@ -332,7 +350,56 @@ impl Model for MakoPlant {
     fn contacts(&self) -> u64 {
         self.sim.contact_count()
     }
+
+    fn place(&mut self, p: &super::engine::Placement) -> Result<(), String> {
+        let pool = self.sim.model().world().pool_m;
+        for (name, value, max) in [
+            ("x_m", p.x_m, pool.x),
+            ("y_m", p.y_m, pool.y),
+            ("depth_m", p.depth_m, pool.z),
+        ] {
+            if !(value.is_finite() && (0.0..=max).contains(&value)) {
+                return Err(format!("{name} {value}: outside the pool (0 to {max} m)"));
+            }
+        }
+        if !p.heading_deg.is_finite() {
+            return Err(format!(
+                "heading_deg {}: expected a number of degrees",
+                p.heading_deg
+            ));
+        }
+        self.sim.place(
+            Vector3::new(p.x_m, p.y_m, p.depth_m),
+            p.heading_deg.to_radians(),
+        );
+        self.sensors
+            .update(&self.sim.state(), self.sim.ray_caster());
+        Ok(())
+    }
+
+    fn set_current(&mut self, north_mps: f64, east_mps: f64) -> Result<(), String> {
+        for (name, value) in [("north_mps", north_mps), ("east_mps", east_mps)] {
+            if !(value.is_finite() && value.abs() <= MAX_CURRENT_MPS) {
+                return Err(format!(
+                    "{name} {value}: expected -{MAX_CURRENT_MPS} to {MAX_CURRENT_MPS} m/s"
+                ));
+            }
+        }
+        self.sim.set_current(Vector3::new(north_mps, east_mps, 0.0));
+        Ok(())
+    }
+
+    fn reset_pose(&mut self) -> Result<(), String> {
+        let (position, heading) = self.start;
+        self.sim.place(position, heading);
+        self.sensors
+            .update(&self.sim.state(), self.sim.ray_caster());
+        Ok(())
+    }
 }
+
+/// The strongest water current the live view may set (a pool has none near it).
+pub const MAX_CURRENT_MPS: f64 = 2.0;
 
 /// The device emulators for `config`.
 pub fn devices(config: &DaemonConfig) -> (SensorBoard, Multiplexer) {

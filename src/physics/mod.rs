@@ -139,6 +139,16 @@ impl Simulation {
         Ok(())
     }
 
+    /// Puts the vehicle at rest at a position and heading ([`Model::place`]).
+    pub fn place(&mut self, position_m: nalgebra::Vector3<f64>, heading_rad: f64) {
+        self.model.place(&mut self.state, position_m, heading_rad);
+    }
+
+    /// Sets the water current from now on ([`Model::set_current`]).
+    pub fn set_current(&mut self, current_mps: nalgebra::Vector3<f64>) {
+        self.model.set_current(current_mps);
+    }
+
     /// Simulated time (steps x step size).
     pub fn t_s(&self) -> f64 {
         self.state.steps() as f64 * self.model.step_s()

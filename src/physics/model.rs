@@ -303,6 +303,28 @@ impl Model {
         }
     }
 
+    /// Puts the vehicle at `position_m` with heading `heading_rad`, level and at rest over
+    /// ground (moving with no water: its velocity through the water is minus the current),
+    /// thruster lag and noise streams kept. The live view's "set pose" uses it.
+    pub fn place(&self, state: &mut SimState, position_m: Vector3<f64>, heading_rad: f64) {
+        state.position_m = position_m;
+        state.attitude = UnitQuaternion::from_euler_angles(0.0, 0.0, heading_rad);
+        let current_body = state.attitude.inverse() * self.world.current_mps;
+        state.nu_r = Vector6::new(
+            -current_body.x,
+            -current_body.y,
+            -current_body.z,
+            0.0,
+            0.0,
+            0.0,
+        );
+    }
+
+    /// Sets the steady water current (world frame, NED, m/s) from now on.
+    pub fn set_current(&mut self, current_mps: Vector3<f64>) {
+        self.world.current_mps = current_mps;
+    }
+
     /// Generalised force of weight and buoyancy (body frame, about the CG), i.e. -g(eta).
     fn restoring(&self, depth_m: f64, attitude: &UnitQuaternion<f64>) -> Vector6<f64> {
         let down_body = attitude.inverse_transform_vector(&Vector3::z());
@@ -339,6 +361,9 @@ impl Model {
         for i in 0..6 {
             out[i] += (lin[i] + quad[i] * nu[i].abs()) * nu[i];
         }
+        let [y_r, n_v] = self.vehicle.damping_sway_yaw;
+        out[1] += y_r * nu[5];
+        out[5] += n_v * nu[1];
         out
     }
 

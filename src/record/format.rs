@@ -29,12 +29,15 @@ pub const CONFIG_FILE: &str = "config.toml";
 pub const BYTES_FILE: &str = "bytes.tsv";
 pub const DROPS_FILE: &str = "drops.tsv";
 pub const STATE_FILE: &str = "state.csv";
+pub const EVENTS_FILE: &str = "events.tsv";
 
 /// Header line of `bytes.tsv` (the field names of [`ByteChunk`]).
 pub const BYTES_HEADER: &str = "sim_s\twall_unix_s\tlink\tdir\thex";
 
 /// Header line of `drops.tsv` (the field names of [`DropRow`]).
 pub const DROPS_HEADER: &str = "sim_s\twall_unix_s\tlink\treason\thex";
+/// The header of `events.tsv`.
+pub const EVENTS_HEADER: &str = "sim_s\twall_unix_s\tevent\tdetail";
 
 /// Header of `state.csv` and of `simulate`'s trace (the field names of [`StateRow`]).
 pub const STATE_HEADER: &str = "t_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,u_mps,v_mps,w_mps,\
@@ -145,10 +148,22 @@ pub struct DropRow {
     pub data: Vec<u8>,
 }
 
+/// One row of `events.tsv`: a change made to the run while it ran.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EventRow {
+    /// Simulated time at which the change took effect.
+    pub sim_s: f64,
+    pub wall_unix_s: f64,
+    /// `pause`, `resume`, `speed`, `pose`, `current` or `reset`.
+    pub event: String,
+    /// The change's values as space-separated `key=value` pairs (empty for none).
+    pub detail: String,
+}
+
 /// One row of `state.csv`, and of `simulate`'s trace: the vehicle's true state. World frame
 /// NED, body frame forward-starboard-down, ZYX Euler angles, thruster forces after the motor
 /// lag; full precision, so a trace reads back bit for bit.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct StateRow {
     pub t_s: f64,
     pub x_m: f64,
@@ -479,6 +494,18 @@ pub fn read_bytes(dir: &Path) -> Result<Vec<ByteChunk>, ReadError> {
         BYTES_HEADER,
         |c: &ByteChunk| finite_time("sim_s", c.sim_s),
     )
+}
+
+/// Reads `events.tsv` of the recording in `dir`: the changes made to the run while it ran
+/// (the live view's controls). A recording made before the file existed has none.
+pub fn read_events(dir: &Path) -> Result<Vec<EventRow>, ReadError> {
+    let path = dir.join(EVENTS_FILE);
+    if !path.exists() {
+        return Ok(Vec::new());
+    }
+    read_table(&path, b'\t', EVENTS_HEADER, |e: &EventRow| {
+        finite_time("sim_s", e.sim_s)
+    })
 }
 
 /// Reads `drops.tsv` of the recording in `dir`.

@@ -34,9 +34,9 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 pub use self::format::{
-    BYTES_HEADER, ByteChunk, DROPS_HEADER, Direction, DropReason, DropRow, Meta, ModelFiles,
-    ParseChunkError, ReadError, STATE_HEADER, StateRow, parse_chunk, read_bytes, read_config,
-    read_drops, read_meta, read_model_files, read_state, read_state_file,
+    BYTES_HEADER, ByteChunk, DROPS_HEADER, Direction, DropReason, DropRow, EVENTS_HEADER, EventRow,
+    Meta, ModelFiles, ParseChunkError, ReadError, STATE_HEADER, StateRow, parse_chunk, read_bytes,
+    read_config, read_drops, read_events, read_meta, read_model_files, read_state, read_state_file,
 };
 
 /// The longest a recorded chunk may wait in memory before it reaches the file.
@@ -74,6 +74,7 @@ enum Message {
     Bytes(ByteChunk),
     Dropped(DropRow),
     State(StateRow),
+    Event(EventRow),
     Finish,
 }
 
@@ -137,6 +138,17 @@ impl RecordHandle {
         }
     }
 
+    /// Records a change made to the run at simulated time `sim_s` (`events.tsv`).
+    pub fn event(&self, sim_s: f64, event: &str, detail: &str) {
+        let row = EventRow {
+            sim_s,
+            wall_unix_s: wall_unix_s(),
+            event: event.to_string(),
+            detail: detail.to_string(),
+        };
+        self.send_or_log(Message::Event(row), "event");
+    }
+
     fn send_or_log(&self, message: Message, what: &str) {
         if !self.send(message) {
             tracing::error!("recorder thread is gone; {what} not recorded");
@@ -171,6 +183,8 @@ pub struct Stats {
     pub dropped_bytes: u64,
     /// How often a caller had to wait for the recorder (its queue was full).
     pub stalls: u64,
+    /// Rows of `events.tsv`.
+    pub events: u64,
 }
 
 /// One table of the recording and where it lives (for errors).
@@ -226,11 +240,17 @@ struct Files {
     bytes: Table,
     drops: Table,
     state: Table,
+    events: Table,
 }
 
 impl Files {
-    fn each(&mut self) -> [&mut Table; 3] {
-        [&mut self.bytes, &mut self.drops, &mut self.state]
+    fn each(&mut self) -> [&mut Table; 4] {
+        [
+            &mut self.bytes,
+            &mut self.drops,
+            &mut self.state,
+            &mut self.events,
+        ]
     }
 }
 
@@ -255,6 +275,7 @@ impl Recorder {
             bytes: Table::create(dir.join(format::BYTES_FILE), b'\t', BYTES_HEADER)?,
             drops: Table::create(dir.join(format::DROPS_FILE), b'\t', DROPS_HEADER)?,
             state: Table::create(dir.join(format::STATE_FILE), b',', STATE_HEADER)?,
+            events: Table::create(dir.join(format::EVENTS_FILE), b'\t', EVENTS_HEADER)?,
         };
         for table in files.each() {
             table.flush()?;
@@ -300,6 +321,11 @@ impl Recorder {
     /// Records bytes put on `link` that never reached the endpoint (`drops.tsv`).
     pub fn dropped(&self, sim_s: f64, link: &'static str, reason: DropReason, data: &[u8]) {
         self.handle.dropped(sim_s, link, reason, data);
+    }
+
+    /// Records a change made to the run (`events.tsv`).
+    pub fn event(&self, sim_s: f64, event: &str, detail: &str) {
+        self.handle.event(sim_s, event, detail);
     }
 
     /// Records one ground-truth row.
@@ -353,6 +379,10 @@ fn write_loop(rx: mpsc::Receiver<Message>, mut files: Files) -> Result<Stats, Re
             Some(Message::State(row)) => {
                 files.state.write(&row)?;
                 stats.states += 1;
+            }
+            Some(Message::Event(row)) => {
+                files.events.write(&row)?;
+                stats.events += 1;
             }
             Some(Message::Finish) => {
                 for table in files.each() {
@@ -416,6 +446,7 @@ mod tests {
         }
         rec.handle()
             .dropped(1.75, "sensor", DropReason::NotRead, &[0xEB, 0x90]);
+        rec.event(1.8, "pose", "x_m=2 y_m=3 depth_m=1 heading_deg=90");
         let stats = rec.finish().unwrap();
         assert_eq!(
             stats,
@@ -426,7 +457,18 @@ mod tests {
                 drops: 1,
                 dropped_bytes: 2,
                 stalls: 0,
+                events: 1,
             }
+        );
+        let events = read_events(dir).unwrap();
+        assert_eq!(events.len(), 1);
+        assert_eq!(
+            (
+                events[0].sim_s,
+                events[0].event.as_str(),
+                events[0].detail.as_str()
+            ),
+            (1.8, "pose", "x_m=2 y_m=3 depth_m=1 heading_deg=90")
         );
         assert_eq!(read_meta(dir).unwrap(), meta);
         assert_eq!(read_config(dir).unwrap(), config);
@@ -502,12 +544,10 @@ mod tests {
         assert_eq!(meta.format, format::FORMAT_COMMENTED_CONFIG);
         assert_eq!(meta.time_mode, "lockstep");
         let config = read_config(dir).unwrap();
-        use crate::config::ConfigSource as _;
-        let embedded = crate::config::Embedded
-            .read(crate::config::DEFAULT_CONFIG)
-            .unwrap();
+        // the default configuration of the binary that made it (configs/default.toml then)
+        let then = std::fs::read_to_string(dir.join("default-then.toml")).unwrap();
         assert_eq!(
-            config, embedded,
+            config, then,
             "the commented copy is the configuration verbatim"
         );
         assert_eq!(

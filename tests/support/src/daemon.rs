@@ -170,6 +170,8 @@ pub struct Daemon {
     pub run_dir: PathBuf,
     /// `(name, path)` of each `link NAME: PATH` line of the announcement.
     pub links: Vec<(String, String)>,
+    /// The URL of the `view: URL` line (`run --view`).
+    pub view_url: Option<String>,
 }
 
 impl Daemon {
@@ -229,6 +231,7 @@ impl Daemon {
             dir,
             run_dir,
             links: Vec::new(),
+            view_url: None,
         };
         let deadline = Instant::now() + READY_TIMEOUT;
         loop {
@@ -237,6 +240,8 @@ impl Daemon {
                     if let Some(rest) = line.strip_prefix("link ") {
                         let (name, path) = rest.split_once(": ").expect("`link NAME: PATH`");
                         daemon.links.push((name.into(), path.into()));
+                    } else if let Some(url) = line.strip_prefix("view: ") {
+                        daemon.view_url = Some(url.to_string());
                     } else if line.starts_with("ready") {
                         return daemon;
                     }

@@ -10,10 +10,13 @@
 //! - [`daemon`]: the daemon under test, as the built binary ([`Daemon`], given the path from
 //!   `CARGO_BIN_EXE_eyebot-hil`) or in-process ([`InProcessDaemon`]).
 //! - [`clients`]: EyeBot-side clients of a running daemon's links.
+//! - [`browser`]: headless chromium over the DevTools protocol, and a plain HTTP client,
+//!   for the live view.
 //! - [`recording`]: a `--record` directory read back.
 //! - [`pty`]: ptys made with the bridge's own `PtyMaster`, and a timestamping reader.
 //! - [`eyebot_c`]: the EyeBot C library and programs built with make and run against a daemon.
 
+pub mod browser;
 pub mod clients;
 pub mod config;
 pub mod daemon;

@@ -1,0 +1,203 @@
+//! The live view: a page in the browser that shows the vehicle in the pool, what each sonar
+//! transducer sees, the sensor readings and thruster commands as plots, the links' counters
+//! and decoded messages, for a running bridge (`run --view`) and for a recording
+//! (`eyebot-hil view RECORD_DIR`).
+//!
+//! What flows where:
+//! - the daemon's loop hands the view link bytes and the true state through a [`tap::Tap`]
+//!   (bounded, `try_send`, latest-wins: the simulation never waits for a page);
+//! - [`live`] decodes the wire ([`wire::WireWatch`]) and publishes one [`frame::Frame`] per
+//!   state update (20 Hz) through a `watch`; each page's event stream reads the newest;
+//! - [`recording`] decodes a recording once and answers "what was it like at time t";
+//! - [`server`] serves the embedded page (`page.html`: HTML, CSS and JavaScript drawing on a
+//!   canvas, no build step, nothing fetched from elsewhere) with axum on the daemon's tokio
+//!   runtime, behind a random token, `Host` and `Origin` checks; controls are POST only and
+//!   go back to the loop as [`tap::ControlRequest`]s, which the recording keeps as events.
+
+pub mod frame;
+pub mod live;
+pub mod recording;
+pub mod scene;
+pub mod server;
+pub mod tap;
+pub mod wire;
+
+use std::net::SocketAddr;
+
+use tokio::sync::{mpsc, watch};
+
+pub use self::scene::Scene;
+use self::server::{Guard, Source};
+
+/// Where and how to serve a view.
+#[derive(Debug, Clone)]
+pub struct ViewOptions {
+    pub addr: SocketAddr,
+    /// Allows a non-loopback address (and any `Host`; the token still guards).
+    pub public: bool,
+    /// The pool, the hull and the transducers to draw.
+    pub scene: Scene,
+}
+
+/// The default address: loopback, a port the system chooses.
+pub const DEFAULT_ADDR: &str = "127.0.0.1:0";
+
+/// Why a view could not be served.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewError {
+    #[error(
+        "view address {addr}: not a loopback address; pass --view-public to serve the view (and its controls) to the network"
+    )]
+    NotLoopback { addr: SocketAddr },
+    #[error("view address {addr}: {source}")]
+    Bind {
+        addr: SocketAddr,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("view: no random token could be drawn from the system: {0}")]
+    Token(String),
+    #[error(transparent)]
+    Recording(#[from] crate::record::ReadError),
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+}
+
+/// A bound listener with its token, not serving yet.
+#[derive(Debug)]
+pub struct Bound {
+    listener: tokio::net::TcpListener,
+    guard: Guard,
+    url: String,
+}
+
+/// Binds `addr` (refusing a non-loopback one unless `public`) and draws the token.
+pub async fn bind(addr: SocketAddr, public: bool) -> Result<Bound, ViewError> {
+    if !addr.ip().is_loopback() && !public {
+        return Err(ViewError::NotLoopback { addr });
+    }
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .map_err(|source| ViewError::Bind { addr, source })?;
+    let local = listener
+        .local_addr()
+        .map_err(|source| ViewError::Bind { addr, source })?;
+    let guard = Guard::new(local, public).map_err(|e| ViewError::Token(e.to_string()))?;
+    if public {
+        tracing::warn!(
+            addr = %local,
+            "the view is served beyond this machine: anyone with the URL can watch and steer the run"
+        );
+    }
+    let url = format!("http://{local}/?token={}", guard.token());
+    Ok(Bound {
+        listener,
+        guard,
+        url,
+    })
+}
+
+impl Bound {
+    /// The URL to open (it carries the token).
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
+    pub fn local_addr(&self) -> Option<SocketAddr> {
+        self.listener.local_addr().ok()
+    }
+
+    /// Serves `source` until `stop` turns true (open event streams end then too).
+    pub async fn serve(self, source: Source, scene: Scene, stop: watch::Receiver<bool>) {
+        let app = server::router(source, scene, self.guard, stop.clone());
+        let mut stop = stop;
+        let served = axum::serve(self.listener, app)
+            .with_graceful_shutdown(async move {
+                let _ = stop.wait_for(|s| *s).await;
+            })
+            .await;
+        if let Err(e) = served {
+            tracing::error!(error = %e, "the view server stopped");
+        }
+    }
+}
+
+/// The daemon's half of a live view: what [`crate::daemon::Daemon`] keeps.
+#[derive(Debug)]
+pub struct DaemonSide {
+    pub tap: tap::Tap,
+    pub controls: mpsc::Receiver<tap::ControlRequest>,
+}
+
+/// Controls that may wait for the loop before the page is told the bridge is busy.
+pub const CONTROL_QUEUE: usize = 8;
+
+/// A service to run beside the links: given the daemon's stop signal, the future to spawn.
+pub type LiveService = Box<
+    dyn FnOnce(watch::Receiver<bool>) -> std::pin::Pin<Box<dyn Future<Output = ()> + Send>> + Send,
+>;
+
+/// Serves the view of a running daemon: returns the daemon's side and the service to spawn
+/// beside the links (given the daemon's status updates and stop signal).
+pub fn live(
+    bound: Bound,
+    scene: Scene,
+    status: watch::Receiver<crate::daemon::status::StatusSnapshot>,
+) -> (DaemonSide, LiveService) {
+    let (tap, tap_rx) = tap::tap();
+    let (controls_tx, controls) = mpsc::channel(CONTROL_QUEUE);
+    let service = move |stop: watch::Receiver<bool>| {
+        let (shared, live) = live::service(tap_rx, status, stop.clone());
+        let source = Source::Live {
+            shared,
+            controls: Some(controls_tx),
+        };
+        let fut: std::pin::Pin<Box<dyn Future<Output = ()> + Send>> = Box::pin(async move {
+            tokio::join!(live, bound.serve(source, scene, stop));
+        });
+        fut
+    };
+    (DaemonSide { tap, controls }, Box::new(service))
+}
+
+/// Serves the view of the recording in `dir` until `stop` turns true; `on_ready` runs once
+/// the recording is read and the page can be opened.
+pub async fn serve_recording(
+    bound: Bound,
+    dir: &std::path::Path,
+    stop: watch::Receiver<bool>,
+    on_ready: impl FnOnce(),
+) -> Result<(), ViewError> {
+    let recording = recording::RecordingView::load(dir)?;
+    let files = crate::record::read_model_files(dir)?;
+    let scene = recording_scene(dir, &files)?;
+    on_ready();
+    bound
+        .serve(
+            Source::Recording(std::sync::Arc::new(recording)),
+            scene,
+            stop,
+        )
+        .await;
+    Ok(())
+}
+
+/// The scene of a recording: its model files from beside it, else the embedded ones (as
+/// `gap convert` finds them).
+fn recording_scene(
+    dir: &std::path::Path,
+    files: &crate::record::ModelFiles,
+) -> Result<Scene, ViewError> {
+    let pick = |name: &str| -> Box<dyn crate::config::ConfigSource> {
+        if dir.join(name).is_file() {
+            Box::new(crate::config::Directory::new(dir))
+        } else {
+            Box::new(crate::config::Embedded)
+        }
+    };
+    let vehicle = crate::physics::load_vehicle(pick(&files.vehicle).as_ref(), &files.vehicle)?;
+    let world = crate::physics::load_world(pick(&files.world).as_ref(), &files.world)?;
+    let sensors =
+        crate::sensors::SensorsConfig::load(pick(&files.sensors).as_ref(), &files.sensors)?;
+    Ok(Scene::new(&vehicle, &world, &sensors))
+}
