@@ -43,7 +43,7 @@ fn run_seed(
 }
 
 /// Thesis 4.5: the compass heading hold drives straight: lateral deviation under 0.3 m over
-/// the first 10 m (default start: mid-pool facing north, 20 m of water ahead).
+/// the first 10 m (default start: 2.5 m off the west wall facing north, 20 m of water ahead).
 #[test]
 fn heading_hold_drives_straight() {
     let (rec, _) = run("heading_hold", "heading_hold", None);
@@ -349,5 +349,5 @@ fn examples_include_only_eyebot_h_and_standard_headers() {
         }
         checked += 1;
     }
-    assert_eq!(checked, 5, "examples found in {}", dir.display());
+    assert_eq!(checked, 6, "examples found in {}", dir.display());
 }

@@ -62,6 +62,8 @@ fn build_robios(name: &str, timeout_ms: u32) -> PathBuf {
         &[],
         &[
             "BACKEND=robios".into(),
+            // timer_square uses RoBIOS's own timers and threads, which the stand-in lacks
+            "EXAMPLES=heading_hold spot_turn dive_hold sonar_three wall_follower".into(),
             cflags,
             format!("LDLIBS={}", stub_o.display()),
         ],

@@ -25,6 +25,10 @@ int eb_port_write(int link, const uint8_t *data, size_t n);
 long eb_port_read(int link, uint8_t *buf, size_t cap, long timeout_ms);
 /* Drops bytes waiting in the driver. */
 void eb_port_flush_in(int link);
+/* POSIX back-end only (RoBIOS has its own OSFlushOutRS232/OSCheckOutRS232): drops the bytes
+ * written and not yet sent; the number of such bytes. */
+void eb_port_flush_out(int link);
+long eb_port_out_pending(int link);
 /* 1 when the link is open. */
 int eb_port_is_open(int link);
 

@@ -21,6 +21,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/ioctl.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
@@ -197,6 +198,19 @@ void eb_port_flush_in(int link) {
     if (eb_port_is_open(link)) tcflush(fds[link], TCIFLUSH);
 }
 
+void eb_port_flush_out(int link) {
+    if (eb_port_is_open(link)) tcflush(fds[link], TCOFLUSH);
+}
+
+long eb_port_out_pending(int link) {
+    int n = 0;
+    if (!eb_port_is_open(link)) return -1;
+    if (ioctl(fds[link], TIOCOUTQ, &n) != 0) return 0;
+    return n;
+}
+
+static int lcd_row, lcd_column;
+
 /* ---- LCD stand-in ----------------------------------------------------------------------- */
 static FILE *lcd_file(void) {
     static FILE *f;
@@ -232,9 +246,66 @@ int LCDPutChar(char chr) { return LCDPrintf("%c", chr); }
 int LCDPutInt(int value) { return LCDPrintf("%d", value); }
 int LCDClear(void) { return LCDPrintf("\n"); }
 int LCDSetPos(int row, int column) {
-    (void)row;
-    (void)column;
+    lcd_row = row;
+    lcd_column = column;
     return 0;
+}
+int LCDPutFloat(float value) { return LCDPrintf("%8.3f", (double)value); }
+int LCDPutFloatS(float value, int spaces, int decimals) {
+    return LCDPrintf("%*.*f", spaces, decimals, (double)value);
+}
+int LCDPutHex(int value) { return LCDPrintf("%X", (unsigned)value); }
+int LCDPutHex1(int value) { return LCDPrintf("%02X", (unsigned)value & 0xFFu); }
+int LCDPutIntS(int value, int spaces) { return LCDPrintf("%*d", spaces, value); }
+
+/* The stand-in is a text stream: a position is remembered for LCDGetPos, text is appended. */
+static int lcd_row, lcd_column;
+
+int LCDGetPos(int *row, int *column) {
+    if (row) *row = lcd_row;
+    if (column) *column = lcd_column;
+    return 0;
+}
+int LCDSetChar(int row, int column, char chr) {
+    LCDSetPos(row, column);
+    return LCDPutChar(chr);
+}
+int LCDSetString(int row, int column, const char *str) {
+    LCDSetPos(row, column);
+    return LCDPutString(str);
+}
+int LCDSetPrintf(int row, int column, const char *format, ...) {
+    va_list ap;
+    int n;
+    FILE *f = lcd_file();
+    LCDSetPos(row, column);
+    va_start(ap, format);
+    n = vfprintf(f, format, ap);
+    va_end(ap);
+    fflush(f);
+    return n < 0 ? -1 : 0;
+}
+int LCDMode(int mode) {
+    (void)mode;
+    return 0;
+}
+int LCDRefresh(void) { return 0; }
+int LCDPixel(int x, int y, int value) {
+    (void)x;
+    (void)y;
+    (void)value;
+    return 0;
+}
+int LCDLine(int x1, int y1, int x2, int y2, int value) {
+    (void)x1;
+    (void)y1;
+    (void)x2;
+    (void)y2;
+    (void)value;
+    return 0;
+}
+int LCDArea(int x1, int y1, int x2, int y2, int value) {
+    return LCDLine(x1, y1, x2, y2, value);
 }
 int LCDMenu(const char *string1, const char *string2, const char *string3, const char *string4) {
     return LCDPrintf("[%s|%s|%s|%s]\n", string1 ? string1 : "", string2 ? string2 : "",
@@ -244,8 +315,9 @@ int LCDMenu(const char *string1, const char *string2, const char *string3, const
 /* ---- keys: a script in EYEBOT_KEYS -------------------------------------------------------
  * Comma-separated entries KEY[@SECONDS]: key 1..4, due at that program time (default: at
  * once). KEYRead returns a due key or NOKEY; KEYGet and KEYWait wait (OSWait) until the next
- * key is due. When the script is used up, waiting for a key ends the program (status 0),
- * because nobody is there to press one. */
+ * key is due. Waiting for a key when the script has none left (or is empty) ends the program
+ * with status 5 and a message naming the call: nobody is there to press one, and a program
+ * that stopped at "press GO" has not succeeded. */
 static int key_codes[32];
 static long key_due_ticks[32];
 static int key_count = -1, key_next;
@@ -277,18 +349,34 @@ static void keys_load(void) {
     }
 }
 
+static void no_key_left(const char *call, int excode) {
+    char text[300];
+    if (key_count == 0)
+        snprintf(text, sizeof text,
+                 "eyebot: %s(0x%X) waits for a key but the key script is empty: set "
+                 "EYEBOT_KEYS, e.g. EYEBOT_KEYS=4 to press KEY4 at once, or 1,4@60 "
+                 "(docs/eyebot.md); program stopped at t %.2f s",
+                 call, (unsigned)excode, OSGetCount() / 100.0);
+    else
+        snprintf(text, sizeof text,
+                 "eyebot: %s(0x%X) waits for a key but the key script (EYEBOT_KEYS) is used "
+                 "up; program stopped at t %.2f s",
+                 call, (unsigned)excode, OSGetCount() / 100.0);
+    eb_exit(5, text);
+}
+
 int KEYRead(void) {
     if (key_count < 0) keys_load();
     if (key_next < key_count && OSGetCount() >= key_due_ticks[key_next]) return key_codes[key_next++];
     return NOKEY;
 }
 
-int KEYWait(int excode) {
+static int key_wait(const char *call, int excode) {
     if (key_count < 0) keys_load();
     for (;;) {
         long now;
         int key;
-        if (key_next >= key_count) eb_exit(0, "eyebot: key script (EYEBOT_KEYS) used up; program ends");
+        if (key_next >= key_count) no_key_left(call, excode);
         now = OSGetCount();
         if (now < key_due_ticks[key_next]) {
             OSWait((int)(key_due_ticks[key_next] - now));
@@ -299,4 +387,23 @@ int KEYWait(int excode) {
     }
 }
 
-int KEYGet(void) { return KEYWait(ANYKEY); }
+int KEYWait(int excode) { return key_wait("KEYWait", excode); }
+
+int KEYGet(void) { return key_wait("KEYGet", ANYKEY); }
+
+/* ---- sound: to the log ------------------------------------------------------------------- */
+static long tone_end_ticks;
+
+int AUTone(int freq, int msec) {
+    long now = OSGetCount();
+    fprintf(stderr, "eyebot: sound: tone %d Hz for %d ms at t %.2f s\n", freq, msec, now / 100.0);
+    tone_end_ticks = now + (msec > 0 ? (msec + 9) / 10 : 0);
+    return 0;
+}
+
+int AUBeep(void) {
+    fprintf(stderr, "eyebot: sound: beep at t %.2f s\n", OSGetCount() / 100.0);
+    return 0;
+}
+
+int AUCheckTone(void) { return OSGetCount() >= tone_end_ticks; }

@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "eb_core.h"
 #include "eb_hdt.h"
 #include "eb_port.h"
 
@@ -31,6 +32,7 @@
 #define T_COMPASS_CALIBRATE 0x22
 #define T_COMPASS_RESET 0x23
 #define T_THRUSTER_SET 0x30
+#define T_THRUSTER_SET_ALL 0x31
 #define T_TIME_GET 0x40
 #define T_TIME_ADVANCE 0x41
 #define T_TIME_MODE 0x42
@@ -87,6 +89,8 @@ static struct {
     int mode;
     uint8_t seq;
     uint32_t tick_us;      /* the bridge's tick */
+    uint32_t now_bridge;   /* lockstep: the bridge's time in its ticks, from its last TIME */
+    int serial_written;    /* lockstep: bytes went out on a serial port since the last advance */
     uint16_t capabilities;
     long timeout_ms;
     int retries;
@@ -137,7 +141,10 @@ static int ring_pop(int port, uint8_t *b) {
 
 static char msgbuf[200];
 
+static int link_failed;
+
 static void fail(const char *what) {
+    link_failed = 1;
     snprintf(msgbuf, sizeof msgbuf, "eyebot: sensor link: %s", what);
     eb_exit(3, msgbuf);
 }
@@ -252,12 +259,23 @@ static int read_frame(long timeout_ms) {
 }
 
 static void session_open(void);
+static void flush_thrusters(void);
+static void flush_at_exit(void);
+
+/* Lockstep: thruster commands wait here until the next request, and consecutive ones go out
+ * as one THRUSTER_SET_ALL. No simulated time passes between requests in lockstep, so the
+ * bridge applies them at the same tick as one by one, and before any reading that follows. */
+static struct {
+    int pending;
+    uint8_t duty[4], direction[4];
+} M = {0, {0xFF, 0xFF, 0xFF, 0xFF}, {0, 0, 0, 0}};
 
 /* Sends a request and waits for its reply (same seq): returns the reply type (payload in
  * S.f_payload), or -1 after the retries. A NAK returns T_NAK with S.nak_code set. */
 static int request(uint8_t type, const uint8_t *payload, uint8_t len, long extra_ms) {
     int attempt;
     if (S.state == 0) session_open();
+    if (M.pending) flush_thrusters();
     S.seq = (uint8_t)(S.seq + 1);
     for (attempt = 0; attempt <= S.retries; attempt++) {
         long deadline;
@@ -296,6 +314,7 @@ static void session_open(void) {
     stop_s = config_long("EYEBOT_STOP_S", 0);
     S.stop_ticks = stop_s > 0 ? (uint32_t)stop_s * 100U : 0;
     S.compass_latest = -1;
+    atexit(flush_at_exit);
     if (S.shared_port < 0 || S.shared_port > 3) eb_exit(2, "eyebot: EYEBOT_SHARED_PORT must be 0..3");
     if (eb_port_open(EB_LINK_SENSOR, -1) != 0) eb_exit(3, "eyebot: cannot open the sensor link");
     eb_port_flush_in(EB_LINK_SENSOR);
@@ -328,6 +347,13 @@ static void session_open(void) {
     r = request(T_TIME_MODE, p, 1, 0);
     if (r == T_ACK) {
         S.mode = p[0];
+        /* In lockstep only this client's TIME_ADVANCE moves time, so after one TIME_GET the
+         * library knows the bridge's time from the TIME replies it receives. */
+        if (S.mode == MODE_LOCKSTEP) {
+            r = request(T_TIME_GET, NULL, 0, 0);
+            if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+            S.now_bridge = get_be32(S.f_payload);
+        }
     } else if (r == T_NAK && strcmp(mode, "auto") == 0) {
         S.mode = MODE_REALTIME;
     } else if (r == T_NAK) {
@@ -339,6 +365,31 @@ static void session_open(void) {
     }
 }
 
+/* Sends the collected thruster commands; the reply type. */
+static int send_thrusters(void) {
+    uint8_t p[8];
+    int i;
+    M.pending = 0;
+    for (i = 0; i < 4; i++) {
+        p[2 * i] = M.duty[i];
+        p[2 * i + 1] = M.direction[i];
+    }
+    return request(T_THRUSTER_SET_ALL, p, 8, 0);
+}
+
+static void flush_thrusters(void) {
+    if (send_thrusters() != T_ACK) fail("no ACK to THRUSTER_SET_ALL");
+}
+
+/* A program that ends right after a thruster command still sends it (best effort: the
+ * program is ending either way). */
+static void flush_at_exit(void) {
+    if (M.pending && !link_failed && S.state == 1) {
+        link_failed = 1; /* a failure inside must not exit again */
+        (void)send_thrusters();
+    }
+}
+
 static void ensure_session(void) {
     if (S.state == 0) session_open();
 }
@@ -346,12 +397,6 @@ static void ensure_session(void) {
 /* Program ticks <-> bridge ticks. */
 static uint32_t to_bridge_ticks(uint32_t program_ticks) {
     return (uint32_t)(((uint64_t)program_ticks * PROGRAM_TICK_US + S.tick_us / 2) / S.tick_us);
-}
-
-static uint32_t bridge_now_ticks(void) {
-    int r = request(T_TIME_GET, NULL, 0, 0);
-    if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
-    return get_be32(S.f_payload);
 }
 
 /* Reads what the serial ports' drivers hold into their rings (no waiting). */
@@ -379,12 +424,21 @@ static void advance(uint32_t program_ticks) {
     uint8_t p[4];
     uint32_t n = to_bridge_ticks(program_ticks);
     int r;
+    if (S.serial_written) {
+        /* The bridge stamps a serial byte with the simulated time at which it reads it from
+         * its own port. One round trip on the sensor link before time moves gives it that
+         * read at the current tick, as it had when every OSGetCount was a TIME_GET. */
+        S.serial_written = 0;
+        r = request(T_TIME_GET, NULL, 0, 0);
+        if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+    }
     put_be32(p, n);
     /* the bridge needs time to simulate n ticks: allow 1 ms per tick on top */
     r = request(T_TIME_ADVANCE, p, 4, (long)(n > 100000 ? 100000 : n));
     if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_ADVANCE");
+    S.now_bridge = get_be32(S.f_payload);
     if (S.stop_ticks) {
-        uint64_t now_us = (uint64_t)get_be32(S.f_payload) * S.tick_us;
+        uint64_t now_us = (uint64_t)S.now_bridge * S.tick_us;
         if (now_us >= (uint64_t)S.stop_ticks * PROGRAM_TICK_US) {
             int i;
             uint8_t off[3];
@@ -400,31 +454,80 @@ static void advance(uint32_t program_ticks) {
 }
 
 /* ---- timing ---------------------------------------------------------------------------- */
+void eb_session(void) { ensure_session(); }
+
+int eb_lockstep(void) {
+    ensure_session();
+    return S.mode == MODE_LOCKSTEP;
+}
+
+static void realtime_stop_check(void) {
+    if (S.stop_ticks && (uint32_t)eb_now_ticks() >= S.stop_ticks)
+        eb_exit(0, "eyebot: EYEBOT_STOP_S reached");
+}
+
+/* 1 when the program opened a serial port (the sonar line). */
+static int serial_open(void) {
+    int port;
+    for (port = 1; port < EB_LINKS; port++)
+        if (ring[port].open) return 1;
+    return 0;
+}
+
+long eb_now_ticks(void) {
+    ensure_session();
+    if (S.mode == MODE_LOCKSTEP) {
+        uint64_t us;
+        /* The bridge's time is known from its last TIME reply. A program with a serial port
+         * open still asks (TIME_GET): bytes between the program and the bridge's serial
+         * ports travel on their own line, and the round trip gives those the bridge wrote
+         * during the last advance the time to arrive before the program looks for them. */
+        if (serial_open()) {
+            int r = request(T_TIME_GET, NULL, 0, 0);
+            if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+            S.now_bridge = get_be32(S.f_payload);
+        }
+        us = (uint64_t)S.now_bridge * S.tick_us;
+        return (long)(us / PROGRAM_TICK_US);
+    }
+    return (eb_clock_ms() - S.start_ms) / 10;
+}
+
+void eb_time_until(long tick) {
+    long now = eb_now_ticks();
+    if (tick <= now) return;
+    if (S.mode == MODE_LOCKSTEP) {
+        advance((uint32_t)(tick - now));
+    } else {
+        long left = S.start_ms + tick * 10 - eb_clock_ms();
+        eb_sleep_ms(left);
+        realtime_stop_check();
+    }
+}
+
+void eb_time_sleep(long n) {
+    ensure_session();
+    eb_sleep_ms(n * 10);
+    realtime_stop_check();
+}
+
+#ifdef EYEBOT_BACKEND_ROBIOS
+/* On a real EyeBot RoBIOS keeps its own timers and threads; the POSIX back-end's OSWait,
+ * with timers and threads, is in eb_os.c. */
 void OSWait(int n) {
     ensure_session();
     if (n < 0) n = 0;
-    if (S.mode == MODE_LOCKSTEP) {
-        advance((uint32_t)n);
-    } else {
-        eb_sleep_ms((long)n * 10);
-        if (S.stop_ticks && (uint32_t)OSGetCount() >= S.stop_ticks)
-            eb_exit(0, "eyebot: EYEBOT_STOP_S reached");
-    }
+    if (S.mode == MODE_LOCKSTEP) advance((uint32_t)n);
+    else eb_time_sleep(n);
 }
 
 int OSSleep(int n) {
     OSWait(n);
     return 0;
 }
+#endif
 
-int OSGetCount(void) {
-    ensure_session();
-    if (S.mode == MODE_LOCKSTEP) {
-        uint64_t us = (uint64_t)bridge_now_ticks() * S.tick_us;
-        return (int)(us / PROGRAM_TICK_US);
-    }
-    return (int)((eb_clock_ms() - S.start_ms) / 10);
-}
+int OSGetCount(void) { return (int)eb_now_ticks(); }
 
 /* ---- serial ports ----------------------------------------------------------------------- */
 static int valid_port(int port) { return port >= 1 && port <= 3; }
@@ -443,6 +546,7 @@ int OSInitRS232(int baud, int handshake, int port) {
 int OSSendCharRS232(char chr, int port) {
     uint8_t b = (uint8_t)chr;
     if (!valid_port(port) || !ring[port].open) return -1;
+    S.serial_written = 1;
     return eb_port_write(port == S.shared_port ? EB_LINK_SENSOR : port, &b, 1) == 0 ? 0 : -1;
 }
 
@@ -495,6 +599,20 @@ int OSFlushInRS232(int port) {
     ring[port].head = 0;
     return 0;
 }
+
+#ifndef EYEBOT_BACKEND_ROBIOS
+/* Bytes the program wrote that the port has not sent yet are in the host driver's queue. */
+int OSFlushOutRS232(int port) {
+    if (!valid_port(port) || !ring[port].open) return -1;
+    eb_port_flush_out(port == S.shared_port ? EB_LINK_SENSOR : port);
+    return 0;
+}
+
+int OSCheckOutRS232(int port) {
+    if (!valid_port(port) || !ring[port].open) return -1;
+    return (int)eb_port_out_pending(port == S.shared_port ? EB_LINK_SENSOR : port);
+}
+#endif
 
 /* ---- analog input ------------------------------------------------------------------------ */
 int OSGetAD(int channel) {
@@ -613,9 +731,28 @@ static int thruster_of(DeviceSemantics semantics) {
 #define HANDLE_OF(i) ((MotorHandle)(intptr_t)((i) + 1))
 #define INDEX_OF(h) ((int)(intptr_t)(h)-1)
 
+/* A motor call on a handle MOTORInit did not return (or MOTORRelease gave back) is a bug
+ * in the program that would otherwise do nothing at all: it is reported, naming the call,
+ * and the program ends (status 4). */
+static void motor_misuse(const char *call, MotorHandle handle) {
+    snprintf(msgbuf, sizeof msgbuf,
+             "eyebot: %s(handle %ld): not a motor handle from MOTORInit (call MOTORInit "
+             "first, and check its result is not 0)",
+             call, (long)(intptr_t)handle);
+    eb_exit(4, msgbuf);
+}
+
 MotorHandle MOTORInit(DeviceSemantics semantics) {
     int i = thruster_of(semantics);
-    if (i < 0) return HANDLE_OF(-1);
+    if (i < 0) {
+        snprintf(msgbuf, sizeof msgbuf,
+                 "eyebot: MOTORInit(0x%x): not a thruster semantics (MOTOR_PORT, "
+                 "MOTOR_STARBOARD, MOTOR_BOW, MOTOR_STERN or MOTOR_LEFT/RIGHT/FRONT/BACK); "
+                 "returns 0",
+                 (unsigned)semantics);
+        eb_report(msgbuf);
+        return HANDLE_OF(-1);
+    }
     ensure_session();
     S.motor_open[i] = 1;
     if (MOTORDrive(HANDLE_OF(i), 0) != 0) return HANDLE_OF(-1);
@@ -625,19 +762,25 @@ MotorHandle MOTORInit(DeviceSemantics semantics) {
 int MOTORDrive(MotorHandle handle, int speed) {
     int i = INDEX_OF(handle);
     uint8_t p[3];
-    if (i < 0 || i > 3 || !S.motor_open[i]) return -1;
+    if (i < 0 || i > 3 || !S.motor_open[i]) motor_misuse("MOTORDrive", handle);
     if (speed > 100) speed = 100;
     if (speed < -100) speed = -100;
     p[0] = (uint8_t)i;
     p[1] = eb_hdt_duty(i, speed < 0 ? -speed : speed);
     p[2] = speed < 0 ? 1 : 0;
+    M.duty[i] = p[1];
+    M.direction[i] = p[2];
+    if (S.mode == MODE_LOCKSTEP) {
+        M.pending = 1; /* sent with the next request (see M) */
+        return 0;
+    }
     return request(T_THRUSTER_SET, p, 3, 0) == T_ACK ? 0 : -1;
 }
 
 int MOTORRelease(MotorHandle handle) {
     int i = INDEX_OF(handle);
     int r;
-    if (i < 0 || i > 3 || !S.motor_open[i]) return -1;
+    if (i < 0 || i > 3 || !S.motor_open[i]) motor_misuse("MOTORRelease", handle);
     r = MOTORDrive(handle, 0);
     S.motor_open[i] = 0;
     return r;

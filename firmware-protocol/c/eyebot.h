@@ -89,6 +89,29 @@ typedef int MotorHandle;
 #define ANYKEY 0x0F
 #define NOKEY 0x00
 
+/* Multitasking [likely: RoBIOS names; values ours]. */
+#define COOP 0
+#define PREEMPT 1
+#define MIN_PRI 1
+#define MAX_PRI 8
+
+/* OSMachineType [likely]. */
+#define VEHICLE 1
+#define PLATFORM 2
+#define WALKER 3
+
+/* A timer function (OSAttachTimer) and its handle (0 = error). */
+typedef void (*TimerFnc)(void);
+typedef int TimerHandle;
+
+/* A thread (OSSpawn) and a counting semaphore (OSSemInit). A program declares `struct sem`
+ * variables and keeps `struct tcb *` pointers; the fields are the library's. */
+struct tcb;
+struct sem {
+    int count;
+    struct tcb *waiting; /* first thread blocked in OSSemP, in arrival order */
+};
+
 #endif /* EYEBOT_BACKEND_ROBIOS */
 
 /* Device semantics for Mako's HDT (thruster order of PROTOCOL.md 2.7: port, starboard, bow,
@@ -162,6 +185,50 @@ int MOTORDrive(EB_MOTOR_HANDLE handle, int speed);
 int MOTORRelease(EB_MOTOR_HANDLE handle);
 
 #ifndef EYEBOT_BACKEND_ROBIOS
+/* ---- More serial calls -------------------------------------------------------------------- */
+int OSFlushOutRS232(int port);  /* drops bytes written but not yet sent; 0 on success */
+int OSCheckOutRS232(int port);  /* bytes written but not yet sent */
+
+/* ---- Timers, threads, semaphores (eb_os.c; docs/eyebot.md "Timers and threads") ----------- */
+/* Calls `function` every `scale` ticks (1/100 s), the first time `scale` ticks from now.
+ * Timer functions run when time passes in OSWait/OSSleep/KEYWait (never in the middle of the
+ * program's own code) and must not wait. 0 on error. */
+TimerHandle OSAttachTimer(int scale, TimerFnc function);
+int OSDetachTimer(TimerHandle handle); /* 1 = removed, 0 = not a valid handle */
+
+int OSMTInit(BYTE mode);                /* COOP or PREEMPT; 0 on success */
+struct tcb *OSSpawn(char *name, void (*code)(void), int stksiz, int pri, int uid);
+int OSReady(struct tcb *thread);        /* suspended -> ready; 0 on success */
+int OSSuspend(struct tcb *thread);      /* ready -> suspended; 0 on success */
+void OSReschedule(void);                /* main: run the threads until none is left */
+void OSYield(void);                     /* let the other ready threads run first */
+int OSKill(struct tcb *thread);         /* end a thread; 0 on success */
+void OSExit(int code);                  /* end the calling thread (main: the program) */
+int OSGetUID(struct tcb *thread);       /* the uid given to OSSpawn; NULL = calling thread */
+void OSPermit(void);                    /* preemption on (no effect: see docs/eyebot.md) */
+void OSForbid(void);                    /* preemption off (no effect) */
+void OSSemInit(struct sem *sem, int val);
+void OSSemP(struct sem *sem);           /* wait until count > 0, then count-- */
+void OSSemV(struct sem *sem);           /* count++, waking the first waiting thread */
+
+/* ---- Time of day, system --------------------------------------------------------------------- */
+int OSSetTime(int hrs, int mins, int secs);                  /* 0 on success */
+int OSGetTime(int *hrs, int *mins, int *secs, int *ticks);   /* 0 on success */
+int OSShowTime(void);                                        /* to the LCD */
+char *OSVersion(void);
+int OSMachineSpeed(void);          /* CPU clock in Hz */
+int OSMachineType(void);           /* VEHICLE */
+char *OSMachineName(void);
+BYTE OSMachineID(void);
+/* Prints msg and number on the LCD; deadend != 0 ends the program (status 6). */
+int OSError(char *msg, int number, BOOL deadend);
+int OSPanic(char *msg);            /* prints msg and ends the program (status 6) */
+
+/* ---- Latches (no bridge meaning: inputs read 0, outputs are kept) --------------------------- */
+BYTE OSReadInLatch(int latchnr);
+BYTE OSWriteOutLatch(int latchnr, BYTE mask, BYTE value); /* (old & mask) | value; old */
+BYTE OSReadOutLatch(int latchnr);
+
 /* ---- LCD and keys: stand-ins (output to stdout or EYEBOT_LCD) ----------------------------- */
 int LCDPrintf(const char *format, ...)
 #if defined(__GNUC__)
@@ -175,6 +242,29 @@ int LCDClear(void);
 int LCDSetPos(int row, int column);
 int LCDMenu(const char *string1, const char *string2, const char *string3,
             const char *string4);
+int LCDPutFloat(float value);                      /* "%8.3f" */
+int LCDPutFloatS(float value, int spaces, int decimals);
+int LCDPutHex(int value);                          /* "%X" */
+int LCDPutHex1(int value);                         /* "%02X" */
+int LCDPutIntS(int value, int spaces);
+int LCDSetChar(int row, int column, char chr);
+int LCDSetString(int row, int column, const char *str);
+int LCDSetPrintf(int row, int column, const char *format, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+int LCDGetPos(int *row, int *column);
+int LCDMode(int mode);
+int LCDRefresh(void);
+/* Graphics: accepted, nothing drawn (the stand-in is text). */
+int LCDPixel(int x, int y, int value);
+int LCDLine(int x1, int y1, int x2, int y2, int value);
+int LCDArea(int x1, int y1, int x2, int y2, int value);
+/* ---- Sound: to the log (stderr, with the program time) --------------------------------------- */
+int AUBeep(void);
+int AUTone(int freq, int msec);  /* returns at once */
+int AUCheckTone(void);           /* 1 when the last tone has finished */
 /* Keys come from the script in EYEBOT_KEYS (see docs/eyebot.md). */
 int KEYGet(void);            /* waits for the next key */
 int KEYRead(void);           /* the key due now, or NOKEY */

@@ -370,7 +370,7 @@ fn nmea_at(speed: f64, wall_s: f64) {
         "near-wall.toml",
         &[
             (
-                "position_m = [3.0, 6.25, 0.3]",
+                "position_m = [3.0, 2.5, 0.3]",
                 "position_m = [3.0, 1.5, 0.5]",
             ),
             // Every ping gives a sentence (empty fields without a valid echo), so the

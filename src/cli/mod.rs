@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
+pub mod check;
 pub mod gap;
 pub mod gap_bench;
 pub mod output;
@@ -53,6 +54,8 @@ pub enum Command {
     Gap(gap::GapArgs),
     /// Benchmark the reality-gap workflow on generated hidden-effect and null cases.
     GapBench(gap_bench::GapBenchArgs),
+    /// Run a control program against a private lockstep daemon and judge it by a scenario.
+    Check(check::CheckArgs),
     /// Show a recording in the browser: the live view's page with a time slider.
     View(view::ViewArgs),
 }
@@ -77,6 +80,8 @@ pub enum CliError {
     Validate(#[from] crate::thesis::ValidateError),
     #[error(transparent)]
     Replay(#[from] replay::ReplayCliError),
+    #[error("check failed: {failed} of {total} criteria")]
+    CheckFailed { failed: usize, total: usize },
     #[error("{failed} of {total} validation rows failed")]
     ValidationFailed { failed: usize, total: usize },
     #[error("cannot write `{}`: {source}", path.display())]
@@ -120,6 +125,7 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
         Command::Replay(args) => Ok(replay::main(args)?),
         Command::Gap(args) => gap::run(&args),
         Command::GapBench(args) => gap_bench::run(&args),
+        Command::Check(args) => check::main(args),
         Command::View(args) => view::main(args),
     }
 }

@@ -281,11 +281,34 @@ async fn sonar(
     sonar.select(t).await?;
     let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
     let mut sentences = 0;
+    let mut acked = false;
     while sentences < count {
         let left = deadline.saturating_duration_since(tokio::time::Instant::now());
         match sonar.next(left).await? {
+            None if sentences == 0 => {
+                return Err(CliError::Usage(format!(
+                    "timed out after {timeout_s} s: {}: {}",
+                    if acked {
+                        "the ack came but no sentence"
+                    } else {
+                        "no ack"
+                    },
+                    why_no_echo(link, acked).await
+                )));
+            }
+            None if acked => {
+                return Err(CliError::Usage(format!(
+                    "timed out after {timeout_s} s with {sentences} of {count} sentences: the \
+                     multiplexer sends a sentence only for a ping with a valid echo (about one \
+                     a second at best; fewer when the beam meets the wall obliquely, thesis \
+                     4.4); wait longer with --timeout-s"
+                )));
+            }
             None => return Err(CliError::Usage(format!("timed out after {timeout_s} s"))),
-            Some(SonarItem::Ack(t)) => outln!("ack transducer {t}"),
+            Some(SonarItem::Ack(t)) => {
+                acked = true;
+                outln!("ack transducer {t}");
+            }
             Some(SonarItem::Nak) => outln!("nak"),
             Some(SonarItem::Sentence { raw, .. }) => {
                 outln!("{raw}");
@@ -295,4 +318,54 @@ async fn sonar(
         }
     }
     Ok(())
+}
+
+/// Why a selected transducer may send nothing, from the daemon's status (next to the link in
+/// its run directory): lockstep time that nobody advances, no acknowledgement (not the sonar
+/// link), or no wall within the sonar's range, with the distances to the default pool's walls.
+async fn why_no_echo(link: &std::path::Path, acked: bool) -> String {
+    let socket = link
+        .parent()
+        .unwrap_or(std::path::Path::new("."))
+        .join("status.sock");
+    let Ok(s) = crate::daemon::status::query(&socket, Duration::from_secs(2)).await else {
+        return format!(
+            "a sentence comes only when the transducer hears an echo (no daemon status at {} \
+             to say more)",
+            socket.display()
+        );
+    };
+    if s.time_mode == "lockstep" {
+        return "the daemon runs in lockstep: simulated time moves only when a client \
+                advances it (e.g. `probe --link run/sensor advance 200` from another shell)"
+            .to_string();
+    }
+    if !acked {
+        return format!(
+            "the multiplexer did not acknowledge the select: is {} the daemon's sonar link?",
+            link.display()
+        );
+    }
+    let p = &s.pose;
+    let walls = crate::physics::load_world(&crate::config::Embedded, "worlds/pool.toml")
+        .map(|w| {
+            format!(
+                "in the default {} x {} m pool the walls are {:.1} m west, {:.1} m east, {:.1} m \
+                 south and {:.1} m north of its centre; ",
+                w.pool_m.x,
+                w.pool_m.y,
+                p.y_m,
+                w.pool_m.y - p.y_m,
+                p.x_m,
+                w.pool_m.x - p.x_m
+            )
+        })
+        .unwrap_or_default();
+    format!(
+        "no echo within the sonar's range (4.4 m with configs/sensors/mako-2008.toml, thesis \
+         table 4.7). The vehicle is at north {:.2} m, east {:.2} m, heading {:.0} deg; {walls}\
+         start it near a wall with `run --start west_wall` or `--start wall_following` \
+         (docs/eyebot.md, \"Course starts\")",
+        p.x_m, p.y_m, p.heading_deg
+    )
 }

@@ -46,7 +46,8 @@ pub struct ReplayArgs {
     /// Sentences per second for `--pacing rate` (implies it when given alone).
     #[arg(long, value_name = "HZ")]
     pub rate: Option<f64>,
-    /// Speed factor on the schedule (2 = twice as fast); bytes keep their wire time.
+    /// Speed factor on the schedule (2 = twice as fast), from 0.001 to 1000; bytes keep
+    /// their wire time (for "as fast as the line takes it", use `--pacing fast`).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
     /// Start this many seconds of log time after the first sentence.
@@ -128,6 +129,8 @@ pub enum ReplayCliError {
     RateMissing,
     #[error("cannot start the runtime for the output: {0}")]
     Runtime(#[source] std::io::Error),
+    #[error("{0} input(s) cut short by a read error; the summary above counts what was read")]
+    CutShort(u64),
 }
 
 impl ReplayArgs {
@@ -198,7 +201,23 @@ impl Observer for Terminal {
 /// Runs `eyebot-hil replay`.
 pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
     let opts = args.options()?;
-    let replay = Replay::open(opts)?;
+    // The pty and serial types register with a tokio reactor; the replay itself runs on this
+    // thread with blocking writes and high-resolution sleeps. A second thread waits for
+    // SIGINT/SIGTERM and raises the shutdown flag, so symlinks are removed on the way out and
+    // a read of a pipe or FIFO (opened below, read once) ends.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(ReplayCliError::Runtime)?;
+    let handle = runtime.handle().clone();
+    let stop = Shutdown::new();
+    let signal_stop = stop.clone();
+    std::thread::Builder::new()
+        .name("replay-signals".into())
+        .spawn(move || runtime.block_on(wait_for_signal(signal_stop)))
+        .map_err(ReplayCliError::Runtime)?;
+    let _enter = handle.enter();
+    let replay = Replay::open_until(opts, &stop)?;
     let line = replay.line_settings();
     let origin_note = match replay.line_origin() {
         LineOrigin::CommandLine => "--line".to_string(),
@@ -223,22 +242,6 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
         args.speed,
         args.policy
     );
-
-    // The pty and serial types register with a tokio reactor; the replay itself runs on this
-    // thread with blocking writes and high-resolution sleeps. A second thread waits for
-    // SIGINT/SIGTERM and raises the shutdown flag, so symlinks are removed on the way out.
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(ReplayCliError::Runtime)?;
-    let handle = runtime.handle().clone();
-    let stop = Shutdown::new();
-    let signal_stop = stop.clone();
-    std::thread::Builder::new()
-        .name("replay-signals".into())
-        .spawn(move || runtime.block_on(wait_for_signal(signal_stop)))
-        .map_err(ReplayCliError::Runtime)?;
-    let _enter = handle.enter();
 
     let mut sink: Box<dyn Sink> = if args.dry_run {
         Box::new(NullSink)
@@ -312,6 +315,9 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
         }
     }
     drop(sink); // removes the pty symlink
+    if summary.inputs_cut_short > 0 {
+        return Err(ReplayCliError::CutShort(summary.inputs_cut_short));
+    }
     Ok(())
 }
 

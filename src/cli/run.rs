@@ -10,6 +10,7 @@ use super::CliError;
 use crate::cli::output::errln;
 use crate::config::{ConfigSource, DEFAULT_CONFIG, Directory, Document, Embedded};
 use crate::daemon::config::{DaemonConfig, Overrides, TimeModeName};
+use crate::daemon::course::StartChoice;
 use crate::daemon::{self, Readiness, RunOptions};
 
 /// Run the bridge: simulate Mako and serve its devices on the sonar and sensor links.
@@ -40,6 +41,10 @@ pub struct RunArgs {
     /// Write the daemon's PID to FILE (removed at exit).
     #[arg(long, value_name = "FILE")]
     pub pid_file: Option<PathBuf>,
+    /// Where the vehicle starts (overrides [start]): a course start named in the world file
+    /// (`wall_following`, ...) or NORTH,EAST,HEADING in m, m, deg (depth from [start]).
+    #[arg(long, value_name = "NAME|N,E,HEADING")]
+    pub start: Option<StartChoice>,
     /// Serve a live page of the run (default 127.0.0.1, a port the system picks); prints
     /// `view: URL` (the URL carries the access token) before `ready`.
     #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = crate::view::DEFAULT_ADDR)]
@@ -107,6 +112,13 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
         text,
         name,
     } = load_config(args.config.as_ref(), &args.overrides())?;
+    let mut config = config;
+    if let Some(choice) = &args.start {
+        let world = crate::physics::load_world(source.as_ref(), &config.world)?;
+        config.start = choice
+            .resolve(&config.start, &world)
+            .map_err(CliError::Usage)?;
+    }
     let model = crate::daemon::plant::MakoPlant::from_config(source.as_ref(), &config)?;
     let (board, mux) = crate::daemon::plant::devices(&config);
     let leftovers = daemon::shutdown::Leftovers::default();

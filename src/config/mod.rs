@@ -25,6 +25,46 @@ pub use embedded::EMBEDDED_CONFIGS;
 /// The name, inside any [`ConfigSource`], of the daemon's default configuration.
 pub const DEFAULT_CONFIG: &str = "default.toml";
 
+/// The largest configuration file read: the shipped ones are a few KiB, and `/dev/zero`
+/// given as a file must cost an error, not memory.
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// Reads a configuration file with bounded memory and without blocking: opened non-blocking
+/// (a FIFO without a writer does not hang the open), refused unless it is a regular file,
+/// refused past [`MAX_CONFIG_BYTES`]. The error says what was found and what was expected.
+pub fn read_config_file(path: &Path) -> Result<String, String> {
+    use std::io::Read;
+    use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY)
+        .open(path)
+        .map_err(|e| e.to_string())?;
+    let kind = file.metadata().map_err(|e| e.to_string())?.file_type();
+    if !kind.is_file() {
+        let found = if kind.is_dir() {
+            "a directory"
+        } else if kind.is_fifo() {
+            "a FIFO"
+        } else if kind.is_char_device() || kind.is_block_device() {
+            "a device"
+        } else {
+            "not a regular file"
+        };
+        return Err(format!("{found}; expected a regular TOML file"));
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_CONFIG_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| e.to_string())?;
+    if bytes.len() as u64 > MAX_CONFIG_BYTES {
+        return Err(format!(
+            "larger than {MAX_CONFIG_BYTES} bytes; expected a TOML file of a few KiB"
+        ));
+    }
+    String::from_utf8(bytes).map_err(|e| format!("not UTF-8 text ({e}); expected a TOML file"))
+}
+
 /// A configuration problem. Every variant names the input it came from.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -58,6 +98,15 @@ pub enum ConfigError {
         origin: String,
         name: String,
         reason: String,
+    },
+    /// A file named by a key of another configuration failed to load.
+    #[error("`{key}` = \"{name}\" (in {origin}): {source}")]
+    Referenced {
+        origin: String,
+        key: String,
+        name: String,
+        #[source]
+        source: Box<ConfigError>,
     },
 }
 
@@ -129,12 +178,12 @@ impl Directory {
 impl ConfigSource for Directory {
     fn read(&self, name: &str) -> Result<Cow<'static, str>, ConfigError> {
         let path = self.root.join(name);
-        std::fs::read_to_string(&path)
+        read_config_file(&path)
             .map(Cow::Owned)
-            .map_err(|e| ConfigError::Unreadable {
+            .map_err(|reason| ConfigError::Unreadable {
                 origin: self.root.display().to_string(),
                 name: name.to_string(),
-                reason: e.to_string(),
+                reason,
             })
     }
 
@@ -247,6 +296,33 @@ fn line_column(text: &str, offset: usize) -> (usize, usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A device, a FIFO, a directory or an oversized file is an error naming what was found,
+    /// read with bounded memory and without waiting for a FIFO's writer.
+    #[test]
+    fn config_files_are_read_bounded_and_without_blocking() {
+        let err = read_config_file(Path::new("/dev/zero")).unwrap_err();
+        assert!(err.contains("a device"), "{err}");
+        let tmp = crate::scratch::dir("cfg-read");
+        let fifo = tmp.path().join("fifo.toml");
+        nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        let err = read_config_file(&fifo).unwrap_err();
+        assert!(err.contains("a FIFO"), "{err}");
+        let err = read_config_file(tmp.path()).unwrap_err();
+        assert!(err.contains("a directory"), "{err}");
+        let big = tmp.path().join("big.toml");
+        std::fs::write(&big, vec![b'#'; MAX_CONFIG_BYTES as usize + 1]).unwrap();
+        let err = read_config_file(&big).unwrap_err();
+        assert!(err.contains("larger than"), "{err}");
+        let ok = tmp.path().join("ok.toml");
+        std::fs::write(&ok, "a = 1\n").unwrap();
+        assert_eq!(read_config_file(&ok).unwrap(), "a = 1\n");
+        let err = Directory::new(tmp.path()).read("fifo.toml").unwrap_err();
+        assert!(
+            err.to_string().contains("fifo.toml") && err.to_string().contains("FIFO"),
+            "{err}"
+        );
+    }
 
     #[derive(Debug, serde::Deserialize)]
     #[serde(deny_unknown_fields)]

@@ -385,6 +385,20 @@ impl DaemonConfig {
         )?;
         let sonar = resolve_link(doc, "sonar", raw.links.sonar, false)?;
         let sensor = resolve_link(doc, "sensor", raw.links.sensor, true)?;
+        // Two links on one path: the second would replace the first's symlink or device,
+        // leaving that link unreachable. (`shared` is the one way for them to share a line.)
+        let same = match (&sonar.endpoint, &sensor.endpoint) {
+            (Endpoint::Pty { link: a }, Endpoint::Pty { link: b }) => a == b,
+            (Endpoint::Serial { device: a }, Endpoint::Serial { device: b }) => a == b,
+            (Endpoint::Tcp { addr: a }, Endpoint::Tcp { addr: b }) => a == b,
+            _ => false,
+        };
+        if same {
+            return Err(doc.invalid(
+                "links.sensor.path",
+                "is the same as `links.sonar.path`; two links cannot share a path (use `endpoint = \"shared\"` for one line carrying both)",
+            ));
+        }
         Ok(Self {
             vehicle: raw.vehicle,
             world: raw.world,
@@ -645,5 +659,24 @@ mod tests {
         assert!(err.to_string().contains("loopback"), "{err}");
         let ok = with(&tcp("path = \"127.0.0.1:7001\"")).unwrap();
         assert!(matches!(ok.sonar.endpoint, Endpoint::Tcp { .. }));
+    }
+
+    /// Two links on one path would leave one unreachable (the second symlink replaces the
+    /// first); the error names the key and its line.
+    #[test]
+    fn two_links_cannot_share_a_path() {
+        let err = with(&[("path = \"sensor\"", "path = \"sonar\"")]).unwrap_err();
+        assert!(
+            matches!(&err, ConfigError::Invalid { key, line: Some(_), .. } if key == "links.sensor.path"),
+            "{err}"
+        );
+        assert!(err.to_string().contains("links.sonar.path"), "{err}");
+        let tcp = with(&[
+            ("endpoint = \"pty\"", "endpoint = \"tcp\""),
+            ("path = \"sonar\"", "path = \"127.0.0.1:7001\""),
+            ("endpoint = \"pty\"", "endpoint = \"tcp\""),
+            ("path = \"sensor\"", "path = \"127.0.0.1:7001\""),
+        ]);
+        assert!(tcp.is_err(), "one loopback port for both links");
     }
 }

@@ -422,7 +422,7 @@ impl<M: Model> Engine<M> {
             }
             Err(full) => {
                 l.counters.dropped_tx += full.dropped as u64;
-                tracing::warn!(line = l.name, %full, "transmit queue full");
+                crate::warn_limited!("transmit queue full", line = l.name, %full, "transmit queue full");
             }
         }
     }

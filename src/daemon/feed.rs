@@ -74,7 +74,7 @@ pub fn load_schedule(path: &Path) -> Result<Vec<(SimNanos, Bytes)>, FeedError> {
         };
         let at = match (timed, line.time_ns) {
             (true, Some(t)) => {
-                let since_first = t - *first_ns.get_or_insert(t);
+                let since_first = t.saturating_sub(*first_ns.get_or_insert(t));
                 latest_ns = latest_ns.max(since_first.max(0) as SimNanos);
                 latest_ns
             }

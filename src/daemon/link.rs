@@ -84,7 +84,8 @@ impl LineContext {
         match reason {
             // A client that does not read drops at every release: counted, not shouted.
             DropReason::NotRead => tracing::debug!(link, bytes, why, "not read: dropped"),
-            DropReason::EndpointGone | DropReason::Shutdown => tracing::warn!(
+            DropReason::EndpointGone | DropReason::Shutdown => crate::warn_limited!(
+                "bytes did not reach the endpoint",
                 link,
                 bytes,
                 why,
@@ -293,7 +294,7 @@ pub async fn run_line(
                 }
                 Err(e) => {
                     cx.counters.io_errors.fetch_add(1, Ordering::Relaxed);
-                    tracing::warn!(link = name, error = %e, "accept failed");
+                    crate::warn_limited!("accept failed", link = name, error = %e, "accept failed");
                     tokio::time::sleep(REOPEN_BACKOFF_MIN).await;
                 }
             }
@@ -418,7 +419,7 @@ async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
                 }
                 Err(e) => {
                     counters.io_errors.fetch_add(1, Ordering::Relaxed);
-                    tracing::warn!(link = name, error = %e, "read failed");
+                    crate::warn_limited!("read failed", link = name, error = %e, "read failed");
                     return Pumped::EndpointLost;
                 }
             }
@@ -506,7 +507,7 @@ async fn write_all_from<W: AsyncWrite + Unpin>(
             }
             Err(e) => {
                 counters.io_errors.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!(link = name, error = %e, "write failed");
+                crate::warn_limited!("write failed", link = name, error = %e, "write failed");
                 return Pumped::EndpointLost;
             }
         }

@@ -11,14 +11,17 @@
 
 pub mod clock;
 pub mod config;
+pub mod course;
 pub mod engine;
 pub mod feed;
 pub mod link;
 pub mod pid_file;
 pub mod plant;
+pub mod run_dir;
 pub mod shutdown;
 pub mod socket;
 pub mod status;
+pub mod warn_limit;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -157,6 +160,8 @@ pub struct Daemon<M: Model> {
     record_dir: Option<PathBuf>,
     pid_file: Option<PidFile>,
     leftovers: shutdown::Leftovers,
+    /// Held until `finish` has removed what the run made.
+    run_dir_lock: Option<run_dir::RunDirLock>,
     view: Option<ViewHook>,
 }
 
@@ -199,7 +204,12 @@ impl<M: Model> Daemon<M> {
         options: RunOptions,
     ) -> Result<Self, DaemonError> {
         let run_dir = config.run_dir.clone();
-        create_run_dir(&run_dir)?;
+        // Before anything is created or cleaned up: of two daemons on one directory, the
+        // second stops here having changed nothing.
+        let run_dir_lock = run_dir::acquire(&run_dir).map_err(|source| DaemonError::RunDir {
+            path: run_dir.clone(),
+            source,
+        })?;
         let lockstep = config.time_mode == TimeMode::Lockstep;
         let leftovers = options.leftovers.clone();
 
@@ -291,6 +301,7 @@ impl<M: Model> Daemon<M> {
             record_dir: options.record,
             pid_file,
             leftovers,
+            run_dir_lock: Some(run_dir_lock),
             view,
         };
         if let Some(service) = view_service {
@@ -589,6 +600,8 @@ impl<M: Model> Daemon<M> {
         };
         drop(self.pid_file.take());
         self.leftovers.remove_all();
+        drop(self.run_dir_lock.take());
+        warn_limit::flush();
         Ok(Summary {
             sim_time_s,
             records,
@@ -848,21 +861,6 @@ fn snapshot<M: Model>(
         contacts: core.model().contacts(),
         recording: record.map(|p| p.display().to_string()),
     }
-}
-
-fn create_run_dir(dir: &Path) -> Result<(), DaemonError> {
-    use std::os::unix::fs::DirBuilderExt;
-    if dir.is_dir() {
-        return Ok(());
-    }
-    std::fs::DirBuilder::new()
-        .recursive(true)
-        .mode(0o700)
-        .create(dir)
-        .map_err(|source| DaemonError::RunDir {
-            path: dir.to_path_buf(),
-            source,
-        })
 }
 
 #[cfg(test)]

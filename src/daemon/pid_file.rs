@@ -9,20 +9,25 @@ use super::DaemonError;
 pub struct PidFile(PathBuf);
 
 impl PidFile {
-    /// Writes the process id to `path`.
+    /// Writes the process id to `path`: never through a symlink, never into a FIFO or
+    /// anything but a regular file.
     pub fn create(path: &Path) -> Result<Self, DaemonError> {
-        std::fs::write(path, format!("{}\n", std::process::id())).map_err(|source| {
-            DaemonError::PidFile {
+        super::run_dir::write_file(path, &format!("{}\n", std::process::id()), 0o644).map_err(
+            |source| DaemonError::PidFile {
                 path: path.to_path_buf(),
                 source,
-            }
-        })?;
+            },
+        )?;
         Ok(Self(path.to_path_buf()))
     }
 }
 
 impl Drop for PidFile {
+    /// Removes the file if it still holds our process id (another daemon may have written
+    /// its own since).
     fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
+        if super::run_dir::read_pid(&self.0) == Some(std::process::id()) {
+            let _ = std::fs::remove_file(&self.0);
+        }
     }
 }

@@ -57,8 +57,34 @@ impl MakoPlant {
         source: &dyn ConfigSource,
         config: &DaemonConfig,
     ) -> Result<Self, ConfigError> {
-        let model = physics::load_model(source, &config.vehicle, &config.world)?;
-        let sensors_config = SensorsConfig::load(source, &config.sensors)?;
+        // A file that cannot be read is reported with the key that named it.
+        let named_by = |key: &'static str, name: &str| {
+            let name = name.to_string();
+            move |e: ConfigError| match e {
+                ConfigError::Unreadable { .. } => ConfigError::Referenced {
+                    origin: "the daemon configuration".into(),
+                    key: key.into(),
+                    name,
+                    source: Box::new(e),
+                },
+                other => other,
+            }
+        };
+        let vehicle = physics::load_vehicle(source, &config.vehicle)
+            .map_err(named_by("vehicle", &config.vehicle))?;
+        let world =
+            physics::load_world(source, &config.world).map_err(named_by("world", &config.world))?;
+        let model = physics::Model::new(vehicle, world);
+        if let Some(why) = model.world().outside_pool(&config.start.position_m) {
+            return Err(ConfigError::Invalid {
+                origin: "the daemon configuration".into(),
+                key: "start.position_m".into(),
+                line: None,
+                message: format!("{why} (world `{}`)", config.world),
+            });
+        }
+        let sensors_config = SensorsConfig::load(source, &config.sensors)
+            .map_err(named_by("sensors", &config.sensors))?;
         let initial = InitialState {
             position_m: config.start.position_m,
             attitude: UnitQuaternion::from_euler_angles(
@@ -230,7 +256,7 @@ impl Plant for MakoPlant {
         // The wire numbers transducers 1..=4, the sensor model 0..=3.
         let index = usize::from(transducer.saturating_sub(1));
         if let Err(e) = self.sensors.sonar.select(index, Self::t_s(now)) {
-            tracing::warn!(error = %e, "sonar select refused");
+            crate::warn_limited!("sonar select refused", error = %e, "sonar select refused");
         }
         self.pull_sonar();
         // PROTOCOL.md 1.2: on a select the master stops forwarding until it acknowledges.
@@ -400,6 +426,29 @@ mod tests {
     use crate::config::{DEFAULT_CONFIG, Document, Embedded};
     use crate::daemon::engine::{Carries, Engine, LineSpec};
     use crate::transport::LineSettings;
+
+    /// A model file that cannot be read is reported with the key that named it.
+    #[test]
+    fn a_missing_model_file_names_its_key() {
+        let text = Embedded.read(DEFAULT_CONFIG).unwrap();
+        let good = DaemonConfig::resolve(&Document::new("default", &text)).unwrap();
+        for key in ["vehicle", "world", "sensors"] {
+            let mut config = good.clone();
+            let slot = match key {
+                "vehicle" => &mut config.vehicle,
+                "world" => &mut config.world,
+                _ => &mut config.sensors,
+            };
+            *slot = "nowhere/missing.toml".into();
+            let err = MakoPlant::from_config(&Embedded, &config)
+                .expect_err("a missing file is an error")
+                .to_string();
+            assert!(
+                err.starts_with(&format!("`{key}` = \"nowhere/missing.toml\"")),
+                "{err}"
+            );
+        }
+    }
 
     /// Regression: a ping's sentence is known only after the physics step that covers the
     /// ping, and no deadline announced that step. A realtime bridge with no other traffic

@@ -82,11 +82,16 @@ impl Leftovers {
                     crate::transport::symlink::remove_if_ours(&path, &target);
                 }
                 Leftover::Socket(path) => {
-                    let _ = std::fs::remove_file(path);
+                    use std::os::unix::fs::FileTypeExt;
+                    // Only a socket: anything else put there since is not ours.
+                    let socket =
+                        std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_socket());
+                    if socket {
+                        let _ = std::fs::remove_file(path);
+                    }
                 }
                 Leftover::PidFile(path) => {
-                    let ours = std::fs::read_to_string(&path)
-                        .is_ok_and(|t| t.trim() == std::process::id().to_string());
+                    let ours = super::run_dir::read_pid(&path) == Some(std::process::id());
                     if ours {
                         let _ = std::fs::remove_file(path);
                     }
@@ -151,13 +156,17 @@ mod tests {
         // Another daemon re-pointed this one since we made it.
         std::os::unix::fs::symlink("/dev/zero", &taken).unwrap();
         let sock = dir.join("status.sock");
-        std::fs::write(&sock, "").unwrap();
+        let _listener = std::os::unix::net::UnixListener::bind(&sock).unwrap();
+        // A regular file where a socket was: not ours, kept.
+        let planted = dir.join("feed.sock");
+        std::fs::write(&planted, "user data").unwrap();
         let pid = dir.join("pid");
         std::fs::write(&pid, "1\n").unwrap();
         let left = Leftovers::default();
         left.symlink(&ours, Path::new("/dev/null"));
         left.symlink(&taken, Path::new("/dev/null"));
         left.socket(&sock);
+        left.socket(&planted);
         left.pid_file(&pid);
         left.remove_all();
         left.remove_all();
@@ -167,6 +176,7 @@ mod tests {
             "not ours any more"
         );
         assert!(!sock.exists());
+        assert!(planted.exists(), "a regular file is not a socket of ours");
         assert!(pid.exists(), "a pid file naming another process is kept");
     }
 }

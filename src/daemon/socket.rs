@@ -7,9 +7,17 @@ use std::path::Path;
 use tokio::net::UnixListener;
 
 /// Binds `path` with mode 0600. A socket file already there is replaced when it is stale
-/// (nothing answers a connection), and refused when a live daemon serves it.
+/// (nothing answers a connection), and refused when a live daemon serves it; anything else
+/// there (a regular file, a symlink, a FIFO) is refused and left alone.
 pub fn bind_owner_only(path: &Path) -> io::Result<UnixListener> {
-    if std::fs::symlink_metadata(path).is_ok() {
+    use std::os::unix::fs::FileTypeExt;
+    if let Ok(meta) = std::fs::symlink_metadata(path) {
+        if !meta.file_type().is_socket() {
+            return Err(io::Error::new(
+                io::ErrorKind::AlreadyExists,
+                "something other than a socket is there; the daemon removes only its own sockets (remove it or choose another run directory)",
+            ));
+        }
         if std::os::unix::net::UnixStream::connect(path).is_ok() {
             return Err(io::Error::new(
                 io::ErrorKind::AddrInUse,

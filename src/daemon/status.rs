@@ -177,7 +177,7 @@ impl StatusServer {
                         });
                     }
                     Err(e) => {
-                        tracing::warn!(error = %e, "status socket accept failed");
+                        crate::warn_limited!("status accept failed", error = %e, "status socket accept failed");
                         tokio::time::sleep(Duration::from_millis(50)).await;
                     }
                 },

@@ -167,7 +167,9 @@ impl SensorBoard {
             }
             LinkError::Frame(FrameError::ChecksumMismatch { msg_type, seq, .. }) => {
                 self.counters.rx_crc_errors = self.counters.rx_crc_errors.wrapping_add(1);
-                Some(self.nak(*seq, *msg_type, ErrorCode::BadCrc, 0))
+                // PROTOCOL.md: the bridge never NAKs a NAK.
+                (*msg_type != msg_type::NAK)
+                    .then(|| self.nak(*seq, *msg_type, ErrorCode::BadCrc, 0))
             }
             LinkError::Frame(_) => {
                 self.counters.rx_framing_errors = self.counters.rx_framing_errors.wrapping_add(1);
@@ -175,7 +177,12 @@ impl SensorBoard {
             }
             LinkError::Message(e) => {
                 self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
+                if e.msg_type() == msg_type::NAK {
+                    return None; // never NAK a NAK
+                }
                 let (code, detail) = match e {
+                    // A reply or push type is not a request, whatever its length or values.
+                    _ if !REQUEST_TYPES.contains(&e.msg_type()) => (ErrorCode::UnknownType, 0),
                     MessageError::UnknownType { .. } => (ErrorCode::UnknownType, 0),
                     MessageError::BadLength { expected, .. } => (ErrorCode::BadLength, *expected),
                     MessageError::BadValue { offset, .. } => (ErrorCode::BadValue, *offset),
@@ -350,12 +357,16 @@ impl SensorBoard {
             | Message::CompassRaw { .. }
             | Message::CalibrationStatus { .. }
             | Message::Time { .. }
-            | Message::Nak { .. }
             | Message::AdcSamples { .. }
             | Message::CompassHeadingPush { .. }
             | Message::CompassRawPush { .. } => {
                 self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
                 return Some(self.nak(seq, kind, ErrorCode::UnknownType, 0));
+            }
+            // Counted, never answered: the bridge never NAKs a NAK.
+            Message::Nak { .. } => {
+                self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
+                return None;
             }
         };
         Some(self.reply(seq, out))
@@ -912,5 +923,67 @@ mod tests {
         assert_eq!(b.counters().rx_crc_errors, 1);
         assert_eq!(b.counters().rx_rejected, 1);
         assert_eq!(b.counters().tx_naks, 2);
+    }
+
+    /// PROTOCOL.md: the bridge never NAKs a NAK (whole, damaged or mis-sized), and a reply or
+    /// push type sent to it gets UNKNOWN_TYPE whatever its size.
+    #[test]
+    fn naks_are_never_naked_and_reply_types_are_unknown() {
+        let mut b = board(false, None);
+        let nak_len = LinkError::Message(MessageError::BadLength {
+            msg_type: msg_type::NAK,
+            seq: 3,
+            expected: 3,
+            found: 1,
+        });
+        assert!(b.handle_error(&nak_len).is_none());
+        let nak_crc = LinkError::Frame(FrameError::ChecksumMismatch {
+            calculated: 1,
+            found: 2,
+            msg_type: msg_type::NAK,
+            seq: 4,
+        });
+        assert!(b.handle_error(&nak_crc).is_none());
+        let nak = Frame::new(
+            5,
+            Message::Nak {
+                rejected_type: msg_type::HELLO,
+                code: ErrorCode::BadCrc,
+                detail: 0,
+            },
+        );
+        assert!(b.handle(nak, 0, &mut FakePlant::default()).is_none());
+        assert_eq!(b.counters().tx_naks, 0);
+        assert_eq!(b.counters().rx_rejected, 2);
+        for (reply_type, error) in [
+            (
+                msg_type::COUNTERS,
+                MessageError::BadLength {
+                    msg_type: msg_type::COUNTERS,
+                    seq: 6,
+                    expected: 40,
+                    found: 0,
+                },
+            ),
+            (
+                msg_type::ADC_VALUE,
+                MessageError::BadValue {
+                    msg_type: msg_type::ADC_VALUE,
+                    seq: 6,
+                    offset: 0,
+                    value: 0xFF,
+                },
+            ),
+        ] {
+            let out = sent(b.handle_error(&LinkError::Message(error)));
+            assert_eq!(
+                out.message,
+                Message::Nak {
+                    rejected_type: reply_type,
+                    code: ErrorCode::UnknownType,
+                    detail: 0
+                }
+            );
+        }
     }
 }

@@ -34,7 +34,7 @@ use crate::gap::model::{EnabledEffect, GapModel};
 use crate::gap::resim::{self, Floor};
 
 /// The effects whose parameters calibration fits, when the data hold one of their channels.
-pub const PARAMETERS: [&str; 18] = [
+pub const PARAMETERS: [&str; 19] = [
     "thrust_gain",
     "reverse_thrust_asymmetry",
     "thruster_imbalance",
@@ -42,6 +42,7 @@ pub const PARAMETERS: [&str; 18] = [
     "added_mass",
     "thruster_lag",
     "yaw_damping",
+    "sway_yaw_coupling",
     "compass_offset",
     "compass_hard_iron",
     "depth_offset",

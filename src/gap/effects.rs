@@ -80,7 +80,7 @@ pub struct Effect {
 }
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 24] = [
+pub const LIBRARY: [Effect; 25] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -347,6 +347,18 @@ pub const LIBRARY: [Effect; 24] = [
         kind: Kind::Mean,
         physics: true,
     },
+    Effect {
+        name: "sway_yaw_coupling",
+        parameters: &["n_v_nm_per_mps"],
+        scales: &[2.0],
+        bounds: &[(-30.0, 30.0)],
+        signature: "turns made while moving are tighter or wider than spot turns predict: the \
+                    hull's sway in a turn adds a yaw moment, so heading and track disagree only \
+                    when turn and speed come together",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+    },
 ];
 /// Looks an effect up by name.
 pub fn by_name(name: &str) -> Option<&'static Effect> {
@@ -448,6 +460,9 @@ pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
             if c.vehicle.damping_linear[5] + c.vehicle.damping_quadratic[5] <= 0.0 {
                 c.vehicle.damping_linear[5] = 1e-3;
             }
+        }
+        "sway_yaw_coupling" => {
+            c.vehicle.damping_sway_yaw[1] += p(0);
         }
         _ => {}
     }

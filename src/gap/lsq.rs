@@ -37,11 +37,40 @@ impl Fit {
         self.residuals.norm_squared()
     }
 
-    /// `(J^T J)^-1`: the covariance of `x` for unit-variance residuals.
+    /// `(J^T J)^-1`: the covariance of `x` for unit-variance residuals. See [`covariance`].
     pub fn covariance(&self) -> Option<DMatrix<f64>> {
-        let j = self.jacobian.as_ref()?;
-        (j.transpose() * j).try_inverse()
+        covariance(self.jacobian.as_ref()?)
     }
+}
+
+/// `(J^T J)^-1` over the parameters the data move. A parameter whose Jacobian column is zero
+/// (scaling a term the model does not have, an observation that does not depend on it) gets
+/// an infinite variance and no covariance with the others, so it does not spoil their
+/// intervals; `None` when the moved parameters are themselves degenerate.
+pub fn covariance(j: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    let n = j.ncols();
+    let live: Vec<usize> = (0..n)
+        .filter(|&c| j.column(c).iter().any(|v| *v != 0.0))
+        .collect();
+    if live.len() == n {
+        return (j.transpose() * j).try_inverse();
+    }
+    let mut out = DMatrix::zeros(n, n);
+    for i in 0..n {
+        if !live.contains(&i) {
+            out[(i, i)] = f64::INFINITY;
+        }
+    }
+    if !live.is_empty() {
+        let jl = j.select_columns(&live);
+        let inv = (jl.transpose() * &jl).try_inverse()?;
+        for (a, &i) in live.iter().enumerate() {
+            for (b, &k) in live.iter().enumerate() {
+                out[(i, k)] = inv[(a, b)];
+            }
+        }
+    }
+    Some(out)
 }
 
 /// The 95 % interval of each parameter (in the parameters' own units: `x * scale`) from a
@@ -106,6 +135,8 @@ struct Problem<'a, F> {
     x: DVector<f64>,
     r: Option<DVector<f64>>,
     evaluations: &'a Cell<usize>,
+    /// The best point evaluated: (chi-square, x, residuals).
+    best: (f64, DVector<f64>, DVector<f64>),
 }
 
 impl<F> Problem<'_, F>
@@ -129,6 +160,12 @@ where
     fn set_params(&mut self, x: &DVector<f64>) {
         self.x = self.bounds.clamp(x);
         self.r = self.eval(&self.x);
+        if let Some(r) = &self.r {
+            let c = r.norm_squared();
+            if c < self.best.0 {
+                self.best = (c, self.x.clone(), r.clone());
+            }
+        }
     }
 
     fn params(&self) -> DVector<f64> {
@@ -175,7 +212,21 @@ where
         if r.len() != r0.len() {
             return None;
         }
-        j.set_column(k, &((r - r0) / h));
+        let mut col = (r - r0) / h;
+        // Where the step changes nothing (a parameter at the edge of the range where the
+        // model responds, e.g. a reverse ratio that cannot exceed 1), the other side.
+        if col.iter().all(|v| *v == 0.0)
+            && x[k] - h >= bounds.lower[k]
+            && x[k] - h <= bounds.upper[k]
+        {
+            let mut xb = x.clone();
+            xb[k] -= h;
+            evaluations.set(evaluations.get() + 1);
+            if let Some(rb) = residuals_of(&xb).filter(|rb| rb.len() == r0.len()) {
+                col = (r0 - rb) / h;
+            }
+        }
+        j.set_column(k, &col);
     }
     Some(j)
 }
@@ -197,32 +248,37 @@ where
     F: Fn(&DVector<f64>) -> Option<DVector<f64>>,
 {
     let evaluations = Cell::new(0);
-    let mut best: Option<(f64, DVector<f64>)> = None;
+    let mut best: Option<(f64, DVector<f64>, DVector<f64>)> = None;
     for s in starts {
         let s = bounds.clamp(s);
         evaluations.set(evaluations.get() + 1);
         if let Some(r) = residuals_of(&s) {
             let c = r.norm_squared();
-            if best.as_ref().is_none_or(|(b, _)| c < *b) {
-                best = Some((c, s));
+            if best.as_ref().is_none_or(|(b, _, _)| c < *b) {
+                best = Some((c, s, r));
             }
         }
     }
-    let (_, start) = best?;
-    let mut problem = Problem {
+    let best = best?;
+    let start = best.1.clone();
+    let problem = Problem {
         residuals_of,
         bounds,
         x: start.clone(),
-        r: None,
+        r: Some(best.2.clone()),
         evaluations: &evaluations,
+        best,
     };
-    problem.set_params(&start);
     let (problem, report) = LevenbergMarquardt::new()
         .with_patience(40)
         .with_stepbound(5.0)
         .minimize(problem);
-    let x = problem.x.clone();
-    let residuals = problem.r.clone()?;
+    // A trial point the model cannot evaluate (a quantity undefined there) ends the search;
+    // the fit is then the best point evaluated, never an undefined one.
+    let (x, residuals) = match problem.r.clone() {
+        Some(r) if r.norm_squared() <= problem.best.0 => (problem.x.clone(), r),
+        _ => (problem.best.1.clone(), problem.best.2.clone()),
+    };
     let jacobian = jacobian(residuals_of, bounds, &x, &residuals, &evaluations);
     Some(Fit {
         at_bound: bounds.on_bound(&x),
@@ -287,5 +343,47 @@ mod tests {
         let fit = minimize(&f, &capped, &axis_scan(1, &[1.0])).expect("fit");
         assert!((fit.x[0] - 1.5).abs() < 1e-9, "slope {}", fit.x[0]);
         assert!(fit.at_bound);
+    }
+
+    /// A parameter the residuals do not depend on gets an infinite interval; the one they do
+    /// depend on keeps its textbook interval.
+    #[test]
+    fn a_parameter_the_data_do_not_move_does_not_spoil_the_others() {
+        let t: Vec<f64> = (1..=20).map(f64::from).collect();
+        let f = |x: &DVector<f64>| {
+            Some(DVector::from_iterator(
+                t.len(),
+                t.iter().map(|t| 3.0 * t - x[0] * t),
+            ))
+        };
+        let bounds = Bounds {
+            lower: vec![-10.0, -10.0],
+            upper: vec![10.0, 10.0],
+        };
+        let fit = minimize(&f, &bounds, &[DVector::zeros(2)]).expect("fit");
+        let ci = intervals(&fit.x, fit.covariance().as_ref(), &[1.0, 1.0], 1.0);
+        assert!(ci[0][0].is_finite() && ci[0][1].is_finite(), "{ci:?}");
+        assert!(ci[0][0] < 3.0 && ci[0][1] > 3.0, "{ci:?}");
+        assert!(ci[1][0].is_infinite() && ci[1][1].is_infinite(), "{ci:?}");
+    }
+
+    /// A model that cannot be evaluated beyond some point (a quantity undefined there) ends
+    /// the search at the best point it could evaluate, not with no fit.
+    #[test]
+    fn an_undefined_trial_point_keeps_the_best_evaluated_fit() {
+        let f = |x: &DVector<f64>| {
+            (x[0] <= 2.0).then(|| DVector::from_vec(vec![x[0] - 3.0, 0.5 * (x[0] - 3.0)]))
+        };
+        let bounds = Bounds {
+            lower: vec![-10.0],
+            upper: vec![10.0],
+        };
+        let fit = minimize(&f, &bounds, &[DVector::zeros(1)]).expect("a fit");
+        assert!(fit.x[0] <= 2.0, "x {}", fit.x[0]);
+        assert!(
+            fit.chi2() <= 1.25 * 9.0,
+            "chi2 {} above the start's",
+            fit.chi2()
+        );
     }
 }

@@ -84,6 +84,8 @@ struct RawAddedMass {
 struct RawDamping {
     linear: [f64; 6],
     quadratic: [f64; 6],
+    #[serde(default)]
+    sway_yaw: [f64; 2],
 }
 
 #[derive(Debug, Deserialize)]
@@ -159,6 +161,11 @@ pub struct VehicleConfig {
     pub added_mass: [f64; 6],
     pub damping_linear: [f64; 6],
     pub damping_quadratic: [f64; 6],
+    /// Linear sway-yaw cross damping `[Y_r, N_v]`: the sway force per unit yaw rate (N per
+    /// rad/s) and the yaw moment per unit sway speed (N m per m/s), both opposing the motion
+    /// with a positive sign, as the diagonal terms do (the off-diagonal sway-yaw entries of Fossen's linear damping
+    /// matrix `D`). Zero unless the vehicle file sets `damping.sway_yaw`.
+    pub damping_sway_yaw: [f64; 2],
     pub thruster_common: ThrusterCommon,
     pub thrusters: [ThrusterConfig; 4],
 }
@@ -297,6 +304,22 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
             "N/(m/s)^2 or N m/(rad/s)^2",
         )?;
     }
+    let damping_sway_yaw = [
+        doc.check_range(
+            "damping.sway_yaw.0",
+            raw.damping.sway_yaw[0],
+            -1e3,
+            1e3,
+            "N/(rad/s)",
+        )?,
+        doc.check_range(
+            "damping.sway_yaw.1",
+            raw.damping.sway_yaw[1],
+            -1e3,
+            1e3,
+            "N m/(m/s)",
+        )?,
+    ];
     if damping_linear
         .iter()
         .zip(&damping_quadratic)
@@ -445,6 +468,7 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
         added_mass,
         damping_linear,
         damping_quadratic,
+        damping_sway_yaw,
         thruster_common,
         thrusters,
     })
@@ -464,6 +488,15 @@ struct RawWorld {
     #[serde(default, rename = "obstacle")]
     obstacles: Vec<RawObstacle>,
     wall_following: RawWallFollowing,
+    #[serde(default)]
+    starts: std::collections::BTreeMap<String, RawCourseStart>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCourseStart {
+    position_m: [f64; 3],
+    heading_deg: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -553,6 +586,20 @@ pub struct WallFollowing {
     pub side: WallSide,
 }
 
+/// A named place a run can start from (`eyebot-hil run --start NAME`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CourseStart {
+    pub name: String,
+    /// Centre of mass, NED (m).
+    pub position_m: Vector3<f64>,
+    /// Compass heading (deg, clockwise from north).
+    pub heading_deg: f64,
+}
+
+/// How far inside the pool's side walls a start must lie (m): Mako's half-width (0.32 m)
+/// less a little, so a vehicle started there does not begin inside a wall.
+pub const START_CLEARANCE_M: f64 = 0.3;
+
 /// The world, resolved.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WorldConfig {
@@ -569,6 +616,8 @@ pub struct WorldConfig {
     pub friction: f64,
     pub obstacles: Vec<Obstacle>,
     pub wall_following: WallFollowing,
+    /// Named course starts in name order: the `[starts.NAME]` tables and `wall_following`.
+    pub starts: Vec<CourseStart>,
 }
 
 impl WorldConfig {
@@ -629,8 +678,36 @@ impl WorldConfig {
         }
         let wf = raw.wall_following;
         let start_m = check3(doc, "wall_following.start_m", wf.start_m, 0.0, 1e3, "m")?;
-        if (0..3).any(|a| start_m[a] > pool_m[a]) {
-            return Err(doc.invalid("wall_following.start_m", "the start lies outside the pool"));
+        if let Some(why) = outside_pool(&pool_m, &start_m) {
+            return Err(doc.invalid("wall_following.start_m", why));
+        }
+        let mut starts = Vec::with_capacity(raw.starts.len() + 1);
+        for (name, st) in &raw.starts {
+            let key = format!("starts.{name}.position_m");
+            let position_m = check3(doc, &key, st.position_m, -1e3, 1e3, "m")?;
+            if let Some(why) = outside_pool(&pool_m, &position_m) {
+                return Err(doc.invalid(&key, why));
+            }
+            let heading_deg = doc.check_range(
+                &format!("starts.{name}.heading_deg"),
+                st.heading_deg,
+                -360.0,
+                360.0,
+                "deg",
+            )?;
+            starts.push(CourseStart {
+                name: name.clone(),
+                position_m,
+                heading_deg,
+            });
+        }
+        if !raw.starts.contains_key("wall_following") {
+            starts.push(CourseStart {
+                name: "wall_following".into(),
+                position_m: start_m,
+                heading_deg: wf.heading_deg,
+            });
+            starts.sort_by(|a, b| a.name.cmp(&b.name));
         }
         Ok(WorldConfig {
             pool_m,
@@ -693,6 +770,45 @@ impl WorldConfig {
                 )?,
                 side: wf.side,
             },
+            starts,
         })
     }
+
+    /// The course start called `name`.
+    pub fn start_named(&self, name: &str) -> Option<&CourseStart> {
+        self.starts.iter().find(|s| s.name == name)
+    }
+
+    /// Why a vehicle with its centre of mass at `position_m` (NED) cannot start there, or
+    /// `None` when it can: inside the pool, at least [`START_CLEARANCE_M`] from each side
+    /// wall, between the surface and the floor.
+    pub fn outside_pool(&self, position_m: &Vector3<f64>) -> Option<String> {
+        outside_pool(&self.pool_m, position_m)
+    }
+}
+
+fn outside_pool(pool_m: &Vector3<f64>, p: &Vector3<f64>) -> Option<String> {
+    let c = START_CLEARANCE_M;
+    let (l, w, d) = (pool_m.x, pool_m.y, pool_m.z);
+    let why = if !(c..=l - c).contains(&p.x) {
+        format!(
+            "north {:.2} m is not within {c}..{:.2} m (the pool is {l} m long)",
+            p.x,
+            l - c
+        )
+    } else if !(c..=w - c).contains(&p.y) {
+        format!(
+            "east {:.2} m is not within {c}..{:.2} m (the pool is {w} m wide)",
+            p.y,
+            w - c
+        )
+    } else if !(0.0..=d).contains(&p.z) {
+        format!(
+            "depth {:.2} m is not within 0..{d} m (the pool is {d} m deep)",
+            p.z
+        )
+    } else {
+        return None;
+    };
+    Some(format!("the start lies outside the pool: {why}"))
 }

@@ -361,6 +361,9 @@ impl Model {
         for i in 0..6 {
             out[i] += (lin[i] + quad[i] * nu[i].abs()) * nu[i];
         }
+        let [y_r, n_v] = self.vehicle.damping_sway_yaw;
+        out[1] += y_r * nu[5];
+        out[5] += n_v * nu[1];
         out
     }
 

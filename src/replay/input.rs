@@ -27,11 +27,17 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use crate::record::{BYTES_HEADER, Direction, parse_chunk};
 use crate::transport::LineSettings;
 
+use super::output::Shutdown;
+
 pub use super::line::{Loc, MAX_PHYSICAL_LINE, Terminator, TimestampForm};
 use super::problem::{Action, Problem, ProblemKind};
 
 /// How many data lines at the start of a file decide its timestamp form.
 pub const DETECT_LINES: usize = 8;
+
+/// At most this many comment and data lines are read ahead to find those [`DETECT_LINES`]
+/// (blank lines are counted, not held): a head of a million comments decides on what it has.
+pub const DETECT_MAX_LOOKAHEAD: usize = 256;
 
 /// What kind of input a file turned out to be.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -144,8 +150,19 @@ impl<R: Read> Read for Counting<R> {
     }
 }
 
+/// The path that means standard input.
+pub const STDIN: &str = "-";
+
+/// Whether `path` is [`STDIN`].
+pub fn is_stdin(path: &Path) -> bool {
+    path.as_os_str() == STDIN
+}
+
 /// The file to read for `path`: itself, or the `bytes.tsv` of a recording directory.
 pub fn resolve_path(path: &Path) -> Result<PathBuf, InputError> {
+    if is_stdin(path) {
+        return Ok(path.to_path_buf());
+    }
     let meta = std::fs::metadata(path).map_err(|source| InputError::Io {
         path: path.to_path_buf(),
         source,
@@ -162,19 +179,120 @@ pub fn resolve_path(path: &Path) -> Result<PathBuf, InputError> {
         })
 }
 
+/// How long a read of a pipe, FIFO or device waits before it looks at the shutdown flag again.
+const POLL_MS: u16 = 100;
+
+/// A pipe, FIFO, terminal or device read without blocking the process: the descriptor is
+/// non-blocking and each read waits in `poll` for at most [`POLL_MS`] at a time, so a
+/// shutdown request ends a read that would otherwise wait forever (a FIFO whose writer never
+/// comes). The descriptor's flags are restored on drop (standard input is shared).
+struct PollRead {
+    file: File,
+    stop: Shutdown,
+    old_flags: Option<nix::fcntl::OFlag>,
+}
+
+impl PollRead {
+    fn new(file: File, stop: Shutdown) -> io::Result<Self> {
+        use nix::fcntl::{FcntlArg, OFlag, fcntl};
+        let old =
+            OFlag::from_bits_truncate(fcntl(&file, FcntlArg::F_GETFL).map_err(io::Error::from)?);
+        fcntl(&file, FcntlArg::F_SETFL(old | OFlag::O_NONBLOCK)).map_err(io::Error::from)?;
+        Ok(Self {
+            file,
+            stop,
+            old_flags: Some(old),
+        })
+    }
+}
+
+impl Drop for PollRead {
+    fn drop(&mut self) {
+        if let Some(old) = self.old_flags.take() {
+            let _ = nix::fcntl::fcntl(&self.file, nix::fcntl::FcntlArg::F_SETFL(old));
+        }
+    }
+}
+
+impl Read for PollRead {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        use nix::poll::{PollFd, PollFlags, poll};
+        use std::os::fd::AsFd;
+        loop {
+            if self.stop.is_triggered() {
+                return Err(io::Error::other("stopped by a shutdown request"));
+            }
+            // Wait for data or the writer's close first: a FIFO that never had a writer
+            // reads as end of file, but polls as not ready until a writer comes and goes.
+            let mut fds = [PollFd::new(self.file.as_fd(), PollFlags::POLLIN)];
+            match poll(&mut fds, POLL_MS) {
+                Ok(0) => continue,
+                Ok(_) => {}
+                Err(nix::errno::Errno::EINTR) => continue,
+                Err(e) => return Err(e.into()),
+            }
+            match self.file.read(buf) {
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+                    ) => {}
+                other => return other,
+            }
+        }
+    }
+}
+
+/// Opens `path` (or standard input for [`STDIN`]) for reading, once. Regular files are read
+/// as they are; anything else (pipe, FIFO, terminal, device) through [`PollRead`], so neither
+/// the open nor a read ignores `stop`. Returns the reader and whether it is a regular file.
+fn open_raw(path: &Path, stop: &Shutdown) -> io::Result<(Box<dyn Read + Send>, bool)> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let file = if is_stdin(path) {
+        use std::os::fd::AsFd;
+        File::from(io::stdin().as_fd().try_clone_to_owned()?)
+    } else {
+        // Non-blocking so that opening a FIFO does not wait for its writer.
+        std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(path)?
+    };
+    let kind = file.metadata()?.file_type();
+    if kind.is_file() {
+        return Ok((Box::new(file), true));
+    }
+    if kind.is_dir() {
+        return Err(io::Error::other("a directory, expected a log file"));
+    }
+    Ok((Box::new(PollRead::new(file, stop.clone())?), false))
+}
+
 /// Opens `path` for reading, decompressing when it starts with the gzip magic `1f 8b`.
-/// Returns the reader and whether it was gzip.
+/// Returns the reader, whether it was gzip and whether it is a regular file (which can be
+/// opened again for another pass; a pipe or FIFO is read once).
 pub fn open_reader(
     path: &Path,
     count: Arc<AtomicU64>,
-) -> Result<(Box<dyn BufRead + Send>, bool), InputError> {
+    stop: &Shutdown,
+) -> Result<(Box<dyn BufRead + Send>, bool, bool), InputError> {
     let io_err = |source| InputError::Io {
         path: path.to_path_buf(),
         source,
     };
-    let file = File::open(path).map_err(io_err)?;
-    let mut reader = BufReader::with_capacity(64 * 1024, Counting { inner: file, count });
-    let magic = reader.fill_buf().map_err(io_err)?;
+    let (inner, regular) = open_raw(path, stop).map_err(io_err)?;
+    let (reader, gzip) = decompressing(inner, count).map_err(io_err)?;
+    Ok((reader, gzip, regular))
+}
+
+/// `inner` as a buffered reader, decompressed when it starts with the gzip magic `1f 8b`;
+/// `count` accumulates the bytes read from `inner`. Returns the reader and whether it is gzip.
+fn decompressing(
+    inner: Box<dyn Read + Send>,
+    count: Arc<AtomicU64>,
+) -> io::Result<(Box<dyn BufRead + Send>, bool)> {
+    let mut reader = BufReader::with_capacity(64 * 1024, Counting { inner, count });
+    let magic = reader.fill_buf()?;
     if magic.starts_with(&[0x1f, 0x8b]) {
         let gz = flate2::bufread::MultiGzDecoder::new(reader);
         Ok((Box::new(BufReader::with_capacity(64 * 1024, gz)), true))
@@ -183,51 +301,51 @@ pub fn open_reader(
     }
 }
 
-/// Reads one physical line (through LF) into `buf` (cleared first, LF not stored), keeping at
-/// most `cap` bytes. Returns `None` at end of input, else the line's full length and whether
-/// it ended with LF.
+/// Reads one physical line into `buf` (cleared first, terminator not stored), keeping at most
+/// `cap` bytes. A line ends at LF, at CR LF, or at a CR not followed by LF (old Mac-style
+/// logs). Returns `None` at end of input, else the line's full length (without terminator) and
+/// how it ended.
 pub fn read_capped(
     reader: &mut dyn BufRead,
     buf: &mut Vec<u8>,
     cap: usize,
-) -> io::Result<Option<(usize, bool)>> {
+) -> io::Result<Option<(usize, Terminator)>> {
+    fn fill(reader: &mut dyn BufRead) -> io::Result<&[u8]> {
+        while let Err(e) = reader.fill_buf() {
+            if e.kind() != io::ErrorKind::Interrupted {
+                return Err(e);
+            }
+        }
+        reader.fill_buf()
+    }
     buf.clear();
     let mut total = 0usize;
     loop {
-        let available = match reader.fill_buf() {
-            Ok(a) => a,
-            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-            Err(e) => return Err(e),
-        };
+        let available = fill(reader)?;
         if available.is_empty() {
-            return Ok((total > 0).then_some((total, false)));
+            return Ok((total > 0).then_some((total, Terminator::Eof)));
         }
-        let (take, found) = match available.iter().position(|&b| b == b'\n') {
-            Some(i) => (i, true),
-            None => (available.len(), false),
-        };
+        let end = available.iter().position(|&b| b == b'\n' || b == b'\r');
+        let take = end.unwrap_or(available.len());
         let keep = take.min(cap.saturating_sub(buf.len()));
         buf.extend_from_slice(&available[..keep]);
         total += take;
-        reader.consume(take + usize::from(found));
-        if found {
-            return Ok(Some((total, true)));
+        let Some(at) = end else {
+            reader.consume(take);
+            continue;
+        };
+        let was_cr = available[at] == b'\r';
+        reader.consume(take + 1);
+        if !was_cr {
+            return Ok(Some((total, Terminator::Lf)));
         }
-    }
-}
-
-/// Splits a physical line into content and terminator.
-fn split_terminator(buf: &mut Vec<u8>, ended_with_lf: bool) -> Terminator {
-    if buf.last() == Some(&b'\r') {
-        buf.pop();
-        if ended_with_lf {
-            return Terminator::CrLf;
+        // A CR: the line ends here; a LF right after it belongs to the same ending.
+        let next = fill(reader)?;
+        if next.first() == Some(&b'\n') {
+            reader.consume(1);
+            return Ok(Some((total, Terminator::CrLf)));
         }
-    }
-    if ended_with_lf {
-        Terminator::Lf
-    } else {
-        Terminator::Eof
+        return Ok(Some((total, Terminator::Cr)));
     }
 }
 
@@ -327,16 +445,38 @@ struct Physical {
     line_no: u64,
     bytes: Vec<u8>,
     total: usize,
-    lf: bool,
+    terminator: Terminator,
+}
+
+/// The settings of a `#Serial:` comment (`None` when `text` is another comment).
+fn serial_comment(text: &str) -> Option<Result<LineSettings, String>> {
+    let payload = text.trim_start_matches('#').trim_start();
+    let rest = payload
+        .get(..7)
+        .filter(|head| head.eq_ignore_ascii_case("serial:"))
+        .and_then(|_| payload.get(7..))?;
+    Some(
+        rest.trim()
+            .parse::<LineSettings>()
+            .map_err(|e| e.to_string()),
+    )
 }
 
 /// One opened input, yielding [`Event`]s in file order.
+///
+/// Every physical line read ends up in exactly one of its counters or events: a blank line
+/// ([`Self::blank_lines`]), a `#` comment ([`Self::comment_lines`], [`Self::serial_lines`]), a
+/// line that cannot be placed (an [`Event::Problem`] with [`Action::Dropped`], counted in
+/// [`Self::unplaceable_lines`]), or an [`Event::Line`]; for recordings, a skipped select/ack
+/// line ([`Self::link_messages_skipped`]) and the chunks of other links or directions
+/// ([`Self::other_chunks`]).
 pub struct Source {
     reader: Box<dyn BufRead + Send>,
     file: Arc<Path>,
     input: usize,
     format: Format,
     gzip: bool,
+    regular: bool,
     comments: CommentMode,
     line_no: u64,
     lookahead: VecDeque<Physical>,
@@ -351,8 +491,19 @@ pub struct Source {
     queue: VecDeque<Event>,
     /// Recording inputs: select/ack lines of the sonar link skipped.
     pub link_messages_skipped: u64,
+    /// Recording inputs: chunk lines of other links or of the `rx` direction, and the header.
+    pub other_chunks: u64,
     /// Blank lines skipped.
     pub blank_lines: u64,
+    /// `#` comment lines other than `#Serial:`, whatever `--comments` does with them.
+    pub comment_lines: u64,
+    /// `#Serial:` comment lines, valid or not.
+    pub serial_lines: u64,
+    /// Lines dropped before validation: a bad timestamp, a bad `bytes.tsv` line.
+    pub unplaceable_lines: u64,
+    /// The input ended with a read error (a truncated gzip, a vanished device): reported as a
+    /// [`ProblemKind::ReadFailed`] problem at the line where it happened.
+    pub cut_short: bool,
 }
 
 impl fmt::Debug for Source {
@@ -375,16 +526,57 @@ impl Source {
         comments: CommentMode,
         count: Arc<AtomicU64>,
     ) -> Result<Self, InputError> {
+        Self::open_until(path, input, link, comments, count, &Shutdown::new())
+    }
+
+    /// [`Self::open`], with reads of pipes, FIFOs and devices ended by `stop`.
+    pub fn open_until(
+        path: &Path,
+        input: usize,
+        link: &str,
+        comments: CommentMode,
+        count: Arc<AtomicU64>,
+        stop: &Shutdown,
+    ) -> Result<Self, InputError> {
         let file_path = resolve_path(path)?;
-        let (reader, gzip) = open_reader(&file_path, count)?;
+        let (reader, gzip, regular) = open_reader(&file_path, count, stop)?;
+        Self::with_reader(&file_path, reader, gzip, regular, input, link, comments)
+    }
+
+    /// An input read from `raw` (decompressed when it is gzip), named `name` in reports:
+    /// what fuzzing and tests feed without a file.
+    pub fn from_reader(
+        name: &Path,
+        raw: Box<dyn Read + Send>,
+        link: &str,
+        comments: CommentMode,
+    ) -> Result<Self, InputError> {
+        let (reader, gzip) =
+            decompressing(raw, Arc::default()).map_err(|source| InputError::Io {
+                path: name.to_path_buf(),
+                source,
+            })?;
+        Self::with_reader(name, reader, gzip, false, 0, link, comments)
+    }
+
+    fn with_reader(
+        file_path: &Path,
+        reader: Box<dyn BufRead + Send>,
+        gzip: bool,
+        regular: bool,
+        input: usize,
+        link: &str,
+        comments: CommentMode,
+    ) -> Result<Self, InputError> {
         let mut source = Source {
             reader,
-            file: Arc::from(file_path.as_path()),
+            file: Arc::from(file_path),
             input,
             format: Format::Nmea {
                 timestamps: TimestampForm::None,
             },
             gzip,
+            regular,
             comments,
             line_no: 0,
             lookahead: VecDeque::new(),
@@ -397,7 +589,12 @@ impl Source {
             buf: Vec::new(),
             queue: VecDeque::new(),
             link_messages_skipped: 0,
+            other_chunks: 0,
             blank_lines: 0,
+            comment_lines: 0,
+            serial_lines: 0,
+            unplaceable_lines: 0,
+            cut_short: false,
         };
         source.detect()?;
         Ok(source)
@@ -411,18 +608,37 @@ impl Source {
         self.gzip
     }
 
+    /// Whether the input is a regular file, which another pass can open again (a pipe, FIFO
+    /// or standard input is read once).
+    pub fn is_regular(&self) -> bool {
+        self.regular
+    }
+
     pub fn path(&self) -> &Path {
         &self.file
     }
 
-    fn io_err(&self, source: io::Error) -> InputError {
-        InputError::Io {
-            path: self.file.to_path_buf(),
-            source,
-        }
+    /// Physical lines read from the input so far (those read ahead for detection included).
+    pub fn physical_lines(&self) -> u64 {
+        self.line_no
     }
 
-    fn read_physical(&mut self) -> Result<Option<Physical>, InputError> {
+    /// The first `#Serial:` comment with valid settings before the first data line, among
+    /// the lines read ahead for detection.
+    pub fn header_serial(&self) -> Option<(LineSettings, Loc)> {
+        for p in &self.lookahead {
+            let trimmed = p.bytes.trim_ascii();
+            if trimmed.first() != Some(&b'#') || p.total > MAX_PHYSICAL_LINE {
+                return None;
+            }
+            if let Some(Ok(settings)) = serial_comment(&String::from_utf8_lossy(trimmed)) {
+                return Some((settings, self.loc(p.line_no)));
+            }
+        }
+        None
+    }
+
+    fn read_physical(&mut self) -> Result<Option<Physical>, io::Error> {
         if let Some(p) = self.lookahead.pop_front() {
             return Ok(Some(p));
         }
@@ -430,11 +646,10 @@ impl Source {
     }
 
     /// The next physical line from the reader itself (not the lookahead).
-    fn read_fresh(&mut self) -> Result<Option<Physical>, InputError> {
+    fn read_fresh(&mut self) -> Result<Option<Physical>, io::Error> {
         let mut buf = std::mem::take(&mut self.buf);
-        let got = read_capped(self.reader.as_mut(), &mut buf, MAX_PHYSICAL_LINE)
-            .map_err(|e| self.io_err(e))?;
-        let Some((total, lf)) = got else {
+        let got = read_capped(self.reader.as_mut(), &mut buf, MAX_PHYSICAL_LINE)?;
+        let Some((total, terminator)) = got else {
             self.buf = buf;
             return Ok(None);
         };
@@ -443,26 +658,39 @@ impl Source {
             line_no: self.line_no,
             bytes: buf,
             total,
-            lf,
+            terminator,
         }))
     }
 
+    /// Reads ahead until [`DETECT_LINES`] data lines have voted on the timestamp form, or
+    /// [`DETECT_MAX_LOOKAHEAD`] comment and data lines are held, whichever comes first, so
+    /// memory stays bounded whatever the head of the file holds. Blank lines are counted as
+    /// they are read and not held.
     fn detect(&mut self) -> Result<(), InputError> {
         let mut votes = Vec::new();
         let mut data_lines = 0;
-        while data_lines < DETECT_LINES {
-            let Some(p) = self.read_fresh()? else {
-                break;
-            };
-            if p.line_no == 1 {
-                let first = p.bytes.strip_suffix(b"\r").unwrap_or(&p.bytes[..]);
-                if first == BYTES_HEADER.as_bytes() {
-                    self.format = Format::Recording;
-                    return Ok(());
+        while data_lines < DETECT_LINES && self.lookahead.len() < DETECT_MAX_LOOKAHEAD {
+            let p = match self.read_fresh() {
+                Ok(Some(p)) => p,
+                Ok(None) => break,
+                // Detection reads what it can; the error is reported where it happened.
+                Err(e) => {
+                    self.fail(e);
+                    break;
                 }
+            };
+            if p.line_no == 1 && p.bytes == BYTES_HEADER.as_bytes() {
+                self.format = Format::Recording;
+                self.other_chunks += 1;
+                return Ok(());
             }
             let trimmed = p.bytes.trim_ascii();
-            if !trimmed.is_empty() && trimmed[0] != b'#' {
+            if trimmed.is_empty() && p.total <= MAX_PHYSICAL_LINE {
+                self.blank_lines += 1;
+                self.buf = p.bytes;
+                continue;
+            }
+            if trimmed[0] != b'#' {
                 data_lines += 1;
                 if let Some(form) = classify(trimmed) {
                     votes.push((p.line_no, form));
@@ -476,6 +704,20 @@ impl Source {
         Ok(())
     }
 
+    /// Ends the input after a read error, reporting it at the line being read.
+    fn fail(&mut self, e: io::Error) {
+        self.cut_short = true;
+        self.done = true;
+        let loc = self.loc(self.line_no + 1);
+        self.queue.push_back(Event::Problem(Problem {
+            loc,
+            kind: ProblemKind::ReadFailed {
+                reason: e.to_string(),
+            },
+            action: Action::InputEnded,
+        }));
+    }
+
     fn loc(&self, line: u64) -> Loc {
         Loc {
             file: self.file.clone(),
@@ -483,7 +725,8 @@ impl Source {
         }
     }
 
-    /// The next event, or `None` at the end of the input.
+    /// The next event, or `None` at the end of the input. A read error after the input was
+    /// opened ends it with a [`ProblemKind::ReadFailed`] problem (and [`Self::cut_short`]).
     pub fn next_event(&mut self) -> Result<Option<Event>, InputError> {
         loop {
             if let Some(e) = self.queue.pop_front() {
@@ -492,33 +735,34 @@ impl Source {
             if self.done {
                 return Ok(None);
             }
-            match self.format {
-                Format::Recording => self.step_recording()?,
-                Format::Nmea { timestamps } => self.step_nmea(timestamps)?,
+            let step = match self.format {
+                Format::Recording => self.step_recording(),
+                Format::Nmea { timestamps } => self.step_nmea(timestamps),
+            };
+            if let Err(e) = step {
+                if self.format == Format::Recording {
+                    self.flush_pending(Terminator::Eof);
+                }
+                self.fail(e);
             }
         }
     }
 
     fn comment(&mut self, loc: Loc, text: &[u8], terminator: Terminator) {
         let text = String::from_utf8_lossy(text).trim().to_string();
-        let payload = text.trim_start_matches('#').trim_start();
-        if let Some(rest) = payload
-            .get(..7)
-            .filter(|head| head.eq_ignore_ascii_case("serial:"))
-            .and_then(|_| payload.get(7..))
-        {
-            match rest.trim().parse::<LineSettings>() {
+        if let Some(serial) = serial_comment(&text) {
+            self.serial_lines += 1;
+            match serial {
                 Ok(settings) => self.queue.push_back(Event::Serial { loc, settings }),
-                Err(e) => self.queue.push_back(Event::Problem(Problem {
+                Err(reason) => self.queue.push_back(Event::Problem(Problem {
                     loc,
-                    kind: ProblemKind::BadSerialComment {
-                        reason: e.to_string(),
-                    },
+                    kind: ProblemKind::BadSerialComment { reason },
                     action: Action::Ignored,
                 })),
             }
             return;
         }
+        self.comment_lines += 1;
         match self.comments {
             CommentMode::Report => self.queue.push_back(Event::Comment { loc, text }),
             CommentMode::Ignore => {}
@@ -534,12 +778,12 @@ impl Source {
         }
     }
 
-    fn step_nmea(&mut self, form: TimestampForm) -> Result<(), InputError> {
+    fn step_nmea(&mut self, form: TimestampForm) -> io::Result<()> {
         let Some(mut p) = self.read_physical()? else {
             self.done = true;
             return Ok(());
         };
-        let terminator = split_terminator(&mut p.bytes, p.lf);
+        let terminator = p.terminator;
         let loc = self.loc(p.line_no);
         let overflow = (p.total > MAX_PHYSICAL_LINE).then_some(p.total);
         let trimmed = p.bytes.trim_ascii();
@@ -566,6 +810,7 @@ impl Source {
                 }
                 None => {
                     let shown = p.bytes.iter().take(24).copied().collect::<Vec<u8>>();
+                    self.unplaceable_lines += 1;
                     self.queue.push_back(Event::Problem(Problem {
                         loc,
                         kind: ProblemKind::BadTimestamp {
@@ -601,6 +846,9 @@ impl Source {
         }));
     }
 
+    /// Notes a line's time; a time earlier than the latest so far is reported. The difference
+    /// of two valid times can exceed `i64` nanoseconds (ISO dates centuries apart), so it is
+    /// taken as an unsigned distance.
     fn check_time(&mut self, loc: &Loc, time_ns: i64) {
         if let Some(last) = self.last_time_ns
             && time_ns < last
@@ -608,7 +856,7 @@ impl Source {
             self.queue.push_back(Event::Problem(Problem {
                 loc: loc.clone(),
                 kind: ProblemKind::TimeWentBack {
-                    by_s: (last - time_ns) as f64 * 1e-9,
+                    by_s: last.abs_diff(time_ns) as f64 * 1e-9,
                 },
                 action: Action::SentInFileOrder,
             }));
@@ -616,27 +864,23 @@ impl Source {
         self.last_time_ns = Some(self.last_time_ns.map_or(time_ns, |l| l.max(time_ns)));
     }
 
-    fn step_recording(&mut self) -> Result<(), InputError> {
-        let Some(mut p) = self.read_physical()? else {
+    fn step_recording(&mut self) -> io::Result<()> {
+        let Some(p) = self.read_physical()? else {
             self.done = true;
             self.flush_pending(Terminator::Eof);
             return Ok(());
         };
-        if p.line_no == 1 {
-            self.buf = p.bytes;
-            return Ok(()); // the header
-        }
-        split_terminator(&mut p.bytes, p.lf);
         let loc = self.loc(p.line_no);
         let text = String::from_utf8_lossy(&p.bytes).into_owned();
         self.buf = p.bytes;
-        if text.trim().is_empty() {
+        if text.trim().is_empty() && p.total <= MAX_PHYSICAL_LINE {
             self.blank_lines += 1;
             return Ok(());
         }
         let chunk = match parse_chunk(&text, loc.line as usize) {
             Ok(c) if p.total <= MAX_PHYSICAL_LINE => c,
             Ok(_) => {
+                self.unplaceable_lines += 1;
                 self.queue.push_back(Event::Problem(Problem {
                     loc,
                     kind: ProblemKind::BadRecordLine {
@@ -647,6 +891,7 @@ impl Source {
                 return Ok(());
             }
             Err(e) => {
+                self.unplaceable_lines += 1;
                 self.queue.push_back(Event::Problem(Problem {
                     loc,
                     kind: ProblemKind::BadRecordLine { reason: e.reason },
@@ -656,6 +901,7 @@ impl Source {
             }
         };
         if chunk.dir != Direction::Tx || chunk.link != self.link {
+            self.other_chunks += 1;
             return Ok(());
         }
         let time_ns = (chunk.sim_s * 1e9).round() as i64;
@@ -917,5 +1163,183 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert!(matches!(&ev[1], Event::Line(l) if l.bytes == b"$SDDBT,1*00" && l.loc.line == 2));
+    }
+}
+
+/// Hostile inputs: each case here once cost unbounded memory, lost lines or overflowed.
+#[cfg(test)]
+mod hostile {
+    use std::io::Write;
+
+    use super::*;
+
+    fn from_bytes(data: Vec<u8>) -> Source {
+        Source::from_reader(
+            Path::new("mem.log"),
+            Box::new(io::Cursor::new(data)),
+            "sonar",
+            CommentMode::Report,
+        )
+        .unwrap()
+    }
+
+    fn drain(s: &mut Source) -> Vec<Event> {
+        let mut out = Vec::new();
+        while let Some(e) = s.next_event().unwrap() {
+            out.push(e);
+        }
+        out
+    }
+
+    /// Format detection holds at most [`DETECT_MAX_LOOKAHEAD`] lines, whatever precedes the
+    /// first data lines: blank lines are counted, not held; comments stop being held at the cap.
+    #[test]
+    fn blank_and_comment_bombs_do_not_fill_the_lookahead() {
+        let mut data = b"\n".repeat(200_000);
+        data.extend(b"  \r\n".repeat(1000));
+        let mut s = from_bytes(data.clone());
+        assert!(s.lookahead.is_empty(), "blank lines are not held");
+        assert_eq!(s.blank_lines, 201_000);
+        let ev = drain(&mut s);
+        assert!(ev.is_empty());
+
+        let mut data = b"# note\n".repeat(50_000);
+        data.extend_from_slice(b"1.0 $A*41\r\n");
+        let mut s = from_bytes(data);
+        assert_eq!(s.lookahead.len(), DETECT_MAX_LOOKAHEAD);
+        let ev = drain(&mut s);
+        assert_eq!(s.comment_lines, 50_000);
+        assert_eq!(s.physical_lines(), 50_001);
+        // Detection saw no data line; the form is decided on what it had (none).
+        assert!(matches!(ev.last(), Some(Event::Line(l)) if l.bytes == b"1.0 $A*41"));
+    }
+
+    /// A CR alone ends a line (old Mac-style logs); CR LF stays one ending; a CR at the end of
+    /// a read buffer is paired with the LF at the start of the next.
+    #[test]
+    fn cr_only_line_endings_split_lines() {
+        let mut s = from_bytes(b"$A*41\r$B*42\r\r\n$C*43\r".to_vec());
+        let got: Vec<(Vec<u8>, Terminator)> = drain(&mut s)
+            .into_iter()
+            .filter_map(|e| match e {
+                Event::Line(l) => Some((l.bytes, l.terminator)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            got,
+            vec![
+                (b"$A*41".to_vec(), Terminator::Cr),
+                (b"$B*42".to_vec(), Terminator::Cr),
+                (b"$C*43".to_vec(), Terminator::Cr),
+            ]
+        );
+        assert_eq!(s.blank_lines, 1, "the CR LF after $B's CR is an empty line");
+        // CR and LF in separate reads.
+        let data = [&b"$A*41\r"[..], &b"\n$B*42\r\n"[..]].concat();
+        let mut r = io::BufReader::with_capacity(6, &data[..]);
+        let mut buf = Vec::new();
+        assert_eq!(
+            read_capped(&mut r, &mut buf, 100).unwrap(),
+            Some((5, Terminator::CrLf))
+        );
+        assert_eq!(
+            read_capped(&mut r, &mut buf, 100).unwrap(),
+            Some((5, Terminator::CrLf))
+        );
+        assert_eq!(read_capped(&mut r, &mut buf, 100).unwrap(), None);
+    }
+
+    /// A truncated gzip yields every line before the cut, then an `input cut short` problem at
+    /// the line being read, and no error: the replay goes on to its summary.
+    #[test]
+    fn a_truncated_gzip_reports_where_it_ended() {
+        let text: String = (0..2000).map(|i| format!("$GPXXX,{i}*00\r\n")).collect();
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        enc.write_all(text.as_bytes()).unwrap();
+        let mut gz = enc.finish().unwrap();
+        gz.truncate(gz.len() / 2);
+        let mut s = from_bytes(gz);
+        assert!(s.is_gzip());
+        let ev = drain(&mut s);
+        assert!(s.cut_short);
+        let lines = ev.iter().filter(|e| matches!(e, Event::Line(_))).count() as u64;
+        assert!(lines > 100 && lines < 2000, "{lines}");
+        match ev.last() {
+            Some(Event::Problem(p)) => {
+                assert!(matches!(p.kind, ProblemKind::ReadFailed { .. }), "{p}");
+                assert_eq!(p.action, Action::InputEnded);
+                assert!(p.loc.line > lines, "{} after {lines} lines", p.loc);
+                assert!(p.to_string().starts_with("mem.log:"), "{p}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// ISO 8601 times centuries apart differ by more than i64 nanoseconds hold.
+    #[test]
+    fn times_far_apart_do_not_overflow() {
+        let mut s =
+            from_bytes(b"2262-04-11T00:00:00Z $A*41\r\n1677-09-22T00:00:00Z $A*41\r\n".to_vec());
+        let ev = drain(&mut s);
+        let back = ev
+            .iter()
+            .find_map(|e| match e {
+                Event::Problem(Problem {
+                    kind: ProblemKind::TimeWentBack { by_s },
+                    ..
+                }) => Some(*by_s),
+                _ => None,
+            })
+            .expect("time went back");
+        let years = back / (365.25 * 86400.0);
+        assert!((584.0..585.0).contains(&years), "{back} s = {years} years");
+    }
+
+    /// Every physical line lands in exactly one counter or event.
+    #[test]
+    fn every_line_is_accounted_for_once() {
+        let data =
+            b"#Serial: 9600 8N1\n# c\n\n1.0 $A*41\r\nbad $A*41\r\n2.0 $B*42\r\n\n#x\nxx\n3 $C"
+                .to_vec();
+        let mut s = from_bytes(data);
+        let ev = drain(&mut s);
+        let lines = ev.iter().filter(|e| matches!(e, Event::Line(_))).count() as u64;
+        assert_eq!(s.unplaceable_lines, 2, "`bad` and `xx` have no timestamp");
+        assert_eq!(s.comment_lines, 2);
+        assert_eq!(s.serial_lines, 1);
+        assert_eq!(s.blank_lines, 2);
+        assert_eq!(lines, 3);
+        assert_eq!(
+            s.physical_lines(),
+            lines + s.unplaceable_lines + s.comment_lines + s.serial_lines + s.blank_lines
+        );
+    }
+
+    /// A FIFO is opened without waiting for its writer and read once; a read waiting for a
+    /// writer that never comes ends on the shutdown flag.
+    #[test]
+    fn a_fifo_without_writer_gives_way_to_shutdown() {
+        let tmp = crate::scratch::dir("fifo");
+        let fifo = tmp.path().join("log.fifo");
+        nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        let stop = Shutdown::new();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let (path, s2) = (fifo.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let r = Source::open_until(&path, 0, "sonar", CommentMode::Report, Arc::default(), &s2);
+            let _ = tx.send(r.map(|_| ()).map_err(|e| e.to_string()));
+        });
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        assert!(rx.try_recv().is_err(), "still waiting for the writer");
+        stop.trigger();
+        let r = rx
+            .recv_timeout(std::time::Duration::from_secs(2))
+            .expect("open gave way to the shutdown flag");
+        let err = r.unwrap_err();
+        assert!(
+            err.contains("log.fifo") && err.contains("shutdown"),
+            "{err}"
+        );
     }
 }

@@ -30,6 +30,9 @@ pub enum Terminator {
     CrLf,
     /// LF without CR: normalised to CR LF on output, and reported.
     Lf,
+    /// CR not followed by LF (old Mac-style line endings): normalised to CR LF on output, and
+    /// reported.
+    Cr,
     /// The file ended without a line feed.
     Eof,
 }

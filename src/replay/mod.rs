@@ -24,8 +24,8 @@ pub mod stats;
 
 use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 pub use input::{CommentMode, Event, Format, InputError, Loc, Source, TimestampForm};
@@ -43,6 +43,11 @@ pub const DEFAULT_LINE: LineSettings = LineSettings::n81(4800);
 
 /// Problems of one kind listed individually before the rest are only counted.
 pub const LISTED_PER_KIND: u64 = 50;
+
+/// The range of `--speed`. Outside it a schedule is either too slow to be useful (a
+/// millisecond of log time per second) or faster than the line's own wire time, which
+/// `--pacing fast` expresses directly.
+pub const SPEED_RANGE: std::ops::RangeInclusive<f64> = 0.001..=1000.0;
 
 /// Everything a replay is told. [`Options::new`] gives the defaults.
 #[derive(Debug, Clone)]
@@ -115,6 +120,8 @@ pub enum ReplayError {
     },
     #[error("pacing by timestamps needs timestamps, but {path} has none ({format})")]
     NoTimestamps { path: PathBuf, format: Format },
+    #[error("--loop reads every input again, but {path} is a pipe, FIFO or device, read once")]
+    NotRereadable { path: PathBuf },
 }
 
 /// Where the line settings came from.
@@ -166,12 +173,21 @@ pub struct Replay {
     line_origin: LineOrigin,
     pacing: Pacing,
     inputs: Vec<InputInfo>,
+    /// The sources opened by [`Replay::open`], read by the first pass: a pipe or FIFO is
+    /// opened and read once.
+    opened: Mutex<Option<Vec<Source>>>,
 }
 
 impl Replay {
     /// Checks the options, opens every input once to detect its format and read the
     /// `#Serial:` comments at its head, and resolves the pacing and line settings.
     pub fn open(opts: Options) -> Result<Self, ReplayError> {
+        Self::open_until(opts, &Shutdown::new())
+    }
+
+    /// [`Self::open`], with reads of pipes, FIFOs and devices (then, and during
+    /// [`Self::run`]) ended by `stop`.
+    pub fn open_until(opts: Options, stop: &Shutdown) -> Result<Self, ReplayError> {
         if opts.inputs.is_empty() {
             return Err(ReplayError::NoInputs);
         }
@@ -186,7 +202,13 @@ impl Replay {
                 })
             }
         };
-        positive("--speed", opts.speed)?;
+        if !SPEED_RANGE.contains(&opts.speed) {
+            return Err(ReplayError::BadOption {
+                what: "--speed",
+                expected: "from 0.001 to 1000",
+                value: opts.speed,
+            });
+        }
         if let Some(Pacing::Rate { per_s }) = opts.pacing {
             positive("--rate", per_s)?;
         }
@@ -207,32 +229,38 @@ impl Replay {
             });
         }
         let mut inputs = Vec::new();
+        let mut opened = Vec::new();
         let mut serial: Option<(LineSettings, Loc)> = None;
         for (i, path) in opts.inputs.iter().enumerate() {
-            let mut source = Source::open(
+            let source = Source::open_until(
                 path,
                 i,
                 &opts.link,
                 opts.comments,
                 Arc::new(AtomicU64::new(0)),
+                stop,
             )?;
-            // Header comments come before the first line; `#Serial:` later is checked in run.
-            while let Some(event) = source.next_event()? {
-                match event {
-                    Event::Serial { loc, settings } => {
-                        serial.get_or_insert((settings, loc));
-                    }
-                    Event::Line(_) => break,
-                    _ => {}
-                }
+            if opts.looping && !source.is_regular() {
+                return Err(ReplayError::NotRereadable {
+                    path: path.to_path_buf(),
+                });
             }
-            let file = input::resolve_path(path)?;
+            // Header comments come before the first line; `#Serial:` later is checked in run.
+            if let Some(found) = source.header_serial() {
+                serial.get_or_insert(found);
+            }
+            let file = source.path().to_path_buf();
             inputs.push(InputInfo {
-                size_bytes: std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0),
+                size_bytes: if source.is_regular() {
+                    std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0)
+                } else {
+                    0
+                },
                 path: file,
                 format: source.format(),
                 gzip: source.is_gzip(),
             });
+            opened.push(source);
         }
         let (line, line_origin) = match (opts.line, serial) {
             (Some(line), _) => (line, LineOrigin::CommandLine),
@@ -261,6 +289,7 @@ impl Replay {
             line_origin,
             pacing,
             inputs,
+            opened: Mutex::new(Some(opened)),
         })
     }
 
@@ -340,24 +369,36 @@ impl Replay {
         'passes: loop {
             let first = pass == 0;
             let read = Arc::new(AtomicU64::new(0));
-            let mut sources = Vec::with_capacity(opts.inputs.len());
-            for (i, path) in opts.inputs.iter().enumerate() {
-                sources.push(Source::open(
-                    path,
-                    i,
-                    &opts.link,
-                    opts.comments,
-                    read.clone(),
-                )?);
-            }
+            let held = self.opened.lock().ok().and_then(|mut o| o.take());
+            let sources = match held {
+                // The first pass reads what `open` opened (bytes read then are not in the
+                // progress count: only the few lines of format detection).
+                Some(sources) => sources,
+                None => {
+                    let mut sources = Vec::with_capacity(opts.inputs.len());
+                    for (i, path) in opts.inputs.iter().enumerate() {
+                        sources.push(Source::open_until(
+                            path,
+                            i,
+                            &opts.link,
+                            opts.comments,
+                            read.clone(),
+                            stop,
+                        )?);
+                    }
+                    sources
+                }
+            };
             let mut merger = Merger::new(sources);
             let mut sched =
                 Scheduler::new(self.pacing, opts.speed, opts.start_s, opts.end_s, char_ns);
             let mut sent_this_pass = 0u64;
             let mut last_due: Option<u64> = None;
+            let mut stopped = false;
             while let Some(event) = merger.next_event()? {
                 if stop.is_triggered() {
-                    break 'passes;
+                    stopped = true;
+                    break;
                 }
                 match event {
                     Event::Problem(p) => {
@@ -365,7 +406,6 @@ impl Replay {
                     }
                     Event::Comment { loc, text } => {
                         if first {
-                            summary.comments += 1;
                             observer.comment(&loc, &text);
                         }
                     }
@@ -388,7 +428,7 @@ impl Replay {
                         }
                     }
                     Event::Line(line) => {
-                        if first {
+                        if first && line.kind == input::LineKind::Data {
                             summary.lines_read += 1;
                         }
                         let checked = match line.kind {
@@ -442,8 +482,15 @@ impl Replay {
                                     }
                                     None
                                 }
-                                Placement::Stop => break,
-                                Placement::Due { offset_ns } => Some(Some(base_ns + offset_ns)),
+                                Placement::Stop => {
+                                    if first {
+                                        summary.past_end += 1;
+                                    }
+                                    break;
+                                }
+                                Placement::Due { offset_ns } => {
+                                    Some(Some(base_ns.saturating_add(offset_ns)))
+                                }
                                 // Without a deadline of its own, a line follows the one before.
                                 Placement::Asap if self.pacing == Pacing::Fast => Some(None),
                                 Placement::Asap => Some(Some(last_due.unwrap_or(base_ns))),
@@ -451,7 +498,10 @@ impl Replay {
                             if let Some(due) = due {
                                 let sent = match sink.send(&out, due, stop) {
                                     Ok(s) => s,
-                                    Err(SinkError::Stopped) => break 'passes,
+                                    Err(SinkError::Stopped) => {
+                                        stopped = true;
+                                        break;
+                                    }
                                     Err(e) => return Err(e.into()),
                                 };
                                 last_due = due.or(last_due);
@@ -463,7 +513,7 @@ impl Replay {
                                     summary.sentences_sent += 1;
                                     if first {
                                         if let Some(address) = checked.address {
-                                            *summary.by_type.entry(address).or_default() += 1;
+                                            summary.count_type(address);
                                         }
                                         if let Some(t) = line.time_ns {
                                             summary.note_time(t, &line.loc);
@@ -493,7 +543,17 @@ impl Replay {
                 for s in merger.sources() {
                     summary.link_messages_skipped += s.link_messages_skipped;
                     summary.blank_lines += s.blank_lines;
+                    summary.comments += s.comment_lines;
+                    summary.physical_lines += s.physical_lines();
+                    summary.other_chunks += s.other_chunks;
+                    summary.lines_read += s.unplaceable_lines;
+                    summary.lines_dropped += s.unplaceable_lines;
+                    summary.serial_comments += s.serial_lines;
+                    summary.inputs_cut_short += u64::from(s.cut_short);
                 }
+            }
+            if stopped {
+                break 'passes;
             }
             observer.progress(read.load(Ordering::Relaxed), summary.sentences_sent);
             summary.passes += 1;
@@ -699,5 +759,138 @@ mod tests {
         assert_eq!(summary.comments_sent, 1);
         assert_eq!(summary.sentences_sent, 2);
         assert_eq!(summary.problems.get("#Serial conflict"), Some(&1));
+    }
+
+    /// Every line of a text log lands in one counter of the summary, bad timestamps among
+    /// the dropped, comments counted whatever `--comments` does with them.
+    #[test]
+    fn the_summary_accounts_for_every_line_once() {
+        let tmp = crate::scratch::dir("replay-acct");
+        let log = tmp.path().join("a.log");
+        std::fs::write(
+            &log,
+            "#Serial: 9600 8N1\n# c1\n\n0.0 $A*41\r\nbad $A*41\r\n1.0 $B*00\r\n\n# c2\n2.0 $A*41\r3.0 $A*41\r\n9.0 $A*41\r\n",
+        )
+        .unwrap();
+        for mode in [CommentMode::Report, CommentMode::Send, CommentMode::Ignore] {
+            let mut opts = Options::new(vec![log.clone()]);
+            opts.pacing = Some(Pacing::Fast);
+            opts.policy = Policy::Drop;
+            opts.comments = mode;
+            opts.start_s = 1.0;
+            opts.end_s = Some(5.0);
+            let replay = Replay::open(opts).unwrap();
+            let out = Shared::default();
+            let mut sink = ByteSink::new(Port::Writer(Box::new(out.clone())), &DEFAULT_LINE);
+            let s = replay.run(&mut sink, &mut Quiet, &Shutdown::new()).unwrap();
+            assert_eq!(s.physical_lines, 11, "{mode:?}");
+            assert_eq!((s.comments, s.serial_comments, s.blank_lines), (2, 1, 2));
+            assert_eq!(s.lines_read, 6, "{mode:?}: 5 timed lines and `bad`");
+            assert_eq!(
+                s.physical_lines,
+                s.lines_read + s.comments + s.serial_comments + s.blank_lines
+            );
+            // 0.0 skipped, `bad` and the bad checksum dropped, 2.0 and 3.0 sent, 9.0 past --end.
+            assert_eq!(
+                (
+                    s.skipped_before_start,
+                    s.lines_dropped,
+                    s.sentences_sent,
+                    s.past_end
+                ),
+                (1, 2, 2, 1),
+                "{mode:?}"
+            );
+            let comments_sent = if mode == CommentMode::Send { 2 } else { 0 };
+            assert_eq!(s.comments_sent, comments_sent, "{mode:?}");
+            assert_eq!(s.problems.get("CR without LF"), Some(&1), "{mode:?}");
+        }
+    }
+
+    /// `--speed` outside its range is refused; at the ends of the range a schedule is finite.
+    #[test]
+    fn speed_has_a_range() {
+        let tmp = crate::scratch::dir("replay-speed");
+        let log = tmp.path().join("a.log");
+        std::fs::write(&log, "0 $A*41\r\n").unwrap();
+        for bad in [1e-300, 0.0009, 1000.5, f64::INFINITY, f64::NAN, -1.0] {
+            let mut opts = Options::new(vec![log.clone()]);
+            opts.speed = bad;
+            let err = Replay::open(opts).unwrap_err().to_string();
+            assert!(
+                err.contains("--speed must be from 0.001 to 1000"),
+                "{bad}: {err}"
+            );
+        }
+        let mut sched = Scheduler::new(Pacing::Timestamps, 0.001, 0.0, None, 1000);
+        assert_eq!(
+            sched.place(Some(i64::MIN), 10),
+            Placement::Due { offset_ns: 0 }
+        );
+        assert!(
+            matches!(sched.place(Some(i64::MAX), 10), Placement::Due { offset_ns } if offset_ns == u64::MAX)
+        );
+    }
+
+    /// A pipe or FIFO is opened once and read once: by `open` for the format and `#Serial:`,
+    /// then by the first pass. `--loop` over one is refused.
+    #[test]
+    fn a_fifo_is_read_once() {
+        let tmp = crate::scratch::dir("replay-fifo");
+        let fifo = tmp.path().join("log.fifo");
+        nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        let path = fifo.clone();
+        let writer = std::thread::spawn(move || {
+            let text: String = std::iter::once("#Serial: 9600 8N1\n".to_string())
+                .chain((0..500).map(|i| format!("$GPXXX,{i}*00\r\n")))
+                .collect();
+            std::fs::write(path, text).unwrap();
+        });
+        let (tx, rx) = std::sync::mpsc::channel();
+        let reader_path = fifo.clone();
+        std::thread::spawn(move || {
+            let mut opts = Options::new(vec![reader_path]);
+            opts.pacing = Some(Pacing::Fast);
+            let replay = Replay::open(opts).unwrap();
+            let line = replay.line_settings();
+            let mut sink = ByteSink::new(Port::Writer(Box::new(std::io::sink())), &line);
+            let s = replay.run(&mut sink, &mut Quiet, &Shutdown::new()).unwrap();
+            let _ = tx.send((line, s.sentences_sent, s.physical_lines));
+        });
+        let (line, sent, lines) = rx
+            .recv_timeout(std::time::Duration::from_secs(10))
+            .expect("the replay of a FIFO ended");
+        writer.join().unwrap();
+        assert_eq!((line, sent, lines), (LineSettings::n81(9600), 500, 501));
+
+        let writer = {
+            let path = fifo.clone();
+            std::thread::spawn(move || std::fs::write(path, "$A*41\r\n").unwrap())
+        };
+        let mut opts = Options::new(vec![fifo]);
+        opts.looping = true;
+        let err = Replay::open(opts).unwrap_err().to_string();
+        writer.join().unwrap();
+        assert!(err.contains("--loop") && err.contains("log.fifo"), "{err}");
+    }
+
+    /// A log of many distinct addresses costs a fixed table of types.
+    #[test]
+    fn sentence_types_have_a_capped_table() {
+        let tmp = crate::scratch::dir("replay-types");
+        let log = tmp.path().join("a.log");
+        let text: String = (0..1000).map(|i| format!("$X{i:05},1*00\r\n")).collect();
+        std::fs::write(&log, text).unwrap();
+        let mut opts = Options::new(vec![log]);
+        opts.pacing = Some(Pacing::Fast);
+        let replay = Replay::open(opts).unwrap();
+        let mut sink = ByteSink::new(Port::Writer(Box::new(std::io::sink())), &DEFAULT_LINE);
+        let s = replay.run(&mut sink, &mut Quiet, &Shutdown::new()).unwrap();
+        assert_eq!(s.by_type.len(), stats::TYPES_LISTED + 1);
+        assert_eq!(
+            s.by_type.get(stats::OTHER_TYPES),
+            Some(&(1000 - stats::TYPES_LISTED as u64))
+        );
+        assert_eq!(s.by_type.values().sum::<u64>(), 1000);
     }
 }

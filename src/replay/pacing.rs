@@ -87,7 +87,7 @@ impl Scheduler {
     /// Places a data sentence of `len` bytes (with CR LF) whose log timestamp is `time_ns`.
     pub fn place(&mut self, time_ns: Option<i64>, len: usize) -> Placement {
         let stamped = time_ns.map(|t| {
-            let since_first = t - *self.first_time_ns.get_or_insert(t);
+            let since_first = t.saturating_sub(*self.first_time_ns.get_or_insert(t));
             self.latest_stamp_ns = self.latest_stamp_ns.max(since_first);
             self.latest_stamp_ns
         });
@@ -99,7 +99,9 @@ impl Scheduler {
             (Pacing::Fast, Some(t)) => t,
         };
         self.index += 1;
-        self.wire_ns += (self.char_ns * len as u64) as i64;
+        self.wire_ns = self.wire_ns.saturating_add(
+            i64::try_from(self.char_ns.saturating_mul(len as u64)).unwrap_or(i64::MAX),
+        );
         if log_ns < self.start_ns {
             return Placement::Skip;
         }

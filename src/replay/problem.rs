@@ -22,6 +22,10 @@ pub enum ProblemKind {
     LineTooLong { len: usize },
     /// LF without CR.
     MissingCr,
+    /// CR without LF.
+    MissingLf,
+    /// Reading the input failed part-way (a truncated gzip, a vanished device).
+    ReadFailed { reason: String },
     /// The file's last line has no line ending.
     NoLineEnding,
     /// A line of a timestamped file without a readable timestamp.
@@ -61,6 +65,8 @@ impl ProblemKind {
             ProblemKind::NoSentence { .. } => "line without '$'",
             ProblemKind::LineTooLong { .. } => "line over input cap",
             ProblemKind::MissingCr => "LF without CR",
+            ProblemKind::MissingLf => "CR without LF",
+            ProblemKind::ReadFailed { .. } => "input cut short",
             ProblemKind::NoLineEnding => "no line ending at end of file",
             ProblemKind::BadTimestamp { .. } => "bad timestamp",
             ProblemKind::TimeWentBack { .. } => "time went back",
@@ -72,7 +78,7 @@ impl ProblemKind {
 
     /// Reported once per file rather than once per line (still counted per line).
     pub fn once_per_file(&self) -> bool {
-        matches!(self, ProblemKind::MissingCr)
+        matches!(self, ProblemKind::MissingCr | ProblemKind::MissingLf)
     }
 
     pub fn is_checksum(&self) -> bool {
@@ -100,6 +106,8 @@ impl fmt::Display for ProblemKind {
                 MAX_PHYSICAL_LINE
             ),
             ProblemKind::MissingCr => f.write_str("lines end in LF without CR"),
+            ProblemKind::MissingLf => f.write_str("lines end in CR without LF"),
+            ProblemKind::ReadFailed { reason } => write!(f, "reading failed: {reason}"),
             ProblemKind::NoLineEnding => f.write_str("last line has no line ending"),
             ProblemKind::BadTimestamp { expected, found } => {
                 write!(f, "expected a line with {expected}, found \"{found}\"")
@@ -132,7 +140,10 @@ pub enum Action {
     },
     JunkRemoved,
     CrAdded,
+    LfAdded,
     SentInFileOrder,
+    /// The rest of the input is not read.
+    InputEnded,
     Ignored,
 }
 
@@ -144,7 +155,9 @@ impl fmt::Display for Action {
             Action::Fixed { checksum } => write!(f, "fixed: checksum set to {checksum:02X}"),
             Action::JunkRemoved => f.write_str("junk removed (policy fix)"),
             Action::CrAdded => f.write_str("CR added: sent with CR LF"),
+            Action::LfAdded => f.write_str("LF added: sent with CR LF"),
             Action::SentInFileOrder => f.write_str("sent in file order"),
+            Action::InputEnded => f.write_str("the rest of this input is lost"),
             Action::Ignored => f.write_str("ignored"),
         }
     }

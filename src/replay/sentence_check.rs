@@ -77,6 +77,9 @@ pub fn check_line(
             Terminator::Lf => checked
                 .problems
                 .push((ProblemKind::MissingCr, Action::CrAdded)),
+            Terminator::Cr => checked
+                .problems
+                .push((ProblemKind::MissingLf, Action::LfAdded)),
             Terminator::Eof => checked
                 .problems
                 .push((ProblemKind::NoLineEnding, Action::CrAdded)),

@@ -9,6 +9,14 @@ use super::input::Loc;
 /// How many of the largest gaps are listed.
 pub const GAPS_LISTED: usize = 5;
 
+/// How many sentence addresses get a row of their own in [`Summary::by_type`]; the rest are
+/// counted in the [`OTHER_TYPES`] row, so a log of millions of distinct addresses costs a
+/// fixed table.
+pub const TYPES_LISTED: usize = 64;
+
+/// The row of [`Summary::by_type`] for addresses beyond [`TYPES_LISTED`].
+pub const OTHER_TYPES: &str = "(other)";
+
 /// A gap between two consecutive sentences' log times.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Gap {
@@ -22,6 +30,14 @@ pub struct Gap {
 #[derive(Debug, Clone, Default)]
 pub struct Summary {
     pub passes: u64,
+    /// Physical lines read from the inputs (first pass). For a text log each is exactly one
+    /// of: a data line ([`Self::lines_read`]), a comment ([`Self::comments`],
+    /// [`Self::serial_comments`]) or a blank line. For a recording each is a chunk of the
+    /// replayed link, another chunk or the header ([`Self::other_chunks`]), a bad line
+    /// (counted in [`Self::lines_read`] and [`Self::lines_dropped`]) or a blank line.
+    pub physical_lines: u64,
+    /// Data lines (sentences) read, first pass. Each is exactly one of: sent (first pass),
+    /// dropped, skipped before `--start`, or [`Self::past_end`].
     pub lines_read: u64,
     pub sentences_sent: u64,
     pub comments_sent: u64,
@@ -31,6 +47,14 @@ pub struct Summary {
     pub lines_passed_with_problems: u64,
     pub checksum_failures: u64,
     pub skipped_before_start: u64,
+    /// The sentence past `--end` that ended the pass (0 or 1 per pass).
+    pub past_end: u64,
+    /// `#Serial:` comment lines.
+    pub serial_comments: u64,
+    /// Recordings: chunk lines of other links or directions, and the header.
+    pub other_chunks: u64,
+    /// Inputs that ended with a read error (reported as `input cut short`).
+    pub inputs_cut_short: u64,
     /// Problems by kind name (counted per line, listed once each).
     pub problems: BTreeMap<&'static str, u64>,
     /// Problems counted but not listed (beyond the per-kind listing limit, or once-per-file).
@@ -69,7 +93,8 @@ impl Summary {
         self.first_time_ns.get_or_insert(time_ns);
         self.last_time_ns = Some(self.last_time_ns.map_or(time_ns, |l| l.max(time_ns)));
         if let Some(prev) = self.prev_time_ns {
-            let seconds = (time_ns - prev) as f64 * 1e-9;
+            // Two valid times can be further apart than i64 nanoseconds hold.
+            let seconds = (i128::from(time_ns) - i128::from(prev)) as f64 * 1e-9;
             if seconds > self.gap_threshold_s {
                 self.gaps_over_threshold += 1;
             }
@@ -84,6 +109,18 @@ impl Summary {
             }
         }
         self.prev_time_ns = Some(time_ns);
+    }
+
+    /// Counts one sentence of type `address` (at most [`TYPES_LISTED`] rows, then
+    /// [`OTHER_TYPES`]).
+    pub fn count_type(&mut self, address: String) {
+        if let Some(n) = self.by_type.get_mut(&address) {
+            *n += 1;
+        } else if self.by_type.len() < TYPES_LISTED {
+            self.by_type.insert(address, 1);
+        } else {
+            *self.by_type.entry(OTHER_TYPES.to_string()).or_default() += 1;
+        }
     }
 
     pub fn problem_count(&self) -> u64 {
@@ -109,7 +146,7 @@ impl Summary {
                 let _ = writeln!(
                     s,
                     "time span: {:.3} s ({:.3} .. {:.3})",
-                    (b - a) as f64 * 1e-9,
+                    (i128::from(b) - i128::from(a)) as f64 * 1e-9,
                     a as f64 * 1e-9,
                     b as f64 * 1e-9
                 );
@@ -136,8 +173,9 @@ impl fmt::Display for Summary {
         let (bps, sps) = self.rates();
         writeln!(
             f,
-            "replay summary: {} pass(es), {} lines read, {} sentences sent ({} bytes) in {:.3} s ({:.0} B/s, {:.1} sentences/s)",
+            "replay summary: {} pass(es), {} lines in, {} sentence lines read, {} sentences sent ({} bytes) in {:.3} s ({:.0} B/s, {:.1} sentences/s)",
             self.passes,
+            self.physical_lines,
             self.lines_read,
             self.sentences_sent,
             self.bytes_sent,
@@ -147,16 +185,26 @@ impl fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "  dropped {}, fixed {}, sent with problems {}, skipped before --start {}, comments {} ({} sent), blank lines {}, link select/ack lines skipped {}",
+            "  dropped {}, fixed {}, sent with problems {}, skipped before --start {}, past --end {}, comments {} ({} sent), #Serial comments {}, blank lines {}, link select/ack lines skipped {}, other recorded chunks {}",
             self.lines_dropped,
             self.lines_fixed,
             self.lines_passed_with_problems,
             self.skipped_before_start,
+            self.past_end,
             self.comments,
             self.comments_sent,
+            self.serial_comments,
             self.blank_lines,
-            self.link_messages_skipped
+            self.link_messages_skipped,
+            self.other_chunks
         )?;
+        if self.inputs_cut_short > 0 {
+            writeln!(
+                f,
+                "  {} input(s) cut short by a read error (see \"input cut short\" above)",
+                self.inputs_cut_short
+            )?;
+        }
         if self.line_waits > 0 {
             writeln!(
                 f,

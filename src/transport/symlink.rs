@@ -7,8 +7,9 @@
 //! regular file, a directory, someone else's symlink, a live daemon's link) is an error that
 //! names the path and what holds it.
 
-use std::fs;
-use std::io;
+use std::fs::{self, File};
+use std::io::{self, Read};
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 /// Why a link could not be created.
@@ -78,9 +79,7 @@ impl OwnedLink {
                 });
             }
             Ok(_) => {
-                let owner = fs::read_to_string(&owner_file)
-                    .ok()
-                    .and_then(|s| s.trim().parse::<u32>().ok());
+                let owner = read_pid(&owner_file);
                 match owner {
                     None => {
                         return Err(LinkError::Occupied {
@@ -101,7 +100,12 @@ impl OwnedLink {
             }
         }
         // Write the owner file first, then swap the link in atomically with a rename.
-        fs::write(&owner_file, format!("{}\n", std::process::id())).map_err(io_err)?;
+        write_file(&owner_file, &format!("{}\n", std::process::id()), 0o600).map_err(|source| {
+            LinkError::Io {
+                path: owner_file.clone(),
+                source,
+            }
+        })?;
         let tmp = path.with_file_name(format!(
             ".{}.tmp{}",
             path.file_name()
@@ -140,13 +144,65 @@ pub fn remove_if_ours(path: &Path, target: &Path) {
         let _ = fs::remove_file(path);
     }
     let owner_file = owner_file_for(path);
-    let ours = fs::read_to_string(&owner_file)
-        .ok()
-        .and_then(|s| s.trim().parse::<u32>().ok())
-        == Some(std::process::id());
+    let ours = read_pid(&owner_file) == Some(std::process::id());
     if ours {
         let _ = fs::remove_file(&owner_file);
     }
+}
+
+/// An error for something the daemon refuses to touch.
+pub fn refuse(message: String) -> io::Error {
+    io::Error::new(io::ErrorKind::PermissionDenied, message)
+}
+
+/// The options for opening a daemon file (owner, pid) for writing: created with `mode`,
+/// truncated, never through a symlink, never blocking on a FIFO.
+fn write_options(mode: u32) -> std::fs::OpenOptions {
+    let mut o = std::fs::OpenOptions::new();
+    o.write(true)
+        .create(true)
+        .truncate(true)
+        .mode(mode)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_NOCTTY);
+    o
+}
+
+/// Opens `path` with `options`, refusing anything but a regular file.
+pub fn open_nofollow(path: &Path, options: &std::fs::OpenOptions) -> io::Result<File> {
+    let file = options.open(path).map_err(|e| match e.raw_os_error() {
+        Some(libc::ELOOP) => refuse("is a symlink; the daemon does not follow it".into()),
+        Some(libc::ENXIO) => refuse("is a FIFO; expected a regular file".into()),
+        _ => e,
+    })?;
+    if !file.metadata()?.is_file() {
+        return Err(refuse("is not a regular file".into()));
+    }
+    Ok(file)
+}
+
+/// Writes `text` to `path` (mode `mode`) through [`open_nofollow`].
+pub fn write_file(path: &Path, text: &str, mode: u32) -> io::Result<()> {
+    use std::io::Write;
+    let mut file = open_nofollow(path, &write_options(mode))?;
+    file.write_all(text.as_bytes())
+}
+
+/// Reads at most `limit` bytes of `path`, if it is a regular file reached without a
+/// symlink; `None` for anything else.
+pub fn read_small(path: &Path, limit: u64) -> Option<String> {
+    let mut options = std::fs::OpenOptions::new();
+    options
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_NOCTTY);
+    let file = open_nofollow(path, &options).ok()?;
+    let mut text = String::new();
+    file.take(limit).read_to_string(&mut text).ok()?;
+    Some(text)
+}
+
+/// The process id a daemon file (owner, pid) holds, read as [`read_small`] does.
+pub fn read_pid(path: &Path) -> Option<u32> {
+    read_small(path, 32)?.trim().parse().ok()
 }
 
 #[cfg(test)]

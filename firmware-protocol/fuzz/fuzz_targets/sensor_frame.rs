@@ -1,15 +1,10 @@
 //! Binary frame parser + message decoder: no panic; a decoded frame re-encodes byte for byte.
+//! The property is `checks::sensor_frame` (shared with the corpus replay in `../tests/fuzz_corpora.rs`).
 #![no_main]
-use bytes::BytesMut;
-use firmware_protocol::{Frame, frame};
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| {
-    if let Ok(raw) = frame::parse(data) {
-        if let Ok(decoded) = Frame::decode(raw) {
-            let mut out = BytesMut::new();
-            decoded.encode(&mut out);
-            assert_eq!(&out[..], data, "re-encoding changed the frame");
-        }
-    }
-});
+#[path = "../checks.rs"]
+#[allow(dead_code)]
+mod checks;
+
+fuzz_target!(|data: &[u8]| checks::sensor_frame(data));

@@ -1,16 +1,10 @@
 //! Sonar select/ack parser: no panic; a decoded command re-encodes byte for byte.
+//! The property is `checks::sonar_command` (shared with the corpus replay in `../tests/fuzz_corpora.rs`).
 #![no_main]
-use bytes::BytesMut;
-use firmware_protocol::sonar_link;
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| {
-    if data.first() == Some(&b'@') {
-        let _ = sonar_link::scan_command(data);
-    }
-    if let Ok(cmd) = sonar_link::parse_command(data) {
-        let mut out = BytesMut::new();
-        cmd.encode(&mut out);
-        assert_eq!(&out[..], data);
-    }
-});
+#[path = "../checks.rs"]
+#[allow(dead_code)]
+mod checks;
+
+fuzz_target!(|data: &[u8]| checks::sonar_command(data));

@@ -83,7 +83,7 @@ pub const HIDDEN: [Hidden; 13] = [
         signed: true,
         scale: true,
     },
-    hidden("sway_yaw_coupling", None, true),
+    hidden("sway_yaw_coupling", Some("sway_yaw_coupling"), true),
 ];
 
 /// The effect the independent model calls `name`.

@@ -10,8 +10,8 @@ pub fn configs_dir() -> PathBuf {
     crate::workspace_root().join("configs")
 }
 
-/// The start line of `configs/default.toml` (mid-pool, facing north).
-pub const DEFAULT_START: &str = "position_m = [3.0, 6.25, 0.3]";
+/// The start line of `configs/default.toml` (2.5 m off the west wall, facing north).
+pub const DEFAULT_START: &str = "position_m = [3.0, 2.5, 0.3]";
 
 /// 1.5 m off the west wall, heading north, so the port-side transducers (1 and 2, pointing
 /// 75 and 105 deg to port) see the wall at about (1.5 - 0.32) / sin 75 deg = 1.22 m.

@@ -182,6 +182,18 @@ pub fn run_program(
     env: &[(&str, &str)],
     timeout: Duration,
 ) -> ProgramRun {
+    run_program_args(daemon, target, program, &[], env, timeout)
+}
+
+/// [`run_program`] with command-line arguments for the program.
+pub fn run_program_args(
+    daemon: &Daemon,
+    target: Target,
+    program: &Path,
+    args: &[&str],
+    env: &[(&str, &str)],
+    timeout: Duration,
+) -> ProgramRun {
     let mut cmd = match target {
         Target::Host => Command::new(program),
         Target::M68k => {
@@ -190,6 +202,7 @@ pub fn run_program(
             c
         }
     };
+    cmd.args(args);
     cmd.env("EYEBOT_RUN_DIR", &daemon.run_dir)
         .env("EYEBOT_TIME_MODE", "lockstep")
         // Generous: in lockstep a retry would change the transcript.
