@@ -127,7 +127,15 @@ pub enum StatusError {
     },
     #[error("status socket {path}: no answer within {timeout:?}")]
     Timeout { path: PathBuf, timeout: Duration },
+    #[error(
+        "status socket {path}: more than {MAX_STATUS_BYTES} bytes; a status document is a few KiB (is something else serving this socket?)"
+    )]
+    TooLarge { path: PathBuf },
 }
+
+/// The most a status client reads: a snapshot is a few KiB, and a socket that streams
+/// without end must cost an error, not memory.
+pub const MAX_STATUS_BYTES: u64 = 1 << 20;
 
 /// The listening socket; removes its file on drop.
 #[derive(Debug)]
@@ -204,9 +212,18 @@ pub async fn query(path: &Path, timeout: Duration) -> Result<StatusSnapshot, Sta
         source,
     };
     let read = async {
-        let mut stream = UnixStream::connect(path).await.map_err(io_err)?;
+        let stream = UnixStream::connect(path).await.map_err(io_err)?;
         let mut doc = Vec::new();
-        stream.read_to_end(&mut doc).await.map_err(io_err)?;
+        stream
+            .take(MAX_STATUS_BYTES + 1)
+            .read_to_end(&mut doc)
+            .await
+            .map_err(io_err)?;
+        if doc.len() as u64 > MAX_STATUS_BYTES {
+            return Err(StatusError::TooLarge {
+                path: path.to_path_buf(),
+            });
+        }
         serde_json::from_slice(&doc).map_err(|source| StatusError::Garbled {
             path: path.to_path_buf(),
             source,
@@ -278,5 +295,21 @@ mod tests {
             .await
             .unwrap_err();
         assert!(err.to_string().contains("nothing.sock"));
+    }
+
+    /// A socket that streams without end costs the client an error, not memory.
+    #[tokio::test]
+    async fn a_client_reads_a_bounded_document() {
+        let tmp = crate::scratch::dir("status-flood");
+        let path = tmp.path().join("status.sock");
+        let listener = UnixListener::bind(&path).unwrap();
+        let server = tokio::spawn(async move {
+            let (mut stream, _) = listener.accept().await.unwrap();
+            let block = vec![b'x'; 64 * 1024];
+            while stream.write_all(&block).await.is_ok() {}
+        });
+        let err = query(&path, Duration::from_secs(10)).await.unwrap_err();
+        assert!(matches!(err, StatusError::TooLarge { .. }), "{err}");
+        server.abort();
     }
 }
