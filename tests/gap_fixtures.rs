@@ -135,7 +135,7 @@ fn hidden_thruster_imbalance_is_named_and_fitted() {
         "thruster-imbalance",
         "thruster_imbalance",
         // 0.03, not 0.02: with the 96-run noise floor a 0.02 imbalance on this manoeuvre
-        // reaches delta BIC 9.98 against the margin of 10 (docs/gap.md, "Null false alarms").
+        // reaches delta BIC 9.98 against the margin of 10 (docs/gap.md, "The guards").
         &[0.03],
         Tolerance::Relative(0.10),
     );
