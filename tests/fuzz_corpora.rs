@@ -6,27 +6,15 @@
 #[path = "../fuzz/checks.rs"]
 mod checks;
 
-use std::path::Path;
+#[path = "../firmware-protocol/fuzz/corpus.rs"]
+mod corpus;
 
 fn replay(target: &str, check: fn(&[u8])) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("fuzz/corpora")
-        .join(target);
-    let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("corpus {}: {e}", dir.display()))
-        .map(|e| e.expect("a corpus entry").path())
-        .collect();
-    files.sort();
-    assert!(!files.is_empty(), "corpus {} is empty", dir.display());
-    for file in &files {
-        let data = std::fs::read(file).expect("a corpus file");
-        let outcome = std::panic::catch_unwind(|| check(&data));
-        assert!(
-            outcome.is_ok(),
-            "{target}: {} fails its property",
-            file.display()
-        );
-    }
+    corpus::replay(
+        std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/fuzz")),
+        target,
+        check,
+    );
 }
 
 #[test]
