@@ -94,7 +94,15 @@ pub fn build(
         make.arg(format!("PROG={}", progs.join(" ")));
     }
     make.args(make_args);
-    let output = make.output().expect("run make");
+    // Tests of one binary run on threads and may share an output directory (one build of
+    // the examples for several runs): make is not safe to run twice at once on one `OUT`.
+    static MAKE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let output = {
+        let _one_at_a_time = MAKE
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        make.output().expect("run make")
+    };
     assert!(
         output.status.success(),
         "make failed for {target:?}:\n{}\n{}",
