@@ -248,6 +248,71 @@ fn timer_square_flies_its_course_host_and_m68k_alike() {
     assert_same_run("timer_square, host and m68k", &runs[0], &runs[1]);
 }
 
+/// The library's TIME_STEP buffer (PROTOCOL.md 2.9) never shows a program a value the bus
+/// would not have delivered: with the buffer (the default) and without it (`EYEBOT_STEP=0`,
+/// one ADC_READ/COMPASS_READ per call) a program that reads every tick, in a pattern that
+/// changes so the buffer both hits and misses, prints the same values and the vehicle
+/// follows the same path (ground truth equal bit for bit); with the buffer, host and
+/// qemu-m68k builds give the same bytes. `timer_square` and `sonar_three` (which waits for
+/// the sonar with TIME_STEP's stop on sonar output) print the same with and without it too.
+#[test]
+fn the_step_buffer_shows_what_the_bus_would_have_shown() {
+    let programs = [mk4_source("read_ahead.c")];
+    let refs: Vec<&Path> = programs.iter().map(PathBuf::as_path).collect();
+    let host = eyebot_c::build(TMP, "read-ahead", Target::Host, &refs, &[]);
+    let m68k = eyebot_c::build(TMP, "read-ahead", Target::M68k, &refs, &[]);
+    let wall_start = Some(([2.0, 1.5, 0.5], 0.0));
+    let mut runs = Vec::new();
+    for (program, start, target, dir, step) in [
+        ("read_ahead", None, Target::Host, &host, "0"),
+        ("read_ahead", None, Target::Host, &host, "1"),
+        ("read_ahead", None, Target::M68k, &m68k, "1"),
+        ("timer_square", None, Target::Host, &host, "0"),
+        ("timer_square", None, Target::Host, &host, "1"),
+        ("sonar_three", wall_start, Target::Host, &host, "0"),
+        ("sonar_three", wall_start, Target::Host, &host, "1"),
+    ] {
+        let daemon = start_daemon(BIN, &format!("step-{program}-{step}"), start, 5);
+        let (rec, stdout) = run_to_end(
+            daemon,
+            target,
+            &dir.join(program),
+            &[("EYEBOT_STEP", step)],
+            TIMEOUT,
+        );
+        let states: Vec<_> = rec
+            .states
+            .iter()
+            .map(eyebot_test_support::recording::state_bits)
+            .collect();
+        let step_types = rec
+            .stream("sensor", eyebot_test_support::recording::Direction::Rx)
+            .windows(3)
+            .filter(|w| w[0] == 0xEB && w[1] == 0x90 && w[2] == 0x43)
+            .count();
+        runs.push((program, target, step, rec.transcript(), stdout, states, step_types));
+    }
+    for pair in runs.chunks(2).take(1).chain(runs[3..].chunks(2)) {
+        let (a, b) = (&pair[0], &pair[1]);
+        assert_eq!(a.6, 0, "{}: EYEBOT_STEP=0 sends no TIME_STEP", a.0);
+        assert!(b.6 > 10, "{}: the buffer was used ({} TIME_STEPs)", b.0, b.6);
+        assert!(a.4.lines().count() > 3, "{}: {}", a.0, a.4);
+        assert_eq!(a.4, b.4, "{}: values differ with the buffer", a.0);
+        assert!(a.5.len() > 100, "{}: {} state rows", a.0, a.5.len());
+        assert!(
+            a.5 == b.5,
+            "{}: ground truth differs with the buffer at row {:?}",
+            a.0,
+            a.5.iter().zip(&b.5).position(|(x, y)| x != y)
+        );
+    }
+    assert_same_run(
+        "read_ahead with the buffer, host and m68k",
+        &(runs[1].3.clone(), runs[1].4.clone()),
+        &(runs[2].3.clone(), runs[2].4.clone()),
+    );
+}
+
 /// Depth sensor in the body frame (configs/sensors/mako-2008.toml [depth]).
 const DEPTH_SENSOR_BODY_M: [f64; 3] = [-0.45, 0.0, 0.15];
 
@@ -338,7 +403,10 @@ fn a_timer_control_loop_runs_on_the_host_clock_in_real_time() {
 
 /// On demand: lockstep speed (simulated seconds per wall second) of the shipped examples and
 /// where the wall time goes: requests the program sent on the sensor link per 10 ms tick, and
-/// wall time per request. Figures in docs/performance.md ("Lockstep speed of C programs").
+/// wall time per request. Each program runs twice against a fresh daemon, in the same run:
+/// the baseline without TIME_STEP (`EYEBOT_STEP=0`: one round trip per reading, thrusters and
+/// TIME_ADVANCE) and the default with it; the ratio is step / baseline. Figures in
+/// docs/eyebot.md ("Lockstep speed").
 #[test]
 #[ignore = "a benchmark: cargo test --test eyebot_c_mk4 lockstep_speed -- --ignored \
             --nocapture"]
@@ -346,8 +414,8 @@ fn lockstep_speed() {
     let host = eyebot_c::build(TMP, "speed", Target::Host, &[], &[]);
     let wall_start = Some(([2.0, 1.5, 0.5], 0.0));
     eprintln!(
-        "{:<14} {:>7} {:>7} {:>7} {:>9} {:>9} {:>8}",
-        "program", "sim s", "wall s", "x real", "requests", "req/tick", "us/req"
+        "{:<14} {:>5} {:>7} {:>7} {:>7} {:>9} {:>9} {:>8} {:>7}",
+        "program", "step", "sim s", "wall s", "x real", "requests", "req/tick", "us/req", "ratio"
     );
     for (program, start) in [
         ("dive_hold", None),
@@ -357,28 +425,42 @@ fn lockstep_speed() {
         ("wall_follower", wall_start),
         ("timer_square", None),
     ] {
-        let mut daemon = start_daemon(BIN, &format!("speed-{program}"), start, 1);
-        let started = Instant::now();
-        let run = run_program(&daemon, Target::Host, &host.join(program), &[], TIMEOUT);
-        let wall = started.elapsed().as_secs_f64();
-        // the status snapshot is refreshed every 100 ms
-        std::thread::sleep(Duration::from_millis(250));
-        let status = daemon.status_command(&[]);
-        let rec = stop_daemon(&mut daemon);
-        assert!(run.status.success(), "{program}: {}", run.stderr);
-        let sim = rec.states.last().map_or(0.0, |s| s.t_s);
-        let requests: f64 = status
-            .lines()
-            .find(|l| l.starts_with("sensor"))
-            // name, path "A -> B", rx bytes, tx bytes, rx frames
-            .and_then(|l| l.split_whitespace().nth(6))
-            .and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("no sensor rx frames in {status}"));
-        eprintln!(
-            "{program:<14} {sim:>7.1} {wall:>7.2} {:>7.0} {requests:>9.0} {:>9.2} {:>8.1}",
-            sim / wall,
-            requests / (sim * 100.0),
-            wall * 1e6 / requests
-        );
+        let mut baseline = 0.0;
+        for step in ["0", "1"] {
+            let mut daemon = start_daemon(BIN, &format!("speed-{program}-{step}"), start, 1);
+            let started = Instant::now();
+            let run = run_program(
+                &daemon,
+                Target::Host,
+                &host.join(program),
+                &[("EYEBOT_STEP", step)],
+                TIMEOUT,
+            );
+            let wall = started.elapsed().as_secs_f64();
+            // the status snapshot is refreshed every 100 ms
+            std::thread::sleep(Duration::from_millis(250));
+            let status = daemon.status_command(&[]);
+            let rec = stop_daemon(&mut daemon);
+            assert!(run.status.success(), "{program}: {}", run.stderr);
+            let sim = rec.states.last().map_or(0.0, |s| s.t_s);
+            let requests: f64 = status
+                .lines()
+                .find(|l| l.starts_with("sensor"))
+                // name, path "A -> B", rx bytes, tx bytes, rx frames
+                .and_then(|l| l.split_whitespace().nth(6))
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("no sensor rx frames in {status}"));
+            let speed = sim / wall;
+            if step == "0" {
+                baseline = speed;
+            }
+            eprintln!(
+                "{program:<14} {step:>5} {sim:>7.1} {wall:>7.2} {speed:>7.0} {requests:>9.0} \
+                 {:>9.2} {:>8.1} {:>7.2}",
+                requests / (sim * 100.0),
+                wall * 1e6 / requests,
+                speed / baseline
+            );
+        }
     }
 }

@@ -10,6 +10,7 @@
  *   EYEBOT_BAUD          sensor-link baud (default 115200)
  *   EYEBOT_LCD           file for LCD output (default stdout)
  *   EYEBOT_KEYS          key script, e.g. "1,4@30" (KEY1 at once, KEY4 at 30 s)
+ *   EYEBOT_STEP          0: lockstep without TIME_STEP (one round trip per reading)
  */
 #define _DEFAULT_SOURCE
 #define _POSIX_C_SOURCE 200809L

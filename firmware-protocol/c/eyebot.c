@@ -36,14 +36,22 @@
 #define T_TIME_GET 0x40
 #define T_TIME_ADVANCE 0x41
 #define T_TIME_MODE 0x42
+#define T_TIME_STEP 0x43
 #define T_ACK 0x80
 #define T_HELLO_REPLY 0x81
 #define T_ADC_VALUE 0x90
 #define T_COMPASS_HEADING 0xA1
 #define T_CALIBRATION_STATUS 0xA3
 #define T_TIME 0xB0
+#define T_STEP 0xB1
 #define T_NAK 0xBF
 #define T_COMPASS_HEADING_PUSH 0xE1
+
+#define CAP_TIME_STEP 0x0100
+#define STEP_THRUSTERS 0x01
+#define STEP_STOP_ON_SONAR 0x02
+#define MAX_READINGS 16
+#define READ_COMPASS 0x21
 
 #define CAL_START 0
 #define CAL_TAKE_POINT 1
@@ -261,6 +269,26 @@ static int read_frame(long timeout_ms) {
 static void session_open(void);
 static void flush_thrusters(void);
 static void flush_at_exit(void);
+static void close_readings(void);
+
+/* Lockstep with TIME_STEP (PROTOCOL.md 2.9): the readings a tick made (ADC channels, the
+ * compass), in order, are asked for again with the next TIME_STEP, and the bridge makes them
+ * at the new tick. A read that matches the next unused value is served from the reply; the
+ * first that does not ends the buffer for that tick (the bridge takes the unused values
+ * back, so it is where one ADC_READ per value would have left it). The buffer never
+ * outlives the tick: every advance replaces it. */
+static struct {
+    int enabled;                   /* lockstep, the bridge offers TIME_STEP, EYEBOT_STEP != 0 */
+    int sonar_port;                /* SERIALn on the bridge's sonar line (EYEBOT_SONAR_PORT) */
+    uint8_t plan[MAX_READINGS];    /* what the last STEP reply holds values for */
+    uint16_t value[MAX_READINGS];
+    int plan_n;
+    int used;                      /* values served in this tick */
+    int open;                      /* the values are for the current tick and still in order */
+    uint8_t seen[MAX_READINGS];    /* the readings the program made since the last advance */
+    int seen_n;
+    unsigned long served, missed;  /* reads served from a reply, reads that went to the bus */
+} R;
 
 /* Lockstep: thruster commands wait here until the next request, and consecutive ones go out
  * as one THRUSTER_SET_ALL. No simulated time passes between requests in lockstep, so the
@@ -275,7 +303,10 @@ static struct {
 static int request(uint8_t type, const uint8_t *payload, uint8_t len, long extra_ms) {
     int attempt;
     if (S.state == 0) session_open();
-    if (M.pending) flush_thrusters();
+    if (type != T_TIME_STEP) {
+        if (R.open) close_readings();
+        if (M.pending) flush_thrusters();
+    }
     S.seq = (uint8_t)(S.seq + 1);
     for (attempt = 0; attempt <= S.retries; attempt++) {
         long deadline;
@@ -331,6 +362,7 @@ static void session_open(void) {
     if (r != T_HELLO_REPLY || S.f_len != 8) fail("no HELLO_REPLY from the bridge (is it running?)");
     S.capabilities = get_be16(S.f_payload + 1);
     S.tick_us = get_be32(S.f_payload + 3);
+    R.sonar_port = (int)config_long("EYEBOT_SONAR_PORT", 2);
     if (S.tick_us == 0) fail("HELLO_REPLY with a zero tick");
 
     mode = eb_config("EYEBOT_TIME_MODE");
@@ -353,6 +385,7 @@ static void session_open(void) {
             r = request(T_TIME_GET, NULL, 0, 0);
             if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
             S.now_bridge = get_be32(S.f_payload);
+            R.enabled = (S.capabilities & CAP_TIME_STEP) && config_long("EYEBOT_STEP", 1) != 0;
         }
     } else if (r == T_NAK && strcmp(mode, "auto") == 0) {
         S.mode = MODE_REALTIME;
@@ -420,23 +453,7 @@ static void poll_serial(void) {
     }
 }
 
-static void advance(uint32_t program_ticks) {
-    uint8_t p[4];
-    uint32_t n = to_bridge_ticks(program_ticks);
-    int r;
-    if (S.serial_written) {
-        /* The bridge stamps a serial byte with the simulated time at which it reads it from
-         * its own port. One round trip on the sensor link before time moves gives it that
-         * read at the current tick, as it had when every OSGetCount was a TIME_GET. */
-        S.serial_written = 0;
-        r = request(T_TIME_GET, NULL, 0, 0);
-        if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
-    }
-    put_be32(p, n);
-    /* the bridge needs time to simulate n ticks: allow 1 ms per tick on top */
-    r = request(T_TIME_ADVANCE, p, 4, (long)(n > 100000 ? 100000 : n));
-    if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_ADVANCE");
-    S.now_bridge = get_be32(S.f_payload);
+static void stop_check(void) {
     if (S.stop_ticks) {
         uint64_t now_us = (uint64_t)S.now_bridge * S.tick_us;
         if (now_us >= (uint64_t)S.stop_ticks * PROGRAM_TICK_US) {
@@ -451,6 +468,121 @@ static void advance(uint32_t program_ticks) {
             eb_exit(0, "eyebot: EYEBOT_STOP_S reached; thrusters off");
         }
     }
+}
+
+/* The sonar line is a line of its own: the bytes the bridge put on it during a step are
+ * taken into the port's ring before the program looks, so what it sees does not depend on
+ * which of the two lines the host delivered first. */
+static void take_sonar_bytes(unsigned n) {
+    int port = R.sonar_port;
+    long deadline;
+    if (n == 0 || port < 1 || port >= EB_LINKS || !ring[port].open || port == S.shared_port)
+        return;
+    deadline = eb_clock_ms() + S.timeout_ms * (1 + S.retries);
+    while (n > 0) {
+        uint8_t tmp[256];
+        long i, got, left = deadline - eb_clock_ms();
+        if (left <= 0) {
+            snprintf(msgbuf, sizeof msgbuf,
+                     "eyebot: SERIAL%d: %u byte(s) the bridge sent on the sonar line did not "
+                     "arrive (is SERIAL%d the sonar line? EYEBOT_SONAR_PORT)",
+                     port, n, port);
+            eb_report(msgbuf);
+            return;
+        }
+        got = eb_port_read(port, tmp, n < sizeof tmp ? n : sizeof tmp, left);
+        if (got < 0) fail("read error on the sonar line");
+        for (i = 0; i < got; i++) ring_push(port, tmp[i]);
+        n -= (unsigned)got;
+    }
+}
+
+/* One TIME_STEP: the pending thrusters, `n` bridge ticks (with stop_on_sonar: only until
+ * the sonar line carried bytes), then the readings of the tick just ended (or, when it made
+ * none, the last list again). */
+static void step(uint32_t n, int stop_on_sonar) {
+    uint8_t p[6 + 8 + MAX_READINGS];
+    uint8_t len = 6;
+    int r, i, k;
+    p[0] = (uint8_t)(R.open ? R.used : 0);
+    p[1] = (uint8_t)((M.pending ? STEP_THRUSTERS : 0) | (stop_on_sonar ? STEP_STOP_ON_SONAR : 0));
+    put_be32(p + 2, n);
+    if (M.pending) {
+        M.pending = 0;
+        for (i = 0; i < 4; i++) {
+            p[len++] = M.duty[i];
+            p[len++] = M.direction[i];
+        }
+    }
+    k = 0;
+    if (n > 0) {
+        /* a tick ends: its readings are the list for the next one */
+        if (R.seen_n > 0) {
+            memcpy(R.plan, R.seen, (size_t)R.seen_n);
+            R.plan_n = R.seen_n;
+        }
+        R.seen_n = 0;
+        k = R.plan_n;
+    }
+    for (i = 0; i < k; i++) p[len++] = R.plan[i];
+    R.open = 0;
+    r = request(T_TIME_STEP, p, len, (long)(n > 100000 ? 100000 : n));
+    if (r != T_STEP || S.f_len != 6 + 2 * k) fail("no STEP reply to TIME_STEP");
+    S.now_bridge = get_be32(S.f_payload);
+    for (i = 0; i < k; i++) R.value[i] = get_be16(S.f_payload + 6 + 2 * i);
+    R.used = 0;
+    R.open = k > 0;
+    take_sonar_bytes(get_be16(S.f_payload + 4));
+}
+
+/* Ends the buffer for this tick: the bridge takes back the values not used (a TIME_STEP of 0
+ * ticks, carrying the pending thrusters). When every value was used nothing needs saying:
+ * any other request counts as all used. */
+static void close_readings(void) {
+    R.open = 0;
+    if (R.used < R.plan_n) {
+        R.open = 1; /* step() reads R.used from it */
+        step(0, 0);
+    }
+}
+
+/* A reading the program makes: served from the tick's STEP reply when it is the next value
+ * there; 1 = served (*value set), 0 = go to the bus. */
+static int buffered_reading(uint8_t code, uint16_t *value) {
+    if (!R.enabled) return 0;
+    if (R.seen_n < MAX_READINGS) R.seen[R.seen_n++] = code;
+    if (R.open && R.used < R.plan_n && R.plan[R.used] == code) {
+        *value = R.value[R.used++];
+        R.served++;
+        return 1;
+    }
+    R.missed++;
+    if (R.open) close_readings();
+    return 0;
+}
+
+static void advance(uint32_t program_ticks) {
+    uint8_t p[4];
+    uint32_t n = to_bridge_ticks(program_ticks);
+    int r;
+    if (S.serial_written) {
+        /* The bridge stamps a serial byte with the simulated time at which it reads it from
+         * its own port. One round trip on the sensor link before time moves gives it that
+         * read at the current tick, as it had when every OSGetCount was a TIME_GET. */
+        S.serial_written = 0;
+        r = request(T_TIME_GET, NULL, 0, 0);
+        if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+    }
+    if (R.enabled) {
+        step(n, 0);
+    } else {
+        put_be32(p, n);
+        /* the bridge needs time to simulate n ticks: allow 1 ms per tick on top */
+        r = request(T_TIME_ADVANCE, p, 4, (long)(n > 100000 ? 100000 : n));
+        if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_ADVANCE");
+        S.now_bridge = get_be32(S.f_payload);
+    }
+    stop_check();
 }
 
 /* ---- timing ---------------------------------------------------------------------------- */
@@ -482,7 +614,7 @@ long eb_now_ticks(void) {
          * open still asks (TIME_GET): bytes between the program and the bridge's serial
          * ports travel on their own line, and the round trip gives those the bridge wrote
          * during the last advance the time to arrive before the program looks for them. */
-        if (serial_open()) {
+        if (serial_open() && !R.enabled) {
             int r = request(T_TIME_GET, NULL, 0, 0);
             if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
             S.now_bridge = get_be32(S.f_payload);
@@ -572,7 +704,22 @@ int OSRecvRS232(char *buf, int port) {
             return 0;
         }
         if (waited >= S.recv_timeout_ticks) return 1;
-        if (S.mode == MODE_LOCKSTEP) {
+        if (S.mode == MODE_LOCKSTEP && R.enabled && port == R.sonar_port &&
+            port != S.shared_port) {
+            /* nothing arrives unless simulated time moves: one step up to the first tick in
+             * which the sonar line carried bytes (the same tick as one step per tick) */
+            uint32_t before = S.now_bridge;
+            uint32_t n = to_bridge_ticks((uint32_t)(S.recv_timeout_ticks - waited));
+            if (S.stop_ticks) {
+                /* never past EYEBOT_STOP_S, where one step per tick would have stopped */
+                uint32_t stop = to_bridge_ticks(S.stop_ticks);
+                if (stop > before && stop - before < n) n = stop - before;
+            }
+            step(n, 1);
+            stop_check();
+            waited += (long)(((uint64_t)(S.now_bridge - before) * S.tick_us) / PROGRAM_TICK_US);
+            if (S.now_bridge == before) waited = S.recv_timeout_ticks;
+        } else if (S.mode == MODE_LOCKSTEP) {
             /* nothing arrives unless simulated time moves */
             advance(1);
             waited++;
@@ -617,8 +764,11 @@ int OSCheckOutRS232(int port) {
 /* ---- analog input ------------------------------------------------------------------------ */
 int OSGetAD(int channel) {
     uint8_t p[1];
+    uint16_t v;
     int r;
     if (channel < 0 || channel > 7) return -1;
+    ensure_session();
+    if (S.mode == MODE_LOCKSTEP && buffered_reading((uint8_t)channel, &v)) return (int)(v & 0x3FF);
     p[0] = (uint8_t)channel;
     r = request(T_ADC_READ, p, 1, 0);
     if (r != T_ADC_VALUE || S.f_len != 3 || S.f_payload[0] != channel) return -1;
@@ -673,10 +823,15 @@ static int decode_heading(void) {
 
 int COMPASSGet(void) {
     int r;
+    uint16_t word;
     ensure_session();
     if (S.compass_cycle && S.compass_fresh) {
         S.compass_fresh = 0;
         return S.compass_latest;
+    }
+    if (S.mode == MODE_LOCKSTEP && buffered_reading(READ_COMPASS, &word)) {
+        S.compass_fresh = 0;
+        return word > 359 ? -1 : (int)word;
     }
     r = request(T_COMPASS_READ, NULL, 0, 0);
     if (r != T_COMPASS_HEADING) return -1;

@@ -194,4 +194,6 @@ pub enum EncodeError {
     SentenceTooLong { len: usize, max: usize },
     #[error("ADC stream period must be at least 1 ms")]
     ZeroPeriod,
+    #[error("a TIME_STEP asks for at most {max} readings")]
+    TooManyReadings { max: usize },
 }

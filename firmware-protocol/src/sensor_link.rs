@@ -35,6 +35,7 @@ pub mod msg_type {
     pub const TIME_GET: u8 = 0x40;
     pub const TIME_ADVANCE: u8 = 0x41;
     pub const TIME_MODE: u8 = 0x42;
+    pub const TIME_STEP: u8 = 0x43;
     pub const ACK: u8 = 0x80;
     pub const HELLO_REPLY: u8 = 0x81;
     pub const COUNTERS: u8 = 0x82;
@@ -43,6 +44,7 @@ pub mod msg_type {
     pub const COMPASS_RAW: u8 = 0xA2;
     pub const CALIBRATION_STATUS: u8 = 0xA3;
     pub const TIME: u8 = 0xB0;
+    pub const STEP: u8 = 0xB1;
     pub const NAK: u8 = 0xBF;
     pub const ADC_SAMPLES: u8 = 0xD1;
     pub const COMPASS_HEADING_PUSH: u8 = 0xE1;
@@ -260,6 +262,117 @@ pub mod capability {
     pub const THRUSTERS: u16 = 0x0020;
     pub const LOCKSTEP: u16 = 0x0040;
     pub const SONAR_ON_THIS_LINE: u16 = 0x0080;
+    /// TIME_STEP: thrusters, advance and the new tick's readings in one round trip.
+    pub const TIME_STEP: u16 = 0x0100;
+}
+
+/// The most readings one TIME_STEP may ask for.
+pub const MAX_READINGS: usize = 16;
+
+/// One reading a TIME_STEP asks for at its new tick, as ADC_READ or COMPASS_READ would make it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Reading {
+    /// A conversion of this ADC channel (wire code = the channel, `0x00..=0x07`).
+    Adc(AdcChannel),
+    /// The compass's heading word (wire code `0x21`, the COMPASS_READ type).
+    Compass,
+}
+
+impl Reading {
+    /// The wire code of the compass reading.
+    pub const COMPASS_CODE: u8 = 0x21;
+
+    pub fn code(self) -> u8 {
+        match self {
+            Self::Adc(channel) => channel.get(),
+            Self::Compass => Self::COMPASS_CODE,
+        }
+    }
+
+    /// `None` for a code that names no reading.
+    pub fn from_code(code: u8) -> Option<Self> {
+        match code {
+            Self::COMPASS_CODE => Some(Self::Compass),
+            c => AdcChannel::new(c).ok().map(Self::Adc),
+        }
+    }
+}
+
+/// The ordered readings of a TIME_STEP (at most [`MAX_READINGS`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Readings {
+    items: [Reading; MAX_READINGS],
+    len: u8,
+}
+
+impl Default for Readings {
+    fn default() -> Self {
+        Self {
+            items: [Reading::Compass; MAX_READINGS],
+            len: 0,
+        }
+    }
+}
+
+impl Readings {
+    pub fn new(readings: impl IntoIterator<Item = Reading>) -> Result<Self, EncodeError> {
+        let mut out = Self::default();
+        for (i, r) in readings.into_iter().enumerate() {
+            if i >= MAX_READINGS {
+                return Err(EncodeError::TooManyReadings { max: MAX_READINGS });
+            }
+            out.items[i] = r;
+            out.len = (i + 1) as u8;
+        }
+        Ok(out)
+    }
+    pub fn len(&self) -> usize {
+        usize::from(self.len)
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    pub fn as_slice(&self) -> &[Reading] {
+        &self.items[..self.len()]
+    }
+}
+
+/// The values a STEP reply carries, one u16 per reading of its request, in the same order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct StepValues {
+    values: [u16; MAX_READINGS],
+    len: u8,
+}
+
+impl StepValues {
+    pub fn new(values: impl IntoIterator<Item = u16>) -> Result<Self, EncodeError> {
+        let mut out = Self::default();
+        for (i, v) in values.into_iter().enumerate() {
+            if i >= MAX_READINGS {
+                return Err(EncodeError::TooManyReadings { max: MAX_READINGS });
+            }
+            out.values[i] = v;
+            out.len = (i + 1) as u8;
+        }
+        Ok(out)
+    }
+    pub fn len(&self) -> usize {
+        usize::from(self.len)
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    pub fn as_slice(&self) -> &[u16] {
+        &self.values[..self.len()]
+    }
+}
+
+/// TIME_STEP flag bits.
+pub mod step_flag {
+    /// Four thruster commands (8 bytes) follow `ticks`.
+    pub const THRUSTERS: u8 = 0x01;
+    /// Stop early, at the end of the first tick in which bytes went out on the sonar line.
+    pub const STOP_ON_SONAR: u8 = 0x02;
 }
 
 /// Link statistics, each a wrapping u32 counted since the bridge started.
@@ -313,6 +426,16 @@ pub enum Message {
     TimeMode {
         mode: TimeMode,
     },
+    /// Lockstep in one round trip: take back the previous step's readings beyond `used`, set
+    /// the thrusters (when given), advance `ticks` (at most, with `stop_on_sonar`), then make
+    /// `readings` at the new tick (PROTOCOL.md 2.9).
+    TimeStep {
+        used: u8,
+        stop_on_sonar: bool,
+        ticks: u32,
+        thrusters: Option<[ThrusterCommand; 4]>,
+        readings: Readings,
+    },
     Ack {
         acked_type: u8,
     },
@@ -341,6 +464,13 @@ pub enum Message {
     Time {
         ticks: u32,
         tick_us: u32,
+    },
+    /// The reply to TIME_STEP: the tick reached, the bytes that went out on the sonar line
+    /// during the advance, and one value per reading.
+    Step {
+        ticks: u32,
+        sonar_bytes: u16,
+        values: StepValues,
     },
     Nak {
         rejected_type: u8,
@@ -419,6 +549,7 @@ impl Message {
             Self::TimeGet => t::TIME_GET,
             Self::TimeAdvance { .. } => t::TIME_ADVANCE,
             Self::TimeMode { .. } => t::TIME_MODE,
+            Self::TimeStep { .. } => t::TIME_STEP,
             Self::Ack { .. } => t::ACK,
             Self::HelloReply { .. } => t::HELLO_REPLY,
             Self::Counters(_) => t::COUNTERS,
@@ -427,6 +558,7 @@ impl Message {
             Self::CompassRaw { .. } => t::COMPASS_RAW,
             Self::CalibrationStatus { .. } => t::CALIBRATION_STATUS,
             Self::Time { .. } => t::TIME,
+            Self::Step { .. } => t::STEP,
             Self::Nak { .. } => t::NAK,
             Self::AdcSamples { .. } => t::ADC_SAMPLES,
             Self::CompassHeadingPush { .. } => t::COMPASS_HEADING_PUSH,
@@ -471,6 +603,38 @@ impl Message {
             }
             Self::TimeMode { mode } => {
                 p.u8(mode as u8);
+            }
+            Self::TimeStep {
+                used,
+                stop_on_sonar,
+                ticks,
+                thrusters,
+                readings,
+            } => {
+                let mut flags = 0;
+                if thrusters.is_some() {
+                    flags |= step_flag::THRUSTERS;
+                }
+                if stop_on_sonar {
+                    flags |= step_flag::STOP_ON_SONAR;
+                }
+                p.u8(used).u8(flags).u32(ticks);
+                for c in thrusters.iter().flatten() {
+                    p.u8(c.duty).u8(c.direction as u8);
+                }
+                for r in readings.as_slice() {
+                    p.u8(r.code());
+                }
+            }
+            Self::Step {
+                ticks,
+                sonar_bytes,
+                values,
+            } => {
+                p.u32(ticks).u16(sonar_bytes);
+                for v in values.as_slice() {
+                    p.u16(*v);
+                }
             }
             Self::Ack { acked_type } => {
                 p.u8(acked_type);
@@ -568,10 +732,11 @@ impl Frame {
     }
 
     /// Append the frame (sync, header, payload, CRC) to `dst`. Cannot fail: every message's
-    /// payload is at most 37 bytes.
+    /// payload is at most 38 bytes.
     pub fn encode(&self, dst: &mut BytesMut) {
         let payload = self.message.payload();
-        // Every payload built above is at most 37 bytes, below MAX_PAYLOAD.
+        // Every payload built above is at most 38 bytes (a STEP with 16 values), below
+        // MAX_PAYLOAD.
         if let Err(e) = frame::encode(self.message.msg_type(), self.seq, payload.as_slice(), dst) {
             unreachable!("message payload exceeds MAX_PAYLOAD: {e}");
         }
@@ -612,6 +777,8 @@ fn fixed_len(t: u8) -> Option<u8> {
         m::NAK => 3,
         // Variable: 5 + 2 * popcount(mask); checked separately.
         m::ADC_SAMPLES => 5,
+        // Variable, at least this long; checked separately.
+        m::TIME_STEP | m::STEP => 6,
         _ => return None,
     })
 }
@@ -663,6 +830,28 @@ fn decode_message(raw: RawFrame<'_>) -> Result<Message, MessageError> {
         }
         if mask == 0 {
             return Err(bad(4, 0));
+        }
+    } else if t == m::TIME_STEP {
+        let Some(&flags) = payload.get(1) else {
+            return Err(bad_len(expected));
+        };
+        let head = if flags & step_flag::THRUSTERS != 0 {
+            14
+        } else {
+            6
+        };
+        if found < head {
+            return Err(bad_len(head));
+        }
+        if usize::from(found - head) > MAX_READINGS {
+            return Err(bad_len(head + MAX_READINGS as u8));
+        }
+    } else if t == m::STEP {
+        if found < expected || (found - expected) % 2 != 0 {
+            return Err(bad_len(expected));
+        }
+        if usize::from(found - expected) / 2 > MAX_READINGS {
+            return Err(bad_len(expected + 2 * MAX_READINGS as u8));
         }
     } else if found != expected {
         return Err(bad_len(expected));
@@ -769,6 +958,58 @@ fn decode_message(raw: RawFrame<'_>) -> Result<Message, MessageError> {
                 v => return Err(bad(0, v)),
             };
             Message::TimeMode { mode }
+        }
+        m::TIME_STEP => {
+            let (rest, (used, flags, ticks)) = (be_u8, be_u8, be_u32)
+                .parse(payload)
+                .map_err(|_: NomErr<'_>| bad_len(expected))?;
+            if flags & !(step_flag::THRUSTERS | step_flag::STOP_ON_SONAR) != 0 {
+                return Err(bad(1, flags));
+            }
+            let (rest, thrusters) = if flags & step_flag::THRUSTERS != 0 {
+                let Some((b, rest)) = rest.split_first_chunk::<8>() else {
+                    return Err(bad_len(14));
+                };
+                let mut commands = [ThrusterCommand::OFF; 4];
+                for (i, c) in commands.iter_mut().enumerate() {
+                    let off = 2 * i;
+                    *c = ThrusterCommand {
+                        duty: b[off],
+                        direction: direction(6 + off as u8 + 1, b[off + 1])?,
+                    };
+                }
+                (rest, Some(commands))
+            } else {
+                (rest, None)
+            };
+            let first = (payload.len() - rest.len()) as u8;
+            let mut items = Vec::with_capacity(rest.len());
+            for (i, &code) in rest.iter().enumerate() {
+                items.push(Reading::from_code(code).ok_or_else(|| bad(first + i as u8, code))?);
+            }
+            Message::TimeStep {
+                used,
+                stop_on_sonar: flags & step_flag::STOP_ON_SONAR != 0,
+                ticks,
+                thrusters,
+                readings: Readings::new(items).map_err(|_| bad_len(first))?,
+            }
+        }
+        m::STEP => {
+            let (mut rest, (ticks, sonar_bytes)) = (be_u32, be_u16)
+                .parse(payload)
+                .map_err(|_: NomErr<'_>| bad_len(expected))?;
+            let mut values = Vec::with_capacity(rest.len() / 2);
+            while !rest.is_empty() {
+                let (r, v) = be_u16(rest).map_err(|_: NomErr<'_>| bad_len(expected))?;
+                values.push(v);
+                rest = r;
+            }
+            Message::Step {
+                ticks,
+                sonar_bytes,
+                values: StepValues::new(values).map_err(|_| bad_len(expected))?,
+            }
         }
         m::ACK => parse(
             all_consuming(be_u8)

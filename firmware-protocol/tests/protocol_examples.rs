@@ -48,7 +48,7 @@ fn every_message_type_has_an_example() {
         .collect();
     types.sort_unstable();
     types.dedup();
-    assert_eq!(types.len(), 25, "types with an example: {types:02x?}");
+    assert_eq!(types.len(), 27, "types with an example: {types:02x?}");
 }
 
 #[test]

@@ -5,7 +5,8 @@ use bytes::BytesMut;
 use firmware_protocol::nmea::Tenths;
 use firmware_protocol::sensor_link::{
     AdcChannel, AdcSamples, AdcValue, CalibrationAction, CalibrationState, CompassMode,
-    CompassOutput, Counters, Direction, ErrorCode, Message, Thruster, ThrusterCommand, TimeMode,
+    CompassOutput, Counters, Direction, ErrorCode, MAX_READINGS, Message, Reading, Readings,
+    StepValues, Thruster, ThrusterCommand, TimeMode,
 };
 use firmware_protocol::{
     Dbt, Dpt, EchoReport, Frame, HeadingWord, LineDecoder, LineItem, LinkError, Sentence,
@@ -128,6 +129,35 @@ fn message() -> impl Strategy<Value = Message> {
             }),
         heading_word().prop_map(|word| Message::CompassHeadingPush { word }),
         (any::<i16>(), any::<i16>()).prop_map(|(x, y)| Message::CompassRawPush { x, y }),
+        (
+            any::<u8>(),
+            any::<bool>(),
+            any::<u32>(),
+            proptest::option::of(proptest::array::uniform4(command())),
+            proptest::collection::vec(
+                prop_oneof![channel().prop_map(Reading::Adc), Just(Reading::Compass)],
+                0..=MAX_READINGS
+            )
+        )
+            .prop_map(
+                |(used, stop_on_sonar, ticks, thrusters, readings)| Message::TimeStep {
+                    used,
+                    stop_on_sonar,
+                    ticks,
+                    thrusters,
+                    readings: Readings::new(readings).unwrap(),
+                }
+            ),
+        (
+            any::<u32>(),
+            any::<u16>(),
+            proptest::collection::vec(any::<u16>(), 0..=MAX_READINGS)
+        )
+            .prop_map(|(ticks, sonar_bytes, values)| Message::Step {
+                ticks,
+                sonar_bytes,
+                values: StepValues::new(values).unwrap(),
+            }),
     ]
 }
 

@@ -369,6 +369,17 @@ impl<M: Model> Engine<M> {
                         let reply = self.board.finish_advance(seq, self.now);
                         self.queue_reply(line, reply);
                     }
+                    Some(Output::Step {
+                        to,
+                        seq,
+                        stop_on_sonar,
+                    }) => {
+                        let sonar_bytes = self.step_to(to, stop_on_sonar)?;
+                        let reply =
+                            self.board
+                                .finish_step(seq, self.now, sonar_bytes, &mut self.model);
+                        self.queue_reply(line, reply);
+                    }
                     None => {}
                 }
             }
@@ -464,6 +475,30 @@ impl<M: Model> Engine<M> {
         self.poll_devices();
         self.release_due();
         Ok(())
+    }
+
+    /// A TIME_STEP's advance: to `target`, or with `stop_on_sonar` to the end of the first
+    /// tick in which bytes went out on the sonar line (its own line; a shared line is refused
+    /// by the board). Returns how many bytes went out on the sonar's own line meanwhile.
+    fn step_to(&mut self, target: SimNanos, stop_on_sonar: bool) -> Result<u16, M::Error> {
+        let sonar = self.sonar_line();
+        let own_line = sonar != self.sensor_line();
+        let before = self.lines[sonar].outbox.len();
+        if stop_on_sonar && own_line {
+            let tick = self.board.tick_ns().max(1);
+            while self.now < target && self.lines[sonar].outbox.len() == before {
+                let next = (self.now + tick).min(target);
+                self.advance_to(next)?;
+            }
+        } else {
+            self.advance_to(target)?;
+        }
+        let sent = if own_line {
+            self.lines[sonar].outbox.len() - before
+        } else {
+            0
+        };
+        Ok(u16::try_from(sent).unwrap_or(u16::MAX))
     }
 
     /// Drops partial messages that have waited longer than their line's idle limit.
@@ -635,6 +670,12 @@ pub(crate) mod fake {
         }
         fn sonar_timeout(&self) -> Option<SimNanos> {
             self.plant.sonar_timeout()
+        }
+        fn readings_checkpoint(&mut self) {
+            self.plant.readings_checkpoint()
+        }
+        fn readings_restore(&mut self) {
+            self.plant.readings_restore()
         }
     }
 

@@ -37,6 +37,19 @@ pub struct MakoPlant {
     forwarding: Option<usize>,
     /// The configured start: position and heading (rad), for a reset from the live view.
     start: (Vector3<f64>, f64),
+    /// The sensors' reading state saved for a TIME_STEP's take-back.
+    readings_saved: Option<ReadingState>,
+}
+
+/// What an ADC or compass read changes in the sensor suite (noise streams, the converter's
+/// carry-over, error models sampled on read); the sonar is never touched by a read.
+#[derive(Debug, Clone)]
+struct ReadingState {
+    adc: sensors::AdcBoard,
+    depth: sensors::DepthSensor,
+    velocity: sensors::PaddleWheel,
+    accelerometer: sensors::Accelerometer,
+    compass: sensors::Compass,
 }
 
 impl std::fmt::Debug for MakoPlant {
@@ -141,6 +154,7 @@ impl MakoPlant {
                 .map(|t| t.controller)
                 .collect(),
             start,
+            readings_saved: None,
         }
     }
 
@@ -163,6 +177,28 @@ impl MakoPlant {
 }
 
 impl Plant for MakoPlant {
+    fn readings_checkpoint(&mut self) {
+        let s = &self.sensors;
+        self.readings_saved = Some(ReadingState {
+            adc: s.adc.clone(),
+            depth: s.depth.clone(),
+            velocity: s.velocity.clone(),
+            accelerometer: s.accelerometer.clone(),
+            compass: s.compass.clone(),
+        });
+    }
+
+    fn readings_restore(&mut self) {
+        if let Some(saved) = self.readings_saved.take() {
+            let s = &mut self.sensors;
+            s.adc = saved.adc;
+            s.depth = saved.depth;
+            s.velocity = saved.velocity;
+            s.accelerometer = saved.accelerometer;
+            s.compass = saved.compass;
+        }
+    }
+
     fn adc(&mut self, channel: u8, now: SimNanos) -> u16 {
         self.sensors.read_adc(channel, Self::t_s(now)).unwrap_or(0)
     }
@@ -422,6 +458,9 @@ pub fn devices(config: &DaemonConfig) -> (SensorBoard, Multiplexer) {
 
 #[cfg(test)]
 mod tests {
+    use firmware_protocol::Frame;
+    use firmware_protocol::sensor_link::{AdcChannel, Message, Reading, Readings};
+
     use super::*;
     use crate::config::{DEFAULT_CONFIG, Document, Embedded};
     use crate::daemon::engine::{Carries, Engine, LineSpec};
@@ -488,5 +527,124 @@ mod tests {
         }
         assert!(sentences >= 2, "the wall gave {sentences} sentences");
         assert_eq!(largest_chunk, 1, "sentence bytes were released in bursts");
+    }
+
+    /// A lockstep engine on the real plant with a sonar and a sensor line.
+    fn lockstep_core() -> Engine<MakoPlant> {
+        let text = Embedded.read(DEFAULT_CONFIG).unwrap();
+        let mut config = DaemonConfig::resolve(&Document::new("default", &text)).unwrap();
+        config.time_mode = super::super::clock::TimeMode::Lockstep;
+        let plant = MakoPlant::from_config(&Embedded, &config).unwrap();
+        let (board, mux) = devices(&config);
+        let line = |name, carries, baud| LineSpec {
+            name,
+            carries,
+            settings: LineSettings::n81(baud),
+            tx_queue_bytes: 4096,
+            release_quantum_ns: 1_000_000,
+        };
+        let lines = [
+            line("sonar", Carries::SONAR, 4800),
+            line("sensor", Carries::SENSOR, 115_200),
+        ];
+        Engine::new(plant, board, mux, &lines, true)
+    }
+
+    /// Sends `message` on the sensor line and returns the reply (pushes skipped).
+    fn ask(core: &mut Engine<MakoPlant>, seq: u8, message: Message) -> Message {
+        let mut buf = bytes::BytesMut::new();
+        Frame::new(seq, message).encode(&mut buf);
+        core.receive(1, &buf).unwrap();
+        let out = core.take_output(1).expect("a lockstep reply at once");
+        firmware_protocol::LineDecoder::decode_all(&out)
+            .into_iter()
+            .find_map(|item| match item {
+                firmware_protocol::LineItem::Frame(f) if f.seq == seq => Some(f.message),
+                _ => None,
+            })
+            .expect("the reply to the request")
+    }
+
+    fn adc(core: &mut Engine<MakoPlant>, seq: u8, channel: u8) -> u16 {
+        match ask(
+            core,
+            seq,
+            Message::AdcRead {
+                channel: AdcChannel::new(channel).unwrap(),
+            },
+        ) {
+            Message::AdcValue { value, .. } => value.get(),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    fn step(
+        core: &mut Engine<MakoPlant>,
+        seq: u8,
+        used: u8,
+        ticks: u32,
+        thrusters: Option<[ThrusterCommand; 4]>,
+        channels: &[u8],
+    ) -> Vec<u16> {
+        let readings = Readings::new(
+            channels
+                .iter()
+                .map(|&c| Reading::Adc(AdcChannel::new(c).unwrap())),
+        )
+        .unwrap();
+        match ask(
+            core,
+            seq,
+            Message::TimeStep {
+                used,
+                stop_on_sonar: false,
+                ticks,
+                thrusters,
+                readings,
+            },
+        ) {
+            Message::Step { values, .. } => values.as_slice().to_vec(),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// TIME_STEP's readings are the conversions ADC_READs at the same moments would have
+    /// made, and values the client did not use are taken back: every later conversion is
+    /// what it would have been (the converter's noise and channel carry-over included).
+    /// Thrusters set in the step before the advance act as a THRUSTER_SET_ALL would.
+    #[test]
+    fn step_readings_equal_adc_reads_and_unused_ones_are_taken_back() {
+        let full = ThrusterCommand {
+            duty: 0,
+            direction: Direction::Forward,
+        };
+        let thrusters = [full, full, ThrusterCommand::OFF, full];
+        // One request per conversion.
+        let mut bus = lockstep_core();
+        let mut seq = 0u8;
+        let mut next = || {
+            seq = seq.wrapping_add(1);
+            seq
+        };
+        let _ = ask(&mut bus, next(), Message::ThrusterSetAll { commands: thrusters });
+        let _ = ask(&mut bus, next(), Message::TimeAdvance { ticks: 30 });
+        let first: Vec<u16> = [0, 1, 0].iter().map(|&c| adc(&mut bus, next(), c)).collect();
+        let _ = ask(&mut bus, next(), Message::TimeAdvance { ticks: 2 });
+        let second: Vec<u16> = [1, 1, 2, 0].iter().map(|&c| adc(&mut bus, next(), c)).collect();
+        // The same through TIME_STEP: five readings asked for, three used.
+        let mut stepped = lockstep_core();
+        let got = step(&mut stepped, 1, 0, 30, Some(thrusters), &[0, 1, 0, 1, 1]);
+        assert_eq!(&got[..3], &first[..], "readings made as ADC_READs would make them");
+        let got = step(&mut stepped, 2, 3, 2, None, &[1, 1, 2, 0]);
+        assert_eq!(got, second, "the two unused readings were taken back");
+        assert_eq!(stepped.board().taken_back(), 2);
+        // Without the take-back (the client claims it used all five) they differ.
+        let mut unfair = lockstep_core();
+        let _ = step(&mut unfair, 1, 0, 30, Some(thrusters), &[0, 1, 0, 1, 1]);
+        let got = step(&mut unfair, 2, 5, 2, None, &[1, 1, 2, 0]);
+        assert_ne!(got, second, "extra conversions change later values");
+        // The vehicle is where the bus run left it: same thrusters, same time.
+        assert_eq!(stepped.now(), bus.now());
+        assert_eq!(stepped.model().state().position_m, bus.model().state().position_m);
     }
 }

@@ -79,6 +79,11 @@ pub trait Plant {
     fn sonar_poll(&mut self, now: SimNanos, out: &mut Vec<(SimNanos, SonarEvent)>);
     /// When the next sonar event is due.
     fn sonar_timeout(&self) -> Option<SimNanos>;
+    /// Saves what ADC and compass reads change (noise draws, the converter's carry-over from
+    /// the previous channel), so that reads made ahead for a TIME_STEP can be taken back.
+    fn readings_checkpoint(&mut self);
+    /// Goes back to the state the last [`Plant::readings_checkpoint`] saved.
+    fn readings_restore(&mut self);
 }
 
 #[cfg(test)]
@@ -98,6 +103,8 @@ pub(crate) mod fake {
         pub compass_reads: Vec<SimNanos>,
         pub sonar: Vec<(SimNanos, SonarEvent)>,
         pub selects: Vec<(SimNanos, u8)>,
+        pub checkpoints: u32,
+        pub restores: u32,
     }
 
     impl Plant for FakePlant {
@@ -170,6 +177,12 @@ pub(crate) mod fake {
         }
         fn sonar_timeout(&self) -> Option<SimNanos> {
             self.sonar.first().map(|(t, _)| *t)
+        }
+        fn readings_checkpoint(&mut self) {
+            self.checkpoints += 1;
+        }
+        fn readings_restore(&mut self) {
+            self.restores += 1;
         }
     }
 }

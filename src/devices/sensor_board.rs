@@ -20,7 +20,7 @@
 use firmware_protocol::error::{FrameError, LinkError, MessageError};
 use firmware_protocol::sensor_link::{
     self, AdcChannel, AdcSamples, AdcValue, CompassMode, CompassOutput, Counters, ErrorCode,
-    Message, ThrusterCommand, TimeMode, capability, msg_type,
+    Message, Reading, Readings, StepValues, ThrusterCommand, TimeMode, capability, msg_type,
 };
 use firmware_protocol::{Frame, HeadingFormat, HeadingWord};
 
@@ -52,6 +52,22 @@ pub enum Output {
     /// Lockstep: advance simulated time to `to`, then call [`SensorBoard::finish_advance`]
     /// to get the TIME reply for `seq`.
     Advance { to: SimNanos, seq: u8 },
+    /// Lockstep TIME_STEP: advance simulated time to `to` (with `stop_on_sonar`, only until
+    /// the end of the first tick in which bytes went out on the sonar line), then call
+    /// [`SensorBoard::finish_step`] for the STEP reply.
+    Step {
+        to: SimNanos,
+        seq: u8,
+        stop_on_sonar: bool,
+    },
+}
+
+/// The readings of the last STEP reply, which the next TIME_STEP may partly take back
+/// (PROTOCOL.md 2.9). The plant saved its reading state just before they were made.
+#[derive(Debug, Clone, Copy)]
+struct OpenStep {
+    readings: Readings,
+    at: SimNanos,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -80,6 +96,11 @@ pub struct SensorBoard {
     next_compass_push_ns: Option<SimNanos>,
     last_request: Option<LastRequest>,
     pending_advance: Option<Frame>,
+    /// The readings the TIME_STEP being carried out asks for.
+    pending_readings: Readings,
+    open_step: Option<OpenStep>,
+    /// Readings taken back (made for a STEP reply, never used by the client).
+    taken_back: u64,
     duplicates: u64,
     thrusters: [ThrusterCommand; 4],
     last_thruster_ns: Option<SimNanos>,
@@ -98,6 +119,9 @@ impl SensorBoard {
             next_compass_push_ns: None,
             last_request: None,
             pending_advance: None,
+            pending_readings: Readings::default(),
+            open_step: None,
+            taken_back: 0,
             duplicates: 0,
             thrusters: [ThrusterCommand::OFF; 4],
             last_thruster_ns: None,
@@ -115,6 +139,11 @@ impl SensorBoard {
         self.duplicates
     }
 
+    /// Readings made for STEP replies that the client took back unused.
+    pub fn taken_back(&self) -> u64 {
+        self.taken_back
+    }
+
     /// How often the watchdog zeroed the thrusters.
     pub fn watchdog_trips(&self) -> u64 {
         self.watchdog_trips
@@ -123,6 +152,11 @@ impl SensorBoard {
     /// The motor driver's current outputs.
     pub fn thrusters(&self) -> [ThrusterCommand; 4] {
         self.thrusters
+    }
+
+    /// One tick of simulated time.
+    pub fn tick_ns(&self) -> u64 {
+        self.settings.tick_ns
     }
 
     fn ticks(&self, now: SimNanos) -> u32 {
@@ -206,6 +240,10 @@ impl SensorBoard {
             self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
             return Some(Output::Send(last.reply));
         }
+        if !matches!(frame.message, Message::TimeStep { .. }) {
+            // Any other request: the client used every value of the last STEP.
+            self.open_step = None;
+        }
         let out = self.execute(frame, now, plant);
         if let Some(Output::Send(reply)) = out {
             self.remember(frame, reply);
@@ -248,7 +286,7 @@ impl SensorBoard {
                     | capability::COMPASS_CALIBRATION
                     | capability::THRUSTERS;
                 if self.settings.lockstep {
-                    capabilities |= capability::LOCKSTEP;
+                    capabilities |= capability::LOCKSTEP | capability::TIME_STEP;
                 }
                 if self.settings.sonar_on_this_line {
                     capabilities |= capability::SONAR_ON_THIS_LINE;
@@ -336,6 +374,42 @@ impl SensorBoard {
                     seq,
                 });
             }
+            Message::TimeStep {
+                used,
+                stop_on_sonar,
+                ticks,
+                thrusters,
+                readings,
+            } => {
+                if !self.settings.lockstep {
+                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
+                }
+                let open = self.open_step.map_or(0, |o| o.readings.len());
+                if usize::from(used) > open {
+                    return Some(self.nak(seq, kind, ErrorCode::BadValue, 0));
+                }
+                if stop_on_sonar && self.settings.sonar_on_this_line {
+                    return Some(self.nak(seq, kind, ErrorCode::Unsupported, 0));
+                }
+                if self.compass_output == CompassOutput::Raw
+                    && readings.as_slice().contains(&Reading::Compass)
+                {
+                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
+                }
+                self.take_back(plant, used);
+                if let Some(commands) = thrusters {
+                    self.thrusters = commands;
+                    self.last_thruster_ns = Some(now);
+                    plant.set_thrusters(self.thrusters, now);
+                }
+                self.pending_advance = Some(frame);
+                self.pending_readings = readings;
+                return Some(Output::Step {
+                    to: now + u64::from(ticks) * self.settings.tick_ns,
+                    seq,
+                    stop_on_sonar,
+                });
+            }
             Message::TimeMode { mode } => {
                 let ours = if self.settings.lockstep {
                     TimeMode::Lockstep
@@ -357,6 +431,7 @@ impl SensorBoard {
             | Message::CompassRaw { .. }
             | Message::CalibrationStatus { .. }
             | Message::Time { .. }
+            | Message::Step { .. }
             | Message::AdcSamples { .. }
             | Message::CompassHeadingPush { .. }
             | Message::CompassRawPush { .. } => {
@@ -379,6 +454,70 @@ impl SensorBoard {
             tick_us: (self.settings.tick_ns / 1000) as u32,
         };
         let reply = Frame::new(seq, message);
+        self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
+        if let Some(request) = self.pending_advance.take() {
+            self.remember(request, reply);
+        }
+        reply
+    }
+
+    /// Takes back the last STEP's readings beyond the first `used`: the plant's reading state
+    /// goes back to before them and the first `used` are made again (same values), so the
+    /// bridge is where one ADC_READ/COMPASS_READ per used value would have left it.
+    fn take_back(&mut self, plant: &mut dyn Plant, used: u8) {
+        let Some(open) = self.open_step.take() else {
+            return;
+        };
+        let used = usize::from(used);
+        if used >= open.readings.len() {
+            return;
+        }
+        self.taken_back += (open.readings.len() - used) as u64;
+        plant.readings_restore();
+        for &reading in &open.readings.as_slice()[..used] {
+            self.reading(plant, reading, open.at);
+        }
+    }
+
+    fn reading(&mut self, plant: &mut dyn Plant, reading: Reading, now: SimNanos) -> u16 {
+        match reading {
+            Reading::Adc(channel) => adc_value(plant, channel, now).get(),
+            Reading::Compass => match self.compass_message(plant, now, false) {
+                Message::CompassHeading { word } => word.0,
+                // TIME_STEP refuses compass readings while the output is raw.
+                _ => 0,
+            },
+        }
+    }
+
+    /// The STEP reply that ends a TIME_STEP, once simulated time reached `now`: makes its
+    /// readings (after the plant saved its reading state, for a take-back).
+    pub fn finish_step(
+        &mut self,
+        seq: u8,
+        now: SimNanos,
+        sonar_bytes: u16,
+        plant: &mut dyn Plant,
+    ) -> Frame {
+        let readings = std::mem::take(&mut self.pending_readings);
+        let mut values = [0u16; sensor_link::MAX_READINGS];
+        if !readings.is_empty() {
+            plant.readings_checkpoint();
+            for (slot, &reading) in values.iter_mut().zip(readings.as_slice()) {
+                *slot = self.reading(plant, reading, now);
+            }
+            self.open_step = Some(OpenStep { readings, at: now });
+        }
+        let values = StepValues::new(values.into_iter().take(readings.len()))
+            .unwrap_or_else(|_| unreachable!("at most MAX_READINGS readings"));
+        let reply = Frame::new(
+            seq,
+            Message::Step {
+                ticks: self.ticks(now),
+                sonar_bytes,
+                values,
+            },
+        );
         self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
         if let Some(request) = self.pending_advance.take() {
             self.remember(request, reply);
@@ -502,6 +641,7 @@ pub const REQUEST_TYPES: &[u8] = &[
     msg_type::TIME_GET,
     msg_type::TIME_ADVANCE,
     msg_type::TIME_MODE,
+    msg_type::TIME_STEP,
 ];
 
 #[cfg(test)]

@@ -4,7 +4,8 @@
 use firmware_protocol::nmea::Tenths;
 use firmware_protocol::sensor_link::{
     AdcChannel, AdcSamples, AdcValue, CalibrationAction, CalibrationState, CompassMode,
-    CompassOutput, Counters, Direction, ErrorCode, Message, Thruster, ThrusterCommand, TimeMode,
+    CompassOutput, Counters, Direction, ErrorCode, Message, Reading, Readings, StepValues,
+    Thruster, ThrusterCommand, TimeMode,
 };
 use firmware_protocol::{
     Dbt, Dpt, EchoReport, Frame, HeadingWord, LineItem, Sentence, SonarCommand, Talker, Transducer,
@@ -241,6 +242,47 @@ pub fn expected(name: &str) -> Option<LineItem> {
             },
         ),
         "time-advance" => frame(0x0F, Message::TimeAdvance { ticks: 10 }),
+        "time-step" => frame(
+            0x12,
+            Message::TimeStep {
+                used: 3,
+                stop_on_sonar: false,
+                ticks: 1,
+                thrusters: Some([fwd(0x40), fwd(0x40), fwd(0xB0), fwd(0xB0)]),
+                readings: Readings::new([
+                    Reading::Adc(ch(1)),
+                    Reading::Adc(ch(0)),
+                    Reading::Compass,
+                ])
+                .unwrap(),
+            },
+        ),
+        "step" => frame(
+            0x12,
+            Message::Step {
+                ticks: 301,
+                sonar_bytes: 0,
+                values: StepValues::new([801, 164, 0x005A]).unwrap(),
+            },
+        ),
+        "time-step-sonar" => frame(
+            0x13,
+            Message::TimeStep {
+                used: 0,
+                stop_on_sonar: true,
+                ticks: 100,
+                thrusters: None,
+                readings: Readings::default(),
+            },
+        ),
+        "step-sonar" => frame(
+            0x13,
+            Message::Step {
+                ticks: 336,
+                sonar_bytes: 5,
+                values: StepValues::default(),
+            },
+        ),
         "time-mode" => frame(
             0x10,
             Message::TimeMode {
