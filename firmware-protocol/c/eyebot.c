@@ -561,18 +561,22 @@ static int buffered_reading(uint8_t code, uint16_t *value) {
     return 0;
 }
 
+/* The bridge stamps a serial byte with the simulated time at which it reads it from its own
+ * port. One round trip on the sensor link before time moves gives it that read at the
+ * current tick, as it had when every OSGetCount was a TIME_GET. */
+static void serial_sync(void) {
+    int r;
+    if (!S.serial_written) return;
+    S.serial_written = 0;
+    r = request(T_TIME_GET, NULL, 0, 0);
+    if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
+}
+
 static void advance(uint32_t program_ticks) {
     uint8_t p[4];
     uint32_t n = to_bridge_ticks(program_ticks);
     int r;
-    if (S.serial_written) {
-        /* The bridge stamps a serial byte with the simulated time at which it reads it from
-         * its own port. One round trip on the sensor link before time moves gives it that
-         * read at the current tick, as it had when every OSGetCount was a TIME_GET. */
-        S.serial_written = 0;
-        r = request(T_TIME_GET, NULL, 0, 0);
-        if (r != T_TIME || S.f_len != 8) fail("no reply to TIME_GET");
-    }
+    serial_sync();
     if (R.enabled) {
         step(n, 0);
     } else {
@@ -715,6 +719,7 @@ int OSRecvRS232(char *buf, int port) {
                 uint32_t stop = to_bridge_ticks(S.stop_ticks);
                 if (stop > before && stop - before < n) n = stop - before;
             }
+            serial_sync();
             step(n, 1);
             stop_check();
             waited += (long)(((uint64_t)(S.now_bridge - before) * S.tick_us) / PROGRAM_TICK_US);
