@@ -290,12 +290,25 @@ fn the_step_buffer_shows_what_the_bus_would_have_shown() {
             .windows(3)
             .filter(|w| w[0] == 0xEB && w[1] == 0x90 && w[2] == 0x43)
             .count();
-        runs.push((program, target, step, rec.transcript(), stdout, states, step_types));
+        runs.push((
+            program,
+            target,
+            step,
+            rec.transcript(),
+            stdout,
+            states,
+            step_types,
+        ));
     }
     for pair in runs.chunks(2).take(1).chain(runs[3..].chunks(2)) {
         let (a, b) = (&pair[0], &pair[1]);
         assert_eq!(a.6, 0, "{}: EYEBOT_STEP=0 sends no TIME_STEP", a.0);
-        assert!(b.6 > 10, "{}: the buffer was used ({} TIME_STEPs)", b.0, b.6);
+        assert!(
+            b.6 > 10,
+            "{}: the buffer was used ({} TIME_STEPs)",
+            b.0,
+            b.6
+        );
         assert!(a.4.lines().count() > 3, "{}: {}", a.0, a.4);
         assert_eq!(a.4, b.4, "{}: values differ with the buffer", a.0);
         assert!(a.5.len() > 100, "{}: {} state rows", a.0, a.5.len());

@@ -139,15 +139,15 @@ fn message() -> impl Strategy<Value = Message> {
                 0..=MAX_READINGS
             )
         )
-            .prop_map(
-                |(used, stop_on_sonar, ticks, thrusters, readings)| Message::TimeStep {
+            .prop_map(|(used, stop_on_sonar, ticks, thrusters, readings)| {
+                Message::TimeStep {
                     used,
                     stop_on_sonar,
                     ticks,
                     thrusters,
                     readings: Readings::new(readings).unwrap(),
                 }
-            ),
+            }),
         (
             any::<u32>(),
             any::<u16>(),

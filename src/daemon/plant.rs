@@ -626,15 +626,31 @@ mod tests {
             seq = seq.wrapping_add(1);
             seq
         };
-        let _ = ask(&mut bus, next(), Message::ThrusterSetAll { commands: thrusters });
+        let _ = ask(
+            &mut bus,
+            next(),
+            Message::ThrusterSetAll {
+                commands: thrusters,
+            },
+        );
         let _ = ask(&mut bus, next(), Message::TimeAdvance { ticks: 30 });
-        let first: Vec<u16> = [0, 1, 0].iter().map(|&c| adc(&mut bus, next(), c)).collect();
+        let first: Vec<u16> = [0, 1, 0]
+            .iter()
+            .map(|&c| adc(&mut bus, next(), c))
+            .collect();
         let _ = ask(&mut bus, next(), Message::TimeAdvance { ticks: 2 });
-        let second: Vec<u16> = [1, 1, 2, 0].iter().map(|&c| adc(&mut bus, next(), c)).collect();
+        let second: Vec<u16> = [1, 1, 2, 0]
+            .iter()
+            .map(|&c| adc(&mut bus, next(), c))
+            .collect();
         // The same through TIME_STEP: five readings asked for, three used.
         let mut stepped = lockstep_core();
         let got = step(&mut stepped, 1, 0, 30, Some(thrusters), &[0, 1, 0, 1, 1]);
-        assert_eq!(&got[..3], &first[..], "readings made as ADC_READs would make them");
+        assert_eq!(
+            &got[..3],
+            &first[..],
+            "readings made as ADC_READs would make them"
+        );
         let got = step(&mut stepped, 2, 3, 2, None, &[1, 1, 2, 0]);
         assert_eq!(got, second, "the two unused readings were taken back");
         assert_eq!(stepped.board().taken_back(), 2);
@@ -645,6 +661,9 @@ mod tests {
         assert_ne!(got, second, "extra conversions change later values");
         // The vehicle is where the bus run left it: same thrusters, same time.
         assert_eq!(stepped.now(), bus.now());
-        assert_eq!(stepped.model().state().position_m, bus.model().state().position_m);
+        assert_eq!(
+            stepped.model().state().position_m,
+            bus.model().state().position_m
+        );
     }
 }
