@@ -1270,4 +1270,54 @@ mod tests {
             })
         ));
     }
+
+    fn decode_raw(t: u8, payload: &[u8]) -> Result<Frame, MessageError> {
+        let mut buf = BytesMut::new();
+        frame::encode(t, 7, payload, &mut buf).unwrap();
+        Frame::decode(frame::parse(&buf).unwrap())
+    }
+
+    /// TIME_STEP's length depends on its flags and its readings (PROTOCOL.md 2.9); bad flag
+    /// bits, directions and reading codes are BAD_VALUE at their offsets.
+    #[test]
+    fn time_step_lengths_and_values_are_checked() {
+        let bad_len = |expected| move |r: Result<Frame, MessageError>| matches!(r, Err(MessageError::BadLength { expected: e, .. }) if e == expected);
+        let bad_value = |offset| move |r: Result<Frame, MessageError>| matches!(r, Err(MessageError::BadValue { offset: o, .. }) if o == offset);
+        let t = msg_type::TIME_STEP;
+        assert!(bad_len(6)(decode_raw(t, &[0])));
+        assert!(bad_len(6)(decode_raw(t, &[0, 0, 0, 0, 1])));
+        // thrusters announced but missing
+        assert!(bad_len(14)(decode_raw(t, &[0, 1, 0, 0, 0, 1, 0xFF, 0])));
+        // 17 readings
+        let mut long = vec![0, 0, 0, 0, 0, 1];
+        long.extend([0u8; 17]);
+        assert!(bad_len(22)(decode_raw(t, &long)));
+        assert!(bad_value(1)(decode_raw(t, &[0, 0x04, 0, 0, 0, 1])));
+        assert!(bad_value(6)(decode_raw(t, &[0, 0, 0, 0, 0, 1, 0x08])));
+        assert!(bad_value(8)(decode_raw(
+            t,
+            &[0, 1, 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0, 0]
+        )));
+        let ok = decode_raw(t, &[2, 0, 0, 0, 0, 1, 0x21, 0x07]).unwrap();
+        assert_eq!(
+            ok.message,
+            Message::TimeStep {
+                used: 2,
+                stop_on_sonar: false,
+                ticks: 1,
+                thrusters: None,
+                readings: Readings::new([
+                    Reading::Compass,
+                    Reading::Adc(AdcChannel::new(7).unwrap())
+                ])
+                .unwrap(),
+            }
+        );
+        // STEP: 6 bytes, then whole u16 values
+        assert!(bad_len(6)(decode_raw(
+            msg_type::STEP,
+            &[0, 0, 0, 1, 0, 0, 1]
+        )));
+        assert!(Readings::new([Reading::Compass; 17]).is_err());
+    }
 }
