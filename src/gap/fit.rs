@@ -826,27 +826,19 @@ pub fn fit_candidates(
         );
         result
     };
-    let threads = std::thread::available_parallelism()
-        .map_or(1, std::num::NonZero::get)
-        .min(todo.len().max(1));
-    let next = std::sync::atomic::AtomicUsize::new(0);
     let (tx, rx) = std::sync::mpsc::channel::<(usize, CandidateResult)>();
     let mut slots: Vec<Option<CandidateResult>> = vec![None; todo.len()];
     std::thread::scope(|scope| {
-        for _ in 0..threads {
-            let tx = tx.clone();
-            let (next, todo, one) = (&next, &todo, &one);
-            scope.spawn(move || {
-                loop {
-                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    let Some(effect) = todo.get(i) else { break };
-                    if tx.send((i, one(effect))).is_err() {
-                        break;
-                    }
-                }
-            });
-        }
-        drop(tx);
+        let (todo, one) = (&todo, &one);
+        scope.spawn(move || {
+            use rayon::prelude::*;
+            todo.par_iter()
+                .enumerate()
+                .for_each_with(tx, |tx, (i, effect)| {
+                    // The receiver lives until every sender is gone.
+                    let _ = tx.send((i, one(effect)));
+                });
+        });
         for (i, result) in rx {
             progress(&result.name);
             slots[i] = Some(result);
