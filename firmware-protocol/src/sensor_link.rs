@@ -1294,7 +1294,8 @@ mod tests {
         assert!(bad_len(22)(decode_raw(t, &long)));
         assert!(bad_value(1)(decode_raw(t, &[0, 0x04, 0, 0, 0, 1])));
         assert!(bad_value(6)(decode_raw(t, &[0, 0, 0, 0, 0, 1, 0x08])));
-        assert!(bad_value(8)(decode_raw(
+        // starboard's direction byte (payload offset 9) is 2
+        assert!(bad_value(9)(decode_raw(
             t,
             &[0, 1, 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0, 0]
         )));
