@@ -847,7 +847,7 @@ fn decode_message(raw: RawFrame<'_>) -> Result<Message, MessageError> {
             return Err(bad_len(head + MAX_READINGS as u8));
         }
     } else if t == m::STEP {
-        if found < expected || (found - expected) % 2 != 0 {
+        if found < expected || !(found - expected).is_multiple_of(2) {
             return Err(bad_len(expected));
         }
         if usize::from(found - expected) / 2 > MAX_READINGS {
