@@ -1,13 +1,16 @@
 //! `eyebot-hil gap convert RECORD_DIR --out MEAS_DIR`: a daemon recording (`--record`,
 //! `docs/recording.md`) turned into the measured-data format (`docs/gap.md`).
 //!
-//! - `commands.csv`: the thruster frames the EyeBot sent (THRUSTER_SET, THRUSTER_SET_ALL;
-//!   HELLO switches all off), decoded with `firmware-protocol` and mapped back from PWM duty and
+//! - `commands.csv`: the thruster frames the EyeBot sent (THRUSTER_SET, THRUSTER_SET_ALL, the
+//!   thrusters of a TIME_STEP, at the request's time; HELLO switches all off), decoded with `firmware-protocol` and mapped back from PWM duty and
 //!   direction to MOTORDrive percent through the inverse of the vehicle's HDT table.
 //! - `measured.csv`: the sensor replies the bridge sent, decoded: `depth_adc` and
 //!   `accel_*_adc` from ADC_VALUE and ADC_SAMPLES (channel meaning from the sensor config's
 //!   analog table), `compass_deg` from COMPASS_HEADING words (binary or BCD, as the EyeBot set
-//!   the compass), `paddle_speed_mps` by counting the velocity channel's pulses per window as
+//!   the compass), both also from the values of STEP replies (value i is the reading the
+//!   TIME_STEP's code i asked for, at the reply's tick; only the values the EyeBot used count:
+//!   those it took back, and those of a last reply it never answered, never happened,
+//!   `firmware-protocol/PROTOCOL.md` 2.9), `paddle_speed_mps` by counting the velocity channel's pulses per window as
 //!   the firmware does, and `sonar1_m..sonar4_m` from `$PEBHS` echo reports (a plain depth
 //!   sentence does not say which transducer pinged, so it is counted and left out).
 //! - `experiment.toml`: the set-up: the initial state from the first ground-truth row of
@@ -25,7 +28,10 @@ use bytes::BytesMut;
 use firmware_protocol::compass_word::HeadingFormat;
 use firmware_protocol::line::{LineDecoder, LineItem};
 use firmware_protocol::nmea::Sentence;
-use firmware_protocol::sensor_link::{CompassOutput, Direction as WireDirection, Message};
+use firmware_protocol::sensor_link::{
+    CompassOutput, Direction as WireDirection, Frame, Message, Reading, Readings,
+};
+use firmware_protocol::{HeadingWord, sensor_link::msg_type};
 use rand::RngExt;
 use rand_distr::StandardNormal;
 
@@ -83,6 +89,20 @@ pub fn percent_from_duty(table: &[f64; 11], duty: u8, direction: WireDirection) 
     }
 }
 
+/// The TIME_STEP exchanges of one link (PROTOCOL.md 2.9): a STEP reply's values count only
+/// once the EyeBot said how many of them it used (the next TIME_STEP's `used`; any other
+/// request: all of them).
+#[derive(Debug, Default)]
+struct StepLink {
+    /// The last request, to tell a retry (same seq and payload, answered from the bridge's
+    /// store, never executed again) from a new request.
+    last_request: Option<Frame>,
+    /// The TIME_STEP waiting for its STEP: seq, `used`, readings.
+    asked: Option<(u8, u8, Readings)>,
+    /// The last STEP's values, in request order: time, reading, value, the heading format then.
+    open: Vec<(f64, Reading, u16, HeadingFormat)>,
+}
+
 /// A recording that cannot be read, as the gap workflow reports it.
 fn recording_error(e: record::ReadError) -> GapError {
     GapError::Data(e.to_string())
@@ -134,7 +154,37 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
     let mut samples: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
     let mut velocity_codes: Vec<(f64, f64)> = Vec::new();
     let (mut ambiguous_sonar, mut raw_compass, mut link_errors) = (0usize, 0usize, 0usize);
+    let mut steps: BTreeMap<String, StepLink> = BTreeMap::new();
+    let mut unused_readings = 0usize;
     let adc_name = |ch: u8| -> Option<AdcSource> { *sensors.adc.channels.get(usize::from(ch))? };
+    // The first `used` values of a STEP reply, as the replies they stand for would convert.
+    let commit = |open: &mut Vec<(f64, Reading, u16, HeadingFormat)>,
+                  used: usize,
+                  samples: &mut BTreeMap<String, Vec<(f64, f64)>>,
+                  velocity_codes: &mut Vec<(f64, f64)>|
+     -> usize {
+        let unused = open.len().saturating_sub(used);
+        for (t, reading, value, format) in open.drain(..).take(used) {
+            match reading {
+                Reading::Adc(channel) => push_adc(
+                    samples,
+                    velocity_codes,
+                    adc_name(channel.get()),
+                    t,
+                    f64::from(value),
+                ),
+                Reading::Compass => {
+                    if let Ok(h) = HeadingWord(value).decode(format) {
+                        samples
+                            .entry("compass_deg".into())
+                            .or_default()
+                            .push((t, f64::from(h)));
+                    }
+                }
+            }
+        }
+        unused
+    };
     for chunk in &chunks {
         let t = chunk.sim_s - t0;
         let key = (chunk.link.clone(), chunk.dir.as_str());
@@ -164,6 +214,45 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
                 }
                 LineItem::Sonar(_) => continue,
             };
+            let link = steps.entry(chunk.link.clone()).or_default();
+            match (chunk.dir, frame.message) {
+                (Direction::Rx, _) if link.last_request == Some(frame) => {
+                    // A retry: the bridge answers it from its store and executes nothing.
+                }
+                (Direction::Rx, Message::TimeStep { used, readings, .. }) => {
+                    link.last_request = Some(frame);
+                    link.asked = Some((frame.seq, used, readings));
+                }
+                (Direction::Rx, _) => {
+                    link.last_request = Some(frame);
+                    let all = link.open.len();
+                    commit(&mut link.open, all, &mut samples, &mut velocity_codes);
+                }
+                (Direction::Tx, Message::Step { ticks, values, .. }) => {
+                    if let Some((_, used, readings)) = link.asked.take_if(|a| a.0 == frame.seq) {
+                        unused_readings += commit(
+                            &mut link.open,
+                            usize::from(used),
+                            &mut samples,
+                            &mut velocity_codes,
+                        );
+                        let ts = f64::from(ticks) * tick_s - t0;
+                        link.open = readings
+                            .as_slice()
+                            .iter()
+                            .zip(values.as_slice())
+                            .map(|(&r, &v)| (ts, r, v, format))
+                            .collect();
+                    }
+                }
+                (Direction::Tx, Message::Nak { rejected_type, .. })
+                    if rejected_type == msg_type::TIME_STEP =>
+                {
+                    // A rejected TIME_STEP changes nothing.
+                    link.asked = None;
+                }
+                _ => {}
+            }
             match (chunk.dir, frame.message) {
                 (Direction::Rx, Message::Hello { .. }) => {
                     percent = [0.0; 4];
@@ -175,7 +264,13 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
                         percent[k] = percent_from_duty(table, command.duty, command.direction);
                     }
                 }
-                (Direction::Rx, Message::ThrusterSetAll { commands: c }) => {
+                (Direction::Rx, Message::ThrusterSetAll { commands: c })
+                | (
+                    Direction::Rx,
+                    Message::TimeStep {
+                        thrusters: Some(c), ..
+                    },
+                ) => {
                     for k in 0..4 {
                         percent[k] = percent_from_duty(&tables[k], c[k].duty, c[k].direction);
                     }
@@ -237,6 +332,13 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
                 }
             }
         }
+    }
+    unused_readings += steps.values().map(|link| link.open.len()).sum::<usize>();
+    if unused_readings > 0 {
+        notices.push(format!(
+            "{unused_readings} values of STEP replies left out: the EyeBot took them back \
+             unused, or the recording ended before it said whether it used them"
+        ));
     }
     if ambiguous_sonar > 0 {
         notices.push(format!(
@@ -526,6 +628,112 @@ mod tests {
                 ),
             )
             .unwrap();
+        }
+
+        /// Thrusters and readings inside TIME_STEP and STEP (PROTOCOL.md 2.9): thrusters at the
+        /// request's time; value i of a STEP is the request's reading i at the reply's tick;
+        /// only values the EyeBot used count (the next TIME_STEP's `used`, or all of them when
+        /// another request follows), and a last reply nobody answered counts for nothing.
+        #[test]
+        fn time_step_thrusters_and_step_values_convert() {
+            use firmware_protocol::sensor_link::{Reading, Readings, StepValues};
+            let scratch = crate::scratch::dir("gap-convert-step");
+            let dir = scratch.path().join("rec");
+            let seq_frame = |seq: u8, m: Message| {
+                let mut b = BytesMut::new();
+                Frame::new(seq, m).encode(&mut b);
+                b.to_vec()
+            };
+            let time_step = |seq: u8, used: u8, thrusters, codes: &[Reading]| {
+                seq_frame(
+                    seq,
+                    Message::TimeStep {
+                        used,
+                        stop_on_sonar: false,
+                        ticks: 10,
+                        thrusters,
+                        readings: Readings::new(codes.iter().copied()).unwrap(),
+                    },
+                )
+            };
+            let step = |seq: u8, ticks: u32, values: &[u16]| {
+                seq_frame(
+                    seq,
+                    Message::Step {
+                        ticks,
+                        sonar_bytes: 0,
+                        values: StepValues::new(values.iter().copied()).unwrap(),
+                    },
+                )
+            };
+            let adc = |c: u8| Reading::Adc(AdcChannel::new(c).unwrap());
+            let north = HeadingWord::encode(90, HeadingFormat::Binary).unwrap().0;
+            let mut bytes = String::new();
+            bytes += &row(
+                0.0,
+                "sensor",
+                "rx",
+                &frame(Message::Hello { client_version: 1 }),
+            );
+            let ahead = Some([wire(50.0), wire(50.0), wire(0.0), wire(0.0)]);
+            bytes += &row(
+                1.0,
+                "sensor",
+                "rx",
+                &time_step(2, 0, ahead, &[adc(0), Reading::Compass, adc(2)]),
+            );
+            bytes += &row(1.1, "sensor", "tx", &step(2, 110, &[200, north, 512]));
+            // Depth and compass used, channel 2 taken back; then the same request again (a
+            // retry, answered from the bridge's store).
+            let next = time_step(3, 2, None, &[adc(0), adc(2)]);
+            bytes += &row(1.1, "sensor", "rx", &next);
+            bytes += &row(1.1, "sensor", "rx", &next);
+            bytes += &row(1.2, "sensor", "tx", &step(3, 120, &[210, 520]));
+            bytes += &row(1.2, "sensor", "tx", &step(3, 120, &[210, 520]));
+            // Another request: every value of the last STEP was used.
+            bytes += &row(
+                1.2,
+                "sensor",
+                "rx",
+                &seq_frame(
+                    4,
+                    Message::ThrusterSet {
+                        thruster: Thruster::Stern,
+                        command: wire(-30.0),
+                    },
+                ),
+            );
+            bytes += &row(1.2, "sensor", "rx", &time_step(5, 0, None, &[adc(0)]));
+            bytes += &row(1.3, "sensor", "tx", &step(5, 130, &[220]));
+            let back = Some([wire(-20.0), wire(-20.0), wire(0.0), wire(-30.0)]);
+            bytes += &row(1.3, "sensor", "rx", &time_step(6, 1, back, &[adc(0)]));
+            // The recording ends before the EyeBot says whether it used this one.
+            bytes += &row(1.4, "sensor", "tx", &step(6, 140, &[230]));
+            write(&dir, &bytes);
+            let c = convert(&dir, &ConvertOptions::default()).unwrap();
+            let m = &c.measurement;
+            let ch = |n: &str| m.channel(n).map(|c| c.samples.clone()).unwrap_or_default();
+            assert_eq!(
+                ch("depth_adc"),
+                vec![(1.1, 200.0), (1.2, 210.0), (1.3, 220.0)]
+            );
+            assert_eq!(ch("compass_deg"), vec![(1.1, 90.0)]);
+            assert_eq!(ch("accel_x_adc"), vec![(1.2, 520.0)], "512 was taken back");
+            let times: Vec<f64> = m.commands.iter().map(|c| c.t_s).collect();
+            assert_eq!(times, vec![0.0, 1.0, 1.2, 1.3], "{:?}", m.commands);
+            let near = |a: f64, b: f64| (a - b).abs() < 0.5;
+            let [p, s, b, st] = m.commands[1].percent;
+            assert!(near(p, 50.0) && near(s, 50.0) && b == 0.0 && st == 0.0);
+            assert!(near(m.commands[2].percent[3], -30.0), "{:?}", m.commands);
+            let [p, s, _, st] = m.commands[3].percent;
+            assert!(near(p, -20.0) && near(s, -20.0) && near(st, -30.0));
+            assert!(
+                c.notices
+                    .iter()
+                    .any(|n| n.starts_with("2 values of STEP replies left out")),
+                "{:?}",
+                c.notices
+            );
         }
 
         /// Every decoded path of a hand-made recording: HELLO, COMPASS_MODE (BCD), both thruster
