@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use eyebot_hil::gap::convert::{ConvertOptions, convert};
 use eyebot_test_support::Daemon;
 use eyebot_test_support::eyebot_c::{
     self, Target, assert_same_run, run_program, run_program_args, run_to_end, start_daemon,
@@ -255,6 +256,7 @@ fn timer_square_flies_its_course_host_and_m68k_alike() {
 /// follows the same path (ground truth equal bit for bit); with the buffer, host and
 /// qemu-m68k builds give the same bytes. `timer_square` and `sonar_three` (which waits for
 /// the sonar with TIME_STEP's stop on sonar output) print the same with and without it too.
+/// `gap convert` makes the same commands and channels of both recordings.
 #[test]
 fn the_step_buffer_shows_what_the_bus_would_have_shown() {
     let programs = [mk4_source("read_ahead.c")];
@@ -272,14 +274,26 @@ fn the_step_buffer_shows_what_the_bus_would_have_shown() {
         ("sonar_three", wall_start, Target::Host, &host, "0"),
         ("sonar_three", wall_start, Target::Host, &host, "1"),
     ] {
-        let daemon = start_daemon(BIN, &format!("step-{program}-{step}"), start, 5);
-        let (rec, stdout) = run_to_end(
-            daemon,
+        let mut daemon = start_daemon(BIN, &format!("step-{program}-{step}"), start, 5);
+        let run = run_program(
+            &daemon,
             target,
             &dir.join(program),
             &[("EYEBOT_STEP", step)],
             TIMEOUT,
         );
+        assert!(
+            run.status.success(),
+            "{program}: {}{}",
+            run.stdout,
+            run.stderr
+        );
+        let (rec, stdout) = (stop_daemon(&mut daemon), run.stdout);
+        // What `gap convert` makes of the recording: the same commands and channels whether
+        // they travelled in THRUSTER_SET_ALL/ADC_VALUE/COMPASS_HEADING or TIME_STEP/STEP.
+        let converted = convert(daemon.record_dir(), &ConvertOptions::default())
+            .ok()
+            .map(|c| (c.measurement.commands, c.measurement.channels));
         let states: Vec<_> = rec
             .states
             .iter()
@@ -298,6 +312,7 @@ fn the_step_buffer_shows_what_the_bus_would_have_shown() {
             stdout,
             states,
             step_types,
+            converted,
         ));
     }
     for pair in runs.chunks(2).take(1).chain(runs[3..].chunks(2)) {
@@ -324,6 +339,23 @@ fn the_step_buffer_shows_what_the_bus_would_have_shown() {
             "{}: ground truth differs with the buffer at row {:?}",
             a.0,
             a.5.iter().zip(&b.5).position(|(x, y)| x != y)
+        );
+    }
+    for pair in [&runs[0..2], &runs[3..5]] {
+        let (a, b) = (&pair[0], &pair[1]);
+        let (commands, channels) = a.7.as_ref().expect("the recording converts");
+        assert!(commands.len() > 10, "{}: {} commands", a.0, commands.len());
+        for name in ["depth_adc", "compass_deg"] {
+            let n = channels
+                .iter()
+                .find(|c| c.name == name)
+                .map_or(0, |c| c.samples.len());
+            assert!(n > 100, "{}: {n} {name} samples", a.0);
+        }
+        assert!(
+            a.7 == b.7,
+            "{}: gap convert gives other commands or channels with the buffer",
+            a.0
         );
     }
     assert_same_run(

@@ -150,7 +150,9 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
     let mut percent = [0.0; 4];
     let mut commands: Vec<CommandRow> = vec![CommandRow { t_s: 0.0, percent }];
     let mut format = HeadingFormat::Binary;
-    let mut tick_s = 0.01;
+    let mut tick_us: u32 = 10_000;
+    // A tick count as seconds, rounded once (as the recording's decimal times are).
+    let tick_time = |ticks: u32, tick_us: u32| (u64::from(ticks) * u64::from(tick_us)) as f64 / 1e6;
     let mut samples: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
     let mut velocity_codes: Vec<(f64, f64)> = Vec::new();
     let (mut ambiguous_sonar, mut raw_compass, mut link_errors) = (0usize, 0usize, 0usize);
@@ -236,7 +238,7 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
                             &mut samples,
                             &mut velocity_codes,
                         );
-                        let ts = f64::from(ticks) * tick_s - t0;
+                        let ts = tick_time(ticks, tick_us) - t0;
                         link.open = readings
                             .as_slice()
                             .iter()
@@ -280,8 +282,8 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
                     CompassOutput::Bcd => format = HeadingFormat::Bcd,
                     CompassOutput::Raw => {}
                 },
-                (Direction::Tx, Message::HelloReply { tick_us, .. }) => {
-                    tick_s = f64::from(tick_us) * 1e-6;
+                (Direction::Tx, Message::HelloReply { tick_us: t, .. }) => {
+                    tick_us = t;
                 }
                 (Direction::Tx, Message::AdcValue { channel, value }) => {
                     push_adc(
@@ -293,7 +295,7 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
                     );
                 }
                 (Direction::Tx, Message::AdcSamples { ticks, samples: s }) => {
-                    let ts = f64::from(ticks) * tick_s - t0;
+                    let ts = tick_time(ticks, tick_us) - t0;
                     for (channel, value) in s.iter() {
                         push_adc(
                             &mut samples,
