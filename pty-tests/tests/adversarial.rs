@@ -256,7 +256,7 @@ fn two_in_process_daemons_on_one_directory_give_one_winner() {
                     .enable_all()
                     .build()
                     .unwrap();
-                barrier.wait();
+                let _ = barrier.wait();
                 runtime.block_on(async {
                     match Bridge::start(&config, model, board, mux, RunOptions::default()).await {
                         Ok(bridge) => {
