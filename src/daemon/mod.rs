@@ -1066,6 +1066,7 @@ mod tests {
             to_link,
             backlog: bytes::BytesMut::new(),
             backlog_limit: 4096,
+            last_rx_wall: Instant::now(),
         };
         let mut lines = vec![
             runtime(0, "sonar", sonar_tx),
