@@ -541,7 +541,9 @@ impl<M: Model> Daemon<M> {
         let wall = self.pacing.started.elapsed();
         let reached = self.engine.now().max(map.target(self.pacing.planned_wake));
         if let Some(slip) = map.settle(reached, wall) {
-            tracing::warn!(
+            // Counted in the status's overruns; a starved loop may slip at every wake-up.
+            crate::warn_limited!(
+                "overrun",
                 slip_ms = slip as f64 * 1e-6,
                 "overrun: simulated time slipped behind the wall clock"
             );
