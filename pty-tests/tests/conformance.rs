@@ -728,3 +728,93 @@ fn realtime_replies_come_within_the_specified_time() {
         "a reply released {worst} s of simulated time after its request"
     );
 }
+
+/// Section 1.2: the first sentence from a newly selected transducer's own ping has its last
+/// byte 1.23 to 2.23 s after the select (relays settled, the next ping re-acquires, the ping
+/// after it echoes, its sentence latency and wire time). Lockstep with a recording: the
+/// select's `rx` chunk gives its time, and the `tx` chunk that ends each sentence the end of
+/// the advance in which the sentence's last byte came due. The client advances one tick
+/// (10 ms) at a time, so a sentence recorded at `t` ended in `(t - 10 ms, t]`, and that
+/// interval must meet the window.
+///
+/// The vehicle lies near the pool's west wall, heading 15 deg, so transducer 2 (port-aft, 105
+/// deg to port) faces the wall square while transducer 1 (75 deg to port) meets it 30 deg off
+/// its normal and the bow pair looks down the pool: only transducer 2 can echo, and every
+/// sentence after the select is its own. Several seeds, so the controller's ping phase falls
+/// at different points of the window.
+#[test]
+fn the_first_own_sentence_after_a_select_comes_in_the_window_of_section_1_2() {
+    use eyebot_test_support::config::{as_edits, start_at};
+    use eyebot_test_support::recording::{Direction, read_chunks};
+    let from_s = spec_number_after("own ping has its last byte ");
+    let to_s = spec_number_after("own ping has its last byte 1.23 to ");
+    assert_eq!((from_s, to_s), (1.23, 2.23));
+    let start = start_at([3.0, 1.5, 0.5], 15.0);
+    let mut edits = as_edits(&start);
+    edits.push(LOCKSTEP);
+    let text = config_text(&edits);
+    for seed in [1u64, 2, 3, 4, 5] {
+        let dir = TempDir::new("conf-first-sentence");
+        let record = dir.join("rec");
+        let mut d = InProcessDaemon::start(dir, &text, Some(record.clone()), |c| c.seed = seed);
+        let mut s = Wire::open(&d.link("sensor"));
+        let mut sonar = Wire::open(&d.link("sonar"));
+        hello(&mut s, 0);
+        let mut seq = 0u8;
+        let mut run = |s: &mut Wire, sonar: &mut Wire, ticks: u32| {
+            for _ in 0..ticks {
+                seq = seq.wrapping_add(1);
+                advance(s, seq, 1);
+                sonar.drain(Duration::ZERO);
+            }
+        };
+        run(&mut s, &mut sonar, 300);
+        sonar.send(b"@S2\r");
+        d.wait_status(WAIT, "the select read", |st| {
+            link_status(st, "sonar").frames_rx > 0
+        });
+        run(&mut s, &mut sonar, 400);
+        drop((s, sonar));
+        d.stop();
+        let chunks = read_chunks(&record);
+        let select_s = chunks
+            .iter()
+            .find(|c| c.link == "sonar" && c.dir == Direction::Rx)
+            .expect("the select in the recording")
+            .sim_s;
+        // Each sentence with the time of the chunk holding its last byte.
+        let mut decoder = firmware_protocol::LineDecoder::new();
+        let mut buf = bytes::BytesMut::new();
+        let mut sentences = Vec::new();
+        let mut acks = Vec::new();
+        for chunk in chunks
+            .iter()
+            .filter(|c| c.link == "sonar" && c.dir == Direction::Tx)
+        {
+            buf.extend_from_slice(&chunk.data);
+            while let Some(item) = decoder.decode(&mut buf) {
+                match item {
+                    LineItem::Nmea(_) => sentences.push(chunk.sim_s - select_s),
+                    LineItem::Sonar(SonarCommand::Ack(_)) => acks.push(chunk.sim_s - select_s),
+                    other => panic!("seed {seed}: on the sonar line: {other:?}"),
+                }
+            }
+        }
+        eprintln!("seed {seed}: ack at {acks:?} s, sentences at {sentences:?} s after the select");
+        assert_eq!(acks.len(), 1, "seed {seed}: one ack");
+        assert!(
+            sentences.iter().all(|&t| t > 0.0),
+            "seed {seed}: no transducer echoes before the select: {sentences:?}"
+        );
+        let first = *sentences
+            .first()
+            .unwrap_or_else(|| panic!("seed {seed}: no sentence within 4 s of the select"));
+        let tick_s = 0.01;
+        assert!(
+            first >= from_s && first - tick_s < to_s,
+            "seed {seed}: first sentence ended {:.2}..{first:.2} s after the select, outside \
+             {from_s}..{to_s} s",
+            first - tick_s
+        );
+    }
+}
