@@ -731,13 +731,79 @@ fn realtime_replies_come_within_the_specified_time() {
     );
 }
 
+/// The sonar line of a lockstep run, from its recording: seconds of simulated time.
+struct SonarTimeline {
+    /// When the select's last byte was received.
+    select_s: Option<f64>,
+    /// When each depth sentence's last byte was handed out: the end of the one-tick advance
+    /// in which it came due, so a sentence recorded at `t` ended in `(t - 10 ms, t]`.
+    sentences: Vec<f64>,
+    /// The same for each acknowledgement.
+    acks: Vec<f64>,
+}
+
+const TICK_S: f64 = 0.01;
+
+/// Runs a lockstep daemon with `config` and `seed` for `ticks` ticks, advancing one tick at a
+/// time; `@S2` is sent after `select_after` ticks, if given.
+fn sonar_timeline(config: &str, seed: u64, select_after: Option<u32>, ticks: u32) -> SonarTimeline {
+    use eyebot_test_support::recording::{Direction, read_chunks};
+    let dir = TempDir::new("conf-sonar-timeline");
+    let record = dir.join("rec");
+    let mut d = InProcessDaemon::start(dir, config, Some(record.clone()), |c| c.seed = seed);
+    let mut s = Wire::open(&d.link("sensor"));
+    let mut sonar = Wire::open(&d.link("sonar"));
+    hello(&mut s, 0);
+    for tick in 0..ticks {
+        if select_after == Some(tick) {
+            sonar.send(b"@S2\r");
+            d.wait_status(WAIT, "the select read", |st| {
+                link_status(st, "sonar").frames_rx > 0
+            });
+        }
+        advance(&mut s, (tick % 200 + 1) as u8, 1);
+        sonar.drain(Duration::ZERO);
+    }
+    drop((s, sonar));
+    d.stop();
+    let chunks = read_chunks(&record);
+    let select_s = chunks
+        .iter()
+        .find(|c| c.link == "sonar" && c.dir == Direction::Rx)
+        .map(|c| c.sim_s);
+    assert_eq!(
+        select_s.is_some(),
+        select_after.is_some(),
+        "the select in the recording"
+    );
+    // Each item with the time of the chunk holding its last byte.
+    let mut decoder = firmware_protocol::LineDecoder::new();
+    let mut buf = bytes::BytesMut::new();
+    let mut timeline = SonarTimeline {
+        select_s,
+        sentences: Vec::new(),
+        acks: Vec::new(),
+    };
+    for chunk in chunks
+        .iter()
+        .filter(|c| c.link == "sonar" && c.dir == Direction::Tx)
+    {
+        buf.extend_from_slice(&chunk.data);
+        while let Some(item) = decoder.decode(&mut buf) {
+            match item {
+                LineItem::Nmea(_) => timeline.sentences.push(chunk.sim_s),
+                LineItem::Sonar(SonarCommand::Ack(_)) => timeline.acks.push(chunk.sim_s),
+                other => panic!("seed {seed}: on the sonar line: {other:?}"),
+            }
+        }
+    }
+    timeline
+}
+
 /// Section 1.2: the first sentence from a newly selected transducer's own ping has its last
 /// byte 1.23 to 2.23 s after the select (relays settled, the next ping re-acquires, the ping
-/// after it echoes, its sentence latency and wire time). Lockstep with a recording: the
-/// select's `rx` chunk gives its time, and the `tx` chunk that ends each sentence the end of
-/// the advance in which the sentence's last byte came due. The client advances one tick
-/// (10 ms) at a time, so a sentence recorded at `t` ended in `(t - 10 ms, t]`, and that
-/// interval must meet the window.
+/// after it echoes, its sentence latency and wire time). A sentence recorded at `t` ended in
+/// `(t - 10 ms, t]`, and that interval must meet the window.
 ///
 /// The vehicle lies near the pool's west wall, heading 15 deg, so transducer 2 (port-aft, 105
 /// deg to port) faces the wall square while transducer 1 (75 deg to port) meets it 30 deg off
@@ -747,7 +813,6 @@ fn realtime_replies_come_within_the_specified_time() {
 #[test]
 fn the_first_own_sentence_after_a_select_comes_in_the_window_of_section_1_2() {
     use eyebot_test_support::config::{as_edits, start_at};
-    use eyebot_test_support::recording::{Direction, read_chunks};
     let from_s = spec_number_after("own ping has its last byte ");
     let to_s = spec_number_after("own ping has its last byte 1.23 to ");
     assert_eq!((from_s, to_s), (1.23, 2.23));
@@ -756,52 +821,10 @@ fn the_first_own_sentence_after_a_select_comes_in_the_window_of_section_1_2() {
     edits.push(LOCKSTEP);
     let text = config_text(&edits);
     for seed in [1u64, 2, 3, 4, 5] {
-        let dir = TempDir::new("conf-first-sentence");
-        let record = dir.join("rec");
-        let mut d = InProcessDaemon::start(dir, &text, Some(record.clone()), |c| c.seed = seed);
-        let mut s = Wire::open(&d.link("sensor"));
-        let mut sonar = Wire::open(&d.link("sonar"));
-        hello(&mut s, 0);
-        let mut seq = 0u8;
-        let mut run = |s: &mut Wire, sonar: &mut Wire, ticks: u32| {
-            for _ in 0..ticks {
-                seq = seq.wrapping_add(1);
-                advance(s, seq, 1);
-                sonar.drain(Duration::ZERO);
-            }
-        };
-        run(&mut s, &mut sonar, 300);
-        sonar.send(b"@S2\r");
-        d.wait_status(WAIT, "the select read", |st| {
-            link_status(st, "sonar").frames_rx > 0
-        });
-        run(&mut s, &mut sonar, 400);
-        drop((s, sonar));
-        d.stop();
-        let chunks = read_chunks(&record);
-        let select_s = chunks
-            .iter()
-            .find(|c| c.link == "sonar" && c.dir == Direction::Rx)
-            .expect("the select in the recording")
-            .sim_s;
-        // Each sentence with the time of the chunk holding its last byte.
-        let mut decoder = firmware_protocol::LineDecoder::new();
-        let mut buf = bytes::BytesMut::new();
-        let mut sentences = Vec::new();
-        let mut acks = Vec::new();
-        for chunk in chunks
-            .iter()
-            .filter(|c| c.link == "sonar" && c.dir == Direction::Tx)
-        {
-            buf.extend_from_slice(&chunk.data);
-            while let Some(item) = decoder.decode(&mut buf) {
-                match item {
-                    LineItem::Nmea(_) => sentences.push(chunk.sim_s - select_s),
-                    LineItem::Sonar(SonarCommand::Ack(_)) => acks.push(chunk.sim_s - select_s),
-                    other => panic!("seed {seed}: on the sonar line: {other:?}"),
-                }
-            }
-        }
+        let run = sonar_timeline(&text, seed, Some(300), 700);
+        let select_s = run.select_s.expect("a select");
+        let sentences: Vec<f64> = run.sentences.iter().map(|t| t - select_s).collect();
+        let acks: Vec<f64> = run.acks.iter().map(|t| t - select_s).collect();
         eprintln!("seed {seed}: ack at {acks:?} s, sentences at {sentences:?} s after the select");
         assert_eq!(acks.len(), 1, "seed {seed}: one ack");
         assert!(
@@ -811,12 +834,78 @@ fn the_first_own_sentence_after_a_select_comes_in_the_window_of_section_1_2() {
         let first = *sentences
             .first()
             .unwrap_or_else(|| panic!("seed {seed}: no sentence within 4 s of the select"));
-        let tick_s = 0.01;
         assert!(
-            first >= from_s && first - tick_s < to_s,
+            first >= from_s && first - TICK_S < to_s,
             "seed {seed}: first sentence ended {:.2}..{first:.2} s after the select, outside \
              {from_s}..{to_s} s",
-            first - tick_s
+            first - TICK_S
         );
+    }
+}
+
+/// Section 1.2: from a select until its ack the master forwards nothing, and a sentence the
+/// switching controller pinged before its relays moved but due after the ack follows the ack.
+///
+/// Near the west wall at heading -15 deg transducer 1 (75 deg to port) faces the wall square
+/// and echoes every second; transducer 2 meets it 30 deg off its normal and the bow pair looks
+/// down the pool, so neither echoes. A control run without a select gives the time
+/// `e` a sentence of transducer 1 ends (it is handed to the line 62.5 ms before, its wire
+/// time). Lockstep runs the same bytes for the same inputs, so two more runs with the same
+/// seed select transducer 2 shortly before `e`:
+/// - 110 ms before: the sentence is due 37.5-47.5 ms after the select, before the ack (80 ms,
+///   its last byte at 90.4): it is dropped, and nothing comes until transducer 2's own
+///   sentence, 1.23 s or more after the select;
+/// - 170 ms before: it was pinged 7.5-17.5 ms after the select, before the relays move (20
+///   ms), and is due 97.5-107.5 ms after it, after the ack: it ends at `e`, after the ack.
+#[test]
+fn the_master_forwards_nothing_between_a_select_and_its_ack() {
+    use eyebot_test_support::config::{as_edits, start_at};
+    let own_s = spec_number_after("own ping has its last byte ");
+    let start = start_at([3.0, 1.5, 0.5], -15.0);
+    let mut edits = as_edits(&start);
+    edits.push(LOCKSTEP);
+    let text = config_text(&edits);
+    let seed = 7;
+    let ticks = 300;
+    let control = sonar_timeline(&text, seed, None, ticks);
+    let e = *control
+        .sentences
+        .iter()
+        .find(|&&t| t > 2.0 && t < 2.0 + 1.0)
+        .unwrap_or_else(|| panic!("transducer 1 echoes every second: {:?}", control.sentences));
+    let before = |t: &f64| *t < e - 0.2;
+    for (ahead_s, dropped) in [(0.11, true), (0.17, false)] {
+        let select_tick = ((e - ahead_s) / TICK_S).round() as u32;
+        let run = sonar_timeline(&text, seed, Some(select_tick), ticks);
+        let select_s = run.select_s.expect("a select");
+        assert!(
+            (select_s - (e - ahead_s)).abs() < 1e-6,
+            "the select at {select_s} s, {ahead_s} s before {e}"
+        );
+        let same: Vec<f64> = run.sentences.iter().copied().filter(before).collect();
+        let expected: Vec<f64> = control.sentences.iter().copied().filter(before).collect();
+        assert_eq!(same, expected, "the same sentences before the select");
+        assert_eq!(run.acks.len(), 1, "one ack: {:?}", run.acks);
+        let ack = run.acks[0];
+        let after: Vec<f64> = run
+            .sentences
+            .iter()
+            .copied()
+            .filter(|&t| t > select_s && t < select_s + own_s)
+            .collect();
+        eprintln!(
+            "select {ahead_s} s before a sentence at {e} s: ack at {ack} s, sentences {after:?} \
+             within {own_s} s of the select"
+        );
+        if dropped {
+            assert!(
+                after.is_empty(),
+                "a sentence due between the select and its ack was forwarded: {after:?}"
+            );
+        } else {
+            assert_eq!(after.len(), 1, "the stale sentence: {after:?}");
+            assert!((after[0] - e).abs() < 1e-9, "{after:?} against {e}");
+            assert!(ack < after[0], "the stale sentence follows the ack");
+        }
     }
 }
