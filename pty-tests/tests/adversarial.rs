@@ -122,7 +122,7 @@ fn endless_frame_headers_do_not_wedge_the_sensor_link() {
     }
 }
 
-/// The sonar line: a megabyte of `$`, over-long lines and CRs without LF, then a select.
+/// The sonar line: 256 KiB of `$`, over-long lines and CRs without LF, then a select.
 #[test]
 fn a_sonar_line_of_broken_sentences_still_acks_a_select() {
     let mut d = daemon("adv-sonar-junk", false);

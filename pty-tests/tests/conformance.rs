@@ -4,9 +4,10 @@
 //! blocks, parsed by the same code as the codec's golden test) with the "answered by" column
 //! of the message table (2.3), the error codes of the NAK table (2.4), the rows of the
 //! receiving table (section 3) with their "bridge answer" column, and the timing figures the
-//! text gives (sonar acknowledgement, ADC stream ticks, the first compass push, the idle
-//! limit). A row or example the test has no input for fails the test, so the specification
-//! cannot grow a rule the daemon is not checked against.
+//! text gives (sonar acknowledgement, the first sentence after a select, ADC stream ticks, the
+//! first compass push, the idle limit, the real-time reply time). A receiving-table row the
+//! test has no input for fails the test, so that table cannot grow a rule the daemon is not
+//! checked against; rules stated only in prose are checked where a test below names them.
 
 #[path = "../../firmware-protocol/tests/common/mod.rs"]
 #[allow(dead_code, clippy::all)]
