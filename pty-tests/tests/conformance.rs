@@ -844,69 +844,93 @@ fn the_first_own_sentence_after_a_select_comes_in_the_window_of_section_1_2() {
     }
 }
 
-/// Section 1.2: from a select until its ack the master forwards nothing, and a sentence the
-/// switching controller pinged before its relays moved but due after the ack follows the ack.
+/// Section 1.2: from a select until its ack the master forwards nothing, from either
+/// controller; from the ack on it forwards both again, including a sentence the switching
+/// controller pinged before its relays moved.
 ///
-/// Near the west wall at heading -15 deg transducer 1 (75 deg to port) faces the wall square
-/// and echoes every second; transducer 2 meets it 30 deg off its normal and the bow pair looks
-/// down the pool, so neither echoes. A control run without a select gives the time
-/// `e` a sentence of transducer 1 ends (it is handed to the line 62.5 ms before, its wire
-/// time). Lockstep runs the same bytes for the same inputs, so two more runs with the same
-/// seed select transducer 2 shortly before `e`:
+/// Two poses, each with one echoing transducer, and a select of transducer 2 (controller A):
+/// - the switching controller's own sentences: near the west wall at heading -15 deg
+///   transducer 1 (75 deg to port) faces the wall square; transducer 2 meets it 30 deg off
+///   its normal and the bow pair looks down the pool, so neither echoes;
+/// - the other controller's: near the north wall, mid-pool, at heading 15 deg transducer 3
+///   (bow, 15 deg to port; controller B's at power-up) faces the wall square; the port pair is
+///   6 m from the west wall, out of range.
+///
+/// A control run without a select gives the time `e` an echoing sentence ends (it is handed
+/// to the line 62.5 ms before, its wire time). Lockstep runs the same bytes for the same
+/// inputs, so two more runs with the same seed select transducer 2 shortly before `e`:
 /// - 110 ms before: the sentence is due 37.5-47.5 ms after the select, before the ack (80 ms,
-///   its last byte at 90.4): it is dropped, and nothing comes until transducer 2's own
-///   sentence, 1.23 s or more after the select;
-/// - 170 ms before: it was pinged 7.5-17.5 ms after the select, before the relays move (20
-///   ms), and is due 97.5-107.5 ms after it, after the ack: it ends at `e`, after the ack.
+///   its last byte at 90.4): it is dropped, and nothing comes within a ping period (1 s);
+/// - 170 ms before: it is due 97.5-107.5 ms after the select, after the ack, and ends at `e`
+///   (for controller A it was pinged 7.5-17.5 ms after the select, before the relays move at
+///   20 ms: a sentence of the previous transducer after the ack).
 #[test]
 fn the_master_forwards_nothing_between_a_select_and_its_ack() {
     use eyebot_test_support::config::{as_edits, start_at};
-    let own_s = spec_number_after("own ping has its last byte ");
-    let start = start_at([3.0, 1.5, 0.5], -15.0);
-    let mut edits = as_edits(&start);
-    edits.push(LOCKSTEP);
-    let text = config_text(&edits);
-    let seed = 7;
-    let ticks = 300;
-    let control = sonar_timeline(&text, seed, None, ticks);
-    let e = *control
-        .sentences
-        .iter()
-        .find(|&&t| t > 2.0 && t < 2.0 + 1.0)
-        .unwrap_or_else(|| panic!("transducer 1 echoes every second: {:?}", control.sentences));
-    let before = |t: &f64| *t < e - 0.2;
-    for (ahead_s, dropped) in [(0.11, true), (0.17, false)] {
-        let select_tick = ((e - ahead_s) / TICK_S).round() as u32;
-        let run = sonar_timeline(&text, seed, Some(select_tick), ticks);
-        let select_s = run.select_s.expect("a select");
-        assert!(
-            (select_s - (e - ahead_s)).abs() < 1e-6,
-            "the select at {select_s} s, {ahead_s} s before {e}"
-        );
-        let same: Vec<f64> = run.sentences.iter().copied().filter(before).collect();
-        let expected: Vec<f64> = control.sentences.iter().copied().filter(before).collect();
-        assert_eq!(same, expected, "the same sentences before the select");
-        assert_eq!(run.acks.len(), 1, "one ack: {:?}", run.acks);
-        let ack = run.acks[0];
-        let after: Vec<f64> = run
+    let period_s = 1.0;
+    for (case, position, heading) in [
+        ("switching controller", [3.0, 1.5, 0.5], -15.0),
+        ("other controller", [23.0, 6.25, 0.5], 15.0),
+    ] {
+        let start = start_at(position, heading);
+        let mut edits = as_edits(&start);
+        edits.push(LOCKSTEP);
+        let text = config_text(&edits);
+        let seed = 7;
+        let ticks = 400;
+        let control = sonar_timeline(&text, seed, None, ticks);
+        let e = *control
             .sentences
             .iter()
-            .copied()
-            .filter(|&t| t > select_s && t < select_s + own_s)
-            .collect();
-        eprintln!(
-            "select {ahead_s} s before a sentence at {e} s: ack at {ack} s, sentences {after:?} \
-             within {own_s} s of the select"
-        );
-        if dropped {
+            .find(|&&t| t > 2.0 && t < 2.0 + period_s)
+            .unwrap_or_else(|| {
+                panic!(
+                    "{case}: a transducer echoes every second: {:?}",
+                    control.sentences
+                )
+            });
+        let before = |t: &f64| *t < e - 0.2;
+        for (ahead_s, dropped) in [(0.11, true), (0.17, false)] {
+            let select_tick = ((e - ahead_s) / TICK_S).round() as u32;
+            let run = sonar_timeline(&text, seed, Some(select_tick), ticks);
+            let select_s = run.select_s.expect("a select");
             assert!(
-                after.is_empty(),
-                "a sentence due between the select and its ack was forwarded: {after:?}"
+                (select_s - (e - ahead_s)).abs() < 1e-6,
+                "{case}: the select at {select_s} s, {ahead_s} s before {e}"
             );
-        } else {
-            assert_eq!(after.len(), 1, "the stale sentence: {after:?}");
-            assert!((after[0] - e).abs() < 1e-9, "{after:?} against {e}");
-            assert!(ack < after[0], "the stale sentence follows the ack");
+            let same: Vec<f64> = run.sentences.iter().copied().filter(before).collect();
+            let expected: Vec<f64> = control.sentences.iter().copied().filter(before).collect();
+            assert_eq!(
+                same, expected,
+                "{case}: the same sentences before the select"
+            );
+            assert_eq!(run.acks.len(), 1, "{case}: one ack: {:?}", run.acks);
+            let ack = run.acks[0];
+            let after: Vec<f64> = run
+                .sentences
+                .iter()
+                .copied()
+                .filter(|&t| t > select_s && t < select_s + period_s)
+                .collect();
+            eprintln!(
+                "{case}: select {ahead_s} s before a sentence at {e} s: ack at {ack} s, \
+                 sentences {after:?} within {period_s} s of the select"
+            );
+            if dropped {
+                assert!(
+                    after.is_empty(),
+                    "{case}: a sentence due between the select and its ack was forwarded: \
+                     {after:?}"
+                );
+            } else {
+                assert_eq!(
+                    after.len(),
+                    1,
+                    "{case}: the sentence due after the ack: {after:?}"
+                );
+                assert!((after[0] - e).abs() < 1e-9, "{case}: {after:?} against {e}");
+                assert!(ack < after[0], "{case}: the sentence follows the ack");
+            }
         }
     }
 }
