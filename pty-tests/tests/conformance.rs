@@ -816,7 +816,8 @@ fn sonar_timeline(config: &str, seed: u64, select_after: Option<u32>, ticks: u32
 /// deg to port) faces the wall square while transducer 1 (75 deg to port) meets it 30 deg off
 /// its normal and the bow pair looks down the pool: only transducer 2 can echo, and every
 /// sentence after the select is its own. Several seeds, so the controller's ping phase falls
-/// at different points of the window.
+/// at different points of the window; for each of them that ping echoes (a missed echo puts
+/// the sentence a period later, as 1.2 says and the on-demand mean test below shows).
 #[test]
 fn the_first_own_sentence_after_a_select_comes_in_the_window_of_section_1_2() {
     use eyebot_test_support::config::{as_edits, start_at};
