@@ -600,8 +600,9 @@ fn window_means(times: &[f64], a: &[f64], b: &[f64], window_s: f64) -> (Vec<f64>
     (ma, mb)
 }
 
-/// Fits the variance-type candidate (depth EMI) on the depth channel.
-fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
+/// Fits the variance-type candidate (depth EMI) on the depth channel (`None`: no depth
+/// data, or no floor for it).
+pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
     let i = setup
         .m
         .channels
