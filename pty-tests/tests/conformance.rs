@@ -158,6 +158,28 @@ fn every_request_example_gets_a_reply_the_message_table_allows() {
         if kind >= 0x80 {
             continue;
         }
+        // A TIME_STEP that says it used k values of the previous STEP reply (2.9) needs a
+        // previous reply with k values: the same readings asked for first, with no advance.
+        if let Message::TimeStep { used, readings, .. } = request.message
+            && used > 0
+        {
+            let seq = request.seq.wrapping_sub(1);
+            let priming = Message::TimeStep {
+                used: 0,
+                stop_on_sonar: false,
+                ticks: 0,
+                thrusters: None,
+                readings,
+            };
+            sensor.send(&frame_bytes(seq, priming));
+            let got = reply(&mut sensor, seq, "a STEP for the example to use");
+            assert_eq!(
+                got.msg_type(),
+                msg_type::STEP,
+                "{:?}: priming got {got:?}",
+                ex.name
+            );
+        }
         sensor.send(&ex.bytes);
         let got = reply(&mut sensor, request.seq, &ex.name);
         let allowed = &answered_by[&kind];
