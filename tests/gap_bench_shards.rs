@@ -17,8 +17,9 @@ fn options(seed: u64) -> BenchOptions {
         cases: 2,
         seed,
         effects: vec![effects::by_name("water_current").expect("library effect")],
-        independent_effects: Vec::new(),
+        hidden: Vec::new(),
         independent_path: PathBuf::new(),
+        bridge: Default::default(),
     }
 }
 

@@ -1,4 +1,4 @@
-//! `eyebot-hil gap-bench [--source simulator|independent] [--cases N] [--seed S]
+//! `eyebot-hil gap-bench [--source simulator|independent|bridge] [--cases N] [--seed S]
 //! [--effects a,b] [--shard K/N --out-part FILE] [--out FILE]`: the hidden-effect benchmark of
 //! the reality-gap workflow ([`crate::gap::bench`]); `eyebot-hil gap-bench merge PART...
 //! [--out FILE]` combines the parts of a sharded run into the table an unsharded run prints.
@@ -18,8 +18,10 @@ use crate::gap::effects::{self, Effect};
 pub struct GapBenchArgs {
     #[command(subcommand)]
     pub command: Option<GapBenchCommand>,
-    /// Where the data come from: this project's simulator, or the independent Python
-    /// vehicle model (`pty-tests/independent`), analysed after calibration.
+    /// Where the data come from: this project's simulator; the independent Python vehicle
+    /// model (`pty-tests/independent`); or closed-loop recordings of the C examples through
+    /// the bridge with a vehicle of another form. The last two are analysed after
+    /// calibration.
     #[arg(long, value_enum, default_value_t = SourceArg::Simulator)]
     pub source: SourceArg,
     /// Cases per effect, and null cases.
@@ -35,6 +37,10 @@ pub struct GapBenchArgs {
     /// The independent model's program (default: the one shipped with the crate).
     #[arg(long, value_name = "PATH")]
     pub independent: Option<PathBuf>,
+    /// Bridge source: a directory with host builds of the C examples (`make -C
+    /// firmware-protocol/c OUT=DIR`); default: built with `make` into a scratch directory.
+    #[arg(long, value_name = "DIR")]
+    pub programs: Option<PathBuf>,
     /// Run only shard K of N: the cases whose index i in the fixed case order has
     /// i % N == K - 1. Needs --out-part.
     #[arg(long, value_name = "K/N", requires = "out_part")]
@@ -51,6 +57,7 @@ pub struct GapBenchArgs {
 pub enum SourceArg {
     Simulator,
     Independent,
+    Bridge,
 }
 
 #[derive(Debug, Clone, clap::Subcommand)]
@@ -70,6 +77,7 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
     let source = match args.source {
         SourceArg::Simulator => Source::Simulator,
         SourceArg::Independent => Source::Independent,
+        SourceArg::Bridge => Source::Bridge,
     };
     let names: Vec<&str> = args.effects.iter().map(|n| n.trim()).collect();
     let mut opts = BenchOptions {
@@ -77,11 +85,15 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
         cases: args.cases,
         seed: args.seed,
         effects: Vec::new(),
-        independent_effects: Vec::new(),
+        hidden: Vec::new(),
         independent_path: args
             .independent
             .clone()
             .unwrap_or_else(bench::independent::default_path),
+        bridge: bench::bridge::BridgeOptions {
+            exe: None,
+            programs: args.programs.clone(),
+        },
     };
     let usage = |e: crate::gap::GapError| CliError::Usage(e.to_string());
     match source {
@@ -96,13 +108,19 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
                     .map_err(usage)?
             }
         }
-        Source::Independent => {
-            opts.independent_effects = if names.is_empty() {
-                bench::independent::HIDDEN.iter().collect()
+        Source::Independent | Source::Bridge => {
+            let (all, by_name): (&'static [bench::calibrated::Hidden], fn(&str) -> _) =
+                if source == Source::Bridge {
+                    (&bench::bridge::HIDDEN, bench::bridge::by_name)
+                } else {
+                    (&bench::independent::HIDDEN, bench::independent::by_name)
+                };
+            opts.hidden = if names.is_empty() {
+                all.iter().collect()
             } else {
                 names
                     .iter()
-                    .map(|n| bench::independent::by_name(n))
+                    .map(|n| by_name(n))
                     .collect::<Result<_, _>>()
                     .map_err(usage)?
             }

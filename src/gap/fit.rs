@@ -19,9 +19,9 @@
 //! blocks of the data it was not fitted to by at least [`HELDOUT_MIN_GAIN`].
 
 use nalgebra::DVector;
-use serde::Serialize;
 
 use crate::gap::GapError;
+use crate::gap::candidate::{self, Candidate, Guards};
 use crate::gap::effects::{self, Configs, Effect, Kind};
 use crate::gap::format::Measurement;
 use crate::gap::lsq::{self, Bounds};
@@ -65,83 +65,6 @@ impl Split {
     pub fn is_training(&self, t_s: f64) -> bool {
         (t_s / self.block_s).floor().rem_euclid(2.0) < 0.5
     }
-}
-
-/// Which guards a candidate passed.
-#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
-pub struct Guards {
-    /// Every parameter strictly inside its physical bounds.
-    pub inside_bounds: bool,
-    /// Every 95 % interval finite, and some interval excludes the no-effect value 0.
-    pub interval_excludes_zero: bool,
-    /// `delta_bic > BIC_MARGIN`.
-    pub significant: bool,
-    /// The signature test.
-    pub signature: bool,
-    /// The held-out gain exceeds `HELDOUT_MIN_GAIN`.
-    pub heldout: bool,
-}
-
-impl Guards {
-    pub fn all(&self) -> bool {
-        self.inside_bounds
-            && self.interval_excludes_zero
-            && self.significant
-            && self.signature
-            && self.heldout
-    }
-
-    /// The guards that failed, by name.
-    pub fn failed(&self) -> Vec<&'static str> {
-        let mut out = Vec::new();
-        for (ok, name) in [
-            (self.inside_bounds, "bounds"),
-            (self.interval_excludes_zero, "interval"),
-            (self.significant, "significance"),
-            (self.signature, "signature"),
-            (self.heldout, "held-out"),
-        ] {
-            if !ok {
-                out.push(name);
-            }
-        }
-        out
-    }
-}
-
-/// What fitting one candidate gave.
-#[derive(Debug, Clone, Serialize)]
-pub struct CandidateResult {
-    pub name: String,
-    /// (parameter, fitted change relative to the model).
-    pub parameters: Vec<(String, f64)>,
-    pub ci95: Vec<(String, [f64; 2])>,
-    /// Training chi-square without and with the effect.
-    pub chi2_before: f64,
-    pub chi2_after: f64,
-    /// BIC gain over "no effect", scaled by `variance_factor * noise_factor`: what the
-    /// significance margin is applied to.
-    pub delta_bic: f64,
-    /// BIC gain without that scaling (the likelihood itself): what candidates that pass are
-    /// ranked by, since all are fitted to the same data.
-    pub delta_bic_uncalibrated: f64,
-    /// Held-out chi-square without and with the effect (fitted values, blocks not fitted to).
-    pub heldout_chi2_before: f64,
-    pub heldout_chi2_after: f64,
-    /// Held-out chi-square gain, scaled as `delta_bic`'s gain is.
-    pub heldout_gain: f64,
-    pub signature_pass: bool,
-    pub signature: String,
-    pub guards: Guards,
-    /// False when the data hold none of the channels the effect shows in.
-    pub testable: bool,
-    /// Re-simulations the fit needed.
-    pub evaluations: usize,
-    /// How much more chi-square a fit of this effect gains on the model's own noise than
-    /// independent noise would (>= 1).
-    pub noise_factor: f64,
-    /// Residual variance left beyond the noise floor after the fit (>= 1).
-    pub variance_factor: f64,
 }
 
 /// Normalised residuals of the modelled channels, with each element's channel and part.
@@ -538,7 +461,7 @@ fn fit_part(
 /// blocks; a candidate that the held-out blocks confirm is then fitted on all the data for
 /// its values, interval and significance (the structure validated on data it was not
 /// fitted to, the values estimated from everything).
-fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> CandidateResult {
+fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> Candidate {
     let k = effect.parameters.len();
     let Some(train) = fit_part(
         setup,
@@ -547,7 +470,7 @@ fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> Candi
         Some(true),
         &lsq::axis_scan(k, &START_SCAN),
     ) else {
-        return failed(
+        return Candidate::untestable(
             effect,
             r0.chi2(true),
             "the fit left the model's valid range",
@@ -579,9 +502,9 @@ fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> Candi
         interval_excludes_zero: chosen.interval_excludes_zero,
         significant: chosen.delta_bic > BIC_MARGIN,
         signature: signature_pass,
-        heldout,
+        heldout: Some(heldout),
     };
-    CandidateResult {
+    Candidate {
         name: effect.name.to_string(),
         parameters: names(effect).zip(chosen.params.iter().copied()).collect(),
         ci95: names(effect).zip(chosen.ci.iter().copied()).collect(),
@@ -589,9 +512,9 @@ fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> Candi
         chi2_after: chosen.chi2_after,
         delta_bic: chosen.delta_bic,
         delta_bic_uncalibrated: chosen.delta_bic_uncalibrated,
-        heldout_chi2_before,
-        heldout_chi2_after,
-        heldout_gain,
+        heldout_chi2_before: Some(heldout_chi2_before),
+        heldout_chi2_after: Some(heldout_chi2_after),
+        heldout_gain: Some(heldout_gain),
         signature_pass,
         signature: signature_text,
         guards,
@@ -599,33 +522,12 @@ fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> Candi
         evaluations,
         noise_factor: chosen.noise_factor,
         variance_factor: chosen.variance_factor,
+        refitted: Vec::new(),
     }
 }
 
 fn names(effect: &Effect) -> impl Iterator<Item = String> + '_ {
     effect.parameters.iter().map(|p| p.to_string())
-}
-
-fn failed(effect: &Effect, chi2_before: f64, why: &str) -> CandidateResult {
-    CandidateResult {
-        name: effect.name.to_string(),
-        parameters: names(effect).map(|n| (n, 0.0)).collect(),
-        ci95: names(effect).map(|n| (n, [0.0, 0.0])).collect(),
-        chi2_before,
-        chi2_after: chi2_before,
-        delta_bic: f64::NEG_INFINITY,
-        delta_bic_uncalibrated: f64::NEG_INFINITY,
-        heldout_chi2_before: 0.0,
-        heldout_chi2_after: 0.0,
-        heldout_gain: 0.0,
-        signature_pass: false,
-        signature: why.to_string(),
-        guards: Guards::default(),
-        testable: false,
-        evaluations: 0,
-        noise_factor: 1.0,
-        variance_factor: 1.0,
-    }
 }
 
 /// The depth channel's per-difference variance for an extra EMI amplitude `e` (V rms at full
@@ -671,7 +573,7 @@ impl EmiData {
 }
 
 /// Fits the variance-type candidate (depth EMI) on the depth channel.
-fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult> {
+fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
     let i = setup
         .m
         .channels
@@ -756,9 +658,9 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
         interval_excludes_zero: interval_excludes_zero(&ci, &fit.x, cov.as_ref(), 1.0),
         significant: delta_bic > BIC_MARGIN,
         signature: signature_pass,
-        heldout: heldout_before - heldout_after > HELDOUT_MIN_GAIN,
+        heldout: Some(heldout_before - heldout_after > HELDOUT_MIN_GAIN),
     };
-    Some(CandidateResult {
+    Some(Candidate {
         name: effect.name.to_string(),
         parameters: vec![(effect.parameters[0].to_string(), e)],
         ci95: vec![(effect.parameters[0].to_string(), ci[0])],
@@ -766,9 +668,9 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
         chi2_after: after,
         delta_bic,
         delta_bic_uncalibrated: delta_bic,
-        heldout_chi2_before: heldout_before,
-        heldout_chi2_after: heldout_after,
-        heldout_gain: heldout_before - heldout_after,
+        heldout_chi2_before: Some(heldout_before),
+        heldout_chi2_after: Some(heldout_after),
+        heldout_gain: Some(heldout_before - heldout_after),
         signature_pass,
         signature: format!(
             "{}: correlation of squared depth residuals with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION})",
@@ -779,6 +681,7 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<CandidateResult
         evaluations: fit.evaluations,
         noise_factor: 1.0,
         variance_factor: 1.0,
+        refitted: Vec::new(),
     })
 }
 
@@ -790,7 +693,7 @@ pub fn fit_candidates(
     setup: &Setup<'_>,
     skip: &[&str],
     progress: &mut dyn FnMut(&str),
-) -> Vec<CandidateResult> {
+) -> Vec<Candidate> {
     let r0 = setup.residuals(&setup.base, &setup.clean);
     let measured: Vec<&str> = setup
         .modelled()
@@ -801,9 +704,9 @@ pub fn fit_candidates(
         .iter()
         .filter(|e| !skip.contains(&e.name))
         .collect();
-    let one = |effect: &'static Effect| -> CandidateResult {
+    let one = |effect: &'static Effect| -> Candidate {
         if !effect.channels.iter().any(|c| measured.contains(c)) {
-            return failed(
+            return Candidate::untestable(
                 effect,
                 r0.chi2(true),
                 &format!(
@@ -815,7 +718,7 @@ pub fn fit_candidates(
         let result = match effect.kind {
             Kind::Mean => fit_mean(setup, effect, &r0),
             Kind::Variance => fit_emi(setup, effect)
-                .unwrap_or_else(|| failed(effect, r0.chi2(true), "no depth data")),
+                .unwrap_or_else(|| Candidate::untestable(effect, r0.chi2(true), "no depth data")),
         };
         tracing::debug!(
             effect = effect.name,
@@ -826,44 +729,27 @@ pub fn fit_candidates(
         );
         result
     };
-    let threads = std::thread::available_parallelism()
-        .map_or(1, std::num::NonZero::get)
-        .min(todo.len().max(1));
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let (tx, rx) = std::sync::mpsc::channel::<(usize, CandidateResult)>();
-    let mut slots: Vec<Option<CandidateResult>> = vec![None; todo.len()];
+    let (tx, rx) = std::sync::mpsc::channel::<(usize, Candidate)>();
+    let mut slots: Vec<Option<Candidate>> = vec![None; todo.len()];
     std::thread::scope(|scope| {
-        for _ in 0..threads {
-            let tx = tx.clone();
-            let (next, todo, one) = (&next, &todo, &one);
-            scope.spawn(move || {
-                loop {
-                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    let Some(effect) = todo.get(i) else { break };
-                    if tx.send((i, one(effect))).is_err() {
-                        break;
-                    }
-                }
-            });
-        }
-        drop(tx);
+        let (todo, one) = (&todo, &one);
+        scope.spawn(move || {
+            use rayon::prelude::*;
+            todo.par_iter()
+                .enumerate()
+                .for_each_with(tx, |tx, (i, effect)| {
+                    // The receiver lives until every sender is gone.
+                    let _ = tx.send((i, one(effect)));
+                });
+        });
         for (i, result) in rx {
             progress(&result.name);
             slots[i] = Some(result);
         }
     });
-    let mut out: Vec<CandidateResult> = slots.into_iter().flatten().collect();
-    out.sort_by(|a, b| {
-        b.delta_bic_uncalibrated
-            .total_cmp(&a.delta_bic_uncalibrated)
-    });
+    let mut out: Vec<Candidate> = slots.into_iter().flatten().collect();
+    candidate::rank(&mut out);
     out
-}
-
-/// The winner of a round: the best-ranked candidate (by the likelihood, see
-/// [`CandidateResult::delta_bic_uncalibrated`]) that passes every guard.
-pub fn winner(results: &[CandidateResult]) -> Option<&CandidateResult> {
-    results.iter().find(|r| r.testable && r.guards.all())
 }
 
 /// Builds a setup for the given configs.
@@ -935,31 +821,6 @@ mod tests {
             Some(&cov),
             1.0
         ));
-    }
-
-    /// A candidate is named only when every guard holds.
-    #[test]
-    fn a_single_failed_guard_blocks_the_name() {
-        let all = Guards {
-            inside_bounds: true,
-            interval_excludes_zero: true,
-            significant: true,
-            signature: true,
-            heldout: true,
-        };
-        assert!(all.all());
-        for k in 0..5 {
-            let mut g = all;
-            match k {
-                0 => g.inside_bounds = false,
-                1 => g.interval_excludes_zero = false,
-                2 => g.significant = false,
-                3 => g.signature = false,
-                _ => g.heldout = false,
-            }
-            assert!(!g.all());
-            assert_eq!(g.failed().len(), 1);
-        }
     }
 
     #[test]

@@ -27,6 +27,7 @@
 pub mod anchor;
 pub mod bench;
 pub mod calibrate;
+pub mod candidate;
 pub mod convert;
 pub mod effects;
 pub mod fit;
@@ -45,8 +46,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use crate::gap::candidate::Candidate;
 use crate::gap::effects::Configs;
-use crate::gap::fit::CandidateResult;
 use crate::gap::format::Measurement;
 use crate::gap::model::{EnabledEffect, GapModel};
 use crate::gap::residuals::ChannelStats;
@@ -109,8 +110,8 @@ pub struct Analysis {
     pub before: Vec<ChannelStats>,
     pub after: Vec<ChannelStats>,
     /// Candidate results of each greedy round, best first.
-    pub rounds: Vec<Vec<CandidateResult>>,
-    pub accepted: Vec<CandidateResult>,
+    pub rounds: Vec<Vec<Candidate>>,
+    pub accepted: Vec<Candidate>,
     pub verdict: Verdict,
     pub fitted: GapModel,
     /// Channels present in the data that the re-simulation does not model.
@@ -284,33 +285,43 @@ pub fn analyse_with(
         .collect();
     let before = stats_for(m, &start, &clean0, &floors);
 
-    let mut fitted = model.clone();
-    let mut accepted: Vec<CandidateResult> = Vec::new();
-    let mut rounds = Vec::new();
-    let mut configs = start.clone();
-    let first = fit::setup(m, configs.clone(), &floors, options.split, &model.spread)?;
+    let first = fit::setup(m, start.clone(), &floors, options.split, &model.spread)?;
     let heldout_before = heldout_excess(&first, &start, &clean0);
-    for round in 0..fit::MAX_EFFECTS {
-        let setup = fit::setup(m, configs.clone(), &floors, options.split, &model.spread)?;
-        let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
-        skip.extend(model.effects.iter().map(|e| e.effect.name));
-        let results = fit::fit_candidates(&setup, &skip, &mut |name| progress(round, name));
-        let win = fit::winner(&results).cloned();
-        rounds.push(results);
-        let Some(win) = win else { break };
-        let Some(effect) = effects::by_name(&win.name) else {
-            break;
-        };
-        let values: Vec<f64> = win.parameters.iter().map(|(_, v)| *v).collect();
-        effects::apply(effect, &values, &mut configs);
-        fitted.effects.push(EnabledEffect {
-            effect,
-            values,
-            ci95: win.ci95.iter().map(|(_, c)| *c).collect(),
-            delta_bic: Some(win.delta_bic),
-        });
-        accepted.push(win);
-    }
+    // The model with the accepted effects: what each round fits against.
+    let configs = std::cell::RefCell::new(start.clone());
+    let fitted = std::cell::RefCell::new(model.clone());
+    let (rounds, accepted) = candidate::select(
+        fit::MAX_EFFECTS,
+        &mut |round, accepted| {
+            let setup = fit::setup(
+                m,
+                configs.borrow().clone(),
+                &floors,
+                options.split,
+                &model.spread,
+            )?;
+            let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
+            skip.extend(model.effects.iter().map(|e| e.effect.name));
+            Ok(Some(fit::fit_candidates(&setup, &skip, &mut |name| {
+                progress(round, name)
+            })))
+        },
+        &mut |win, _| {
+            let effect = effects::by_name(&win.name).ok_or_else(|| {
+                GapError::Data(format!("`{}` is not in the effect library", win.name))
+            })?;
+            let values = win.values();
+            effects::apply(effect, &values, &mut configs.borrow_mut());
+            fitted.borrow_mut().effects.push(EnabledEffect {
+                effect,
+                values,
+                ci95: win.ci95.iter().map(|(_, c)| *c).collect(),
+                delta_bic: Some(win.delta_bic),
+            });
+            Ok(())
+        },
+    )?;
+    let (configs, fitted) = (configs.into_inner(), fitted.into_inner());
     let clean1 = resim::simulate(&configs, m, None)?;
     // A fitted noise source (depth EMI) changes the floor the "after" residuals are judged by.
     let floors_after = if configs == start {

@@ -17,7 +17,7 @@ pub fn json(a: &Analysis) -> Value {
             .collect::<serde_json::Map<_, _>>()
             .into()
     };
-    let effect = |r: &fit::CandidateResult| {
+    let effect = |r: &crate::gap::candidate::Candidate| {
         json!({
             "name": r.name,
             "parameters": r.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_,_>>(),
@@ -164,39 +164,7 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
     }
     for (i, round) in a.rounds.iter().enumerate() {
         let _ = writeln!(s, "\n## Candidates, round {}\n", i + 1);
-        let _ = writeln!(
-            s,
-            "| rank | effect | delta BIC | held-out gain | parameters | failed guards | signature |\n|---|---|---|---|---|---|---|"
-        );
-        for (k, c) in round.iter().enumerate() {
-            let p: Vec<String> = c
-                .parameters
-                .iter()
-                .zip(&c.ci95)
-                .map(|((n, v), (_, ci))| format!("{n} = {v:.4} [{:.4}, {:.4}]", ci[0], ci[1]))
-                .collect();
-            let failed = if c.testable {
-                c.guards.failed().join(", ")
-            } else {
-                "not testable".to_string()
-            };
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {:.1} | {} | {} | {} {} |",
-                k + 1,
-                c.name,
-                if c.delta_bic.is_finite() {
-                    format!("{:.1}", c.delta_bic)
-                } else {
-                    "-".into()
-                },
-                c.heldout_gain,
-                p.join("; "),
-                if failed.is_empty() { "none" } else { &failed },
-                if c.signature_pass { "pass:" } else { "fail:" },
-                c.signature
-            );
-        }
+        s.push_str(&crate::gap::candidate::round_table(round));
     }
     let _ = writeln!(s, "\n## The gap, before and after\n");
     let _ = writeln!(
@@ -377,7 +345,7 @@ pub fn plots(a: &Analysis, m: &Measurement, out: &Path) -> Result<(), GapError> 
     // Candidate ranking (first round).
     let path = out.join("ranking.svg");
     {
-        let round: Vec<&fit::CandidateResult> = a
+        let round: Vec<&crate::gap::candidate::Candidate> = a
             .rounds
             .first()
             .map(|r| r.iter().filter(|c| c.delta_bic.is_finite()).collect())

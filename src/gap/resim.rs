@@ -296,16 +296,18 @@ pub fn measurement_std(c: &Configs, m: &Measurement, run: &Run, channel: &Channe
 }
 
 /// Noise floors of every modelled channel: measurement noise from the settings plus the
-/// spread of [`ENSEMBLE`] runs with the model's process noise on.
+/// spread of [`ENSEMBLE`] runs with the model's process noise on. The members run in
+/// parallel and are kept in seed order, so the floor does not depend on the thread count.
 pub fn noise_floor(
     c: &Configs,
     m: &Measurement,
     clean: &Run,
 ) -> Result<Vec<Option<Floor>>, GapError> {
-    let mut noisy = Vec::new();
-    for seed in 0..ENSEMBLE {
-        noisy.push(simulate(c, m, Some(0x6a70_0000 + seed))?);
-    }
+    use rayon::prelude::*;
+    let noisy: Vec<Run> = (0..ENSEMBLE)
+        .into_par_iter()
+        .map(|seed| simulate(c, m, Some(0x6a70_0000 + seed)))
+        .collect::<Result<_, _>>()?;
     Ok(m.channels
         .iter()
         .map(|ch| {

@@ -93,7 +93,7 @@ pub fn table(
 ) -> String {
     match source {
         Source::Simulator => simulator_table(results),
-        Source::Independent => independent_table(results, calibration),
+        Source::Independent | Source::Bridge => independent_table(results, calibration),
     }
 }
 

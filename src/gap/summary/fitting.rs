@@ -7,6 +7,7 @@ use serde::Serialize;
 use super::{
     Bound, ENSEMBLE, FEW_OBSERVATIONS, Observation, Quantity, Summary, predict, signature_kinds,
 };
+use crate::gap::candidate::{self, Candidate, Guards, Refitted};
 use crate::gap::effects::{self, Configs, Effect};
 use crate::gap::lsq::{self, Bounds};
 use crate::gap::model::{EnabledEffect, GapModel};
@@ -32,30 +33,12 @@ pub struct ObservationResult {
     pub z_after: Option<f64>,
 }
 
-/// One candidate's fit on the summary observations.
-#[derive(Debug, Clone, Serialize)]
-pub struct SummaryCandidate {
-    pub name: String,
-    pub parameters: Vec<(String, f64)>,
-    pub ci95: Vec<(String, [f64; 2])>,
-    /// The effects accepted in earlier rounds, refitted jointly with this one: (name, values,
-    /// 95 % intervals).
-    pub refitted: Vec<(String, Vec<f64>, Vec<[f64; 2]>)>,
-    pub chi2_before: f64,
-    pub chi2_after: f64,
-    pub delta_bic: f64,
-    pub signature_pass: bool,
-    pub signature: String,
-    pub testable: bool,
-    pub evaluations: usize,
-}
-
 /// Everything the summary workflow found.
 #[derive(Debug, Clone)]
 pub struct SummaryAnalysis {
     pub observations: Vec<ObservationResult>,
-    pub rounds: Vec<Vec<SummaryCandidate>>,
-    pub accepted: Vec<SummaryCandidate>,
+    pub rounds: Vec<Vec<Candidate>>,
+    pub accepted: Vec<Candidate>,
     pub verdict: Verdict,
     pub fitted: GapModel,
     pub chi2_before: f64,
@@ -162,20 +145,8 @@ fn names(effect: &Effect) -> impl Iterator<Item = String> + '_ {
     effect.parameters.iter().map(|p| p.to_string())
 }
 
-fn untestable(effect: &Effect, chi2_before: f64, why: String) -> SummaryCandidate {
-    SummaryCandidate {
-        name: effect.name.to_string(),
-        parameters: names(effect).map(|n| (n, 0.0)).collect(),
-        ci95: names(effect).map(|n| (n, [0.0, 0.0])).collect(),
-        refitted: Vec::new(),
-        chi2_before,
-        chi2_after: chi2_before,
-        delta_bic: f64::NEG_INFINITY,
-        signature_pass: false,
-        signature: why,
-        testable: false,
-        evaluations: 0,
-    }
+fn untestable(effect: &Effect, chi2_before: f64, why: String) -> Candidate {
+    Candidate::untestable(effect, chi2_before, &why)
 }
 
 fn fit_one(
@@ -184,7 +155,7 @@ fn fit_one(
     prior: &[Prior],
     effect: &'static Effect,
     z0: &[f64],
-) -> SummaryCandidate {
+) -> Candidate {
     let k = effect.parameters.len();
     let n = z0.len();
     let chi2_before = chi2(z0);
@@ -240,11 +211,15 @@ fn fit_one(
     let refitted = prior
         .iter()
         .zip(prior_values)
-        .map(|(p, v)| {
+        .map(|(p, values)| {
             let kk = p.effect.parameters.len();
-            let c = ci_all[at..at + kk].to_vec();
+            let ci95 = ci_all[at..at + kk].to_vec();
             at += kk;
-            (p.effect.name.to_string(), v, c)
+            Refitted {
+                name: p.effect.name.to_string(),
+                values,
+                ci95,
+            }
         })
         .collect();
     // Only the candidate's own parameters are new; the priors' were paid for already.
@@ -278,14 +253,19 @@ fn fit_one(
     };
     let identifiable = n > m;
     let signature_pass = identifiable && share >= fit::SIGNATURE_MIN_SHARE;
-    SummaryCandidate {
+    let ci95: Vec<(String, [f64; 2])> = names(effect).zip(ci).collect();
+    let guards = guards(effect, &params, &ci95, delta_bic, signature_pass);
+    Candidate {
         name: effect.name.to_string(),
         parameters: names(effect).zip(params.iter().copied()).collect(),
-        ci95: names(effect).zip(ci).collect(),
-        refitted,
+        ci95,
         chi2_before,
         chi2_after,
         delta_bic,
+        delta_bic_uncalibrated: delta_bic,
+        heldout_chi2_before: None,
+        heldout_chi2_after: None,
+        heldout_gain: None,
         signature_pass,
         signature: if identifiable {
             format!(
@@ -296,27 +276,38 @@ fn fit_one(
         } else {
             format!("not identifiable: {m} parameters in all, {n} observations")
         },
+        guards,
         testable: true,
         evaluations: result.evaluations,
+        noise_factor: 1.0,
+        variance_factor: 1.0,
+        refitted,
     }
 }
 
-/// The winner of a round, if any (see the module doc for the rule): besides the margin and
-/// the signature, every parameter strictly inside its physical bounds and every 95 %
-/// interval finite, one of them clear of zero. A parameter the observations cannot move (a
-/// scale of a term the model does not have) has an infinite interval, and an effect that
-/// holds one is not named.
-pub fn winner(results: &[SummaryCandidate]) -> Option<&SummaryCandidate> {
-    results.iter().find(|r| {
-        let values: Vec<f64> = r.parameters.iter().map(|(_, v)| *v).collect();
-        let inside = effects::by_name(&r.name).is_some_and(|e| effects::inside_bounds(e, &values));
-        let finite = r
-            .ci95
-            .iter()
-            .all(|(_, c)| c[0].is_finite() && c[1].is_finite());
-        let clear = r.ci95.iter().any(|(_, c)| c[0] > 0.0 || c[1] < 0.0);
-        r.testable && r.delta_bic > fit::BIC_MARGIN && r.signature_pass && inside && finite && clear
-    })
+/// The guards of a summary candidate (see the module doc for the rule): every parameter
+/// strictly inside its physical bounds; every 95 % interval finite and one of them clear of
+/// zero (a parameter the observations cannot move, a scale of a term the model does not
+/// have, has an infinite interval, and an effect that holds one is not named); the margin;
+/// the signature. Summary observations have no held-out part.
+fn guards(
+    effect: &Effect,
+    values: &[f64],
+    ci95: &[(String, [f64; 2])],
+    delta_bic: f64,
+    signature: bool,
+) -> Guards {
+    let finite = ci95
+        .iter()
+        .all(|(_, c)| c[0].is_finite() && c[1].is_finite());
+    let clear = ci95.iter().any(|(_, c)| c[0] > 0.0 || c[1] < 0.0);
+    Guards {
+        inside_bounds: effects::inside_bounds(effect, values),
+        interval_excludes_zero: finite && clear,
+        significant: delta_bic > fit::BIC_MARGIN,
+        signature,
+        heldout: None,
+    }
 }
 
 /// Runs the summary workflow with `model` (experiments' world: the model's, or the default
@@ -377,9 +368,6 @@ pub fn analyse(
         .collect();
     let ctx = Context { s, sigma: &sigma };
 
-    let mut priors: Vec<Prior> = Vec::new();
-    let mut accepted: Vec<SummaryCandidate> = Vec::new();
-    let mut rounds = Vec::new();
     let skip_model: Vec<&str> = model.effects.iter().map(|e| e.effect.name).collect();
     let with = |priors: &[Prior]| {
         let mut c = start.clone();
@@ -388,42 +376,49 @@ pub fn analyse(
         }
         c
     };
-    for round in 0..fit::MAX_EFFECTS {
-        let Some(z0) = ctx.z(&with(&priors)) else {
-            break;
-        };
-        let mut results = Vec::new();
-        for effect in effects::LIBRARY.iter() {
-            progress(round, effect.name);
-            if skip_model.contains(&effect.name)
-                || priors.iter().any(|p| p.effect.name == effect.name)
-            {
-                continue;
+    // The accepted effects with their latest (jointly refitted) values.
+    let priors: std::cell::RefCell<Vec<Prior>> = std::cell::RefCell::new(Vec::new());
+    let (rounds, accepted) = candidate::select(
+        fit::MAX_EFFECTS,
+        &mut |round, _| {
+            let priors = priors.borrow();
+            let Some(z0) = ctx.z(&with(&priors)) else {
+                return Ok(None);
+            };
+            let mut results = Vec::new();
+            for effect in effects::LIBRARY.iter() {
+                progress(round, effect.name);
+                if skip_model.contains(&effect.name)
+                    || priors.iter().any(|p| p.effect.name == effect.name)
+                {
+                    continue;
+                }
+                let r = fit_one(&ctx, &start, &priors, effect, &z0);
+                tracing::debug!(
+                    effect = effect.name,
+                    delta_bic = r.delta_bic,
+                    "summary candidate fitted"
+                );
+                results.push(r);
             }
-            let r = fit_one(&ctx, &start, &priors, effect, &z0);
-            tracing::debug!(
-                effect = effect.name,
-                delta_bic = r.delta_bic,
-                "summary candidate fitted"
-            );
-            results.push(r);
-        }
-        results.sort_by(|a, b| b.delta_bic.total_cmp(&a.delta_bic));
-        let win = winner(&results).cloned();
-        rounds.push(results);
-        let Some(win) = win else { break };
-        let Some(effect) = effects::by_name(&win.name) else {
-            break;
-        };
-        for (p, (_, v, _)) in priors.iter_mut().zip(&win.refitted) {
-            p.values.clone_from(v);
-        }
-        priors.push(Prior {
-            effect,
-            values: win.parameters.iter().map(|(_, v)| *v).collect(),
-        });
-        accepted.push(win);
-    }
+            Ok(Some(results))
+        },
+        &mut |win, _| {
+            let effect = effects::by_name(&win.name).ok_or_else(|| {
+                GapError::Data(format!("`{}` is not in the effect library", win.name))
+            })?;
+            let mut priors = priors.borrow_mut();
+            for (p, r) in priors.iter_mut().zip(&win.refitted) {
+                p.values.clone_from(&r.values);
+            }
+            priors.push(Prior {
+                effect,
+                values: win.values(),
+            });
+            Ok(())
+        },
+    )?;
+    let priors = priors.into_inner();
     let configs = with(&priors);
     // The fitted model: the model's own effects, then the accepted ones with their final
     // (jointly refitted) values and intervals.
@@ -434,7 +429,7 @@ pub fn analyse(
             Some(l) if i + 1 < accepted.len() => l
                 .refitted
                 .get(i)
-                .map_or_else(|| vec![[f64::NAN; 2]; p.values.len()], |r| r.2.clone()),
+                .map_or_else(|| vec![[f64::NAN; 2]; p.values.len()], |r| r.ci95.clone()),
             _ => a.ci95.iter().map(|(_, c)| *c).collect(),
         };
         fitted.effects.push(EnabledEffect {

@@ -25,7 +25,7 @@
 //! effect library ([`effects::LIBRARY`]) with Levenberg-Marquardt on `z`, rank by
 //! `delta_BIC = chi2_0 - chi2_1 - k ln(n)` and add the winner greedily.
 //!
-//! Significance with few numbers ([`winner`]): a candidate is named only when (1) the data hold
+//! Significance with few numbers (the guards of each candidate): a candidate is named only when (1) the data hold
 //! more observations than it has parameters, (2) `delta_BIC > fit::BIC_MARGIN`, and (3) at
 //! least `fit::SIGNATURE_MIN_SHARE` of its chi-square reduction comes from the observations it
 //! should move ([`signature_kinds`]), and (4) its parameters lie strictly inside their
@@ -39,7 +39,7 @@ mod fitting;
 mod predict;
 mod report;
 
-pub use fitting::{ObservationResult, Prior, SummaryAnalysis, SummaryCandidate, analyse, winner};
+pub use fitting::{ObservationResult, Prior, SummaryAnalysis, analyse};
 pub use predict::{predict, quantity};
 pub use report::{by_name, json, markdown, plot, write_all};
 

@@ -7,14 +7,15 @@ use std::path::Path;
 use plotters::prelude::*;
 use serde_json::{Value, json};
 
-use super::{Bound, ObservationResult, Summary, SummaryAnalysis, SummaryCandidate};
+use super::{Bound, ObservationResult, Summary, SummaryAnalysis};
+use crate::gap::candidate::Candidate;
 use crate::gap::{GapError, fit};
 
 fn finite(v: f64) -> Value {
     if v.is_finite() { json!(v) } else { Value::Null }
 }
 
-fn candidate_json(c: &SummaryCandidate) -> Value {
+fn candidate_json(c: &Candidate) -> Value {
     json!({
         "name": c.name,
         "parameters": c.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
@@ -190,34 +191,7 @@ pub fn markdown(a: &SummaryAnalysis, s: &Summary) -> String {
     );
     for (i, round) in a.rounds.iter().enumerate() {
         let _ = writeln!(out, "\n## Candidates, round {}\n", i + 1);
-        let _ = writeln!(
-            out,
-            "| rank | effect | delta BIC | chi2 before -> after | parameters [95 %] | signature |\n|---|---|---|---|---|---|"
-        );
-        for (k, c) in round.iter().enumerate() {
-            let p: Vec<String> = c
-                .parameters
-                .iter()
-                .zip(&c.ci95)
-                .map(|((n, v), (_, ci))| format!("{n} = {v:.4} [{:.4}, {:.4}]", ci[0], ci[1]))
-                .collect();
-            let _ = writeln!(
-                out,
-                "| {} | {} | {} | {:.1} -> {:.1} | {} | {} {} |",
-                k + 1,
-                c.name,
-                if c.delta_bic.is_finite() {
-                    format!("{:.1}", c.delta_bic)
-                } else {
-                    "-".into()
-                },
-                c.chi2_before,
-                c.chi2_after,
-                if c.testable { p.join("; ") } else { "-".into() },
-                if c.signature_pass { "pass:" } else { "fail:" },
-                c.signature
-            );
-        }
+        out.push_str(&crate::gap::candidate::round_table(round));
     }
     out
 }

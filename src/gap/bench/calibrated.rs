@@ -1,0 +1,314 @@
+//! The benchmark loop for data whose truth is not the model that analyses it: calibrate
+//! first, then find what is new (the thesis's order). A [`Truth`] writes measurement
+//! directories; this module plans the cases, calibrates, analyses and scores. The truth stays
+//! here, used only to score.
+//!
+//! For a seed S: [`BASELINE_RUNS`] null baseline runs and one more null run (seeds drawn from
+//! S); the embedded model is calibrated on the baselines ([`crate::gap::calibrate::calibrate`],
+//! with the between-run spread) and its gap before and after is reported on the further run.
+//! Then, per hidden effect, N runs with the effect hidden, each analysed with the calibrated
+//! model and the default options (re-anchored re-simulation), and N null runs.
+//!
+//! **Sizes.** A case's physical size is drawn uniformly between 1x and 3x the truth's default
+//! size, with a random sign where the effect allows one (not for a delay or an amplitude; a
+//! 2-vector keeps its direction). A scale (default 1.5 for `yaw_damping` of the independent
+//! model) grows its deviation from 1: `1 + f (d - 1)`, or its reciprocal for the other sign,
+//! so it stays positive.
+//!
+//! **Size in sigma** (post hoc, for the >= 3 sigma split): |truth| in the library effect's
+//! parameters over the standard error (95 % half-width / 1.96) of the candidate of the right
+//! name in round 1, accepted or not; for two parameters the norm of the per-parameter ratios.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use rand::RngExt;
+
+use crate::config::{ConfigSource, Embedded};
+use crate::gap::bench::{BenchOptions, CalibrationGap, CaseResult, MODEL, Outcome, Shard};
+use crate::gap::calibrate::{self, Run};
+use crate::gap::format::Measurement;
+use crate::gap::model::GapModel;
+use crate::gap::{GapError, Options};
+
+/// Baseline runs the model is calibrated on (a further null run validates it).
+pub const BASELINE_RUNS: usize = 3;
+/// Case sizes are drawn uniformly from this range, in multiples of the default size.
+pub const SIZE_FACTOR: (f64, f64) = (1.0, 3.0);
+
+/// An effect a truth source can hide, and the library effect that is its right answer.
+#[derive(Debug)]
+pub struct Hidden {
+    /// The source's name for it.
+    pub name: &'static str,
+    /// The library effect (`None`: nothing in the library; the right answer is no name).
+    pub library: Option<&'static str>,
+    /// Whether the size may take either sign.
+    pub signed: bool,
+    /// A multiplicative scale (no effect at 1; the library parameters are `size - 1`).
+    pub scale: bool,
+}
+
+/// An additive hidden effect.
+pub const fn hidden(name: &'static str, library: Option<&'static str>, signed: bool) -> Hidden {
+    Hidden {
+        name,
+        library,
+        signed,
+        scale: false,
+    }
+}
+
+/// Where a calibrated benchmark's measurements come from.
+pub trait Truth {
+    /// Every hidden effect's default size, in the source's units, by name.
+    fn default_sizes(&self) -> Result<Vec<(String, Vec<f64>)>, GapError>;
+    /// Writes null run `index` of the calibration set (`index == BASELINE_RUNS`: the run it
+    /// is scored on) as a measurement directory `out`.
+    fn baseline(&self, index: usize, seed: u64, out: &Path) -> Result<(), GapError>;
+    /// Writes one case as a measurement directory `out`: `hidden` with its physical size,
+    /// or a null run.
+    fn case(
+        &self,
+        seed: u64,
+        hidden: Option<(&Hidden, &[f64])>,
+        out: &Path,
+    ) -> Result<(), GapError>;
+}
+
+/// A scratch directory removed when dropped.
+pub struct Scratch(pub PathBuf);
+
+impl Scratch {
+    pub fn new(label: &str, seed: u64) -> Result<Self, GapError> {
+        let path = std::env::temp_dir().join(format!(
+            "eyebot-gap-bench-{label}-{}-{seed}",
+            std::process::id()
+        ));
+        std::fs::create_dir_all(&path).map_err(io(&path))?;
+        Ok(Self(path))
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// One planned case: its draws, fixed whichever shard runs it.
+struct Planned {
+    index: usize,
+    hidden: Option<&'static Hidden>,
+    seed: u64,
+    /// Physical size in the source's unit (empty for a null).
+    size: Vec<f64>,
+}
+
+/// The physical size of a case: `factor` times the default, with `sign`.
+pub fn physical_size(h: &Hidden, default: &[f64], factor: f64, positive: bool) -> Vec<f64> {
+    if h.scale {
+        let grown = 1.0 + factor * (default[0] - 1.0);
+        return vec![if positive { grown } else { 1.0 / grown }];
+    }
+    let sign = if positive { 1.0 } else { -1.0 };
+    default.iter().map(|d| sign * factor * d).collect()
+}
+
+/// The size in the library effect's parameters.
+pub fn library_truth(h: &Hidden, size: &[f64]) -> Vec<f64> {
+    if h.scale {
+        // A scale of the whole term: linear and quadratic parts together.
+        vec![size[0] - 1.0, size[0] - 1.0]
+    } else {
+        size.to_vec()
+    }
+}
+
+/// Post-hoc size in sigma of `truth` against 95 % intervals `ci95` (see the module doc).
+pub fn post_hoc_sigma(truth: &[f64], ci95: &[[f64; 2]]) -> Option<f64> {
+    if truth.len() != ci95.len() || truth.is_empty() {
+        return None;
+    }
+    let mut sum = 0.0;
+    for (t, c) in truth.iter().zip(ci95) {
+        let se = (c[1] - c[0]) / 2.0 / 1.96;
+        if se.is_nan() || se <= 0.0 {
+            return None;
+        }
+        // An infinite interval: the data do not inform the parameter, size 0.
+        sum += (t / se).powi(2);
+    }
+    Some(sum.sqrt())
+}
+
+pub fn io(path: &Path) -> impl FnOnce(std::io::Error) -> GapError + '_ {
+    move |source| GapError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Runs the cases of `shard` on data from `truth` (calibration is done by every shard: it is
+/// deterministic).
+pub fn run(
+    opts: &BenchOptions,
+    shard: Shard,
+    progress: &mut dyn FnMut(usize, usize, &str),
+    truth: &dyn Truth,
+) -> Result<Outcome, GapError> {
+    let defaults = truth.default_sizes()?;
+    let mut rng = crate::sensors::rng::stream(opts.seed, opts.source.rng_stream());
+    let mut draw_seed = || rng.random_range(1_000..1_000_000_000u64);
+    let baseline_seeds: Vec<u64> = (0..=BASELINE_RUNS).map(|_| draw_seed()).collect();
+    let mut plan = Vec::new();
+    for h in &opts.hidden {
+        let default = defaults
+            .iter()
+            .find(|(n, _)| n == h.name)
+            .map(|(_, v)| v.clone())
+            .ok_or_else(|| {
+                GapError::Data(format!(
+                    "the {} source offers no default size for the effect `{}`",
+                    opts.source.name(),
+                    h.name
+                ))
+            })?;
+        for _ in 0..opts.cases {
+            let seed = rng.random_range(1_000..1_000_000_000u64);
+            let factor = rng.random_range(SIZE_FACTOR.0..SIZE_FACTOR.1);
+            let positive = !h.signed || rng.random::<bool>();
+            plan.push(Planned {
+                index: plan.len(),
+                hidden: Some(*h),
+                seed,
+                size: physical_size(h, &default, factor, positive),
+            });
+        }
+    }
+    for _ in 0..opts.cases {
+        let seed = rng.random_range(1_000..1_000_000_000u64);
+        plan.push(Planned {
+            index: plan.len(),
+            hidden: None,
+            seed,
+            size: Vec::new(),
+        });
+    }
+    let total = shard.count(plan.len());
+
+    let scratch = Scratch::new(opts.source.name(), opts.seed)?;
+    progress(0, total, "calibrating");
+    let mut runs = Vec::new();
+    for (i, seed) in baseline_seeds.iter().enumerate() {
+        let dir = scratch.0.join(format!("baseline-{i}"));
+        truth.baseline(i, *seed, &dir)?;
+        runs.push(Run::load(&dir)?);
+    }
+    let validate = runs.split_off(BASELINE_RUNS);
+    let model_text = Embedded.read(MODEL)?;
+    let model = GapModel::from_text(&Embedded.describe(MODEL), &model_text, ".".into())?;
+    let t0 = Instant::now();
+    let cal = calibrate::calibrate(&model, &runs, &validate, &mut |_| {})?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let calibration = cal.runs.iter().find(|r| !r.fitted).map(|r| CalibrationGap {
+        gap_before: r.gap_before,
+        gap_after: r.gap_after,
+        reduction_pct: r.reduction_pct,
+        seconds,
+    });
+    for r in runs.iter().chain(&validate) {
+        std::fs::remove_dir_all(&r.dir).map_err(io(&r.dir))?;
+    }
+
+    let mut out = Vec::new();
+    for p in plan.into_iter().filter(|p| shard.contains(p.index)) {
+        let dir = scratch.0.join(format!("case-{}", p.index));
+        truth.case(p.seed, p.hidden.map(|h| (h, p.size.as_slice())), &dir)?;
+        let m = Measurement::load(&dir)?;
+        let t0 = Instant::now();
+        let a = crate::gap::analyse_with(&cal.model, &m, &dir, Options::default(), &mut |_, _| {})?;
+        let seconds = t0.elapsed().as_secs_f64();
+        std::fs::remove_dir_all(&dir).map_err(io(&dir))?;
+
+        let first = a.accepted.first();
+        let named = first.map(|w| w.name.clone());
+        let expected = p.hidden.and_then(|h| h.library);
+        let truth = p.hidden.map_or(Vec::new(), |h| library_truth(h, &p.size));
+        // The right candidate's interval in round 1, accepted or not.
+        let size_sigma = expected.and_then(|name| {
+            let c = a.rounds.first()?.iter().find(|c| c.name == name)?;
+            let ci: Vec<[f64; 2]> = c.ci95.iter().map(|(_, c)| *c).collect();
+            post_hoc_sigma(&truth, &ci)
+        });
+        let label = p.hidden.map_or("null", |h| h.name);
+        out.push(CaseResult {
+            index: p.index,
+            effect: p.hidden.map(|h| h.name.to_string()),
+            expected: expected.map(str::to_string),
+            label: label.to_string(),
+            seed: p.seed,
+            truth,
+            size_sigma,
+            fitted: first
+                .map(|w| w.parameters.iter().map(|(_, v)| *v).collect())
+                .unwrap_or_default(),
+            ci95: first
+                .map(|w| w.ci95.iter().map(|(_, c)| *c).collect())
+                .unwrap_or_default(),
+            named,
+            parameter_error: None,
+            ci_covers: None,
+            held_out_reduction_pct: first.map(|_| a.heldout_reduction_pct),
+            held_out_truth_reduction_pct: None,
+            held_out_grew: Some(first.is_some() && a.heldout_gap_after > a.heldout_gap_before),
+            seconds,
+        });
+        progress(out.len(), total, label);
+    }
+    Ok(Outcome {
+        results: out,
+        calibration,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scale grows its deviation from 1 and stays positive for either sign; a vector keeps
+    /// its direction; the library sees a scale as its deviation on both parameters.
+    #[test]
+    fn sizes_scale_from_the_default() {
+        let yaw = Hidden {
+            name: "yaw_damping",
+            library: Some("yaw_damping"),
+            signed: true,
+            scale: true,
+        };
+        let up = physical_size(&yaw, &[1.5], 3.0, true);
+        assert!((up[0] - 2.5).abs() < 1e-12);
+        let down = physical_size(&yaw, &[1.5], 3.0, false);
+        assert!((down[0] - 0.4).abs() < 1e-12);
+        assert_eq!(library_truth(&yaw, &up), vec![1.5, 1.5]);
+        let wc = hidden("water_current", Some("water_current"), false);
+        assert_eq!(
+            physical_size(&wc, &[0.02, -0.015], 2.0, true),
+            vec![0.04, -0.03]
+        );
+    }
+
+    /// The post-hoc size is |truth| over the standard error, the norm over two parameters,
+    /// and zero for an interval the data do not bound.
+    #[test]
+    fn post_hoc_sigma_uses_the_interval_half_width() {
+        let s = post_hoc_sigma(&[0.3], &[[-1.96, 1.96]]).unwrap();
+        assert!((s - 0.3).abs() < 1e-12);
+        let s = post_hoc_sigma(&[3.0, 4.0], &[[-1.96, 1.96], [0.0, 3.92]]).unwrap();
+        assert!((s - 5.0).abs() < 1e-12);
+        assert_eq!(
+            post_hoc_sigma(&[1.0], &[[f64::NEG_INFINITY, f64::INFINITY]]),
+            Some(0.0)
+        );
+    }
+}

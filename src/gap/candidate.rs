@@ -1,0 +1,322 @@
+//! A candidate effect as every objective scores it (the measured time series in
+//! [`crate::gap::fit`], the summary observations in [`crate::gap::summary`]), the guards that
+//! decide whether it is named, the greedy selection loop that names effects one at a time,
+//! and the candidate table of both reports.
+
+use std::fmt::Write as _;
+
+use serde::Serialize;
+
+use crate::gap::GapError;
+
+/// Which guards a candidate passed.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+pub struct Guards {
+    /// Every parameter strictly inside its physical bounds.
+    pub inside_bounds: bool,
+    /// Every 95 % interval finite, and the no-effect value outside the confidence region.
+    pub interval_excludes_zero: bool,
+    /// `delta_bic > BIC_MARGIN`.
+    pub significant: bool,
+    /// The signature test.
+    pub signature: bool,
+    /// The held-out gain exceeds `HELDOUT_MIN_GAIN` (`None`: the objective has no held-out
+    /// part, as summary observations have not).
+    pub heldout: Option<bool>,
+}
+
+impl Guards {
+    pub fn all(&self) -> bool {
+        self.inside_bounds
+            && self.interval_excludes_zero
+            && self.significant
+            && self.signature
+            && self.heldout != Some(false)
+    }
+
+    /// The guards that failed, by name.
+    pub fn failed(&self) -> Vec<&'static str> {
+        let mut out = Vec::new();
+        for (ok, name) in [
+            (self.inside_bounds, "bounds"),
+            (self.interval_excludes_zero, "interval"),
+            (self.significant, "significance"),
+            (self.signature, "signature"),
+            (self.heldout != Some(false), "held-out"),
+        ] {
+            if !ok {
+                out.push(name);
+            }
+        }
+        out
+    }
+}
+
+/// An effect accepted in an earlier round, refitted jointly with a later candidate.
+#[derive(Debug, Clone, Serialize)]
+pub struct Refitted {
+    pub name: String,
+    pub values: Vec<f64>,
+    pub ci95: Vec<[f64; 2]>,
+}
+
+/// What fitting one candidate gave.
+#[derive(Debug, Clone, Serialize)]
+pub struct Candidate {
+    pub name: String,
+    /// (parameter, fitted change relative to the model).
+    pub parameters: Vec<(String, f64)>,
+    pub ci95: Vec<(String, [f64; 2])>,
+    /// Chi-square of the data the fit saw, without and with the effect.
+    pub chi2_before: f64,
+    pub chi2_after: f64,
+    /// BIC gain over "no effect", scaled by `variance_factor * noise_factor`: what the
+    /// significance margin is applied to.
+    pub delta_bic: f64,
+    /// BIC gain without that scaling (the likelihood itself): what candidates are ranked by,
+    /// since all are fitted to the same data.
+    pub delta_bic_uncalibrated: f64,
+    /// Held-out chi-square without and with the effect (fitted values, blocks not fitted
+    /// to), and the gain scaled as `delta_bic`'s is; `None` without a held-out part.
+    pub heldout_chi2_before: Option<f64>,
+    pub heldout_chi2_after: Option<f64>,
+    pub heldout_gain: Option<f64>,
+    pub signature_pass: bool,
+    pub signature: String,
+    pub guards: Guards,
+    /// False when the data hold nothing the effect shows in.
+    pub testable: bool,
+    /// Model evaluations the fit needed.
+    pub evaluations: usize,
+    /// How much more chi-square a fit of this effect gains on the model's own noise than
+    /// independent noise would (>= 1).
+    pub noise_factor: f64,
+    /// Residual variance left beyond the noise floor after the fit (>= 1).
+    pub variance_factor: f64,
+    /// Effects accepted before, refitted jointly with this one (empty when they are held).
+    pub refitted: Vec<Refitted>,
+}
+
+impl Candidate {
+    /// A candidate that could not be fitted, with the reason in place of its signature.
+    pub fn untestable(effect: &crate::gap::effects::Effect, chi2_before: f64, why: &str) -> Self {
+        let names = || effect.parameters.iter().map(|p| p.to_string());
+        Self {
+            name: effect.name.to_string(),
+            parameters: names().map(|n| (n, 0.0)).collect(),
+            ci95: names().map(|n| (n, [0.0, 0.0])).collect(),
+            chi2_before,
+            chi2_after: chi2_before,
+            delta_bic: f64::NEG_INFINITY,
+            delta_bic_uncalibrated: f64::NEG_INFINITY,
+            heldout_chi2_before: None,
+            heldout_chi2_after: None,
+            heldout_gain: None,
+            signature_pass: false,
+            signature: why.to_string(),
+            guards: Guards::default(),
+            testable: false,
+            evaluations: 0,
+            noise_factor: 1.0,
+            variance_factor: 1.0,
+            refitted: Vec::new(),
+        }
+    }
+
+    /// The fitted values, in the effect's parameter order.
+    pub fn values(&self) -> Vec<f64> {
+        self.parameters.iter().map(|(_, v)| *v).collect()
+    }
+}
+
+/// Ranks a round's candidates: by the likelihood gain, best first.
+pub fn rank(round: &mut [Candidate]) {
+    round.sort_by(|a, b| {
+        b.delta_bic_uncalibrated
+            .total_cmp(&a.delta_bic_uncalibrated)
+    });
+}
+
+/// The winner of a ranked round: the best candidate that passes every guard.
+pub fn winner(round: &[Candidate]) -> Option<&Candidate> {
+    round.iter().find(|r| r.testable && r.guards.all())
+}
+
+/// One round of an objective: round number and the effects accepted so far in, every
+/// candidate's fit out (`None`: nothing can be fitted any more).
+pub type FitRound<'a> =
+    dyn FnMut(usize, &[Candidate]) -> Result<Option<Vec<Candidate>>, GapError> + 'a;
+/// Takes a round's winner into the model (the earlier winners alongside).
+pub type Accept<'a> = dyn FnMut(&Candidate, &mut [Candidate]) -> Result<(), GapError> + 'a;
+
+/// The greedy selection, whatever the objective: up to `max` rounds; in each, `fit_round`
+/// fits every candidate not yet accepted against the model with the accepted effects
+/// (`None`: nothing can be fitted any more), the round is ranked, and its winner is handed to
+/// `accept` (which may replace the earlier accepted effects' values by their joint refit) and
+/// accepted. Stops at the first round without a winner. Returns every round and the
+/// accepted effects in order.
+pub fn select(
+    max: usize,
+    fit_round: &mut FitRound<'_>,
+    accept: &mut Accept<'_>,
+) -> Result<(Vec<Vec<Candidate>>, Vec<Candidate>), GapError> {
+    let mut rounds = Vec::new();
+    let mut accepted: Vec<Candidate> = Vec::new();
+    for round in 0..max {
+        let Some(mut results) = fit_round(round, &accepted)? else {
+            break;
+        };
+        rank(&mut results);
+        let win = winner(&results).cloned();
+        rounds.push(results);
+        let Some(win) = win else { break };
+        accept(&win, &mut accepted)?;
+        accepted.push(win);
+    }
+    Ok((rounds, accepted))
+}
+
+/// The candidate table of one round (markdown): rank, effect, delta BIC, the chi-square the
+/// fit saw before and after, the held-out gain, the parameters with their 95 % intervals,
+/// the guards that failed, and the signature test.
+pub fn round_table(round: &[Candidate]) -> String {
+    let mut s = String::from(
+        "| rank | effect | delta BIC | chi2 before -> after | held-out gain | parameters [95 %] | failed guards | signature |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    for (k, c) in round.iter().enumerate() {
+        let p: Vec<String> = c
+            .parameters
+            .iter()
+            .zip(&c.ci95)
+            .map(|((n, v), (_, ci))| format!("{n} = {v:.4} [{:.4}, {:.4}]", ci[0], ci[1]))
+            .collect();
+        let failed = if c.testable {
+            let f = c.guards.failed();
+            if f.is_empty() {
+                "none".to_string()
+            } else {
+                f.join(", ")
+            }
+        } else {
+            "not testable".to_string()
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.1} -> {:.1} | {} | {} | {} | {} {} |",
+            k + 1,
+            c.name,
+            if c.delta_bic.is_finite() {
+                format!("{:.1}", c.delta_bic)
+            } else {
+                "-".into()
+            },
+            c.chi2_before,
+            c.chi2_after,
+            c.heldout_gain.map_or("-".into(), |g| format!("{g:.1}")),
+            if c.testable { p.join("; ") } else { "-".into() },
+            failed,
+            if c.signature_pass { "pass:" } else { "fail:" },
+            c.signature
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gap::effects;
+
+    fn candidate(name: &str, bic: f64, pass: bool) -> Candidate {
+        let mut c = Candidate::untestable(effects::by_name(name).unwrap(), 100.0, "");
+        c.testable = true;
+        c.delta_bic = bic;
+        c.delta_bic_uncalibrated = bic;
+        c.guards = Guards {
+            inside_bounds: true,
+            interval_excludes_zero: true,
+            significant: pass,
+            signature: true,
+            heldout: Some(true),
+        };
+        c
+    }
+
+    /// The loop ranks each round, accepts its best candidate that passes every guard (not
+    /// the best ranked), hands the earlier winners to `accept`, and stops at a round
+    /// without a winner.
+    #[test]
+    fn selection_accepts_the_best_passing_candidate_until_a_round_has_none() {
+        let mut seen_accepted = Vec::new();
+        let (rounds, accepted) = select(
+            3,
+            &mut |round, accepted| {
+                seen_accepted.push(accepted.len());
+                Ok(Some(match round {
+                    0 => vec![
+                        candidate("thrust_gain", 20.0, true),
+                        candidate("water_current", 50.0, false),
+                        candidate("compass_offset", 30.0, true),
+                    ],
+                    _ => vec![candidate("thrust_gain", 5.0, false)],
+                }))
+            },
+            &mut |win, earlier| {
+                assert!(earlier.is_empty() || win.name != earlier[0].name);
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert_eq!(seen_accepted, vec![0, 1]);
+        assert_eq!(rounds.len(), 2);
+        assert_eq!(
+            rounds[0][0].name, "water_current",
+            "ranked by the likelihood"
+        );
+        let names: Vec<&str> = accepted.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, vec!["compass_offset"]);
+    }
+
+    /// A candidate is named only when every guard holds.
+    #[test]
+    fn a_single_failed_guard_blocks_the_name() {
+        let all = Guards {
+            inside_bounds: true,
+            interval_excludes_zero: true,
+            significant: true,
+            signature: true,
+            heldout: Some(true),
+        };
+        assert!(all.all());
+        for k in 0..5 {
+            let mut g = all;
+            match k {
+                0 => g.inside_bounds = false,
+                1 => g.interval_excludes_zero = false,
+                2 => g.significant = false,
+                3 => g.signature = false,
+                _ => g.heldout = Some(false),
+            }
+            assert!(!g.all());
+            assert_eq!(g.failed().len(), 1);
+        }
+    }
+
+    /// A guard without a held-out part neither passes nor fails on it; a failed held-out
+    /// guard is named.
+    #[test]
+    fn a_missing_heldout_part_is_not_a_failed_guard() {
+        let mut g = Guards {
+            inside_bounds: true,
+            interval_excludes_zero: true,
+            significant: true,
+            signature: true,
+            heldout: None,
+        };
+        assert!(g.all());
+        g.heldout = Some(false);
+        assert!(!g.all());
+        assert_eq!(g.failed(), vec!["held-out"]);
+    }
+}
