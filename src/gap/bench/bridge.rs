@@ -584,6 +584,22 @@ mod tests {
         }
     }
 
+    /// A programs directory without the examples is an error that names the missing
+    /// program and the command that builds it.
+    #[test]
+    fn missing_programs_are_named_with_the_build_command() {
+        let empty = crate::scratch::dir("bridge-programs");
+        let err = Bridge::new(&BridgeOptions {
+            exe: Some("eyebot-hil".into()),
+            programs: Some(empty.path().to_path_buf()),
+        })
+        .err()
+        .expect("an empty directory has no programs")
+        .to_string();
+        assert!(err.contains("no `timer_square`"), "{err}");
+        assert!(err.contains("make -C firmware-protocol/c"), "{err}");
+    }
+
     /// An edit scales, adds to, sets and creates numbers along dotted and indexed paths, and
     /// names the key when the path does not fit the file.
     #[test]
