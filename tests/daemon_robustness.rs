@@ -265,3 +265,71 @@ async fn a_client_that_never_reads_does_not_stall_the_other_link() {
     );
     drop(sensor);
 }
+
+/// The rate-limited warning kinds a sonar flood can raise: "transmit queue full" (answers
+/// the client never reads), "sonar select refused" and "overrun" (a starved loop).
+const FLOOD_WARNING_KINDS: u64 = 3;
+
+/// A flood of selects on the sonar link, half of them bad (`@S1\r@S9\r`, a megabyte): every
+/// byte, select and bad select is counted, and stderr gets a bounded number of lines, not
+/// one per sentence. The bound is the limiter's own: per kind, `BURST` warnings and one
+/// "suppressed N" line per window, over the windows the daemon was alive.
+#[test]
+fn a_sonar_flood_costs_counters_not_log_lines() {
+    use eyebot_hil::daemon::warn_limit::{BURST, WINDOW};
+    let started = Instant::now();
+    let mut daemon = Daemon::options(BIN, "log-flood").realtime().start();
+    let pairs: u64 = 128 * 1024;
+    let flood: Vec<u8> = b"@S1\r@S9\r"
+        .iter()
+        .copied()
+        .cycle()
+        .take(8 * pairs as usize)
+        .collect();
+    let mut sonar = open_raw(&daemon.link("sonar"));
+    sonar.write_all(&flood).expect("write the flood");
+    // Bytes are counted as the link task reads them, sentences as the engine decodes them.
+    let s = daemon.wait_status(Duration::from_secs(20), "the flood read and decoded", |s| {
+        let l = link_status(s, "sonar");
+        l.bytes_rx >= flood.len() as u64 && l.frames_rx >= pairs && l.errors >= pairs
+    });
+    let link = link_status(&s, "sonar").clone();
+    drop(sonar);
+    daemon.stop();
+    let alive = started.elapsed();
+    assert_eq!(link.bytes_rx, flood.len() as u64, "{link:?}");
+    assert_eq!(link.frames_rx, pairs, "every good select counted: {link:?}");
+    assert_eq!(link.errors, pairs, "every bad select counted: {link:?}");
+    assert!(
+        link.frames_tx >= pairs,
+        "every bad select answered: {link:?}"
+    );
+    let log = daemon.log();
+    let warnings: Vec<&str> = log.lines().filter(|l| l.contains("WARN")).collect();
+    let windows = alive.as_nanos().div_ceil(WINDOW.as_nanos()) as u64 + 1;
+    let bound = FLOOD_WARNING_KINDS * (u64::from(BURST) + 1) * windows;
+    eprintln!(
+        "{} selects in {alive:?}: {} stderr lines, {} warnings (bound {bound}); {link:?}",
+        2 * pairs,
+        log.lines().count(),
+        warnings.len()
+    );
+    assert!(
+        warnings.len() as u64 <= bound,
+        "{} warning lines for {} sentences in {alive:?} (bound {bound}):\n{log}",
+        warnings.len(),
+        2 * pairs
+    );
+    // The other lines are the daemon's start and stop, whatever the flood.
+    assert!(
+        log.lines().count() - warnings.len() <= 20,
+        "more than start-up and shut-down lines besides the warnings:\n{log}"
+    );
+    assert!(
+        link.dropped_tx == 0
+            || warnings
+                .iter()
+                .any(|l| l.contains("suppressed") && l.contains("transmit queue full")),
+        "answers were dropped but no `suppressed` line reports the hidden warnings:\n{log}"
+    );
+}

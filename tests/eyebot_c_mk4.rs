@@ -230,7 +230,8 @@ fn timer_square_flies_its_course_host_and_m68k_alike() {
     let m68k = eyebot_c::build(TMP, "timer-square", Target::M68k, &[], &[]);
     let mut runs = Vec::new();
     for (target, dir) in [(Target::Host, &host), (Target::M68k, &m68k)] {
-        let daemon = start_daemon(BIN, "timer-square", None, 3);
+        // the middle of the pool: the square and the glide while surfacing stay off the walls
+        let daemon = start_daemon(BIN, "timer-square", Some(([12.5, 6.25, 0.3], 0.0)), 3);
         let started = Instant::now();
         let (rec, stdout) = run_to_end(daemon, target, &dir.join("timer_square"), &[], TIMEOUT);
         let wall = started.elapsed().as_secs_f64();
@@ -257,11 +258,21 @@ fn judge_square(rec: &eyebot_test_support::Recording, stdout: &str) {
         stdout.contains("leg 4: heading") && stdout.ends_with("done\n"),
         "{stdout}"
     );
-    // depth at the sensor within 0.1 m of 0.8 m once down (from 20 s on)
+    // the thrusters stop after the last leg and Mako floats up
+    let surfacing_s: f64 = stdout
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("surfacing at ")?
+                .strip_suffix(" s")?
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("no \"surfacing at T s\" line: {stdout}"));
+    // depth at the sensor within 0.1 m of 0.8 m once down (from 20 s on) until then
     let worst = rec
         .states
         .iter()
-        .filter(|s| s.t_s >= 20.0)
+        .filter(|s| s.t_s >= 20.0 && s.t_s <= surfacing_s)
         .map(|s| {
             let (sr, cr) = s.roll_rad.sin_cos();
             let (sp, cp) = s.pitch_rad.sin_cos();
@@ -271,8 +282,17 @@ fn judge_square(rec: &eyebot_test_support::Recording, stdout: &str) {
             (z - 0.8).abs()
         })
         .fold(0.0, f64::max);
-    eprintln!("timer_square: worst depth error after 20 s {worst:.3} m");
-    assert!(worst < 0.1, "depth error {worst:.3} m after 20 s");
+    eprintln!("timer_square: worst depth error from 20 s to {surfacing_s} s {worst:.3} m");
+    assert!(
+        worst < 0.1,
+        "depth error {worst:.3} m from 20 s to {surfacing_s} s"
+    );
+    // at the surface by the end: the centre of mass above its holding depth (about 0.65 m)
+    let last = rec.states.last().map_or(f64::NAN, |s| s.z_m);
+    assert!(
+        last < 0.4,
+        "centre of mass at {last:.3} m when the program ended"
+    );
     // the paddle-wheel timer measured a speed (the display thread printed it)
     assert!(
         stdout

@@ -164,3 +164,17 @@ fn a_hidden_thrust_loss_is_named_first() {
     );
     assert!(a.accepted[0].parameters[0].1 < 0.0);
 }
+
+/// Motor noise on the depth channel, three times the independent model's default, named
+/// after a calibration that measured the baseline's own level of duty-correlated depth noise
+/// (whatever its cause) and took it as the model's.
+#[test]
+fn a_hidden_depth_emi_is_named_after_calibration() {
+    let a = discover("emi-7307", 7307, "depth_emi", Some("0.09"));
+    assert_eq!(
+        names(&a).first(),
+        Some(&"depth_pwm_emi"),
+        "verdict {:?}",
+        a.verdict
+    );
+}

@@ -36,6 +36,20 @@ fn every_protocol_example_decodes_to_its_meaning_and_reencodes_identically() {
     }
 }
 
+/// Each example block has a name of its own, so a name says which example it is.
+#[test]
+fn example_names_are_unique() {
+    let mut names: Vec<String> = examples().into_iter().map(|ex| ex.name).collect();
+    let count = names.len();
+    names.sort_unstable();
+    names.dedup();
+    assert_eq!(
+        names.len(),
+        count,
+        "an example name is used twice: {names:?}"
+    );
+}
+
 #[test]
 fn every_message_type_has_an_example() {
     use firmware_protocol::LineItem;

@@ -81,9 +81,12 @@ pub enum StartSpec {
 #[derive(Debug, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Criterion {
-    /// Depth of the centre of mass within [min_m, max_m] at every sample from after_s on.
+    /// Depth of the centre of mass within [min_m, max_m] at every sample from after_s on (to
+    /// until_s, default the end).
     DepthBand {
         after_s: f64,
+        #[serde(default)]
+        until_s: Option<f64>,
         min_m: f64,
         max_m: f64,
     },
@@ -122,9 +125,13 @@ impl Criterion {
         match self {
             Criterion::DepthBand {
                 after_s,
+                until_s,
                 min_m,
                 max_m,
-            } => format!("depth_band {min_m}..{max_m} m after {after_s} s"),
+            } => format!(
+                "depth_band {min_m}..{max_m} m after {after_s} s{}",
+                until_s.map(|t| format!(" to {t} s")).unwrap_or_default()
+            ),
             Criterion::Region {
                 north_m,
                 east_m,
@@ -162,12 +169,22 @@ impl Criterion {
         match self {
             Criterion::DepthBand {
                 after_s,
+                until_s,
                 min_m,
                 max_m,
             } => {
-                let rows: Vec<&StateRow> = states.iter().filter(|s| s.t_s >= *after_s).collect();
+                let until = until_s.unwrap_or(f64::INFINITY);
+                let rows: Vec<&StateRow> = states
+                    .iter()
+                    .filter(|s| s.t_s >= *after_s && s.t_s <= until)
+                    .collect();
                 if rows.is_empty() {
-                    return Err(format!("the run ended before {after_s} s"));
+                    return Err(match until_s {
+                        Some(u) if *u < *after_s => {
+                            format!("until_s {u} s is before after_s {after_s} s")
+                        }
+                        _ => format!("the run ended before {after_s} s"),
+                    });
                 }
                 if let Some(s) = rows.iter().find(|s| s.z_m < *min_m || s.z_m > *max_m) {
                     return Err(format!("at t {:.2} s depth {:.3} m", s.t_s, s.z_m));
@@ -605,4 +622,43 @@ fn write_junit(path: &Path, name: &str, verdicts: &[Verdict], wall_s: f64) -> Re
     xml.push_str("  </testsuite>\n</testsuites>\n");
     let mut f = std::fs::File::create(path).map_err(|e| err_io(path, e))?;
     f.write_all(xml.as_bytes()).map_err(|e| err_io(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn criterion(text: &str) -> Criterion {
+        toml::from_str(text).expect("criterion parses")
+    }
+
+    /// `depth_band` judges the samples from `after_s` to `until_s` only, and says so when the
+    /// window is empty because `until_s` comes first.
+    #[test]
+    fn depth_band_ends_at_until_s() {
+        let states: Vec<StateRow> = (0..100)
+            .map(|i| StateRow {
+                t_s: f64::from(i),
+                z_m: if i < 80 { 0.65 } else { 0.25 },
+                ..StateRow::default()
+            })
+            .collect();
+        let band = "kind = \"depth_band\"\nafter_s = 20.0\nmin_m = 0.55\nmax_m = 0.75\n";
+        let whole = criterion(band);
+        let err = whole.judge(&states, (25.0, 12.5), "").unwrap_err();
+        assert!(err.contains("at t 80.00 s depth 0.250 m"), "{err}");
+        let held = criterion(&format!("{band}until_s = 75.0\n"));
+        assert_eq!(
+            held.judge(&states, (25.0, 12.5), ""),
+            Ok("depth 0.650..0.650 m".to_string())
+        );
+        assert!(
+            held.label().ends_with("after 20 s to 75 s"),
+            "{}",
+            held.label()
+        );
+        let backwards = criterion(&format!("{band}until_s = 10.0\n"));
+        let err = backwards.judge(&states, (25.0, 12.5), "").unwrap_err();
+        assert!(err.contains("until_s 10 s is before after_s 20 s"), "{err}");
+    }
 }

@@ -51,6 +51,11 @@ pub struct GapBenchArgs {
     /// Also write the table (markdown) and one line per case (CSV-like) to this file.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Independent and bridge sources: keep the calibrated model (`calibrated.toml`), the
+    /// baseline runs and each case's measurement directory (`case-INDEX-EFFECT`) in DIR, to
+    /// analyse a case again with `eyebot-hil gap`.
+    #[arg(long, value_name = "DIR")]
+    pub keep: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -94,6 +99,7 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
             exe: None,
             programs: args.programs.clone(),
         },
+        keep: args.keep.clone(),
     };
     let usage = |e: crate::gap::GapError| CliError::Usage(e.to_string());
     match source {

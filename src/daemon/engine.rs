@@ -144,8 +144,34 @@ pub struct Engine<M: Model> {
     receiving: Option<usize>,
     feed_decoder: LineDecoder,
     feed_inbox: BytesMut,
-    feed_schedule: std::collections::VecDeque<(SimNanos, Bytes)>,
+    feed_schedule: Option<Box<dyn FeedSchedule>>,
     feed_errors: u64,
+}
+
+/// Captured sentences due at simulated times, taken in order (`replay = "FILE"`).
+pub trait FeedSchedule: Send {
+    /// When the next sentence is due; `None` once the schedule is over.
+    fn next_time(&self) -> Option<SimNanos>;
+    /// Takes the next sentence.
+    fn pop(&mut self) -> Option<(SimNanos, Bytes)>;
+}
+
+impl FeedSchedule for std::collections::VecDeque<(SimNanos, Bytes)> {
+    fn next_time(&self) -> Option<SimNanos> {
+        self.front().map(|(t, _)| *t)
+    }
+    fn pop(&mut self) -> Option<(SimNanos, Bytes)> {
+        self.pop_front()
+    }
+}
+
+impl FeedSchedule for crate::daemon::feed::Schedule {
+    fn next_time(&self) -> Option<SimNanos> {
+        crate::daemon::feed::Schedule::next_time(self)
+    }
+    fn pop(&mut self) -> Option<(SimNanos, Bytes)> {
+        crate::daemon::feed::Schedule::pop(self)
+    }
 }
 
 impl<M: Model> Engine<M> {
@@ -192,7 +218,7 @@ impl<M: Model> Engine<M> {
             receiving: None,
             feed_decoder: LineDecoder::new(),
             feed_inbox: BytesMut::new(),
-            feed_schedule: std::collections::VecDeque::new(),
+            feed_schedule: None,
             feed_errors: 0,
         }
     }
@@ -200,14 +226,26 @@ impl<M: Model> Engine<M> {
     /// Captured sentences to forward as the sonar controllers' output, each at its simulated
     /// time (`replay = "FILE"`): deterministic in both time modes.
     pub fn set_feed_schedule(&mut self, schedule: Vec<(SimNanos, Bytes)>) {
-        self.mux.set_feed_active(!schedule.is_empty());
-        self.feed_schedule = schedule.into();
+        self.set_feed(Box::new(std::collections::VecDeque::from(schedule)));
+    }
+
+    /// A streamed schedule (the daemon's `replay = "FILE"`, read as simulated time reaches
+    /// each sentence).
+    pub fn set_feed(&mut self, schedule: Box<dyn FeedSchedule>) {
+        let active = schedule.next_time().is_some();
+        self.mux.set_feed_active(active);
+        self.feed_schedule = active.then_some(schedule);
+    }
+
+    fn feed_pending(&self) -> bool {
+        self.feed_schedule
+            .as_ref()
+            .is_some_and(|s| s.next_time().is_some())
     }
 
     /// A live feed (`replay --into-sonar`) connected or left.
     pub fn set_feed_connected(&mut self, connected: bool) {
-        self.mux
-            .set_feed_active(connected || !self.feed_schedule.is_empty());
+        self.mux.set_feed_active(connected || self.feed_pending());
         self.feed_inbox.clear();
         self.feed_decoder = LineDecoder::new();
     }
@@ -245,12 +283,12 @@ impl<M: Model> Engine<M> {
     }
 
     fn poll_feed(&mut self) {
-        while self
+        while let Some(schedule) = self
             .feed_schedule
-            .front()
-            .is_some_and(|(t, _)| *t <= self.now)
+            .as_mut()
+            .filter(|s| s.next_time().is_some_and(|t| t <= self.now))
         {
-            let Some((_, raw)) = self.feed_schedule.pop_front() else {
+            let Some((_, raw)) = schedule.pop() else {
                 break;
             };
             match firmware_protocol::nmea::parse_line(&raw) {
@@ -444,7 +482,7 @@ impl<M: Model> Engine<M> {
                 self.board.poll_timeout(),
                 self.mux.poll_timeout(&self.model),
                 self.mux.feed_timeout(),
-                self.feed_schedule.front().map(|(t, _)| *t),
+                self.feed_schedule.as_ref().and_then(|s| s.next_time()),
                 self.recorder.as_ref().map(|_| self.next_state_ns),
             ]
             .into_iter()
@@ -476,14 +514,43 @@ impl<M: Model> Engine<M> {
             {
                 continue;
             }
-            self.lines[line].garbage_pending = false;
-            loop {
-                let l = &mut self.lines[line];
-                let Some(item) = l.decoder.decode_eof(&mut l.inbox) else {
-                    break;
-                };
-                self.route(line, item)?;
-            }
+            self.flush_line(line)?;
+        }
+        Ok(())
+    }
+
+    /// Whether `line` holds a partial message (or an unreported run of garbage) that the
+    /// idle limit would drop.
+    pub fn holds_partial(&self, line: usize) -> bool {
+        self.lines
+            .get(line)
+            .is_some_and(|l| !l.inbox.is_empty() || l.garbage_pending)
+    }
+
+    /// The idle limit of `line` (PROTOCOL.md section 3): 50 ms on a line that carries the
+    /// sensor link, 200 ms on a sonar-only line.
+    pub fn idle_limit(&self, line: usize) -> std::time::Duration {
+        std::time::Duration::from_nanos(
+            self.lines
+                .get(line)
+                .map_or(SENSOR_IDLE_FLUSH_NS, |l| l.idle_flush_ns),
+        )
+    }
+
+    /// Drops the partial message `line` holds now, at the current simulated time: what the
+    /// daemon does in lockstep once the line has been silent for its idle limit of wall
+    /// time (simulated time stands still while the bridge waits for a request).
+    pub fn flush_line(&mut self, line: usize) -> Result<(), M::Error> {
+        let Some(l) = self.lines.get_mut(line) else {
+            return Ok(());
+        };
+        l.garbage_pending = false;
+        loop {
+            let l = &mut self.lines[line];
+            let Some(item) = l.decoder.decode_eof(&mut l.inbox) else {
+                break;
+            };
+            self.route(line, item)?;
         }
         Ok(())
     }

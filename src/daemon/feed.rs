@@ -37,6 +37,10 @@ pub enum FeedError {
         #[source]
         source: InputError,
     },
+    #[error(
+        "sonar replay {path}: not a regular file (a log is read as the simulation reaches each sentence; copy a pipe's output to a file first)"
+    )]
+    NotAFile { path: PathBuf },
     #[error("sonar feed socket {path}: {source}")]
     Socket {
         path: PathBuf,
@@ -45,46 +49,128 @@ pub enum FeedError {
     },
 }
 
-/// Reads a log into (simulated time, sentence) pairs, the first sentence at time 0: by the
-/// log's timestamps when it has them (a time that goes back is due with the sentence before),
-/// else one sentence per [`UNTIMED_PERIOD_NS`]. Sentences are checked as `replay --policy
-/// pass` does (sent as they are, with CR LF); comments and lines with problems the policy
-/// drops are left out.
-pub fn load_schedule(path: &Path) -> Result<Vec<(SimNanos, Bytes)>, FeedError> {
-    let fail = |source| FeedError::Log {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut source =
-        Source::open(path, 0, "sonar", CommentMode::Ignore, Default::default()).map_err(fail)?;
-    let timed = source.format().is_timed();
-    let mut schedule: Vec<(SimNanos, Bytes)> = Vec::new();
-    let mut first_ns = None;
-    let mut latest_ns: SimNanos = 0;
-    while let Some(event) = source.next_event().map_err(fail)? {
-        let Event::Line(line) = event else {
-            continue;
-        };
-        if line.kind != LineKind::Data {
-            continue;
-        }
-        let checked = check_line(&line.bytes, line.terminator, line.overflow, Policy::Pass);
-        let Some(out) = checked.out else {
-            continue;
-        };
-        let at = match (timed, line.time_ns) {
-            (true, Some(t)) => {
-                let since_first = t.saturating_sub(*first_ns.get_or_insert(t));
-                latest_ns = latest_ns.max(since_first.max(0) as SimNanos);
-                latest_ns
-            }
-            (true, None) => schedule.last().map_or(0, |(t, _)| *t),
-            (false, _) => schedule.len() as SimNanos * UNTIMED_PERIOD_NS,
-        };
-        schedule.push((at, Bytes::from(out)));
+/// A log as (simulated time, sentence) pairs, the first sentence at time 0: by the log's
+/// timestamps when it has them (a time that goes back is due with the sentence before), else
+/// one sentence per [`UNTIMED_PERIOD_NS`]. Sentences are checked as `replay --policy pass`
+/// does (sent as they are, with CR LF); comments and lines with problems the policy drops are
+/// left out.
+///
+/// The log is streamed: the schedule holds the next sentence only, and reads the one after
+/// when it is taken, so a log of any length costs the reader's bounded buffers. Only regular
+/// files are accepted: the simulation takes sentences as it reaches their times, and a pipe
+/// could stall it.
+pub struct Schedule {
+    path: PathBuf,
+    source: Source,
+    timed: bool,
+    first_ns: Option<i64>,
+    latest_ns: SimNanos,
+    /// Sentences taken so far (the untimed clock, and the log line at the end).
+    taken: u64,
+    next: Option<(SimNanos, Bytes)>,
+}
+
+impl std::fmt::Debug for Schedule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Schedule")
+            .field("path", &self.path)
+            .field("taken", &self.taken)
+            .field("next", &self.next.as_ref().map(|(t, _)| *t))
+            .finish()
     }
-    tracing::info!(log = %path.display(), sentences = schedule.len(), timed, "sonar replay loaded");
-    Ok(schedule)
+}
+
+impl Schedule {
+    /// Opens the log and reads its first sentence (so a log that cannot be read fails here,
+    /// before the daemon reports ready).
+    pub fn open(path: &Path) -> Result<Self, FeedError> {
+        let fail = |source| FeedError::Log {
+            path: path.to_path_buf(),
+            source,
+        };
+        let meta = std::fs::metadata(path).map_err(|source| {
+            fail(InputError::Io {
+                path: path.to_path_buf(),
+                source,
+            })
+        })?;
+        if !meta.is_file() {
+            return Err(FeedError::NotAFile {
+                path: path.to_path_buf(),
+            });
+        }
+        let source = Source::open(path, 0, "sonar", CommentMode::Ignore, Default::default())
+            .map_err(fail)?;
+        let timed = source.format().is_timed();
+        let mut schedule = Self {
+            path: path.to_path_buf(),
+            source,
+            timed,
+            first_ns: None,
+            latest_ns: 0,
+            taken: 0,
+            next: None,
+        };
+        schedule.next = schedule.read_next().map_err(fail)?;
+        tracing::info!(log = %path.display(), timed, "sonar replay opened");
+        Ok(schedule)
+    }
+
+    /// When the next sentence is due.
+    pub fn next_time(&self) -> Option<SimNanos> {
+        self.next.as_ref().map(|(t, _)| *t)
+    }
+
+    /// Takes the next sentence and reads the one after. A read error part-way ends the
+    /// schedule, logged with the file.
+    pub fn pop(&mut self) -> Option<(SimNanos, Bytes)> {
+        let taken = self.next.take()?;
+        self.taken += 1;
+        match self.read_next() {
+            Ok(next) => self.next = next,
+            Err(error) => {
+                tracing::warn!(log = %self.path.display(), %error, "sonar replay cut short");
+            }
+        }
+        if self.next.is_none() {
+            tracing::info!(log = %self.path.display(), sentences = self.taken, "sonar replay finished");
+        }
+        Some(taken)
+    }
+
+    fn read_next(&mut self) -> Result<Option<(SimNanos, Bytes)>, InputError> {
+        while let Some(event) = self.source.next_event()? {
+            let Event::Line(line) = event else {
+                continue;
+            };
+            if line.kind != LineKind::Data {
+                continue;
+            }
+            let checked = check_line(&line.bytes, line.terminator, line.overflow, Policy::Pass);
+            let Some(out) = checked.out else {
+                continue;
+            };
+            let at = match (self.timed, line.time_ns) {
+                (true, Some(t)) => {
+                    let since_first = t.saturating_sub(*self.first_ns.get_or_insert(t));
+                    self.latest_ns = self.latest_ns.max(since_first.max(0) as SimNanos);
+                    self.latest_ns
+                }
+                (true, None) => self.latest_ns,
+                // Called with no sentence held: `taken` sentences come before this one.
+                (false, _) => self.taken.saturating_mul(UNTIMED_PERIOD_NS),
+            };
+            return Ok(Some((at, Bytes::from(out))));
+        }
+        Ok(None)
+    }
+}
+
+/// Reads a whole log into a schedule (tests and small logs; the daemon streams through
+/// [`Schedule`]).
+pub fn load_schedule(path: &Path) -> Result<Vec<(SimNanos, Bytes)>, FeedError> {
+    let mut schedule = Schedule::open(path)?;
+    Ok(std::iter::from_fn(|| schedule.pop()).collect())
 }
 
 /// What a live feeder does.

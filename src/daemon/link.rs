@@ -25,15 +25,18 @@ use tokio::sync::{mpsc, watch};
 
 use super::config::{Endpoint, LinkConfig};
 use crate::record::{DropReason, RecordHandle};
-use crate::transport::pty::{PtyError, PtyMaster};
+use crate::transport::pty::{PtyDrain, PtyError, PtyMaster};
 use crate::transport::{LineSettings, serial};
 
 /// Back-off between attempts to reopen a vanished serial device.
 pub const REOPEN_BACKOFF_MIN: Duration = Duration::from_millis(100);
 /// The longest wait between reopen attempts.
 pub const REOPEN_BACKOFF_MAX: Duration = Duration::from_secs(2);
-/// At shutdown, input is read until the endpoint stays quiet this long.
+/// At shutdown, input is read until the endpoint stays quiet this long (a pty is instead
+/// held and read to its last accepted byte, see [`PtyDrain`]).
 pub const SHUTDOWN_DRAIN: Duration = Duration::from_millis(10);
+/// At shutdown, an endpoint that keeps sending is read for at most this long.
+pub const SHUTDOWN_DRAIN_LIMIT: Duration = Duration::from_millis(100);
 /// At shutdown, bytes already handed over are still written for at most this long.
 pub const SHUTDOWN_FLUSH: Duration = Duration::from_millis(50);
 /// Chunks the core may have handed over but the endpoint has not yet written.
@@ -226,7 +229,21 @@ pub async fn run_line(
         OpenEndpoint::Pty(mut pty, watch) => {
             let opens = watch_opens(&cx, watch);
             tokio::pin!(opens);
-            let pumped = pump(&cx, &mut pty, &to_core, &mut from_core, &mut shutdown);
+            let drain = match pty.drain_handle() {
+                Ok(drain) => Some(drain),
+                Err(error) => {
+                    tracing::warn!(link = name, %error, "cannot hold the pty's input at shutdown");
+                    None
+                }
+            };
+            let pumped = pump(
+                &cx,
+                &mut pty,
+                drain,
+                &to_core,
+                &mut from_core,
+                &mut shutdown,
+            );
             tokio::select! {
                 _ = pumped => {}
                 () = &mut opens => {}
@@ -241,7 +258,15 @@ pub async fn run_line(
             loop {
                 if let Some(mut open) = port.take() {
                     backoff = REOPEN_BACKOFF_MIN;
-                    if pump(&cx, &mut open, &to_core, &mut from_core, &mut shutdown).await
+                    if pump(
+                        &cx,
+                        &mut open,
+                        None,
+                        &to_core,
+                        &mut from_core,
+                        &mut shutdown,
+                    )
+                    .await
                         == Pumped::Shutdown
                     {
                         return;
@@ -284,7 +309,15 @@ pub async fn run_line(
                 Ok((mut stream, peer)) => {
                     tracing::info!(link = name, %peer, "client connected");
                     let _ = stream.set_nodelay(true);
-                    if pump(&cx, &mut stream, &to_core, &mut from_core, &mut shutdown).await
+                    if pump(
+                        &cx,
+                        &mut stream,
+                        None,
+                        &to_core,
+                        &mut from_core,
+                        &mut shutdown,
+                    )
+                    .await
                         == Pumped::Shutdown
                     {
                         return;
@@ -391,6 +424,7 @@ impl std::os::fd::AsRawFd for InotifyFd {
 async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
     cx: &LineContext,
     stream: &mut S,
+    pty: Option<PtyDrain>,
     to_core: &mpsc::Sender<Inbound>,
     from_core: &mut mpsc::Receiver<Outbound>,
     shutdown: &mut watch::Receiver<bool>,
@@ -405,17 +439,19 @@ async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
     let reader = async {
         let mut buf = vec![0u8; 4096];
         loop {
+            // Room in the channel first, then the read: both waits are cancel-safe, so a
+            // shutdown never drops bytes already taken from the endpoint.
+            let Ok(permit) = to_core.reserve().await else {
+                return Pumped::Shutdown;
+            };
             match rd.read(&mut buf).await {
                 Ok(0) => return Pumped::EndpointLost,
                 Ok(n) => {
                     counters.bytes_rx.fetch_add(n as u64, Ordering::Relaxed);
-                    let inbound = Inbound {
+                    permit.send(Inbound {
                         line,
                         data: Bytes::copy_from_slice(&buf[..n]),
-                    };
-                    if to_core.send(inbound).await.is_err() {
-                        return Pumped::Shutdown;
-                    }
+                    });
                 }
                 Err(e) => {
                     counters.io_errors.fetch_add(1, Ordering::Relaxed);
@@ -433,19 +469,26 @@ async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
     };
     if outcome == Pumped::Shutdown {
         // What the EyeBot side wrote before the shutdown is still taken, so the recording
-        // holds it: read until the endpoint has nothing more for a moment.
-        let mut buf = vec![0u8; 4096];
-        while let Ok(Ok(n)) = tokio::time::timeout(SHUTDOWN_DRAIN, rd.read(&mut buf)).await {
-            if n == 0 {
-                break;
-            }
-            counters.bytes_rx.fetch_add(n as u64, Ordering::Relaxed);
-            let inbound = Inbound {
-                line,
-                data: Bytes::copy_from_slice(&buf[..n]),
-            };
-            if to_core.try_send(inbound).is_err() {
-                break;
+        // holds it. A pty's input is held first, so every byte its writer was told was
+        // accepted is read; other endpoints are read until they are quiet for a moment.
+        match &pty {
+            Some(pty) => drain_pty(cx, pty, to_core).await,
+            None => {
+                let mut buf = vec![0u8; 4096];
+                let deadline = tokio::time::Instant::now() + SHUTDOWN_DRAIN_LIMIT;
+                while let Ok(Ok(n)) = tokio::time::timeout(SHUTDOWN_DRAIN, rd.read(&mut buf)).await
+                {
+                    if n == 0 || !forward(cx, to_core, &buf[..n]).await {
+                        break;
+                    }
+                    if tokio::time::Instant::now() >= deadline {
+                        tracing::warn!(
+                            link = name,
+                            "input still arriving at shutdown; stopped reading"
+                        );
+                        break;
+                    }
+                }
             }
         }
         // What the core released before it stopped is still written, briefly: the core
@@ -469,6 +512,49 @@ async fn pump<S: AsyncRead + AsyncWrite + Unpin>(
         }
     }
     outcome
+}
+
+/// Hands bytes read at shutdown to the core (which records them); `false` if it is gone.
+async fn forward(cx: &LineContext, to_core: &mpsc::Sender<Inbound>, data: &[u8]) -> bool {
+    cx.counters
+        .bytes_rx
+        .fetch_add(data.len() as u64, Ordering::Relaxed);
+    let inbound = Inbound {
+        line: cx.line,
+        data: Bytes::copy_from_slice(data),
+    };
+    match tokio::time::timeout(SHUTDOWN_DRAIN_LIMIT, to_core.send(inbound)).await {
+        Ok(Ok(())) => true,
+        _ => {
+            tracing::warn!(
+                link = cx.name,
+                bytes = data.len(),
+                "input read at shutdown could not be handed over"
+            );
+            false
+        }
+    }
+}
+
+/// Holds the pty's input and reads what it already accepted, to the last byte.
+async fn drain_pty(cx: &LineContext, pty: &PtyDrain, to_core: &mpsc::Sender<Inbound>) {
+    if let Err(error) = pty.hold_input() {
+        tracing::warn!(link = cx.name, %error, "cannot hold the pty's input at shutdown");
+    }
+    let mut buf = vec![0u8; 4096];
+    loop {
+        match pty.read_now(&mut buf) {
+            Ok(0) => return,
+            Ok(n) => {
+                if !forward(cx, to_core, &buf[..n]).await {
+                    return;
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            // WouldBlock: nothing left. Anything else: the pty is gone.
+            Err(_) => return,
+        }
+    }
 }
 
 /// Writes `current` and then each chunk from the core until the channel closes

@@ -133,6 +133,8 @@ struct LineRuntime {
     backlog: bytes::BytesMut,
     /// Beyond this many waiting bytes the client is taken for not reading: drop and count.
     backlog_limit: usize,
+    /// When bytes last arrived (lockstep's wall-clock idle limit).
+    last_rx_wall: Instant,
 }
 
 /// The bridge, started: endpoints open, link tasks and services running, recording begun.
@@ -231,7 +233,7 @@ impl<M: Model> Daemon<M> {
 
         let mut engine = Engine::new(model, board, mux, &specs, lockstep);
         if let Some(log) = &config.sonar_replay {
-            engine.set_feed_schedule(feed::load_schedule(log)?);
+            engine.set_feed(Box::new(feed::Schedule::open(log)?));
         }
         let feed_path = run_dir.join(feed::FEED_SOCKET);
         let feed_listener = feed::bind(&feed_path)?;
@@ -392,6 +394,7 @@ impl<M: Model> Daemon<M> {
         let mut shutdown = std::pin::pin!(shutdown);
         loop {
             self.catch_up()?;
+            self.flush_idle_lockstep()?;
             flush_outputs(&mut self.engine, &mut self.lines, self.view.as_ref());
             let now = Instant::now();
             if let Some(view) = self.view.as_mut()
@@ -415,6 +418,9 @@ impl<M: Model> Daemon<M> {
                 self.pacing.next_status = now + STATUS_PERIOD;
             }
             let mut wake_at = self.pacing.next_wake(&self.engine, now);
+            if let Some(idle) = self.next_idle_flush_lockstep() {
+                wake_at = wake_at.min(idle.max(now));
+            }
             if let Some(view) = &self.view {
                 wake_at = wake_at.min(view.next_state.max(now));
             }
@@ -434,6 +440,9 @@ impl<M: Model> Daemon<M> {
                             view.side.tap.bytes(t_s, name, crate::record::Direction::Rx, inbound.data.clone());
                         }
                         self.engine.receive(inbound.line, &inbound.data).map_err(model_error)?;
+                        if let Some(line) = self.lines.get_mut(inbound.line) {
+                            line.last_rx_wall = Instant::now();
+                        }
                     }
                     None => return Ok(()),
                 },
@@ -539,7 +548,9 @@ impl<M: Model> Daemon<M> {
         let wall = self.pacing.started.elapsed();
         let reached = self.engine.now().max(map.target(self.pacing.planned_wake));
         if let Some(slip) = map.settle(reached, wall) {
-            tracing::warn!(
+            // Counted in the status's overruns; a starved loop may slip at every wake-up.
+            crate::warn_limited!(
+                "overrun",
                 slip_ms = slip as f64 * 1e-6,
                 "overrun: simulated time slipped behind the wall clock"
             );
@@ -547,6 +558,36 @@ impl<M: Model> Daemon<M> {
         self.engine
             .advance_to(map.target(wall))
             .map_err(model_error)
+    }
+
+    /// In lockstep, where simulated time stands still while the bridge waits for a request,
+    /// a partial message is dropped once its line has been silent for the idle limit of wall
+    /// time (PROTOCOL.md section 3). In realtime the engine does this in simulated time.
+    fn flush_idle_lockstep(&mut self) -> Result<(), DaemonError> {
+        if self.pacing.map.is_some() {
+            return Ok(());
+        }
+        for index in 0..self.lines.len() {
+            if self.engine.holds_partial(index)
+                && self.lines[index].last_rx_wall.elapsed() >= self.engine.idle_limit(index)
+            {
+                self.engine.flush_line(index).map_err(model_error)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// In lockstep: when the next line with a partial message reaches its idle limit.
+    fn next_idle_flush_lockstep(&self) -> Option<Instant> {
+        if self.pacing.map.is_some() {
+            return None;
+        }
+        self.lines
+            .iter()
+            .enumerate()
+            .filter(|(index, _)| self.engine.holds_partial(*index))
+            .map(|(index, line)| line.last_rx_wall + self.engine.idle_limit(index))
+            .min()
     }
 
     /// In realtime: runs the model up to the wall clock before an input is applied.
@@ -571,20 +612,36 @@ impl<M: Model> Daemon<M> {
         drop(std::mem::take(&mut self.lines));
         // Link tasks get `TASKS_BUDGET` between them; one that has not stopped by then is
         // aborted, which drops its endpoint (and symlink). See `shutdown` for the whole bound.
-        let tasks_deadline = Instant::now() + shutdown::TASKS_BUDGET;
-        for mut task in std::mem::take(&mut self.link_tasks) {
-            if tokio::time::timeout_at(tasks_deadline, &mut task)
-                .await
-                .is_err()
-            {
-                tracing::warn!("a link task did not stop in time; aborting it");
-                task.abort();
-                let _ = tokio::time::timeout(Duration::from_millis(20), task).await;
-            }
-        }
         // Input that arrived before the shutdown but was not processed (the loop may stop
         // with chunks still queued, and the link tasks drain their endpoints as they stop) is
-        // recorded, not acted on: the run is over.
+        // recorded, not acted on: the run is over. It is taken while the tasks stop, so a
+        // task handing over its endpoint's last bytes never waits for room.
+        let tasks_deadline = Instant::now() + shutdown::TASKS_BUDGET;
+        let tasks = std::mem::take(&mut self.link_tasks);
+        let aborts: Vec<_> = tasks.iter().map(|t| t.abort_handle()).collect();
+        let joined = async {
+            for task in tasks {
+                let _ = task.await;
+            }
+        };
+        tokio::pin!(joined);
+        loop {
+            tokio::select! {
+                biased;
+                Some(inbound) = self.inbound.recv() => {
+                    self.engine.record_unprocessed(inbound.line, &inbound.data);
+                }
+                () = &mut joined => break,
+                () = tokio::time::sleep_until(tasks_deadline) => {
+                    tracing::warn!("a link task did not stop in time; aborting it");
+                    for abort in &aborts {
+                        abort.abort();
+                    }
+                    let _ = tokio::time::timeout(Duration::from_millis(20), &mut joined).await;
+                    break;
+                }
+            }
+        }
         while let Ok(inbound) = self.inbound.try_recv() {
             self.engine.record_unprocessed(inbound.line, &inbound.data);
         }
@@ -701,6 +758,7 @@ fn spawn_link_tasks(
             to_link: out_tx,
             backlog: bytes::BytesMut::new(),
             backlog_limit: spec.tx_queue_bytes,
+            last_rx_wall: Instant::now(),
         });
     }
     spawned
@@ -1022,6 +1080,7 @@ mod tests {
             to_link,
             backlog: bytes::BytesMut::new(),
             backlog_limit: 4096,
+            last_rx_wall: Instant::now(),
         };
         let mut lines = vec![
             runtime(0, "sonar", sonar_tx),

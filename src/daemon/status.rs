@@ -24,7 +24,8 @@ pub struct LinkStatus {
     pub bytes_tx: u64,
     pub frames_rx: u64,
     pub frames_tx: u64,
-    /// Malformed or unknown input (each also logged and answered per the protocol).
+    /// Malformed or unknown input: answered where the protocol says so, logged at debug level
+    /// (so a flood costs counters, not log lines).
     pub errors: u64,
     /// Bytes put on the line that never reached the endpoint (the EyeBot side did not read,
     /// the endpoint was gone); with `--record` each drop is in `drops.tsv`.

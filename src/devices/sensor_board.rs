@@ -131,11 +131,16 @@ impl SensorBoard {
     }
 
     fn reply(&mut self, seq: u8, message: Message) -> Output {
+        self.reply_frame(Frame::new(seq, message))
+    }
+
+    /// Counts and sends a reply (a NAK also counts as a NAK sent).
+    fn reply_frame(&mut self, frame: Frame) -> Output {
         self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
-        if matches!(message, Message::Nak { .. }) {
+        if matches!(frame.message, Message::Nak { .. }) {
             self.counters.tx_naks = self.counters.tx_naks.wrapping_add(1);
         }
-        Output::Send(Frame::new(seq, message))
+        Output::Send(frame)
     }
 
     fn push(&mut self, message: Message) -> Frame {
@@ -195,20 +200,38 @@ impl SensorBoard {
     }
 
     /// Handles one decoded frame from the EyeBot side at simulated time `now`.
+    ///
+    /// Counting (PROTOCOL.md 2.4, COUNTERS): a frame whose CRC checks is counted once, as
+    /// "received OK" when it is answered with its reply (or starts a lockstep advance), and as
+    /// "rejected" when it is answered with a NAK of any code or not answered at all (a NAK
+    /// sent to the bridge). A retry answered from the stored reply counts the same way again.
     pub fn handle(&mut self, frame: Frame, now: SimNanos, plant: &mut dyn Plant) -> Option<Output> {
-        self.counters.rx_frames = self.counters.rx_frames.wrapping_add(1);
-        if let Some(last) = self.last_request.filter(|l| l.request == frame) {
-            self.duplicates += 1;
-            tracing::debug!(
-                seq = frame.seq,
-                "retried request answered from the stored reply"
-            );
-            self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
-            return Some(Output::Send(last.reply));
-        }
-        let out = self.execute(frame, now, plant);
-        if let Some(Output::Send(reply)) = out {
-            self.remember(frame, reply);
+        let out = match self.last_request.filter(|l| l.request == frame) {
+            Some(last) => {
+                self.duplicates += 1;
+                tracing::debug!(
+                    seq = frame.seq,
+                    "retried request answered from the stored reply"
+                );
+                Some(self.reply_frame(last.reply))
+            }
+            None => {
+                let out = self.execute(frame, now, plant);
+                if let Some(Output::Send(reply)) = out {
+                    self.remember(frame, reply);
+                }
+                out
+            }
+        };
+        let rejected = match &out {
+            Some(Output::Send(reply)) => matches!(reply.message, Message::Nak { .. }),
+            Some(Output::Advance { .. }) => false,
+            None => true,
+        };
+        if rejected {
+            self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
+        } else {
+            self.counters.rx_frames = self.counters.rx_frames.wrapping_add(1);
         }
         out
     }
@@ -360,14 +383,10 @@ impl SensorBoard {
             | Message::AdcSamples { .. }
             | Message::CompassHeadingPush { .. }
             | Message::CompassRawPush { .. } => {
-                self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
                 return Some(self.nak(seq, kind, ErrorCode::UnknownType, 0));
             }
-            // Counted, never answered: the bridge never NAKs a NAK.
-            Message::Nak { .. } => {
-                self.counters.rx_rejected = self.counters.rx_rejected.wrapping_add(1);
-                return None;
-            }
+            // Counted (as rejected, in `handle`), never answered: the bridge never NAKs a NAK.
+            Message::Nak { .. } => return None,
         };
         Some(self.reply(seq, out))
     }
@@ -985,5 +1004,70 @@ mod tests {
                 }
             );
         }
+    }
+
+    /// PROTOCOL.md 2.4: a frame with a good CRC is "received OK" only when it gets its reply;
+    /// one answered with any NAK (BAD_STATE and VERSION_MISMATCH included), or a NAK sent to
+    /// the bridge, is "rejected". A retry answered from the stored reply counts again.
+    #[test]
+    fn a_nak_counts_the_frame_as_rejected_not_received() {
+        let mut plant = FakePlant::default();
+        let mut b = board(false, None);
+        let counts = |b: &SensorBoard| {
+            let c = b.counters();
+            (c.rx_frames, c.rx_rejected, c.tx_frames, c.tx_naks)
+        };
+        sent(b.handle(Frame::new(1, Message::TimeGet), 0, &mut plant));
+        assert_eq!(counts(&b), (1, 0, 1, 0), "a TIME_GET is received OK");
+        let advance = Frame::new(2, Message::TimeAdvance { ticks: 5 });
+        let nak = sent(b.handle(advance, 0, &mut plant));
+        assert!(matches!(
+            nak.message,
+            Message::Nak {
+                code: ErrorCode::BadState,
+                ..
+            }
+        ));
+        assert_eq!(counts(&b), (1, 1, 2, 1), "BAD_STATE is a rejection");
+        let again = sent(b.handle(advance, 0, &mut plant));
+        assert_eq!(again, nak, "the retry gets the stored NAK");
+        assert_eq!(counts(&b), (1, 2, 3, 2), "and counts as a rejection again");
+        let hello = Frame::new(3, Message::Hello { client_version: 2 });
+        let mismatch = sent(b.handle(hello, 0, &mut plant));
+        assert!(matches!(
+            mismatch.message,
+            Message::Nak {
+                code: ErrorCode::VersionMismatch,
+                detail: 1,
+                ..
+            }
+        ));
+        assert_eq!(counts(&b), (1, 3, 4, 3), "VERSION_MISMATCH is a rejection");
+        let stray_reply = Frame::new(4, Message::Ack { acked_type: 0x10 });
+        sent(b.handle(stray_reply, 0, &mut plant));
+        assert_eq!(counts(&b), (1, 4, 5, 4), "a reply type is a rejection");
+        let stray_nak = Frame::new(
+            5,
+            Message::Nak {
+                rejected_type: 0x10,
+                code: ErrorCode::BadValue,
+                detail: 0,
+            },
+        );
+        assert!(b.handle(stray_nak, 0, &mut plant).is_none());
+        assert_eq!(counts(&b), (1, 5, 5, 4), "a NAK is rejected, not answered");
+        let stream = Frame::new(
+            6,
+            Message::AdcStream {
+                channels: 1,
+                period_ms: 0,
+            },
+        );
+        sent(b.handle(stream, 0, &mut plant));
+        assert_eq!(
+            counts(&b),
+            (1, 6, 6, 5),
+            "BAD_VALUE from the board is a rejection"
+        );
     }
 }

@@ -15,6 +15,9 @@
 //!   typical size): a direction the data do not inform stays near the model as given instead
 //!   of wandering to a bound.
 //!
+//! Then the depth channel's duty-correlated noise level (`depth_pwm_emi`, a variance) is
+//! fitted on each baseline run of the calibrated model and its mean kept.
+//!
 //! The result is written as the model's `[[calibration]]` entries: applied before any effect,
 //! and still free to be found again by `gap` as a change in a later run. Calibration reports
 //! its gap before and after on runs it was not fitted to (`--validate`).
@@ -170,6 +173,22 @@ fn excess(per_channel: &[(usize, f64)]) -> f64 {
 }
 
 /// Applies the parameter vector (units of the scales) to a copy of `base`.
+/// The mean of per-run fitted values and its 95 % interval: from the between-run spread for
+/// two or more runs, the run's own interval for one.
+fn mean_level(levels: &[(f64, [f64; 2])]) -> Option<(f64, [f64; 2])> {
+    match levels {
+        [] => None,
+        [one] => Some(*one),
+        _ => {
+            let n = levels.len() as f64;
+            let mean = levels.iter().map(|l| l.0).sum::<f64>() / n;
+            let var = levels.iter().map(|l| (l.0 - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            let half = 1.96 * (var / n).sqrt();
+            Some((mean, [mean - half, mean + half]))
+        }
+    }
+}
+
 fn applied(base: &Configs, chosen: &[&'static Effect], x: &DVector<f64>) -> Configs {
     let mut c = base.clone();
     let mut k = 0;
@@ -316,6 +335,46 @@ pub fn calibrate(
             delta_bic: None,
         });
         k += n;
+    }
+
+    // Noise levels: the motor noise on the depth channel (`depth_pwm_emi`, a variance, not a
+    // mean: fitted on each baseline run of the calibrated model, its mean over the runs).
+    // Without it a vehicle whose depth jitters with the stern duty, whatever the cause, would
+    // report that jitter as new in every later run.
+    if let Some(emi) = effects::by_name("depth_pwm_emi")
+        && measured.iter().any(|c| emi.channels.contains(c))
+    {
+        progress("noise levels");
+        let mut levels = Vec::new();
+        for p in &prepared {
+            let s = fit::setup(
+                &p.run.m,
+                applied(&p.base, &chosen, &x),
+                &p.floors,
+                Split::DEFAULT,
+                &[],
+            )?;
+            if let Some(c) = fit::fit_emi(&s, emi) {
+                levels.push((c.parameters[0].1, c.ci95[0].1));
+            }
+        }
+        if let Some(level) = mean_level(&levels)
+            && level.0 > 0.0
+        {
+            parameters.push(Parameter {
+                effect: emi.name.to_string(),
+                parameter: emi.parameters[0].to_string(),
+                value: level.0,
+                ci95: level.1,
+                at_bound: false,
+            });
+            calibrated.calibration.push(EnabledEffect {
+                effect: emi,
+                values: vec![level.0],
+                ci95: vec![level.1],
+                delta_bic: None,
+            });
+        }
     }
 
     // Between-run spread: every candidate fitted on each baseline run of the calibrated

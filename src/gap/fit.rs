@@ -533,6 +533,8 @@ fn names(effect: &Effect) -> impl Iterator<Item = String> + '_ {
 /// The depth channel's per-difference variance for an extra EMI amplitude `e` (V rms at full
 /// stern duty).
 struct EmiData {
+    /// Time of each difference's later sample (s).
+    times: Vec<f64>,
     r2: Vec<f64>,
     base_var: Vec<f64>,
     /// Per-difference (duty * attenuation / lsb)^2, summed over the two samples.
@@ -572,8 +574,35 @@ impl EmiData {
     }
 }
 
-/// Fits the variance-type candidate (depth EMI) on the depth channel.
-fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
+/// Length of the windows over which the EMI signature averages squared differences (s).
+pub const EMI_WINDOW_S: f64 = 1.0;
+
+/// Means of `a` and `b` over consecutive windows of `window_s` by `times` (ascending); windows
+/// with fewer than 5 samples are left out.
+fn window_means(times: &[f64], a: &[f64], b: &[f64], window_s: f64) -> (Vec<f64>, Vec<f64>) {
+    let (mut ma, mut mb) = (Vec::new(), Vec::new());
+    let mut start = 0;
+    while start < times.len() {
+        let w = (times[start] / window_s).floor();
+        let end = start
+            + times[start..]
+                .iter()
+                .take_while(|t| (**t / window_s).floor() == w)
+                .count()
+                .max(1);
+        if end - start >= 5 {
+            let n = (end - start) as f64;
+            ma.push(a[start..end].iter().sum::<f64>() / n);
+            mb.push(b[start..end].iter().sum::<f64>() / n);
+        }
+        start = end;
+    }
+    (ma, mb)
+}
+
+/// Fits the variance-type candidate (depth EMI) on the depth channel (`None`: no depth
+/// data, or no floor for it).
+pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
     let i = setup
         .m
         .channels
@@ -611,6 +640,7 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
     }
     bins.retain(|b| b.len() >= 5);
     let data = EmiData {
+        times: idx.iter().map(|&i| ch.samples[i].0).collect(),
         r2: idx.iter().map(|&i| (r[i] - r[i - 1]).powi(2)).collect(),
         base_var: idx.iter().map(|&i| w[i] + w[i - 1]).collect(),
         gain: idx.iter().map(|&i| g[i] + g[i - 1]).collect(),
@@ -632,25 +662,12 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
     let delta_bic = before - after - n.ln();
     let heldout_before = data.minus2_log_l(0.0, false);
     let heldout_after = data.minus2_log_l(e, false);
-    // Signature: squared residuals grow with the stern duty.
-    let corr = {
-        let k = data.r2.len() as f64;
-        let (ma, mb) = (
-            data.r2.iter().sum::<f64>() / k,
-            data.gain.iter().sum::<f64>() / k,
-        );
-        let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
-        for (a, b) in data.r2.iter().zip(&data.gain) {
-            ab += (a - ma) * (b - mb);
-            aa += (a - ma).powi(2);
-            bb += (b - mb).powi(2);
-        }
-        if aa > 0.0 && bb > 0.0 {
-            ab / (aa * bb).sqrt()
-        } else {
-            0.0
-        }
-    };
+    // Signature: the local variance grows with the stern duty. One squared difference is a
+    // chi-square draw with one degree of freedom, so its own correlation with duty^2 stays
+    // below about 0.45 even when EMI is all the noise there is; means over
+    // [`EMI_WINDOW_S`] windows estimate the local variance.
+    let (local_r2, local_gain) = window_means(&data.times, &data.r2, &data.gain, EMI_WINDOW_S);
+    let corr = crate::gap::residuals::pearson(&local_r2, &local_gain);
     let signature_pass = e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION;
     let params = [e];
     let guards = Guards {
@@ -673,7 +690,7 @@ fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
         heldout_gain: Some(heldout_before - heldout_after),
         signature_pass,
         signature: format!(
-            "{}: correlation of squared depth residuals with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION})",
+            "{}: correlation of the depth residuals' local variance with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}; {EMI_WINDOW_S} s windows)",
             effect.signature
         ),
         guards,
@@ -774,6 +791,41 @@ pub fn setup<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The EMI signature on squared differences drawn with a variance that follows the duty
+    /// (0 for 20 s, 0.4 for 40 s, 1 for 10 s, as a surfacing, a hold and a dive give; EMI
+    /// variance a sixth of the other noise's at the hold, equal to it at full duty): one
+    /// draw per sample correlates below the 0.2 bar although the EMI is there, the 1 s
+    /// window means correlate far above it, and with no EMI they stay below it.
+    #[test]
+    fn emi_signature_correlates_local_variance_not_single_draws() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let times: Vec<f64> = (0..7000).map(|i| i as f64 * 0.01).collect();
+        let duty = |t: f64| -> f64 {
+            match t {
+                t if t < 20.0 => 0.0,
+                t if t < 60.0 => 0.4,
+                _ => 1.0,
+            }
+        };
+        let gain: Vec<f64> = times.iter().map(|t| (duty(*t) * 1.0).powi(2)).collect();
+        let draw = |rng: &mut rand_chacha::ChaCha8Rng, var: f64| {
+            let z: f64 = rng.sample(rand_distr::StandardNormal);
+            var * z * z
+        };
+        let with: Vec<f64> = gain.iter().map(|g| draw(&mut rng, 1.0 + g)).collect();
+        let without: Vec<f64> = gain.iter().map(|_| draw(&mut rng, 1.0)).collect();
+        let single = crate::gap::residuals::pearson(&with, &gain);
+        assert!(single < SIGNATURE_MIN_CORRELATION, "single draws: {single}");
+        let (a, b) = window_means(&times, &with, &gain, EMI_WINDOW_S);
+        assert_eq!(a.len(), 70);
+        let windowed = crate::gap::residuals::pearson(&a, &b);
+        assert!(windowed > 0.6, "windows: {windowed}");
+        let (a, b) = window_means(&times, &without, &gain, EMI_WINDOW_S);
+        let null = crate::gap::residuals::pearson(&a, &b);
+        assert!(null.abs() < SIGNATURE_MIN_CORRELATION, "no EMI: {null}");
+    }
 
     /// The interval guard: an infinite interval, or an estimate whose confidence region holds
     /// 0, names nothing; two correlated parameters whose intervals each hold 0 can still be

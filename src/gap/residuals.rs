@@ -86,7 +86,8 @@ pub fn ljung_box(x: &[f64], h: usize) -> f64 {
         * (nf + 2.0)
 }
 
-fn pearson(a: &[f64], b: &[f64]) -> f64 {
+/// Pearson's correlation of two series (0 when either is constant or shorter than 3).
+pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     if n < 3 {
         return 0.0;

@@ -93,6 +93,40 @@ impl PtyMaster {
     pub fn client_path(&self) -> &Path {
         self.link_path().unwrap_or(&self.slave_path)
     }
+
+    /// Handles for taking the last input at shutdown ([`PtyDrain`]), on duplicates of the
+    /// pair's descriptors.
+    pub fn drain_handle(&self) -> io::Result<PtyDrain> {
+        Ok(PtyDrain {
+            master: self.master.get_ref().try_clone()?,
+            slave: self._slave.try_clone()?,
+        })
+    }
+}
+
+/// Takes what the EyeBot side wrote before the bridge closes the pair.
+///
+/// [`hold_input`](Self::hold_input) suspends the slave's output (`tcflow(TCOOFF)`): the
+/// EyeBot side's writes then wait, or fail with EAGAIN, instead of being accepted. After it,
+/// reading the master until it would block ([`read_now`](Self::read_now)) takes every byte
+/// the kernel accepted: none is left in the pty when it closes.
+#[derive(Debug)]
+pub struct PtyDrain {
+    master: OwnedFd,
+    slave: OwnedFd,
+}
+
+impl PtyDrain {
+    /// Stops the slave side's writes from being accepted from now on.
+    pub fn hold_input(&self) -> io::Result<()> {
+        termios::tcflow(&self.slave, termios::FlowArg::TCOOFF).map_err(nix_to_io)
+    }
+
+    /// One non-blocking read of the master: `Ok(0)` at end of file, `WouldBlock` when
+    /// nothing is buffered (the kernel pushes pending input to the reader before saying so).
+    pub fn read_now(&self, buf: &mut [u8]) -> io::Result<usize> {
+        nix::unistd::read(&self.master, buf).map_err(nix_to_io)
+    }
 }
 
 fn nix_to_io(e: nix::Error) -> io::Error {

@@ -9,7 +9,8 @@
  * The pilot reads depth and compass every tick (10 ms), holds DEPTH_M with the vertical
  * thrusters (on a 0.1 s moving average: one conversion is too noisy to differentiate over
  * 10 ms) and flies LEGS legs: turn on the spot to the leg's heading (right by 90 degrees each
- * time), then LEG_S seconds ahead.
+ * time), then LEG_S seconds ahead. After the last leg it stops every thruster and waits
+ * SURFACE_S seconds while Mako floats up, as a run in the pool ends.
  */
 #include <stdio.h>
 
@@ -21,6 +22,7 @@
 #define DEPTH_M 0.8
 #define LEGS 4
 #define LEG_S 8
+#define SURFACE_S 20   /* s at the surface after the last leg, thrusters off */
 #define CRUISE 60      /* % on port and starboard along a leg */
 #define FEED_FORWARD 40.0
 #define KP_DEPTH 150.0
@@ -113,10 +115,19 @@ static void pilot(void) {
         }
         target = (target + 90) % 360; /* turn right */
     }
+    /* all thrusters off: Mako floats up; wait for it at the surface, as at the end of a run
+       in the pool, before the program ends */
     MOTORDrive(port, 0);
     MOTORDrive(starboard, 0);
     MOTORDrive(bow, 0);
     MOTORDrive(stern, 0);
+    OSSemP(&lcd);
+    LCDPrintf("surfacing at %.1f s\n", OSGetCount() / 100.0);
+    OSSemV(&lcd);
+    for (t = 0; t < SURFACE_S * 100; t++) {
+        depth_now = OSGetAD(DEPTH_CHANNEL) * 5.0 / 1024.0;
+        OSWait(1);
+    }
     finished = 1;
 }
 

@@ -77,6 +77,15 @@ pub fn expected(name: &str) -> Option<LineItem> {
     Some(match name {
         "select-2" => LineItem::Sonar(SonarCommand::Select(t2)),
         "ack-2" => LineItem::Sonar(SonarCommand::Ack(t2)),
+        "sonar-nak" => LineItem::Sonar(SonarCommand::Nak),
+        "nak" => frame(
+            0x11,
+            Message::Nak {
+                rejected_type: 0x10,
+                code: ErrorCode::BadValue,
+                detail: 0,
+            },
+        ),
         "dbt" => LineItem::Nmea(Sentence::Dbt(Dbt {
             talker: sd,
             feet: t(105),
@@ -251,23 +260,8 @@ pub fn expected(name: &str) -> Option<LineItem> {
     })
 }
 
-/// Names used twice in PROTOCOL.md would make the map ambiguous: the sonar NAK and the
-/// binary NAK are told apart by content.
+/// What example `example` must decode to.
 pub fn expected_for(example: &Example) -> LineItem {
-    if example.name == "nak" {
-        return if example.bytes.first() == Some(&b'@') {
-            LineItem::Sonar(SonarCommand::Nak)
-        } else {
-            frame(
-                0x11,
-                Message::Nak {
-                    rejected_type: 0x10,
-                    code: ErrorCode::BadValue,
-                    detail: 0,
-                },
-            )
-        };
-    }
     expected(&example.name).unwrap_or_else(|| {
         panic!(
             "PROTOCOL.md example {:?} has no expected value",

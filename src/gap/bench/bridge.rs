@@ -18,8 +18,9 @@ use crate::gap::GapError;
 use crate::gap::bench::calibrated::{Hidden, Truth, hidden, io};
 use crate::gap::convert::{ConvertOptions, convert};
 
-/// Simulated length of a case (s): `timer_square` dives, flies its four legs and holds.
-pub const DURATION_S: u32 = 90;
+/// Simulated length of a case (s): `timer_square` dives, flies its four legs and surfaces
+/// (about 97 s; the programs that do not end by themselves are stopped here).
+pub const DURATION_S: u32 = 110;
 /// The program of every case and of the run calibration is scored on.
 pub const CASE_PROGRAM: &str = "timer_square";
 /// The calibration runs' programs, in order (the last is the run it is scored on).

@@ -76,8 +76,8 @@ pub trait Truth {
     ) -> Result<(), GapError>;
 }
 
-/// A scratch directory removed when dropped.
-pub struct Scratch(pub PathBuf);
+/// A scratch directory removed when dropped, unless it is one the user asked to keep.
+pub struct Scratch(pub PathBuf, bool);
 
 impl Scratch {
     pub fn new(label: &str, seed: u64) -> Result<Self, GapError> {
@@ -86,13 +86,30 @@ impl Scratch {
             std::process::id()
         ));
         std::fs::create_dir_all(&path).map_err(io(&path))?;
-        Ok(Self(path))
+        Ok(Self(path, false))
+    }
+
+    /// The user's directory `path`: created if missing, and it and what is written into it
+    /// stay.
+    pub fn kept(path: &Path) -> Result<Self, GapError> {
+        std::fs::create_dir_all(path).map_err(io(path))?;
+        Ok(Self(path.to_path_buf(), true))
+    }
+
+    /// Done with `dir`, a directory inside: removed unless kept.
+    pub fn done(&self, dir: &Path) -> Result<(), GapError> {
+        if self.1 {
+            return Ok(());
+        }
+        std::fs::remove_dir_all(dir).map_err(io(dir))
     }
 }
 
 impl Drop for Scratch {
     fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
+        if !self.1 {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
     }
 }
 
@@ -197,7 +214,10 @@ pub fn run(
     }
     let total = shard.count(plan.len());
 
-    let scratch = Scratch::new(opts.source.name(), opts.seed)?;
+    let scratch = match &opts.keep {
+        Some(dir) => Scratch::kept(dir)?,
+        None => Scratch::new(opts.source.name(), opts.seed)?,
+    };
     progress(0, total, "calibrating");
     let mut runs = Vec::new();
     for (i, seed) in baseline_seeds.iter().enumerate() {
@@ -217,19 +237,30 @@ pub fn run(
         reduction_pct: r.reduction_pct,
         seconds,
     });
+    if opts.keep.is_some() {
+        let path = scratch.0.join("calibrated.toml");
+        let provenance = format!(
+            "calibrated by `eyebot-hil gap-bench --source {} --seed {}` on baseline-0..{}",
+            opts.source.name(),
+            opts.seed,
+            BASELINE_RUNS - 1
+        );
+        std::fs::write(&path, cal.model.to_toml(&provenance, &scratch.0)).map_err(io(&path))?;
+    }
     for r in runs.iter().chain(&validate) {
-        std::fs::remove_dir_all(&r.dir).map_err(io(&r.dir))?;
+        scratch.done(&r.dir)?;
     }
 
     let mut out = Vec::new();
     for p in plan.into_iter().filter(|p| shard.contains(p.index)) {
-        let dir = scratch.0.join(format!("case-{}", p.index));
+        let label = p.hidden.map_or("null", |h| h.name);
+        let dir = scratch.0.join(format!("case-{}-{label}", p.index));
         truth.case(p.seed, p.hidden.map(|h| (h, p.size.as_slice())), &dir)?;
         let m = Measurement::load(&dir)?;
         let t0 = Instant::now();
         let a = crate::gap::analyse_with(&cal.model, &m, &dir, Options::default(), &mut |_, _| {})?;
         let seconds = t0.elapsed().as_secs_f64();
-        std::fs::remove_dir_all(&dir).map_err(io(&dir))?;
+        scratch.done(&dir)?;
 
         let first = a.accepted.first();
         let named = first.map(|w| w.name.clone());
@@ -241,7 +272,6 @@ pub fn run(
             let ci: Vec<[f64; 2]> = c.ci95.iter().map(|(_, c)| *c).collect();
             post_hoc_sigma(&truth, &ci)
         });
-        let label = p.hidden.map_or("null", |h| h.name);
         out.push(CaseResult {
             index: p.index,
             effect: p.hidden.map(|h| h.name.to_string()),

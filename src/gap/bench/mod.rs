@@ -81,6 +81,10 @@ pub struct BenchOptions {
     pub independent_path: std::path::PathBuf,
     /// The bridge source's set-up: where the C examples and this program are.
     pub bridge: bridge::BridgeOptions,
+    /// Calibrated sources: keep the calibrated model, the baseline runs and every case's
+    /// measurement directory here instead of deleting them, so a case can be analysed again
+    /// with `eyebot-hil gap`.
+    pub keep: Option<std::path::PathBuf>,
 }
 
 impl BenchOptions {

@@ -584,8 +584,7 @@ pub fn run(
                         scene.sonar,
                     )?;
                     let (before, after, tb, ta) = if scene.sonar && sonar_only(effect) {
-                        // The all-channel excess does not cover the sonar (docs/gap.md): the
-                        // data figure is the sonar -2 ln L over the truth's on the held-out
+                        // The all-channel excess does not cover the sonar: the data figure is the sonar -2 ln L over the truth's on the held-out
                         // data, the truth figure the KL distance of the echo probabilities.
                         let d_truth = sonar_deviance(&truth_cfg, &h)?;
                         (

@@ -1,0 +1,121 @@
+//! A bare EyeBot-side client for tests that speak the wire protocols byte by byte: writes
+//! exactly the bytes given, and decodes what comes back with the protocol's own decoder.
+//!
+//! Unlike `probe`'s clients it never retries, never reframes and never hides an unexpected
+//! item, so a test sees every byte the bridge sent, in order.
+
+use std::fs::File;
+use std::io::{Read, Write};
+use std::os::fd::AsFd;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use bytes::BytesMut;
+use firmware_protocol::sensor_link::Message;
+use firmware_protocol::{Frame, LineDecoder, LineItem};
+
+/// One end of a link, opened as a plain C program would (raw file, blocking writes).
+pub struct Wire {
+    file: File,
+    decoder: LineDecoder,
+    buf: BytesMut,
+    /// Every byte read so far, in order.
+    pub received: Vec<u8>,
+}
+
+impl Wire {
+    pub fn open(path: &Path) -> Self {
+        Self {
+            file: eyebot_test_support::clients::open_raw(path),
+            decoder: LineDecoder::new(),
+            buf: BytesMut::new(),
+            received: Vec::new(),
+        }
+    }
+
+    /// Writes `bytes` whole.
+    pub fn send(&mut self, bytes: &[u8]) {
+        self.file.write_all(bytes).expect("write to the link");
+    }
+
+    /// Encodes and writes a request frame.
+    pub fn request(&mut self, seq: u8, message: Message) {
+        self.send(&frame_bytes(seq, message));
+    }
+
+    /// Reads what arrives within `wait` (polling); `false` if nothing did.
+    fn fill(&mut self, wait: Duration) -> bool {
+        let timeout = nix::poll::PollTimeout::from(wait.as_millis().min(60_000) as u16);
+        let mut fds = [nix::poll::PollFd::new(
+            self.file.as_fd(),
+            nix::poll::PollFlags::POLLIN,
+        )];
+        match nix::poll::poll(&mut fds, timeout) {
+            Ok(n) if n > 0 => {
+                let mut chunk = [0u8; 4096];
+                match (&self.file).read(&mut chunk) {
+                    Ok(n) if n > 0 => {
+                        self.buf.extend_from_slice(&chunk[..n]);
+                        self.received.extend_from_slice(&chunk[..n]);
+                        true
+                    }
+                    _ => false,
+                }
+            }
+            _ => false,
+        }
+    }
+
+    /// The next decoded item, waiting at most `timeout` for it.
+    pub fn next_item(&mut self, timeout: Duration) -> Option<LineItem> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(item) = self.decoder.decode(&mut self.buf) {
+                return Some(item);
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return None;
+            }
+            self.fill(left);
+        }
+    }
+
+    /// The next frame, skipping NMEA sentences (a sonar line's depth readings); panics with
+    /// `what` if none arrives within `timeout` or something else does.
+    pub fn next_frame(&mut self, what: &str, timeout: Duration) -> Frame {
+        loop {
+            match self.next_item(timeout) {
+                Some(LineItem::Frame(frame)) => return frame,
+                Some(LineItem::Nmea(_)) => continue,
+                other => panic!("{what}: expected a frame, got {other:?}"),
+            }
+        }
+    }
+
+    /// The next item that is not an NMEA sentence, within `timeout`.
+    pub fn next_non_nmea(&mut self, timeout: Duration) -> Option<LineItem> {
+        loop {
+            match self.next_item(timeout) {
+                Some(LineItem::Nmea(_)) => continue,
+                other => return other,
+            }
+        }
+    }
+
+    /// Waits `quiet` and returns every item that arrived meanwhile (NMEA included).
+    pub fn drain(&mut self, quiet: Duration) -> Vec<LineItem> {
+        let mut items = Vec::new();
+        while let Some(item) = self.next_item(quiet) {
+            items.push(item);
+        }
+        items
+    }
+}
+
+/// The bytes of a frame.
+pub fn frame_bytes(seq: u8, message: Message) -> Vec<u8> {
+    let mut b = BytesMut::new();
+    Frame::new(seq, message).encode(&mut b);
+    b.to_vec()
+}
