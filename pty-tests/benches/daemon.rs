@@ -14,9 +14,10 @@
 //!   the same two settings under a client polling 800 `ADC_READ`s a second, which is what
 //!   releasing replies byte by byte would cost.
 //! - `rss`: resident memory over one simulated hour at speed 100 with a client.
-//! - `view`: what one live page costs (`run --view`): daemon CPU under the 100 Hz ADC stream
-//!   with a page reading the 20 Hz event stream, against the same daemon without a page,
-//!   measured before and after it (baseline: the mean of those two).
+//! - `view`: what one live page costs (`run --view`): daemon CPU under the 100 Hz ADC stream,
+//!   then under a client polling 800 `ADC_READ`s a second, with a page reading the 20 Hz
+//!   event stream, against the same daemon without a page, measured before and after it
+//!   (baseline: the mean of those two).
 //!
 //! The binary measured is the one `EYEBOT_HIL_BIN` names, built by the same command:
 //!
@@ -515,33 +516,16 @@ fn cpu() {
 /// a second (each channel at 100 Hz, as a control loop reading every channel would), each
 /// write waiting for its reply.
 fn cpu_polled(quantum_ms: Option<f64>) -> f64 {
-    const PERIOD: Duration = Duration::from_micros(1250);
     let dir = TempDir::new("bench-cpu-poll");
     let args = quantum_args(&dir, quantum_ms);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let daemon = start_daemon(dir, &args);
-    let mut port = open_raw(&daemon.link("sensor"));
+    let port = open_raw(&daemon.link("sensor"));
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let client = {
         let stop = stop.clone();
         std::thread::spawn(move || {
-            let started = Instant::now();
-            let mut reply = [0u8; 10];
-            let mut i = 0u32;
-            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                let due = started + PERIOD * i;
-                std::thread::sleep(due.saturating_duration_since(Instant::now()));
-                let request = frame(
-                    i as u8,
-                    Message::AdcRead {
-                        channel: AdcChannel::new((i % 8) as u8).unwrap(),
-                    },
-                );
-                port.write_all(&request).unwrap();
-                port.read_exact(&mut reply).unwrap();
-                i += 1;
-            }
-            i
+            poll_adc(port, || stop.load(std::sync::atomic::Ordering::Relaxed))
         })
     };
     std::thread::sleep(Duration::from_secs(1));
@@ -556,6 +540,29 @@ fn cpu_polled(quantum_ms: Option<f64>) -> f64 {
         (interval + Duration::from_secs(1)).as_secs_f64()
     );
     polled
+}
+
+/// `ADC_READ` of channels 0-7 in turn, 800 a second, each write waiting for its reply, until
+/// `stop` says so; returns the number of replies.
+fn poll_adc(mut port: std::fs::File, stop: impl Fn() -> bool) -> u32 {
+    const PERIOD: Duration = Duration::from_micros(1250);
+    let started = Instant::now();
+    let mut reply = [0u8; 10];
+    let mut i = 0u32;
+    while !stop() {
+        let due = started + PERIOD * i;
+        std::thread::sleep(due.saturating_duration_since(Instant::now()));
+        let request = frame(
+            i as u8,
+            Message::AdcRead {
+                channel: AdcChannel::new((i % 8) as u8).unwrap(),
+            },
+        );
+        port.write_all(&request).unwrap();
+        port.read_exact(&mut reply).unwrap();
+        i += 1;
+    }
+    i
 }
 
 /// Prints and returns the CPU under the stream.
@@ -603,9 +610,23 @@ fn cpu_with(quantum_ms: Option<f64>) -> f64 {
     streaming
 }
 
-/// The CPU a reading page adds: 10 s without a page, 10 s with one, 10 s without again, all
-/// under the 100 Hz stream.
+/// What the EyeBot side does while `view` measures.
+#[derive(Debug, Clone, Copy)]
+enum Load {
+    /// The 100 Hz, 8-channel ADC stream.
+    Stream,
+    /// 800 `ADC_READ`s a second, each waiting for its reply.
+    Polled,
+}
+
 fn view() {
+    view_under(Load::Stream);
+    view_under(Load::Polled);
+}
+
+/// The CPU a reading page adds: 10 s without a page, 10 s with one, 10 s without again, all
+/// under `load`.
+fn view_under(load: Load) {
     let dir = TempDir::new("bench-view");
     let mut args = quantum_args(&dir, None);
     args.push("--view".into());
@@ -615,22 +636,30 @@ fn view() {
     let (addr, token) = eyebot_test_support::browser::split_view_url(&url);
     let interval = Duration::from_secs(10);
     let mut port = open_raw(&daemon.link("sensor"));
-    port.write_all(&frame(
-        1,
-        Message::AdcStream {
-            channels: 0xFF,
-            period_ms: 10,
-        },
-    ))
-    .unwrap();
-    let mut reader = port.try_clone().unwrap();
-    let drain = std::thread::spawn(move || {
-        let mut buf = [0u8; 4096];
-        let started = Instant::now();
-        while started.elapsed() < Duration::from_secs(33) {
-            let _ = reader.read(&mut buf);
+    let span = Duration::from_secs(33);
+    let drain = match load {
+        Load::Stream => {
+            port.write_all(&frame(
+                1,
+                Message::AdcStream {
+                    channels: 0xFF,
+                    period_ms: 10,
+                },
+            ))
+            .unwrap();
+            std::thread::spawn(move || {
+                let mut buf = [0u8; 4096];
+                let started = Instant::now();
+                while started.elapsed() < span {
+                    let _ = port.read(&mut buf);
+                }
+            })
         }
-    });
+        Load::Polled => std::thread::spawn(move || {
+            let started = Instant::now();
+            poll_adc(port, || started.elapsed() >= span);
+        }),
+    };
     std::thread::sleep(Duration::from_secs(1));
     let before = cpu_percent(&daemon, interval);
     let page = std::thread::spawn(move || {
@@ -664,9 +693,11 @@ fn view() {
     let after = cpu_percent(&daemon, interval);
     drain.join().unwrap();
     let baseline = (before + after) / 2.0;
-    println!(
-        "daemon CPU over {interval:?} each, 100 Hz ADC stream, run --view (/proc/PID/stat utime+stime)"
-    );
+    let what = match load {
+        Load::Stream => "100 Hz ADC stream",
+        Load::Polled => "800 ADC reads a second",
+    };
+    println!("daemon CPU over {interval:?} each, {what}, run --view (/proc/PID/stat utime+stime)");
     println!("  no page:  {before:5.2} % before, {after:5.2} % after (baseline {baseline:5.2} %)");
     println!(
         "  one page reading the event stream: {with_page:5.2} % ({frames} frames, {bytes} bytes in {:.1} s)",

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand, ValueEnum};
 
 pub mod check;
+pub mod export;
 pub mod gap;
 pub mod gap_bench;
 pub mod output;
@@ -58,6 +59,8 @@ pub enum Command {
     Check(check::CheckArgs),
     /// Show a recording in the browser: the live view's page with a time slider.
     View(view::ViewArgs),
+    /// Write a recording in another format (MCAP for Foxglove).
+    Export(export::ExportArgs),
 }
 
 /// Errors that end a CLI command.
@@ -127,5 +130,6 @@ pub fn main(cli: Cli) -> Result<(), CliError> {
         Command::GapBench(args) => gap_bench::run(&args),
         Command::Check(args) => check::main(args),
         Command::View(args) => view::main(args),
+        Command::Export(args) => export::main(args),
     }
 }

@@ -52,6 +52,14 @@ pub struct RunArgs {
     /// Allow --view on an address other than loopback (anyone with the URL can steer the run).
     #[arg(long, requires = "view")]
     pub view_public: bool,
+    /// Publish the run to Foxglove over its WebSocket protocol (default 127.0.0.1:8765):
+    /// the 3D scene, the pose, the sonar, the sensors, the thrusters and the link messages.
+    /// Prints `foxglove: ws://HOST:PORT` before `ready`.
+    #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = crate::view::FOXGLOVE_ADDR)]
+    pub foxglove: Option<std::net::SocketAddr>,
+    /// Allow --foxglove on an address other than loopback (anyone who reaches it can watch).
+    #[arg(long, requires = "foxglove")]
+    pub foxglove_public: bool,
 }
 
 impl RunArgs {
@@ -122,18 +130,21 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
     let model = crate::daemon::plant::MakoPlant::from_config(source.as_ref(), &config)?;
     let (board, mux) = crate::daemon::plant::devices(&config);
     let leftovers = daemon::shutdown::Leftovers::default();
-    let view = match args.view {
-        Some(addr) => Some(crate::view::ViewOptions {
-            addr,
+    let view = if args.view.is_some() || args.foxglove.is_some() {
+        Some(crate::view::ViewOptions {
+            addr: args.view,
             public: args.view_public,
+            foxglove: args.foxglove,
+            foxglove_public: args.foxglove_public,
             scene: crate::view::Scene::load(
                 source.as_ref(),
                 &config.vehicle,
                 &config.world,
                 &config.sensors,
             )?,
-        }),
-        None => None,
+        })
+    } else {
+        None
     };
     let options = RunOptions {
         record: args.record,
@@ -160,6 +171,9 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
                 }
                 Readiness::View { url } => {
                     let _ = writeln!(out, "view: {url}");
+                }
+                Readiness::Foxglove { url } => {
+                    let _ = writeln!(out, "foxglove: {url}");
                 }
                 Readiness::Ready { status_socket } => {
                     let _ = writeln!(out, "ready (status: {})", status_socket.display());

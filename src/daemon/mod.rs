@@ -99,6 +99,8 @@ pub enum Readiness {
     Link { name: &'static str, path: String },
     /// The live view is served at `url` (it carries the token).
     View { url: String },
+    /// Foxglove connects at `url` (`ws://HOST:PORT`).
+    Foxglove { url: String },
     /// Everything is up.
     Ready { status_socket: PathBuf },
 }
@@ -170,7 +172,8 @@ pub struct Daemon<M: Model> {
 /// The loop's side of a live view.
 struct ViewHook {
     side: crate::view::DaemonSide,
-    url: String,
+    url: Option<String>,
+    foxglove_url: Option<String>,
     next_state: Instant,
 }
 
@@ -258,16 +261,15 @@ impl<M: Model> Daemon<M> {
         let (status, status_rx) = watch::channel(StatusSnapshot::default());
         let view = match options.view {
             Some(view) => {
-                let bound = crate::view::bind(view.addr, view.public).await?;
-                let url = bound.url().to_string();
-                let (side, service) = crate::view::live(bound, view.scene, status.subscribe());
+                let started = crate::view::start_live(view, status.subscribe()).await?;
                 Some((
                     ViewHook {
-                        side,
-                        url,
+                        side: started.side,
+                        url: started.page_url,
+                        foxglove_url: started.foxglove_url,
                         next_state: Instant::now(),
                     },
-                    service,
+                    started.service,
                 ))
             }
             None => None,
@@ -351,7 +353,12 @@ impl<M: Model> Daemon<M> {
 
     /// The live view's URL (with its token), when serving one.
     pub fn view_url(&self) -> Option<&str> {
-        self.view.as_ref().map(|v| v.url.as_str())
+        self.view.as_ref().and_then(|v| v.url.as_deref())
+    }
+
+    /// Where Foxglove connects (`ws://HOST:PORT`), when serving it.
+    pub fn foxglove_url(&self) -> Option<&str> {
+        self.view.as_ref().and_then(|v| v.foxglove_url.as_deref())
     }
 
     /// Runs the simulation until `shutdown` resolves, every link task has ended, or the model
@@ -800,6 +807,11 @@ where
     }
     if let Some(url) = daemon.view_url() {
         on_ready(Readiness::View {
+            url: url.to_string(),
+        });
+    }
+    if let Some(url) = daemon.foxglove_url() {
+        on_ready(Readiness::Foxglove {
             url: url.to_string(),
         });
     }

@@ -1,6 +1,7 @@
 //! The view of a running bridge: reads the daemon's [`TapReceiver`] and status, decodes the
 //! wire, keeps the last minute of samples, and publishes one frame per state update to any
-//! number of pages through a latest-wins channel.
+//! number of pages through a latest-wins channel, and to Foxglove's clients when it serves
+//! them.
 
 use std::collections::VecDeque;
 use std::sync::atomic::Ordering;
@@ -8,6 +9,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use tokio::sync::watch;
 
+use super::foxglove::{LiveFoxglove, Watchers};
 use super::frame::{Frame, HISTORY_S, Sample, StatusView};
 use super::tap::TapReceiver;
 use super::wire::{LinkMessage, WireWatch};
@@ -33,6 +35,8 @@ pub struct History {
 pub struct LiveShared {
     pub latest: watch::Receiver<Published>,
     pub history: Arc<Mutex<History>>,
+    /// Each open event stream counts as a watcher while it lives.
+    pub watchers: Watchers,
 }
 
 impl LiveShared {
@@ -47,6 +51,7 @@ impl LiveShared {
 pub fn service(
     mut tap: TapReceiver,
     mut status: watch::Receiver<StatusSnapshot>,
+    mut fox: Option<LiveFoxglove>,
     mut stop: watch::Receiver<bool>,
 ) -> (LiveShared, impl Future<Output = ()> + Send + 'static) {
     let (publish, latest) = watch::channel(Published::default());
@@ -54,23 +59,33 @@ pub fn service(
     let shared = LiveShared {
         latest,
         history: history.clone(),
+        watchers: tap.watchers.clone(),
     };
     let task = async move {
         let mut wire = WireWatch::new();
+        // Chunks the loop skipped or dropped so far: when they grow, the wire has a gap.
+        let mut missed = 0u64;
         let mut sent_seq = 0;
         let mut messages: Arc<[LinkMessage]> = Arc::from(Vec::new());
         let mut view = StatusView::default();
         loop {
             tokio::select! {
                 chunk = tap.chunks.recv() => match chunk {
-                    Some(c) => wire.feed(c.t_s, c.link, c.dir, &c.data, |_| {}),
-                    None => return,
+                    Some(c) => {
+                        note_gap(&tap, &mut missed, &mut wire);
+                        match &fox {
+                            Some(f) => wire.feed(c.t_s, c.link, c.dir, &c.data, |m| f.channels.message(m)),
+                            None => wire.feed(c.t_s, c.link, c.dir, &c.data, |_| {}),
+                        }
+                    }
+                    None => break,
                 },
                 changed = tap.state.changed() => {
                     if changed.is_err() {
-                        return;
+                        break;
                     }
                     let row = *tap.state.borrow_and_update();
+                    note_gap(&tap, &mut missed, &mut wire);
                     let sample = Sample::new(&row, wire.readings());
                     {
                         let mut h = history.lock().unwrap_or_else(PoisonError::into_inner);
@@ -95,6 +110,10 @@ pub fn service(
                         sent_seq = wire.seq();
                         messages = wire.recent().iter().cloned().collect();
                     }
+                    if let Some(f) = fox.as_mut() {
+                        f.time(row.t_s);
+                        f.channels.state(&sample, wire.readings());
+                    }
                     let frame = Frame { sample: &sample, readings: wire.readings(), status: &view };
                     match serde_json::to_string(&frame) {
                         Ok(json) => {
@@ -105,11 +124,23 @@ pub fn service(
                 }
                 changed = stop.changed() => {
                     if changed.is_err() || *stop.borrow() {
-                        return;
+                        break;
                     }
                 }
             }
         }
+        if let Some(f) = fox {
+            f.stop().await;
+        }
     };
     (shared, task)
+}
+
+/// Tells `wire` of a gap when the loop skipped or dropped chunks since the last look.
+fn note_gap(tap: &TapReceiver, missed: &mut u64, wire: &mut WireWatch) {
+    let now = tap.skipped.load(Ordering::Relaxed) + tap.dropped.load(Ordering::Relaxed);
+    if now != *missed {
+        *missed = now;
+        wire.gap();
+    }
 }

@@ -14,6 +14,7 @@
 //!   runtime, behind a random token, `Host` and `Origin` checks; controls are POST only and
 //!   go back to the loop as [`tap::ControlRequest`]s, which the recording keeps as events.
 
+pub mod foxglove;
 pub mod frame;
 pub mod live;
 pub mod recording;
@@ -29,18 +30,26 @@ use tokio::sync::{mpsc, watch};
 pub use self::scene::Scene;
 use self::server::{Guard, Source};
 
-/// Where and how to serve a view.
+/// Where and how to show a running bridge: the page, Foxglove, or both.
 #[derive(Debug, Clone)]
 pub struct ViewOptions {
-    pub addr: SocketAddr,
-    /// Allows a non-loopback address (and any `Host`; the token still guards).
+    /// Where to serve the page (`None`: no page).
+    pub addr: Option<SocketAddr>,
+    /// Allows a non-loopback page address (and any `Host`; the token still guards).
     pub public: bool,
+    /// Where to serve Foxglove's WebSocket protocol (`None`: not at all).
+    pub foxglove: Option<SocketAddr>,
+    /// Allows a non-loopback Foxglove address.
+    pub foxglove_public: bool,
     /// The pool, the hull and the transducers to draw.
     pub scene: Scene,
 }
 
 /// The default address: loopback, a port the system chooses.
 pub const DEFAULT_ADDR: &str = "127.0.0.1:0";
+
+/// Foxglove's default: loopback, the port Foxglove's "open connection" dialog proposes.
+pub const FOXGLOVE_ADDR: &str = "127.0.0.1:8765";
 
 /// Why a view could not be served.
 #[derive(Debug, thiserror::Error)]
@@ -61,6 +70,8 @@ pub enum ViewError {
     Recording(#[from] crate::record::ReadError),
     #[error(transparent)]
     Config(#[from] crate::config::ConfigError),
+    #[error(transparent)]
+    Foxglove(#[from] self::foxglove::FoxgloveError),
 }
 
 /// A bound listener with its token, not serving yet.
@@ -137,27 +148,69 @@ pub type LiveService = Box<
     dyn FnOnce(watch::Receiver<bool>) -> std::pin::Pin<Box<dyn Future<Output = ()> + Send>> + Send,
 >;
 
-/// Serves the view of a running daemon: returns the daemon's side and the service to spawn
-/// beside the links (given the daemon's status updates and stop signal).
-pub fn live(
-    bound: Bound,
-    scene: Scene,
+/// A live view, started: the daemon's side, the service to spawn beside the links, and
+/// where to look.
+pub struct Started {
+    pub side: DaemonSide,
+    pub service: LiveService,
+    /// The page's URL (it carries the token).
+    pub page_url: Option<String>,
+    /// Foxglove's address (`ws://HOST:PORT`).
+    pub foxglove_url: Option<String>,
+}
+
+/// Binds the page and starts the Foxglove server as `options` ask; returns the daemon's side
+/// and the service that decodes the tap and serves both (given the daemon's status updates
+/// and, when spawned, its stop signal).
+pub async fn start_live(
+    options: ViewOptions,
     status: watch::Receiver<crate::daemon::status::StatusSnapshot>,
-) -> (DaemonSide, LiveService) {
+) -> Result<Started, ViewError> {
     let (tap, tap_rx) = tap::tap();
+    let bound = match options.addr {
+        Some(addr) => Some(bind(addr, options.public).await?),
+        None => None,
+    };
+    let fox = match options.foxglove {
+        Some(addr) => Some((
+            addr,
+            self::foxglove::LiveFoxglove::start(
+                addr,
+                options.foxglove_public,
+                options.scene.clone(),
+                tap_rx.watchers.clone(),
+            )
+            .await?,
+        )),
+        None => None,
+    };
+    let page_url = bound.as_ref().map(|b| b.url().to_string());
+    let foxglove_url = fox.as_ref().map(|(addr, f)| f.url(*addr));
+    let fox = fox.map(|(_, f)| f);
     let (controls_tx, controls) = mpsc::channel(CONTROL_QUEUE);
+    let scene = options.scene;
     let service = move |stop: watch::Receiver<bool>| {
-        let (shared, live) = live::service(tap_rx, status, stop.clone());
+        let (shared, live) = live::service(tap_rx, status, fox, stop.clone());
         let source = Source::Live {
             shared,
             controls: Some(controls_tx),
         };
         let fut: std::pin::Pin<Box<dyn Future<Output = ()> + Send>> = Box::pin(async move {
-            tokio::join!(live, bound.serve(source, scene, stop));
+            match bound {
+                Some(bound) => {
+                    tokio::join!(live, bound.serve(source, scene, stop));
+                }
+                None => live.await,
+            }
         });
         fut
     };
-    (DaemonSide { tap, controls }, Box::new(service))
+    Ok(Started {
+        side: DaemonSide { tap, controls },
+        service: Box::new(service),
+        page_url,
+        foxglove_url,
+    })
 }
 
 /// Serves the view of the recording in `dir` until `stop` turns true; `on_ready` runs once

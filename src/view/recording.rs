@@ -28,6 +28,13 @@ pub struct RecordingView {
     events: Vec<record::EventRow>,
 }
 
+/// One step of [`RecordingView::replay`].
+#[derive(Debug, Clone, Copy)]
+pub enum Step<'a> {
+    Message(&'a LinkMessage),
+    State(&'a Sample, &'a Readings),
+}
+
 /// What the page shows of the recording itself.
 #[derive(Debug, Clone, Serialize)]
 pub struct RecordingInfo {
@@ -82,6 +89,22 @@ impl RecordingView {
             messages,
             events,
         })
+    }
+
+    /// Goes through the recording in time order: each state row (with what the wire had said
+    /// by then) after the link messages decoded up to its time, then the messages after the
+    /// last row. `export --mcap` writes what it is given.
+    pub fn replay(&self, mut each: impl FnMut(Step<'_>)) {
+        let mut messages = self.messages.iter().peekable();
+        for (sample, readings) in self.samples.iter().zip(&self.readings) {
+            while let Some(m) = messages.next_if(|m| m.t_s <= sample.t_s) {
+                each(Step::Message(m));
+            }
+            each(Step::State(sample, readings));
+        }
+        for m in messages {
+            each(Step::Message(m));
+        }
     }
 
     /// The first and last state rows' times.

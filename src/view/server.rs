@@ -229,8 +229,11 @@ async fn stream(State(app): State<AppState>) -> Response {
         stop: watch::Receiver<bool>,
         history: Option<String>,
         last_seq: Option<u64>,
+        /// The page counts as watching (the link bytes are decoded) while its stream lives.
+        _watching: super::foxglove::WatchGuard,
     }
     let client = Client {
+        _watching: shared.watchers.guard(),
         latest,
         stop: app.stop.clone(),
         history: Some(history),

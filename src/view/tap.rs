@@ -1,8 +1,10 @@
 //! The daemon's side of a live view: what the simulation loop hands over, without ever
 //! waiting for it.
 //!
-//! The loop copies each chunk of bytes that crosses a link into a bounded channel with
-//! `try_send` (a full channel drops the chunk and counts it), and every [`VIEW_PERIOD`] puts
+//! While a page or a Foxglove client watches ([`Watchers`]), the loop copies each chunk of
+//! bytes that crosses a link into a bounded channel with `try_send` (a full channel drops the
+//! chunk and counts it); while none does, it only counts the chunk as skipped, so nobody pays
+//! for decoding what nobody sees. Every [`VIEW_PERIOD`] it puts
 //! the vehicle's true state into a latest-wins `watch`. Controls come back the other way as
 //! [`ControlRequest`]s, each answered once the loop has applied or refused it.
 
@@ -14,6 +16,7 @@ use bytes::Bytes;
 use serde::{Deserialize, Serialize};
 use tokio::sync::{mpsc, oneshot, watch};
 
+pub use super::foxglove::Watchers;
 use crate::record::{Direction, StateRow};
 
 /// How often the loop publishes the vehicle's state to a view (20 Hz).
@@ -36,6 +39,8 @@ pub struct TapChunk {
 pub struct Tap {
     chunks: mpsc::Sender<TapChunk>,
     dropped: Arc<AtomicU64>,
+    skipped: Arc<AtomicU64>,
+    watchers: Watchers,
     state: watch::Sender<StateRow>,
     settings: watch::Sender<Settings>,
 }
@@ -55,6 +60,10 @@ pub struct TapReceiver {
     pub chunks: mpsc::Receiver<TapChunk>,
     /// Chunks the loop dropped because the view had not taken the earlier ones.
     pub dropped: Arc<AtomicU64>,
+    /// Chunks the loop did not hand over because nothing watched.
+    pub skipped: Arc<AtomicU64>,
+    /// Open pages and connected Foxglove clients.
+    pub watchers: Watchers,
     pub state: watch::Receiver<StateRow>,
     pub settings: watch::Receiver<Settings>,
 }
@@ -63,18 +72,24 @@ pub struct TapReceiver {
 pub fn tap() -> (Tap, TapReceiver) {
     let (chunks_tx, chunks) = mpsc::channel(TAP_CHUNKS);
     let dropped = Arc::new(AtomicU64::new(0));
+    let skipped = Arc::new(AtomicU64::new(0));
+    let watchers = Watchers::default();
     let (state_tx, state) = watch::channel(StateRow::default());
     let (settings_tx, settings) = watch::channel(Settings::default());
     (
         Tap {
             chunks: chunks_tx,
             dropped: dropped.clone(),
+            skipped: skipped.clone(),
+            watchers: watchers.clone(),
             state: state_tx,
             settings: settings_tx,
         },
         TapReceiver {
             chunks,
             dropped,
+            skipped,
+            watchers,
             state,
             settings,
         },
@@ -82,9 +97,14 @@ pub fn tap() -> (Tap, TapReceiver) {
 }
 
 impl Tap {
-    /// Offers a chunk; drops and counts it when the view is behind. Never waits.
+    /// Offers a chunk; drops and counts it when the view is behind, skips and counts it when
+    /// nothing watches. Never waits.
     pub fn bytes(&self, t_s: f64, link: &'static str, dir: Direction, data: Bytes) {
         if data.is_empty() {
+            return;
+        }
+        if !self.watchers.any() {
+            self.skipped.fetch_add(1, Ordering::Relaxed);
             return;
         }
         let chunk = TapChunk {

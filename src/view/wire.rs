@@ -87,6 +87,10 @@ pub struct WireWatch {
     readings: Readings,
     recent: VecDeque<LinkMessage>,
     seq: u64,
+    /// After a gap, what a decoder skips before its first message is not counted or shown
+    /// as an error; `synced` holds those that have found one since.
+    after_gap: bool,
+    synced: std::collections::BTreeSet<(String, &'static str)>,
 }
 
 impl Default for WireWatch {
@@ -97,6 +101,8 @@ impl Default for WireWatch {
             readings: Readings::default(),
             recent: VecDeque::with_capacity(MESSAGES_KEPT),
             seq: 0,
+            after_gap: false,
+            synced: std::collections::BTreeSet::new(),
         }
     }
 }
@@ -120,6 +126,25 @@ impl WireWatch {
         self.seq
     }
 
+    /// Some bytes were not seen (nobody watched, or the view fell behind): partial messages
+    /// are dropped, each decoder starts afresh at the next bytes without counting what it
+    /// skips to find a message start as an error, and what the wire had said is forgotten
+    /// until it says it again.
+    pub fn gap(&mut self) {
+        for (decoder, buf) in self.decoders.values_mut() {
+            *decoder = LineDecoder::default();
+            buf.clear();
+        }
+        self.after_gap = true;
+        self.synced.clear();
+        let r = &mut self.readings;
+        r.thrusters = [None; 4];
+        r.adc = [None; 8];
+        r.compass_deg = None;
+        r.selected = None;
+        r.echoes = [None; 4];
+    }
+
     /// Bytes that crossed `link` in direction `dir` at simulated time `t_s`; `each` sees
     /// every message they completed.
     pub fn feed(
@@ -139,6 +164,12 @@ impl WireWatch {
         let (mut decoder, mut buf) = self.decoders.remove(&key).unwrap_or_default();
         buf.extend_from_slice(data);
         while let Some(item) = decoder.decode(&mut buf) {
+            if self.after_gap && !self.synced.contains(&key) {
+                if matches!(item, LineItem::Error(_)) {
+                    continue;
+                }
+                self.synced.insert(key.clone());
+            }
             let counts = self.readings.links.entry(link.to_string()).or_default();
             match (&item, dir) {
                 (LineItem::Error(_), _) => counts.errors += 1,
@@ -166,17 +197,24 @@ impl WireWatch {
 
     /// Updates the readings with one item; returns its kind and text.
     fn apply(&mut self, t_s: f64, dir: Direction, item: LineItem) -> (String, String) {
-        let text = match &item {
-            LineItem::Frame(f) => format!("#{} {:?}", f.seq, f.message),
-            LineItem::Sonar(c) => format!("{c:?}"),
-            LineItem::Nmea(s) => format!("{s:?}"),
-            LineItem::Error(e) => e.to_string(),
-        };
-        let kind = match &item {
-            LineItem::Frame(f) => variant(&format!("{:?}", f.message)),
-            LineItem::Sonar(c) => variant(&format!("{c:?}")),
-            LineItem::Nmea(s) => variant(&format!("{s:?}")),
-            LineItem::Error(_) => "Error".to_string(),
+        // One `Debug` rendering per message: the kind is its leading variant name.
+        let (text, kind) = match &item {
+            LineItem::Frame(f) => {
+                let text = format!("#{} {:?}", f.seq, f.message);
+                let kind = variant(text.split_once(' ').map_or("", |(_, m)| m));
+                (text, kind)
+            }
+            LineItem::Sonar(c) => {
+                let text = format!("{c:?}");
+                let kind = variant(&text);
+                (text, kind)
+            }
+            LineItem::Nmea(s) => {
+                let text = format!("{s:?}");
+                let kind = variant(&text);
+                (text, kind)
+            }
+            LineItem::Error(e) => (e.to_string(), "Error".to_string()),
         };
         let r = &mut self.readings;
         match (dir, item) {
@@ -330,5 +368,57 @@ mod tests {
         assert_eq!(w.recent().len(), MESSAGES_KEPT);
         assert_eq!(w.recent().front().map(|m| m.seq), Some(50));
         assert_eq!(w.seq(), 250);
+    }
+
+    /// After a gap the decoder drops what it held, skips to the next message without an
+    /// error, and forgets the readings until the wire says them again; without a gap the
+    /// same bytes are an error.
+    #[test]
+    fn a_gap_resyncs_without_an_error_and_forgets_the_readings() {
+        let command = ThrusterCommand {
+            duty: 0x40,
+            direction: Spin::Forward,
+        };
+        let set = frame(
+            1,
+            Message::ThrusterSetAll {
+                commands: [command; 4],
+            },
+        );
+        let read = frame(2, Message::TimeGet);
+        let kinds = |w: &mut WireWatch, data: &[u8]| {
+            let mut k = Vec::new();
+            w.feed(0.0, "sensor", Direction::Rx, data, |m| {
+                k.push(m.kind.clone())
+            });
+            k
+        };
+        let mut tail = set[3..].to_vec();
+        tail.extend(&read);
+
+        let mut w = WireWatch::new();
+        assert_eq!(kinds(&mut w, &set), ["ThrusterSetAll"]);
+        assert!(w.readings().thrusters[0].is_some());
+        w.gap();
+        assert_eq!(w.readings().thrusters[0], None);
+        let after_gap = kinds(&mut w, &tail);
+        assert_eq!(
+            after_gap.last().map(String::as_str),
+            Some("TimeGet"),
+            "{after_gap:?}"
+        );
+        assert!(!after_gap.contains(&"Error".to_string()), "{after_gap:?}");
+        assert_eq!(w.readings().errors, 0);
+        // Once in step, stray bytes are an error again, as they are without a gap.
+        let again = kinds(&mut w, &tail);
+        assert!(again.contains(&"Error".to_string()), "{again:?}");
+        assert_eq!(
+            again.last().map(String::as_str),
+            Some("TimeGet"),
+            "{again:?}"
+        );
+        let mut w = WireWatch::new();
+        let fresh = kinds(&mut w, &tail);
+        assert!(fresh.contains(&"Error".to_string()), "{fresh:?}");
     }
 }

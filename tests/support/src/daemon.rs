@@ -172,6 +172,8 @@ pub struct Daemon {
     pub links: Vec<(String, String)>,
     /// The URL of the `view: URL` line (`run --view`).
     pub view_url: Option<String>,
+    /// The address of the `foxglove: URL` line (`run --foxglove`).
+    pub foxglove_url: Option<String>,
 }
 
 impl Daemon {
@@ -232,6 +234,7 @@ impl Daemon {
             run_dir,
             links: Vec::new(),
             view_url: None,
+            foxglove_url: None,
         };
         let deadline = Instant::now() + READY_TIMEOUT;
         loop {
@@ -242,6 +245,8 @@ impl Daemon {
                         daemon.links.push((name.into(), path.into()));
                     } else if let Some(url) = line.strip_prefix("view: ") {
                         daemon.view_url = Some(url.to_string());
+                    } else if let Some(url) = line.strip_prefix("foxglove: ") {
+                        daemon.foxglove_url = Some(url.to_string());
                     } else if line.starts_with("ready") {
                         return daemon;
                     }

@@ -12,6 +12,7 @@
 //! - [`clients`]: EyeBot-side clients of a running daemon's links.
 //! - [`browser`]: headless chromium over the DevTools protocol, and a plain HTTP client,
 //!   for the live view.
+//! - [`foxglove`]: a Foxglove WebSocket client for `run --foxglove`.
 //! - [`recording`]: a `--record` directory read back.
 //! - [`pty`]: ptys made with the bridge's own `PtyMaster`, and a timestamping reader.
 //! - [`eyebot_c`]: the EyeBot C library and programs built with make and run against a daemon.
@@ -22,6 +23,7 @@ pub mod config;
 pub mod daemon;
 pub mod dir;
 pub mod eyebot_c;
+pub mod foxglove;
 pub mod process;
 pub mod pty;
 pub mod recording;
