@@ -5,81 +5,17 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use eyebot_hil::probe::SensorClient;
 use eyebot_hil::view::foxglove::TOPICS;
-use eyebot_test_support::clients::{sensor_client, sonar_client};
+use eyebot_test_support::clients::LockstepDriver;
 use eyebot_test_support::foxglove::FoxgloveClient;
 use eyebot_test_support::{Daemon, Recording, RunningDaemon};
-use firmware_protocol::sensor_link::{Direction as Spin, Message, ThrusterCommand};
-use firmware_protocol::{LineDecoder, Transducer};
+use firmware_protocol::LineDecoder;
+use firmware_protocol::sensor_link::Message;
 use foxglove::Decode as _;
 use foxglove::messages::{FrameTransform, Log};
 
 const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 const WAIT: Duration = Duration::from_secs(20);
-
-/// The EyeBot side of a lockstep run: a sensor-link client on its own runtime.
-struct Driver {
-    rt: tokio::runtime::Runtime,
-    sensor: SensorClient,
-    ticks: u64,
-}
-
-impl Driver {
-    fn new(daemon: &Daemon) -> Self {
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .expect("runtime");
-        let sensor = rt.block_on(async { sensor_client(&daemon.link("sensor")) });
-        let mut d = Self {
-            rt,
-            sensor,
-            ticks: 0,
-        };
-        d.ask(Message::Hello { client_version: 1 });
-        d
-    }
-
-    fn ask(&mut self, message: Message) -> Message {
-        self.rt
-            .block_on(
-                self.sensor
-                    .request("foxglove test", message, Duration::ZERO),
-            )
-            .expect("the bridge answers")
-    }
-
-    /// Advances simulated time by `ticks` of 10 ms.
-    fn advance(&mut self, ticks: u32) {
-        let reply = self.ask(Message::TimeAdvance { ticks });
-        assert!(matches!(reply, Message::Time { .. }), "{reply:?}");
-        self.ticks += u64::from(ticks);
-    }
-
-    /// Thrusters on, the ADC streaming, the sonar's transducer 1 selected: messages of every
-    /// kind on both links.
-    fn busy(&mut self, daemon: &Daemon) -> eyebot_hil::probe::SonarClient {
-        let on = ThrusterCommand {
-            duty: 0x60,
-            direction: Spin::Forward,
-        };
-        self.ask(Message::ThrusterSetAll {
-            commands: [on, on, ThrusterCommand::OFF, ThrusterCommand::OFF],
-        });
-        self.ask(Message::AdcStream {
-            channels: 0xFF,
-            period_ms: 100,
-        });
-        let mut sonar = self
-            .rt
-            .block_on(async { sonar_client(&daemon.link("sonar")) });
-        self.rt
-            .block_on(sonar.select(Transducer::new(1).expect("transducer 1")))
-            .expect("select");
-        sonar
-    }
-}
 
 /// Heading (deg, 0-360) of a NED attitude quaternion.
 fn heading_deg(q: &foxglove::messages::Quaternion) -> f64 {
@@ -116,7 +52,7 @@ fn a_foxglove_client_sees_the_channels_and_the_pose_follows_status() {
     assert_eq!(schema("/thrusters").0, "json");
     client.subscribe(&["/tf", "/links"]);
 
-    let mut drive = Driver::new(&daemon);
+    let mut drive = LockstepDriver::new(&daemon, "foxglove test");
     let _sonar = drive.busy(&daemon);
     let mut kinds = BTreeMap::new();
     for step in 0..4 {
@@ -202,7 +138,7 @@ fn an_exported_recording_holds_every_channel_in_time_order() {
         .lockstep()
         .record()
         .start();
-    let mut drive = Driver::new(&daemon);
+    let mut drive = LockstepDriver::new(&daemon, "foxglove test");
     let sonar = drive.busy(&daemon);
     for _ in 0..5 {
         drive.advance(50);

@@ -7,53 +7,14 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use eyebot_hil::daemon::status::StatusSnapshot;
-use eyebot_hil::probe::SensorClient;
 use eyebot_test_support::browser::{Browser, http, split_view_url, stalled_stream};
-use eyebot_test_support::clients::{sensor_client, sonar_client};
+use eyebot_test_support::clients::LockstepDriver;
 use eyebot_test_support::{Daemon, RunningDaemon};
-use firmware_protocol::Transducer;
-use firmware_protocol::sensor_link::{Direction, Message, ThrusterCommand};
+use firmware_protocol::sensor_link::Message;
 use serde_json::Value;
 
 const BIN: &str = env!("CARGO_BIN_EXE_eyebot-hil");
 const WAIT: Duration = Duration::from_secs(20);
-
-/// The EyeBot side of a lockstep run: a sensor-link client on its own runtime.
-struct Driver {
-    rt: tokio::runtime::Runtime,
-    sensor: SensorClient,
-    seq_ticks: u64,
-}
-
-impl Driver {
-    fn new(daemon: &Daemon) -> Self {
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .expect("runtime");
-        let sensor = rt.block_on(async { sensor_client(&daemon.link("sensor")) });
-        let mut d = Self {
-            rt,
-            sensor,
-            seq_ticks: 0,
-        };
-        d.ask(Message::Hello { client_version: 1 });
-        d
-    }
-
-    fn ask(&mut self, message: Message) -> Message {
-        self.rt
-            .block_on(self.sensor.request("view test", message, Duration::ZERO))
-            .expect("the bridge answers")
-    }
-
-    /// Advances simulated time by `ticks` of 10 ms.
-    fn advance(&mut self, ticks: u32) {
-        let reply = self.ask(Message::TimeAdvance { ticks });
-        assert!(matches!(reply, Message::Time { .. }), "{reply:?}");
-        self.seq_ticks += u64::from(ticks);
-    }
-}
 
 /// The page's current pose and time: `[t_s, x_m, y_m, depth_m, heading_deg]`.
 const PAGE_POSE: &str = "(() => { const f = window.eyebotView && eyebotView.frame; \
@@ -110,32 +71,14 @@ fn the_page_follows_the_bridge_steers_it_and_shows_the_recording() {
         .view_url
         .clone()
         .expect("run --view prints `view: URL`");
-    let mut drive = Driver::new(&daemon);
-    let command = ThrusterCommand {
-        duty: 0x60,
-        direction: Direction::Forward,
-    };
-    let off = ThrusterCommand::OFF;
-    drive.ask(Message::ThrusterSetAll {
-        commands: [command, command, off, off],
-    });
-    drive.ask(Message::AdcStream {
-        channels: 0xFF,
-        period_ms: 100,
-    });
-    let mut sonar = drive
-        .rt
-        .block_on(async { sonar_client(&daemon.link("sonar")) });
-    drive
-        .rt
-        .block_on(sonar.select(Transducer::new(1).expect("transducer 1")))
-        .expect("select");
+    let mut drive = LockstepDriver::new(&daemon, "view test");
+    let sonar = drive.busy(&daemon);
     drive.advance(300);
 
     let mut browser = Browser::open(daemon.dir.path(), "chromium", &url);
     for step in 0..4 {
         let status = daemon.wait_status(WAIT, "time to reach the advance", |s| {
-            (s.sim_time_s - drive.seq_ticks as f64 * 0.01).abs() < 1e-6
+            (s.sim_time_s - drive.ticks as f64 * 0.01).abs() < 1e-6
         });
         let want = status_pose(&status);
         let shown = browser.wait_eval(
@@ -151,7 +94,7 @@ fn the_page_follows_the_bridge_steers_it_and_shows_the_recording() {
 
     // A pose outside the pool is refused with the reason, and nothing moves.
     let before = daemon.wait_status(WAIT, "time to reach the advance", |s| {
-        (s.sim_time_s - drive.seq_ticks as f64 * 0.01).abs() < 1e-6
+        (s.sim_time_s - drive.ticks as f64 * 0.01).abs() < 1e-6
     });
     let refused = browser
         .eval("eyebotControl({action: 'pose', x_m: 99, y_m: 5, depth_m: 1, heading_deg: 45})");
@@ -185,7 +128,7 @@ fn the_page_follows_the_bridge_steers_it_and_shows_the_recording() {
         drive.ask(Message::CompassRead);
     }
     let status = daemon.wait_status(WAIT, "the last advance", |s| {
-        (s.sim_time_s - drive.seq_ticks as f64 * 0.01).abs() < 1e-6
+        (s.sim_time_s - drive.ticks as f64 * 0.01).abs() < 1e-6
     });
     let want = status_pose(&status);
     browser.wait_eval("the pose after the move", WAIT, PAGE_POSE, |v| {
