@@ -11,7 +11,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
-use firmware_protocol::sensor_link::Message;
+use firmware_protocol::sensor_link::{Counters, Message};
 use firmware_protocol::{Frame, LineDecoder, LineItem};
 
 /// One end of a link, opened as a plain C program would (raw file, blocking writes).
@@ -22,6 +22,9 @@ pub struct Wire {
     /// Every byte read so far, in order.
     pub received: Vec<u8>,
 }
+
+/// How long [`Wire::reply`] waits for a reply.
+pub const REPLY_WAIT: Duration = Duration::from_secs(10);
 
 impl Wire {
     pub fn open(path: &Path) -> Self {
@@ -90,6 +93,33 @@ impl Wire {
                 Some(LineItem::Nmea(_)) => continue,
                 other => panic!("{what}: expected a frame, got {other:?}"),
             }
+        }
+    }
+
+    /// The next frame that is not a push (types `0xC0` and up), within [`REPLY_WAIT`]; it must
+    /// carry `seq`. `what` names the request in a failure.
+    pub fn reply(&mut self, seq: u8, what: &str) -> Message {
+        loop {
+            let frame = self.next_frame(what, REPLY_WAIT);
+            if frame.message.msg_type() >= 0xC0 {
+                continue;
+            }
+            assert_eq!(frame.seq, seq, "{what}: reply seq");
+            return frame.message;
+        }
+    }
+
+    /// Sends `message` as frame `seq` and returns its reply (pushes and NMEA skipped).
+    pub fn ask(&mut self, seq: u8, message: Message) -> Message {
+        self.request(seq, message);
+        self.reply(seq, &format!("{message:?}"))
+    }
+
+    /// The bridge's counters (COUNTERS_GET as frame `seq`).
+    pub fn counters(&mut self, seq: u8) -> Counters {
+        match self.ask(seq, Message::CountersGet) {
+            Message::Counters(c) => c,
+            other => panic!("COUNTERS_GET answered {other:?}"),
         }
     }
 

@@ -14,7 +14,7 @@ use eyebot_hil::daemon::config::DaemonConfig;
 use eyebot_hil::daemon::{Daemon as Bridge, RunOptions};
 use eyebot_test_support::config::{LOCKSTEP, config_text};
 use eyebot_test_support::{InProcessDaemon, RunningDaemon, TempDir};
-use firmware_protocol::sensor_link::{Counters, Message};
+use firmware_protocol::sensor_link::Message;
 use firmware_protocol::{LineItem, SonarCommand};
 use pty_tests::wire::{Wire, frame_bytes};
 
@@ -25,28 +25,8 @@ fn daemon(tag: &str, lockstep: bool) -> InProcessDaemon {
     InProcessDaemon::start(TempDir::new(tag), &config_text(edits), None, |_| {})
 }
 
-/// The reply to `message` (pushes and NMEA skipped); it must carry `seq`.
-fn ask(wire: &mut Wire, seq: u8, message: Message) -> Message {
-    wire.request(seq, message);
-    loop {
-        let frame = wire.next_frame(&format!("{message:?}"), WAIT);
-        if frame.message.msg_type() >= 0xC0 {
-            continue;
-        }
-        assert_eq!(frame.seq, seq, "reply to {message:?}");
-        return frame.message;
-    }
-}
-
-fn counters(wire: &mut Wire, seq: u8) -> Counters {
-    match ask(wire, seq, Message::CountersGet) {
-        Message::Counters(c) => c,
-        other => panic!("COUNTERS_GET: {other:?}"),
-    }
-}
-
 fn answers_hello(wire: &mut Wire, seq: u8, context: &str) {
-    let r = ask(wire, seq, Message::Hello { client_version: 1 });
+    let r = wire.ask(seq, Message::Hello { client_version: 1 });
     assert!(matches!(r, Message::HelloReply { .. }), "{context}: {r:?}");
 }
 
@@ -304,7 +284,7 @@ fn frames_written_byte_by_byte_are_whole_frames() {
     let mut d = daemon("adv-bytewise", false);
     let mut s = Wire::open(&d.link("sensor"));
     answers_hello(&mut s, 0, "start");
-    let before = counters(&mut s, 1);
+    let before = s.counters(1);
     for seq in 2..6u8 {
         for b in frame_bytes(seq, Message::TimeGet) {
             s.send(&[b]);
@@ -314,7 +294,7 @@ fn frames_written_byte_by_byte_are_whole_frames() {
         assert_eq!(f.seq, seq);
         assert!(matches!(f.message, Message::Time { .. }), "{:?}", f.message);
     }
-    let after = counters(&mut s, 6);
+    let after = s.counters(6);
     assert_eq!(after.rx_framing_errors, before.rx_framing_errors);
     assert_eq!(after.rx_crc_errors, before.rx_crc_errors);
     assert_eq!(
@@ -332,7 +312,7 @@ fn mixed_traffic_is_counted_exactly() {
     let mut d = daemon("adv-mixed", true);
     let mut s = Wire::open(&d.link("sensor"));
     answers_hello(&mut s, 0, "start");
-    let before = counters(&mut s, 1);
+    let before = s.counters(1);
     // HELLO and COUNTERS_GET so far: 8 + 7 bytes.
     let bytes_before = 15u64;
     let mut stream = Vec::new();
@@ -364,7 +344,7 @@ fn mixed_traffic_is_counted_exactly() {
         assert!(f.seq >= 10 && f.seq < 50, "{f:?}");
         answers += 1;
     }
-    let after = counters(&mut s, 60);
+    let after = s.counters(60);
     let d_ = |a: u32, b: u32| b.wrapping_sub(a);
     assert_eq!(
         d_(before.rx_frames, after.rx_frames),

@@ -20,7 +20,7 @@ use eyebot_test_support::config::{LOCKSTEP, config_text};
 use eyebot_test_support::daemon::link_status;
 use eyebot_test_support::{InProcessDaemon, RunningDaemon, TempDir};
 use firmware_protocol::sensor_link::{
-    CompassMode, CompassOutput, Counters, ErrorCode, Message, TimeMode, msg_type,
+    CompassMode, CompassOutput, ErrorCode, Message, TimeMode, msg_type,
 };
 use firmware_protocol::{Frame, LineItem, SonarCommand};
 use pty_tests::wire::{Wire, frame_bytes};
@@ -96,33 +96,8 @@ fn raw_frame(kind: u8, seq: u8, payload: &[u8]) -> Vec<u8> {
     b.to_vec()
 }
 
-/// Sends `message` and returns the reply with its seq (pushes are skipped).
-fn ask(wire: &mut Wire, seq: u8, message: Message) -> Message {
-    wire.request(seq, message);
-    reply(wire, seq, &format!("{message:?}"))
-}
-
-/// The next frame that is not a push; it must carry `seq`.
-fn reply(wire: &mut Wire, seq: u8, what: &str) -> Message {
-    loop {
-        let frame = wire.next_frame(what, WAIT);
-        if frame.message.msg_type() >= 0xC0 {
-            continue;
-        }
-        assert_eq!(frame.seq, seq, "{what}: reply seq");
-        return frame.message;
-    }
-}
-
-fn counters(wire: &mut Wire, seq: u8) -> Counters {
-    match ask(wire, seq, Message::CountersGet) {
-        Message::Counters(c) => c,
-        other => panic!("COUNTERS_GET answered {other:?}"),
-    }
-}
-
 fn hello(wire: &mut Wire, seq: u8) {
-    let r = ask(wire, seq, Message::Hello { client_version: 1 });
+    let r = wire.ask(seq, Message::Hello { client_version: 1 });
     assert!(matches!(r, Message::HelloReply { .. }), "{r:?}");
 }
 
@@ -172,7 +147,7 @@ fn every_request_example_gets_a_reply_the_message_table_allows() {
                 readings,
             };
             sensor.send(&frame_bytes(seq, priming));
-            let got = reply(&mut sensor, seq, "a STEP for the example to use");
+            let got = sensor.reply(seq, "a STEP for the example to use");
             assert_eq!(
                 got.msg_type(),
                 msg_type::STEP,
@@ -181,7 +156,7 @@ fn every_request_example_gets_a_reply_the_message_table_allows() {
             );
         }
         sensor.send(&ex.bytes);
-        let got = reply(&mut sensor, request.seq, &ex.name);
+        let got = sensor.reply(request.seq, &ex.name);
         let allowed = &answered_by[&kind];
         assert!(
             allowed.contains(&got.msg_type()),
@@ -277,7 +252,7 @@ fn every_row_of_the_receiving_table_gets_its_bridge_answer() {
                 ),
             }
             seq = seq.wrapping_add(1);
-            let before = counters(&mut sensor, seq);
+            let before = sensor.counters(seq);
             sensor.send(input);
             if situation == "incomplete frame" {
                 // The idle limit, in simulated time (realtime: the bridge's clock).
@@ -300,7 +275,7 @@ fn every_row_of_the_receiving_table_gets_its_bridge_answer() {
                 "row {situation:?}: input {input:02X?}"
             );
             seq = seq.wrapping_add(1);
-            let after = counters(&mut sensor, seq);
+            let after = sensor.counters(seq);
             if situation == "incomplete frame" {
                 assert_eq!(
                     after.rx_framing_errors,
@@ -345,9 +320,9 @@ fn counters_follow_the_specified_rule() {
     let mut d = daemon("conf-counters", false);
     let mut s = Wire::open(&d.link("sensor"));
     hello(&mut s, 0);
-    let c0 = counters(&mut s, 1);
+    let c0 = s.counters(1);
     // Received OK: 1 (TIME_GET).
-    ask(&mut s, 2, Message::TimeGet);
+    s.ask(2, Message::TimeGet);
     // Rejected: BAD_STATE twice (TIME_ADVANCE in real time, TIME_MODE lockstep),
     // VERSION_MISMATCH, UNKNOWN_TYPE for a reply type, a NAK frame (no answer).
     for (seq, message, want) in [
@@ -362,7 +337,7 @@ fn counters_follow_the_specified_rule() {
         (5, Message::Hello { client_version: 9 }, "VERSION_MISMATCH"),
         (6, Message::Ack { acked_type: 0x10 }, "UNKNOWN_TYPE"),
     ] {
-        match ask(&mut s, seq, message) {
+        match s.ask(seq, message) {
             Message::Nak { code: c, .. } => assert_eq!(c, code(want), "{message:?}"),
             other => panic!("{message:?}: {other:?}"),
         }
@@ -379,11 +354,11 @@ fn counters_follow_the_specified_rule() {
     let mut bad = frame_bytes(8, Message::TimeGet);
     bad[5] ^= 0x55;
     s.send(&bad);
-    match reply(&mut s, 8, "damaged TIME_GET") {
+    match s.reply(8, "damaged TIME_GET") {
         Message::Nak { code: c, .. } => assert_eq!(c, code("BAD_CRC")),
         other => panic!("damaged frame: {other:?}"),
     }
-    let c1 = counters(&mut s, 9);
+    let c1 = s.counters(9);
     let delta = |a: u32, b: u32| b.wrapping_sub(a);
     assert_eq!(
         delta(c0.rx_frames, c1.rx_frames),
@@ -463,7 +438,7 @@ fn lockstep_pushes_come_when_the_spec_says() {
     let mut d = daemon("conf-timing", true);
     let mut s = Wire::open(&d.link("sensor"));
     hello(&mut s, 0);
-    let start = match ask(&mut s, 1, Message::TimeGet) {
+    let start = match s.ask(1, Message::TimeGet) {
         Message::Time { ticks, .. } => ticks,
         other => panic!("{other:?}"),
     };
@@ -472,8 +447,7 @@ fn lockstep_pushes_come_when_the_spec_says() {
     let period = spec_number_after("a stream of period ") as u16;
     let ticks = spec_list_after("and reports ticks ");
     assert_eq!(period, 15);
-    let ack = ask(
-        &mut s,
+    let ack = s.ask(
         2,
         Message::AdcStream {
             channels: 0b1,
@@ -491,8 +465,7 @@ fn lockstep_pushes_come_when_the_spec_says() {
         })
         .collect();
     assert_eq!(got, ticks, "ADC_SAMPLES ticks after the ACK");
-    ask(
-        &mut s,
+    s.ask(
         4,
         Message::AdcStream {
             channels: 0,
@@ -505,7 +478,7 @@ fn lockstep_pushes_come_when_the_spec_says() {
         mode: CompassMode::Continuous,
         output: CompassOutput::Binary,
     };
-    ask(&mut s, 5, continuous);
+    s.ask(5, continuous);
     assert!(
         advance(&mut s, 6, period_ticks - 1).is_empty(),
         "no push before one period"
@@ -514,14 +487,13 @@ fn lockstep_pushes_come_when_the_spec_says() {
     assert_eq!(first.len(), 1, "one push at one period: {first:?}");
     // Half a period later, COMPASS_MODE again: the next push one whole period after it.
     assert!(advance(&mut s, 8, period_ticks / 2).is_empty());
-    ask(&mut s, 9, continuous);
+    s.ask(9, continuous);
     assert!(
         advance(&mut s, 10, period_ticks - 1).is_empty(),
         "the phase restarted"
     );
     assert_eq!(advance(&mut s, 11, 1).len(), 1);
-    ask(
-        &mut s,
+    s.ask(
         12,
         Message::CompassMode {
             mode: CompassMode::Poll,
@@ -529,14 +501,14 @@ fn lockstep_pushes_come_when_the_spec_says() {
         },
     );
     // A retried TIME_ADVANCE (same seq, same payload) gets the stored TIME, applied once.
-    let before = match ask(&mut s, 13, Message::TimeGet) {
+    let before = match s.ask(13, Message::TimeGet) {
         Message::Time { ticks, .. } => ticks,
         other => panic!("{other:?}"),
     };
-    let first = ask(&mut s, 14, Message::TimeAdvance { ticks: 7 });
-    let again = ask(&mut s, 14, Message::TimeAdvance { ticks: 7 });
+    let first = s.ask(14, Message::TimeAdvance { ticks: 7 });
+    let again = s.ask(14, Message::TimeAdvance { ticks: 7 });
     assert_eq!(first, again);
-    match ask(&mut s, 15, Message::TimeGet) {
+    match s.ask(15, Message::TimeGet) {
         Message::Time { ticks, .. } => assert_eq!(ticks, before + 7, "advanced once"),
         other => panic!("{other:?}"),
     }
@@ -604,16 +576,16 @@ fn lockstep_drops_a_partial_frame_after_the_idle_limit_of_wall_time() {
     let mut d = daemon("conf-idle", true);
     let mut s = Wire::open(&d.link("sensor"));
     hello(&mut s, 0);
-    let before = counters(&mut s, 1);
+    let before = s.counters(1);
     s.send(&frame_bytes(2, Message::TimeGet)[..4]);
     std::thread::sleep(Duration::from_millis(3 * limit_ms as u64));
     let t0 = Instant::now();
-    match ask(&mut s, 3, Message::TimeGet) {
+    match s.ask(3, Message::TimeGet) {
         Message::Time { .. } => {}
         other => panic!("after the idle limit: {other:?}"),
     }
     assert!(t0.elapsed() < WAIT);
-    let after = counters(&mut s, 4);
+    let after = s.counters(4);
     assert_eq!(after.rx_framing_errors, before.rx_framing_errors + 1);
     assert_eq!(after.rx_crc_errors, before.rx_crc_errors, "no CRC error");
     assert_eq!(after.tx_naks, before.tx_naks, "no NAK");
@@ -709,7 +681,7 @@ fn realtime_replies_come_within_the_specified_time() {
         assert_eq!((echoed.seq, echoed.message), (seq, Message::TimeGet));
         let baseline = t0.elapsed();
         let t0 = Instant::now();
-        ask(&mut s, seq, Message::TimeGet);
+        s.ask(seq, Message::TimeGet);
         let took = t0.elapsed();
         excess.push(took.saturating_sub(baseline));
         pairs.push((took, baseline));
