@@ -37,7 +37,7 @@ use crate::gap::model::{EnabledEffect, GapModel};
 use crate::gap::resim::{self, Floor};
 
 /// The effects whose parameters calibration fits, when the data hold one of their channels.
-pub const PARAMETERS: [&str; 19] = [
+pub const PARAMETERS: [&str; 20] = [
     "thrust_gain",
     "reverse_thrust_asymmetry",
     "thruster_imbalance",
@@ -45,6 +45,7 @@ pub const PARAMETERS: [&str; 19] = [
     "added_mass",
     "thruster_lag",
     "yaw_damping",
+    "yaw_damping_quadratic",
     "sway_yaw_coupling",
     "compass_offset",
     "compass_hard_iron",

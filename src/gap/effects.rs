@@ -80,7 +80,7 @@ pub struct Effect {
 }
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 25] = [
+pub const LIBRARY: [Effect; 26] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -338,11 +338,22 @@ pub const LIBRARY: [Effect; 25] = [
     },
     Effect {
         name: "yaw_damping",
-        parameters: &["linear_scale", "quadratic_scale"],
-        scales: &[0.2, 0.2],
-        bounds: &[(-0.9, 5.0), (-0.9, 5.0)],
+        parameters: &["scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
         signature: "turn rate off for a given thrust couple: spins too fast or slow, heading \
                     overshoots or lags after a turn command",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+    },
+    Effect {
+        name: "yaw_damping_quadratic",
+        parameters: &["scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
+        signature: "fast spins too fast or slow while gentle turns match: the part of the yaw \
+                    damping that grows with the turn rate is off",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
         kind: Kind::Mean,
         physics: true,
@@ -456,7 +467,14 @@ pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
         "yaw_damping" => {
             c.vehicle.damping_linear[5] = (c.vehicle.damping_linear[5] * (1.0 + p(0))).max(0.0);
             c.vehicle.damping_quadratic[5] =
-                (c.vehicle.damping_quadratic[5] * (1.0 + p(1))).max(0.0);
+                (c.vehicle.damping_quadratic[5] * (1.0 + p(0))).max(0.0);
+            if c.vehicle.damping_linear[5] + c.vehicle.damping_quadratic[5] <= 0.0 {
+                c.vehicle.damping_linear[5] = 1e-3;
+            }
+        }
+        "yaw_damping_quadratic" => {
+            c.vehicle.damping_quadratic[5] =
+                (c.vehicle.damping_quadratic[5] * (1.0 + p(0))).max(0.0);
             if c.vehicle.damping_linear[5] + c.vehicle.damping_quadratic[5] <= 0.0 {
                 c.vehicle.damping_linear[5] = 1e-3;
             }

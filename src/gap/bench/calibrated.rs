@@ -135,8 +135,9 @@ pub fn physical_size(h: &Hidden, default: &[f64], factor: f64, positive: bool) -
 /// The size in the library effect's parameters.
 pub fn library_truth(h: &Hidden, size: &[f64]) -> Vec<f64> {
     if h.scale {
-        // A scale of the whole term: linear and quadratic parts together.
-        vec![size[0] - 1.0, size[0] - 1.0]
+        // A scale of the whole term, linear and quadratic parts together, as the library's
+        // `yaw_damping` scales it.
+        vec![size[0] - 1.0]
     } else {
         size.to_vec()
     }
@@ -307,7 +308,7 @@ mod tests {
     use super::*;
 
     /// A scale grows its deviation from 1 and stays positive for either sign; a vector keeps
-    /// its direction; the library sees a scale as its deviation on both parameters.
+    /// its direction; the library sees a scale as its deviation.
     #[test]
     fn sizes_scale_from_the_default() {
         let yaw = Hidden {
@@ -320,7 +321,7 @@ mod tests {
         assert!((up[0] - 2.5).abs() < 1e-12);
         let down = physical_size(&yaw, &[1.5], 3.0, false);
         assert!((down[0] - 0.4).abs() < 1e-12);
-        assert_eq!(library_truth(&yaw, &up), vec![1.5, 1.5]);
+        assert_eq!(library_truth(&yaw, &up), vec![1.5]);
         let wc = hidden("water_current", Some("water_current"), false);
         assert_eq!(
             physical_size(&wc, &[0.02, -0.015], 2.0, true),

@@ -156,9 +156,11 @@ impl Quantity {
 /// sensors move none.
 pub fn signature_kinds(effect: &Effect) -> &'static [Behaviour] {
     match effect.name {
-        "thruster_imbalance" | "reverse_thrust_asymmetry" | "yaw_damping" | "sway_yaw_coupling" => {
-            &[Behaviour::Turn]
-        }
+        "thruster_imbalance"
+        | "reverse_thrust_asymmetry"
+        | "yaw_damping"
+        | "yaw_damping_quadratic"
+        | "sway_yaw_coupling" => &[Behaviour::Turn],
         "drag_mismatch" | "added_mass" | "thruster_lag" => &[Behaviour::Speed],
         "water_current" | "thrust_gain" => &[Behaviour::Speed, Behaviour::Turn],
         _ => &[],
