@@ -76,6 +76,13 @@ fn subsim_2_4_against_mako_names_weak_thrust_and_shrinks_the_gap() {
             e.effect.name,
             e.ci95
         );
+        // Final values: after the joint refit of later rounds too.
+        assert!(
+            effects::inside_bounds(e.effect, &e.values),
+            "{} named on its bound: {:?}",
+            e.effect.name,
+            e.values
+        );
     }
     assert!(
         a.fitted

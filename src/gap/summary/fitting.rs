@@ -208,7 +208,7 @@ fn fit_one(
     let (prior_values, params) = joint.split(&all);
     let ci = ci_all[m - k..].to_vec();
     let mut at = 0;
-    let refitted = prior
+    let refitted: Vec<Refitted> = prior
         .iter()
         .zip(prior_values)
         .map(|(p, values)| {
@@ -254,7 +254,13 @@ fn fit_one(
     let identifiable = n > m;
     let signature_pass = identifiable && share >= fit::SIGNATURE_MIN_SHARE;
     let ci95: Vec<(String, [f64; 2])> = names(effect).zip(ci).collect();
-    let guards = guards(effect, &params, &ci95, delta_bic, signature_pass);
+    let mut guards = guards(effect, &params, &ci95, delta_bic, signature_pass);
+    // The joint refit must leave the effects accepted before inside their bounds too: a
+    // candidate that only fits by pushing an earlier one onto its bound is not named.
+    guards.inside_bounds &= prior
+        .iter()
+        .zip(&refitted)
+        .all(|(p, r): (_, &Refitted)| effects::inside_bounds(p.effect, &r.values));
     Candidate {
         name: effect.name.to_string(),
         parameters: names(effect).zip(params.iter().copied()).collect(),

@@ -29,7 +29,8 @@
 //! more observations than it has parameters, (2) `delta_BIC > fit::BIC_MARGIN`, and (3) at
 //! least `fit::SIGNATURE_MIN_SHARE` of its chi-square reduction comes from the observations it
 //! should move ([`signature_kinds`]), and (4) its parameters lie strictly inside their
-//! physical bounds with finite 95 % intervals, one clear of zero. With fewer than [`FEW_OBSERVATIONS`] observations the
+//! physical bounds with finite 95 % intervals, one clear of zero, and the joint refit leaves
+//! the effects accepted before it inside theirs. With fewer than [`FEW_OBSERVATIONS`] observations the
 //! report says that the BIC's large-sample footing is weak there and the verdict is a lead,
 //! not a proof. After fitting, the remaining chi-square is compared with the chi-square 95 %
 //! point for `n - k` degrees of freedom: above it, the model still disagrees beyond the stated
