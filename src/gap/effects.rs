@@ -394,14 +394,7 @@ pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
                 t.reverse_ratio = (t.reverse_ratio * (1.0 + p(0))).clamp(0.0, 1.0);
             }
         }
-        "drag_mismatch" => {
-            c.vehicle.damping_linear[0] = (c.vehicle.damping_linear[0] * (1.0 + p(0))).max(0.0);
-            c.vehicle.damping_quadratic[0] =
-                (c.vehicle.damping_quadratic[0] * (1.0 + p(1))).max(0.0);
-            if c.vehicle.damping_linear[0] + c.vehicle.damping_quadratic[0] <= 0.0 {
-                c.vehicle.damping_linear[0] = 1e-3;
-            }
-        }
+        "drag_mismatch" => scale_damping(&mut c.vehicle, 0, 1.0 + p(0), 1.0 + p(1)),
         "added_mass" => {
             c.vehicle.added_mass[0] = (c.vehicle.added_mass[0] + p(0)).max(0.0);
         }
@@ -464,25 +457,23 @@ pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
             let axis = axis_of(effect.name);
             c.analog.accel_gain_scale[axis] += p(0);
         }
-        "yaw_damping" => {
-            c.vehicle.damping_linear[5] = (c.vehicle.damping_linear[5] * (1.0 + p(0))).max(0.0);
-            c.vehicle.damping_quadratic[5] =
-                (c.vehicle.damping_quadratic[5] * (1.0 + p(0))).max(0.0);
-            if c.vehicle.damping_linear[5] + c.vehicle.damping_quadratic[5] <= 0.0 {
-                c.vehicle.damping_linear[5] = 1e-3;
-            }
-        }
-        "yaw_damping_quadratic" => {
-            c.vehicle.damping_quadratic[5] =
-                (c.vehicle.damping_quadratic[5] * (1.0 + p(0))).max(0.0);
-            if c.vehicle.damping_linear[5] + c.vehicle.damping_quadratic[5] <= 0.0 {
-                c.vehicle.damping_linear[5] = 1e-3;
-            }
-        }
+        "yaw_damping" => scale_damping(&mut c.vehicle, 5, 1.0 + p(0), 1.0 + p(0)),
+        "yaw_damping_quadratic" => scale_damping(&mut c.vehicle, 5, 1.0, 1.0 + p(0)),
         "sway_yaw_coupling" => {
             c.vehicle.damping_sway_yaw[1] += p(0);
         }
         _ => {}
+    }
+}
+
+/// Scales `axis`'s linear and quadratic damping by `linear` and `quadratic` (each kept >= 0),
+/// leaving a little linear damping when both would vanish: every axis stays damped, as the
+/// vehicle configuration requires.
+fn scale_damping(v: &mut VehicleConfig, axis: usize, linear: f64, quadratic: f64) {
+    v.damping_linear[axis] = (v.damping_linear[axis] * linear).max(0.0);
+    v.damping_quadratic[axis] = (v.damping_quadratic[axis] * quadratic).max(0.0);
+    if v.damping_linear[axis] + v.damping_quadratic[axis] <= 0.0 {
+        v.damping_linear[axis] = 1e-3;
     }
 }
 
