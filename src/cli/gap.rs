@@ -201,9 +201,14 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
                 );
             }
         }
-        None if analysis.verdict == gap::Verdict::Unexplained => {
+        None if analysis.verdict == gap::Verdict::Unexplained && analysis.known.is_empty() => {
             outln!(
                 "unexplained: the model disagrees beyond its noise floor and no effect in the library passes every guard"
+            )
+        }
+        None if analysis.verdict == gap::Verdict::Unexplained => {
+            outln!(
+                "unexplained: the model disagrees beyond its noise floor and its known disagreement, and no effect in the library passes every guard"
             )
         }
         None => outln!("no significant missing effect"),
@@ -230,6 +235,16 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         analysis.heldout_reduction_pct,
         out.display()
     );
+    if !analysis.known.is_empty() {
+        outln!(
+            "against the noise floor alone (without the calibration's known disagreement): gap {:.2} -> {:.2}; held out {:.2} -> {:.2} ({:.0} % smaller)",
+            analysis.raw.excess_before,
+            analysis.raw.excess_after,
+            analysis.raw.heldout_before,
+            analysis.raw.heldout_after,
+            analysis.raw.heldout_reduction_pct()
+        );
+    }
     Ok(())
 }
 
@@ -313,6 +328,22 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
         outln!(
             "not fitted (no channel of theirs measured): {}",
             c.not_fitted.join(", ")
+        );
+    }
+    if !c.discrepancy.is_empty() {
+        let known: Vec<String> = c
+            .discrepancy
+            .iter()
+            .map(|(ch, v)| format!("{ch} {v:.2}"))
+            .collect();
+        outln!(
+            "known disagreement (chi2 per sample of the calibrated model, on the {} runs): {}",
+            if c.runs.iter().any(|r| !r.fitted) {
+                "validation"
+            } else {
+                "baseline"
+            },
+            known.join(", ")
         );
     }
     for r in &c.runs {

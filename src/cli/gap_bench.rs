@@ -139,11 +139,11 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
 fn report(table: &str, results: &[CaseResult]) -> String {
     let mut text = table.to_string();
     text.push_str(
-        "\nindex,effect,seed,size_sigma,named,truth,fitted,ci95,parameter_error,ci_covers,held_out_reduction_pct,held_out_truth_reduction_pct,held_out_grew,seconds\n",
+        "\nindex,effect,seed,size_sigma,named,truth,fitted,ci95,parameter_error,ci_covers,held_out_reduction_pct,held_out_truth_reduction_pct,held_out_raw_reduction_pct,held_out_grew,seconds\n",
     );
     for r in results {
         text.push_str(&format!(
-            "{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:.2}\n",
+            "{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:.2}\n",
             r.index,
             r.label,
             r.seed,
@@ -156,6 +156,7 @@ fn report(table: &str, results: &[CaseResult]) -> String {
             r.ci_covers,
             r.held_out_reduction_pct,
             r.held_out_truth_reduction_pct,
+            r.held_out_raw_reduction_pct,
             r.held_out_grew,
             r.seconds
         ));

@@ -132,6 +132,10 @@ pub struct Calibration {
     pub spread: Vec<Parameter>,
     /// Parameters left out because none of their channels is measured.
     pub not_fitted: Vec<String>,
+    /// The calibrated model's chi-square per independent sample by channel, averaged over
+    /// the validation runs (the baseline runs when there are none): what `gap` later
+    /// measures a run's gap against.
+    pub discrepancy: Vec<(String, f64)>,
     #[serde(skip)]
     pub model: GapModel,
 }
@@ -173,7 +177,30 @@ fn excess(per_channel: &[(usize, f64)]) -> f64 {
     (mean - 1.0).max(0.0).sqrt()
 }
 
-/// Applies the parameter vector (units of the scales) to a copy of `base`.
+/// The calibrated model's chi-square per sample by channel, as `gap` will see it (the
+/// calibrated model's own noise floor, re-anchored segments), averaged over `runs`.
+fn discrepancy(calibrated: &GapModel, runs: &[&Run]) -> Result<Vec<(String, f64)>, GapError> {
+    let mut sums: Vec<(String, f64, usize)> = Vec::new();
+    for r in runs {
+        let p = prepare(calibrated, r)?;
+        let s = p.setup()?;
+        for (i, chi2) in channel_chi2(&p, &s, &p.base).unwrap_or_default() {
+            let channel = &r.m.channels[i].name;
+            match sums.iter_mut().find(|(c, _, _)| c == channel) {
+                Some(e) => {
+                    e.1 += chi2;
+                    e.2 += 1;
+                }
+                None => sums.push((channel.clone(), chi2, 1)),
+            }
+        }
+    }
+    Ok(sums
+        .into_iter()
+        .map(|(c, s, n)| (c, s / n as f64))
+        .collect())
+}
+
 /// The mean of per-run fitted values and its 95 % interval: from the between-run spread for
 /// two or more runs, the run's own interval for one.
 fn mean_level(levels: &[(f64, [f64; 2])]) -> Option<(f64, [f64; 2])> {
@@ -458,12 +485,22 @@ pub fn calibrate(
             });
         }
     }
+    progress("discrepancy");
+    calibrated.discrepancy = Default::default();
+    let known: Vec<&Run> = if validate.is_empty() {
+        baseline.iter().collect()
+    } else {
+        validate.iter().collect()
+    };
+    let discrepancy = discrepancy(&calibrated, &known)?;
+    calibrated.discrepancy = discrepancy.iter().cloned().collect();
     Ok(Calibration {
         parameters,
         runs,
         evaluations,
         spread,
         not_fitted,
+        discrepancy,
         model: calibrated,
     })
 }

@@ -104,6 +104,21 @@ pub struct Unexplained {
     pub windows: Vec<(f64, f64, f64)>,
 }
 
+/// Gap measures against the noise floor alone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RawGap {
+    pub excess_before: f64,
+    pub excess_after: f64,
+    pub heldout_before: f64,
+    pub heldout_after: f64,
+}
+
+impl RawGap {
+    pub fn heldout_reduction_pct(&self) -> f64 {
+        reduction_pct(self.heldout_before, self.heldout_after)
+    }
+}
+
 /// Everything `gap` found.
 #[derive(Debug, Clone)]
 pub struct Analysis {
@@ -119,7 +134,8 @@ pub struct Analysis {
     /// Mean distance between measured and simulated track at matched times (thesis [49]).
     pub track_distance_before_m: Option<f64>,
     pub track_distance_after_m: Option<f64>,
-    /// Excess of the normalised residual over the noise floor, before and after.
+    /// The gap measure ([`excess`]: per channel, chi2 per sample over the model's known
+    /// level) over the whole run, before and after.
     pub excess_before: f64,
     pub excess_after: f64,
     pub gap_reduction_pct: f64,
@@ -127,6 +143,11 @@ pub struct Analysis {
     pub heldout_gap_before: f64,
     pub heldout_gap_after: f64,
     pub heldout_reduction_pct: f64,
+    /// The same measures against the noise floor alone (without the calibrated model's known
+    /// disagreement); equal to the above for a model without a `[discrepancy]`.
+    pub raw: RawGap,
+    /// The model's known disagreement by channel (`GapModel::discrepancy`), as used.
+    pub known: Vec<(String, f64)>,
     /// Channels still significantly off after the accepted effects, with where.
     pub unexplained: Vec<Unexplained>,
     /// How the re-simulation was cut and the data split.
@@ -141,6 +162,7 @@ pub struct Analysis {
 }
 
 fn stats_for(
+    model: &GapModel,
     m: &Measurement,
     c: &Configs,
     run: &resim::Run,
@@ -164,6 +186,7 @@ fn stats_for(
                 &unit,
                 run,
                 (0.0, rms),
+                model.known_chi2(&ch.name),
             ));
             continue;
         }
@@ -184,7 +207,15 @@ fn stats_for(
                 }
             }
         }
-        out.push(residuals::channel_stats(&ch.name, &t, &r, floor, run, best));
+        out.push(residuals::channel_stats(
+            &ch.name,
+            &t,
+            &r,
+            floor,
+            run,
+            best,
+            model.known_chi2(&ch.name),
+        ));
     }
     out
 }
@@ -205,20 +236,54 @@ fn track_distance(m: &Measurement, run: &resim::Run) -> Option<f64> {
     (n > 0).then(|| sum / n as f64)
 }
 
-fn excess(stats: &[ChannelStats]) -> f64 {
-    if stats.is_empty() {
+/// The gap measure: `sqrt(max(0, q - 1))`, `q` the mean over channels of each channel's
+/// chi-square per sample over its known level (`known`: the calibrated model's on baseline
+/// runs, or 1, the noise floor alone). Each channel counts once, whatever its sample rate.
+fn excess(per_channel: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (chi2, known) in per_channel {
+        sum += chi2 / known.max(1.0);
+        n += 1;
+    }
+    if n == 0 {
         return 0.0;
     }
-    let mean = stats.iter().map(|s| s.chi2_per_sample).sum::<f64>() / stats.len() as f64;
-    (mean - 1.0).max(0.0).sqrt()
+    (sum / n as f64 - 1.0).max(0.0).sqrt()
 }
 
-/// The held-out gap: the excess of the held-out blocks' chi-square per independent sample
-/// over 1, as [`excess`] measures the whole run.
-fn heldout_excess(setup: &fit::Setup<'_>, c: &Configs, run: &resim::Run) -> f64 {
+/// The whole run's gap from channel statistics, against each channel's known level (`raw`:
+/// against the noise floor alone).
+fn stats_excess(stats: &[ChannelStats], raw: bool) -> f64 {
+    excess(stats.iter().map(|s| {
+        let known = if raw { 1.0 } else { s.known_chi2_per_sample };
+        (s.chi2_per_sample, known)
+    }))
+}
+
+/// The held-out gap: [`excess`] of the held-out blocks' chi-square per independent sample,
+/// channel by channel, against the model's known levels (`raw`: the noise floor alone).
+fn heldout_excess(
+    model: &GapModel,
+    setup: &fit::Setup<'_>,
+    c: &Configs,
+    run: &resim::Run,
+    raw: bool,
+) -> f64 {
     let r = setup.residuals(c, run);
-    let n = setup.n_eff(Some(false));
-    (r.chi2(false) / n - 1.0).max(0.0).sqrt()
+    let per_channel = setup.modelled().into_iter().filter_map(|i| {
+        let tau = setup.floors[i].as_ref()?.tau;
+        let (sum, n) = r
+            .values
+            .iter()
+            .zip(&r.owner)
+            .zip(&r.training)
+            .filter(|((_, o), t)| **o == i && !**t)
+            .fold((0.0, 0usize), |(s, n), ((v, _), _)| (s + v * v, n + 1));
+        let name = &setup.m.channels[i].name;
+        let known = if raw { 1.0 } else { model.known_chi2(name) };
+        (n > 0).then(|| (sum / (n as f64 / tau), known))
+    });
+    excess(per_channel)
 }
 
 /// How much smaller `after` is than `before`, in percent (0 when there was no gap).
@@ -283,10 +348,11 @@ pub fn analyse_with(
         .filter(|(_, f)| f.is_none())
         .map(|(c, _)| c.name.clone())
         .collect();
-    let before = stats_for(m, &start, &clean0, &floors);
+    let before = stats_for(model, m, &start, &clean0, &floors);
 
     let first = fit::setup(m, start.clone(), &floors, options.split, &model.spread)?;
-    let heldout_before = heldout_excess(&first, &start, &clean0);
+    let heldout_before = heldout_excess(model, &first, &start, &clean0, false);
+    let heldout_raw_before = heldout_excess(model, &first, &start, &clean0, true);
     // The model with the accepted effects: what each round fits against.
     let configs = std::cell::RefCell::new(start.clone());
     let fitted = std::cell::RefCell::new(model.clone());
@@ -329,9 +395,11 @@ pub fn analyse_with(
     } else {
         resim::noise_floor(&configs, m, &clean1)?
     };
-    let after = stats_for(m, &configs, &clean1, &floors_after);
-    let heldout_after = heldout_excess(&first, &configs, &clean1);
-    let (eb, ea) = (excess(&before), excess(&after));
+    let after = stats_for(model, m, &configs, &clean1, &floors_after);
+    let heldout_after = heldout_excess(model, &first, &configs, &clean1, false);
+    let heldout_raw_after = heldout_excess(model, &first, &configs, &clean1, true);
+    let (eb, ea) = (stats_excess(&before, false), stats_excess(&after, false));
+    let (rb, ra) = (stats_excess(&before, true), stats_excess(&after, true));
     let unexplained: Vec<Unexplained> = after
         .iter()
         .filter(|s| s.significant)
@@ -364,6 +432,17 @@ pub fn analyse_with(
         heldout_gap_before: heldout_before,
         heldout_gap_after: heldout_after,
         heldout_reduction_pct: reduction_pct(heldout_before, heldout_after),
+        raw: RawGap {
+            excess_before: rb,
+            excess_after: ra,
+            heldout_before: heldout_raw_before,
+            heldout_after: heldout_raw_after,
+        },
+        known: model
+            .discrepancy
+            .iter()
+            .map(|(c, v)| (c.clone(), *v))
+            .collect(),
         unexplained,
         shooting: options.shooting,
         split: options.split,

@@ -40,6 +40,8 @@ struct RawModel {
     effects: Vec<RawEffect>,
     #[serde(default, rename = "spread")]
     spread: Vec<RawEffect>,
+    #[serde(default)]
+    discrepancy: BTreeMap<String, f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -80,6 +82,10 @@ pub struct GapModel {
     /// two or more runs): model error that looks like the effect. `gap` adds it to the fit's
     /// own uncertainty before deciding an effect is there.
     pub spread: Vec<EnabledEffect>,
+    /// The calibrated model's known disagreement per channel: its chi-square per independent
+    /// sample on baseline runs (written by `gap calibrate`; 1 = as the noise floor expects).
+    /// `gap` measures what is new against it: a channel's gap is its chi-square over this.
+    pub discrepancy: BTreeMap<String, f64>,
 }
 
 /// Reads `name` relative to `base` if such a file exists, else from the embedded configs.
@@ -108,6 +114,29 @@ impl GapModel {
         let calibration = enabled(&doc, "calibration", &raw.calibration)?;
         let effects = enabled(&doc, "effect", &raw.effects)?;
         let spread = enabled(&doc, "spread", &raw.spread)?;
+        for (channel, v) in &raw.discrepancy {
+            if !crate::gap::resim::MODELLED.contains(&channel.as_str())
+                && crate::gap::sonar::index(channel).is_none()
+            {
+                return Err(doc
+                    .invalid(
+                        &format!("discrepancy.{channel}"),
+                        format!(
+                            "`{channel}` is not a re-simulated channel; they are {} and sonar1_m..sonar4_m",
+                            crate::gap::resim::MODELLED.join(", ")
+                        ),
+                    )
+                    .into());
+            }
+            if !v.is_finite() || *v <= 0.0 {
+                return Err(doc
+                    .invalid(
+                        &format!("discrepancy.{channel}"),
+                        format!("expected a chi-square per sample > 0, got {v}"),
+                    )
+                    .into());
+            }
+        }
         Ok(Self {
             name: raw.name,
             vehicle_ref: raw.vehicle,
@@ -117,7 +146,17 @@ impl GapModel {
             calibration,
             effects,
             spread,
+            discrepancy: raw.discrepancy,
         })
+    }
+
+    /// The known chi-square per sample of `channel` (at least 1: the noise floor).
+    pub fn known_chi2(&self, channel: &str) -> f64 {
+        self.discrepancy
+            .get(channel)
+            .copied()
+            .unwrap_or(1.0)
+            .max(1.0)
     }
 
     /// The base configurations (no effects), with the experiment's world and sensors unless
@@ -213,6 +252,15 @@ impl GapModel {
             let _ = writeln!(s, "ci95 = {{ {} }}   # 95 % intervals", ci.join(", "));
             if let Some(d) = e.delta_bic {
                 let _ = writeln!(s, "delta_bic = {d:.1}");
+            }
+        }
+        if !self.discrepancy.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n[discrepancy]   # chi-square per sample on baseline runs, by channel"
+            );
+            for (channel, v) in &self.discrepancy {
+                let _ = writeln!(s, "{channel} = {v:.4}");
             }
         }
         s

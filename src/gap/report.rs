@@ -43,6 +43,15 @@ pub fn json(a: &Analysis) -> Value {
         "heldout_gap_before": a.heldout_gap_before,
         "heldout_gap_after": a.heldout_gap_after,
         "heldout_reduction_pct": a.heldout_reduction_pct,
+        "known_disagreement": a.known,
+        "noise_floor_only": {
+            "excess_before": a.raw.excess_before,
+            "excess_after": a.raw.excess_after,
+            "gap_reduction_pct": crate::gap::reduction_pct(a.raw.excess_before, a.raw.excess_after),
+            "heldout_gap_before": a.raw.heldout_before,
+            "heldout_gap_after": a.raw.heldout_after,
+            "heldout_reduction_pct": a.raw.heldout_reduction_pct(),
+        },
         "unexplained": a.unexplained,
         "segment_s": a.shooting.segment_s,
         "heldout_block_s": a.split.block_s,
@@ -71,9 +80,14 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
     let _ = writeln!(s, "# Reality gap: {}\n", m.experiment.name);
     let verdict = match (a.verdict, a.accepted.first()) {
         (_, Some(w)) => format!("missing effect: **{}**", w.name),
-        (crate::gap::Verdict::Unexplained, None) => {
+        (crate::gap::Verdict::Unexplained, None) if a.known.is_empty() => {
             "**unexplained**: the model disagrees with the data beyond its noise floor and no \
              effect in the library passes every guard"
+                .to_string()
+        }
+        (crate::gap::Verdict::Unexplained, None) => {
+            "**unexplained**: the model disagrees with the data beyond its noise floor and its \
+             known disagreement on baseline runs, and no effect in the library passes every guard"
                 .to_string()
         }
         _ => "no significant missing effect".to_string(),
@@ -188,9 +202,14 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
             "\nTrack distance at matched times (thesis [49]): {x:.3} m before, {y:.3} m after."
         );
     }
+    let against = if a.known.is_empty() {
+        "the noise floor"
+    } else {
+        "the noise floor and the calibrated model's known disagreement"
+    };
     let _ = writeln!(
         s,
-        "\nGap (excess of the normalised residual over the noise floor): {:.2} before, {:.2} after: {:.0} % smaller. On the held-out blocks: {:.2} before, {:.2} after: {:.0} % smaller.",
+        "\nGap (excess of the normalised residual over {against}): {:.2} before, {:.2} after: {:.0} % smaller. On the held-out blocks: {:.2} before, {:.2} after: {:.0} % smaller.",
         a.excess_before,
         a.excess_after,
         a.gap_reduction_pct,
@@ -198,6 +217,19 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
         a.heldout_gap_after,
         a.heldout_reduction_pct
     );
+    if !a.known.is_empty() {
+        let known: Vec<String> = a.known.iter().map(|(c, v)| format!("{c} {v:.2}")).collect();
+        let _ = writeln!(
+            s,
+            "\nKnown disagreement (chi2 per sample on baseline runs): {}. Against the noise floor alone the gap is {:.2} before, {:.2} after; held out {:.2} before, {:.2} after ({:.0} % smaller).",
+            known.join(", "),
+            a.raw.excess_before,
+            a.raw.excess_after,
+            a.raw.heldout_before,
+            a.raw.heldout_after,
+            a.raw.heldout_reduction_pct()
+        );
+    }
     let _ = writeln!(
         s,
         "\n![trajectories](trajectories.svg)\n![residuals](residuals.svg)\n![ranking](ranking.svg)"

@@ -26,7 +26,10 @@ pub struct ChannelStats {
     pub chi2_per_sample: f64,
     /// Samples per independent sample (autocorrelation of the model's process noise).
     pub tau_samples: f64,
-    /// True when chi2 exceeds its expectation by more than 3 standard deviations.
+    /// The calibrated model's known chi2 per sample for this channel on baseline runs (1
+    /// without a calibration): what is new is judged against it.
+    pub known_chi2_per_sample: f64,
+    /// True when chi2 over the known level exceeds 1 by more than 3 standard deviations.
     pub significant: bool,
     pub ljung_box_q: f64,
     pub ljung_box_critical_95: f64,
@@ -166,7 +169,9 @@ fn excess(chi2: f64, n: usize, tau: f64) -> bool {
     chi2 > 1.0 + 3.0 * (2.0 / n_eff).sqrt()
 }
 
-/// Statistics of one channel's residuals `r` at times `t` against the floor.
+/// Statistics of one channel's residuals `r` at times `t` against the floor; significance
+/// (whole channel, regimes, windows) is judged on chi2 over `known`, the calibrated model's
+/// known level (1 = the noise floor alone).
 pub fn channel_stats(
     name: &str,
     t: &[f64],
@@ -174,7 +179,9 @@ pub fn channel_stats(
     floor: &Floor,
     run: &Run,
     lag: (f64, f64),
+    known: f64,
 ) -> ChannelStats {
+    let known = known.max(1.0);
     let n = r.len();
     let nf = n.max(1) as f64;
     let z: Vec<f64> = r.iter().zip(&floor.sigma).map(|(a, s)| a / s).collect();
@@ -217,7 +224,7 @@ pub fn channel_stats(
                 regime,
                 samples: k,
                 chi2_per_sample: c,
-                significant: excess(c, k, floor.tau),
+                significant: excess(c / known, k, floor.tau),
             }
         })
         .collect();
@@ -231,7 +238,7 @@ pub fn channel_stats(
             .collect();
         if !idx.is_empty() {
             let c = idx.iter().map(|&i| z[i] * z[i]).sum::<f64>() / idx.len() as f64;
-            if excess(c, idx.len(), floor.tau) {
+            if excess(c / known, idx.len(), floor.tau) {
                 windows.push((w0, w0 + WINDOW_S, c));
             }
         }
@@ -245,7 +252,8 @@ pub fn channel_stats(
         noise_floor_rms: (floor.sigma.iter().map(|s| s * s).sum::<f64>() / nf).sqrt(),
         chi2_per_sample: chi2,
         tau_samples: floor.tau,
-        significant: excess(chi2, n, floor.tau),
+        known_chi2_per_sample: known,
+        significant: excess(chi2 / known, n, floor.tau),
         ljung_box_q: q,
         ljung_box_critical_95: crit,
         white: q <= crit,

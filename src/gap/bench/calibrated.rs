@@ -292,6 +292,7 @@ pub fn run(
             ci_covers: None,
             held_out_reduction_pct: first.map(|_| a.heldout_reduction_pct),
             held_out_truth_reduction_pct: None,
+            held_out_raw_reduction_pct: first.map(|_| a.raw.heldout_reduction_pct()),
             held_out_grew: Some(first.is_some() && a.heldout_gap_after > a.heldout_gap_before),
             seconds,
         });

@@ -148,6 +148,10 @@ pub struct CaseResult {
     /// Held-out reduction of the gap (%) against the truth's noise-free prediction on the
     /// held-out manoeuvre (simulator source only).
     pub held_out_truth_reduction_pct: Option<f64>,
+    /// Held-out reduction (%) against the noise floor alone, without the calibrated model's
+    /// known disagreement (calibrated sources, when an effect was named).
+    #[serde(default)]
+    pub held_out_raw_reduction_pct: Option<f64>,
     /// True when an effect was accepted and the held-out gap grew (independent source).
     pub held_out_grew: Option<bool>,
     /// Wall time of the workflow on the training data (s).

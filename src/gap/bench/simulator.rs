@@ -635,6 +635,7 @@ pub fn run(
                 ci_covers,
                 held_out_reduction_pct,
                 held_out_truth_reduction_pct,
+                held_out_raw_reduction_pct: None,
                 held_out_grew: None,
                 seconds,
             });
