@@ -459,3 +459,20 @@ pub fn analyse_with(
         floors,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The gap measure is the mean over channels of chi2 over the known level, less 1: a run
+    /// as far off as the baseline runs has no gap, each channel counts once, and a known
+    /// level below the noise floor counts as the floor.
+    #[test]
+    fn the_gap_measure_is_the_channel_mean_over_known_levels() {
+        assert_eq!(excess([(3.0, 3.0), (1.0, 1.0)].into_iter()), 0.0);
+        assert!((excess([(6.0, 3.0), (1.0, 1.0)].into_iter()) - 0.5f64.sqrt()).abs() < 1e-12);
+        assert!((excess([(2.0, 0.5)].into_iter()) - 1.0).abs() < 1e-12);
+        assert_eq!(excess([(0.5, 1.0)].into_iter()), 0.0);
+        assert_eq!(excess(std::iter::empty()), 0.0);
+    }
+}

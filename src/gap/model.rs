@@ -257,7 +257,7 @@ impl GapModel {
         if !self.discrepancy.is_empty() {
             let _ = writeln!(
                 s,
-                "\n[discrepancy]   # chi-square per sample on baseline runs, by channel"
+                "\n[discrepancy]   # chi-square per sample by channel on runs with nothing new"
             );
             for (channel, v) in &self.discrepancy {
                 let _ = writeln!(s, "{channel} = {v:.4}");
@@ -344,4 +344,44 @@ fn relative(target: &Path, from: &Path) -> Option<String> {
         p.push(c);
     }
     Some(p.to_string_lossy().replace('\\', "/"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn model(extra: &str) -> Result<GapModel, GapError> {
+        let text = format!("name = \"m\"\nvehicle = \"vehicles/mako.toml\"\n{extra}");
+        GapModel::from_text("test.toml", &text, PathBuf::new())
+    }
+
+    /// The calibrated model's known disagreement is read, floored at the noise floor (1),
+    /// written back unchanged, and a channel `gap` cannot re-simulate or a level that is not
+    /// a positive number is refused with the key named.
+    #[test]
+    fn the_known_disagreement_round_trips_and_rejects_bad_entries() {
+        let m = model("[discrepancy]\nx_m = 2.5\ncompass_deg = 0.8\n").expect("loads");
+        assert_eq!(m.known_chi2("x_m"), 2.5);
+        assert_eq!(m.known_chi2("compass_deg"), 1.0);
+        assert_eq!(m.known_chi2("depth_adc"), 1.0);
+        let again = GapModel::from_text(
+            "again.toml",
+            &m.to_toml("test", Path::new(".")),
+            PathBuf::new(),
+        )
+        .expect("written model loads");
+        assert_eq!(again.discrepancy, m.discrepancy);
+
+        let e = model("[discrepancy]\nspeed = 2.0\n").expect_err("unknown channel");
+        assert!(
+            e.to_string().contains("discrepancy.speed") && e.to_string().contains("x_m"),
+            "{e}"
+        );
+        let e = model("[discrepancy]\ny_m = -1.0\n").expect_err("negative level");
+        assert!(
+            e.to_string().contains("discrepancy.y_m") && e.to_string().contains("> 0"),
+            "{e}"
+        );
+        assert!(model("[discrepancy]\ny_m = nan\n").is_err());
+    }
 }
