@@ -168,13 +168,10 @@ fn channel_chi2(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Option<Vec<
     Some(out)
 }
 
-/// The gap measure `gap` reports: the excess of chi-square per independent sample over 1.
+/// The gap measure `gap` reports against the noise floor alone (every known level 1): a
+/// model without a known disagreement is what calibration starts from and ends with.
 fn excess(per_channel: &[(usize, f64)]) -> f64 {
-    if per_channel.is_empty() {
-        return 0.0;
-    }
-    let mean = per_channel.iter().map(|(_, c)| c).sum::<f64>() / per_channel.len() as f64;
-    (mean - 1.0).max(0.0).sqrt()
+    crate::gap::excess(per_channel.iter().map(|(_, c)| (*c, 1.0)))
 }
 
 /// The calibrated model's chi-square per sample by channel, as `gap` will see it (the

@@ -239,7 +239,7 @@ fn track_distance(m: &Measurement, run: &resim::Run) -> Option<f64> {
 /// The gap measure: `sqrt(max(0, q - 1))`, `q` the mean over channels of each channel's
 /// chi-square per sample over its known level (`known`: the calibrated model's on baseline
 /// runs, or 1, the noise floor alone). Each channel counts once, whatever its sample rate.
-fn excess(per_channel: impl Iterator<Item = (f64, f64)>) -> f64 {
+pub(crate) fn excess(per_channel: impl Iterator<Item = (f64, f64)>) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
     for (chi2, known) in per_channel {
         sum += chi2 / known.max(1.0);
