@@ -201,7 +201,9 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
                 );
             }
         }
-        None if analysis.verdict == gap::Verdict::Unexplained && analysis.known.is_empty() => {
+        None if analysis.verdict == gap::Verdict::Unexplained
+            && analysis.fitted.discrepancy.is_empty() =>
+        {
             outln!(
                 "unexplained: the model disagrees beyond its noise floor and no effect in the library passes every guard"
             )
@@ -235,7 +237,7 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         analysis.heldout_reduction_pct,
         out.display()
     );
-    if !analysis.known.is_empty() {
+    if !analysis.fitted.discrepancy.is_empty() {
         outln!(
             "against the noise floor alone (without the calibration's known disagreement): gap {:.2} -> {:.2}; held out {:.2} -> {:.2} ({:.0} % smaller)",
             analysis.raw.excess_before,

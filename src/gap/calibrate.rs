@@ -483,7 +483,6 @@ pub fn calibrate(
         }
     }
     progress("discrepancy");
-    calibrated.discrepancy = Default::default();
     let known: Vec<&Run> = if validate.is_empty() {
         baseline.iter().collect()
     } else {

@@ -146,8 +146,6 @@ pub struct Analysis {
     /// The same measures against the noise floor alone (without the calibrated model's known
     /// disagreement); equal to the above for a model without a `[discrepancy]`.
     pub raw: RawGap,
-    /// The model's known disagreement by channel (`GapModel::discrepancy`), as used.
-    pub known: Vec<(String, f64)>,
     /// Channels still significantly off after the accepted effects, with where.
     pub unexplained: Vec<Unexplained>,
     /// How the re-simulation was cut and the data split.
@@ -438,11 +436,6 @@ pub fn analyse_with(
             heldout_before: heldout_raw_before,
             heldout_after: heldout_raw_after,
         },
-        known: model
-            .discrepancy
-            .iter()
-            .map(|(c, v)| (c.clone(), *v))
-            .collect(),
         unexplained,
         shooting: options.shooting,
         split: options.split,

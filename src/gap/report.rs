@@ -43,7 +43,7 @@ pub fn json(a: &Analysis) -> Value {
         "heldout_gap_before": a.heldout_gap_before,
         "heldout_gap_after": a.heldout_gap_after,
         "heldout_reduction_pct": a.heldout_reduction_pct,
-        "known_disagreement": a.known,
+        "known_disagreement": a.fitted.discrepancy,
         "noise_floor_only": {
             "excess_before": a.raw.excess_before,
             "excess_after": a.raw.excess_after,
@@ -80,7 +80,7 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
     let _ = writeln!(s, "# Reality gap: {}\n", m.experiment.name);
     let verdict = match (a.verdict, a.accepted.first()) {
         (_, Some(w)) => format!("missing effect: **{}**", w.name),
-        (crate::gap::Verdict::Unexplained, None) if a.known.is_empty() => {
+        (crate::gap::Verdict::Unexplained, None) if a.fitted.discrepancy.is_empty() => {
             "**unexplained**: the model disagrees with the data beyond its noise floor and no \
              effect in the library passes every guard"
                 .to_string()
@@ -202,7 +202,7 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
             "\nTrack distance at matched times (thesis [49]): {x:.3} m before, {y:.3} m after."
         );
     }
-    let against = if a.known.is_empty() {
+    let against = if a.fitted.discrepancy.is_empty() {
         "the noise floor"
     } else {
         "the noise floor and the calibrated model's known disagreement"
@@ -217,8 +217,13 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
         a.heldout_gap_after,
         a.heldout_reduction_pct
     );
-    if !a.known.is_empty() {
-        let known: Vec<String> = a.known.iter().map(|(c, v)| format!("{c} {v:.2}")).collect();
+    if !a.fitted.discrepancy.is_empty() {
+        let known: Vec<String> = a
+            .fitted
+            .discrepancy
+            .iter()
+            .map(|(c, v)| format!("{c} {v:.2}"))
+            .collect();
         let _ = writeln!(
             s,
             "\nKnown disagreement (chi2 per sample on baseline runs): {}. Against the noise floor alone the gap is {:.2} before, {:.2} after; held out {:.2} before, {:.2} after ({:.0} % smaller).",
