@@ -69,7 +69,7 @@ fn calibrated() -> &'static Calibration {
         let v = generate(dir.path(), "validate-7303", 7303, "none", None);
         let validate = vec![Run::load(&v).expect("validation run loads")];
         let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
-        calibrate::calibrate(&model, &base, &validate, &mut |_| {}).expect("calibrates")
+        calibrate::calibrate(&model, &base, &validate, &[], &mut |_| {}).expect("calibrates")
     })
 }
 

@@ -95,6 +95,11 @@ pub struct CalibrateArgs {
     /// repeat for several.
     #[arg(long)]
     pub validate: Vec<PathBuf>,
+    /// A null run, not among the baseline runs, of the programme later runs will use; the
+    /// between-run spread is measured on these (two or more) instead of on the baseline runs.
+    /// Repeat for several.
+    #[arg(long)]
+    pub spread_from: Vec<PathBuf>,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -259,7 +264,8 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
     };
     let baseline = load(&args.measured)?;
     let validate = load(&args.validate)?;
-    for r in baseline.iter().chain(&validate) {
+    let spread_from = load(&args.spread_from)?;
+    for r in baseline.iter().chain(&validate).chain(&spread_from) {
         for n in &r.m.notices {
             errln!("notice: {}: {n}", r.dir.display());
         }
@@ -270,7 +276,7 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
     } else {
         ProgressBar::hidden()
     };
-    let c = gap::calibrate::calibrate(&model, &baseline, &validate, &mut |msg| {
+    let c = gap::calibrate::calibrate(&model, &baseline, &validate, &spread_from, &mut |msg| {
         bar.set_message(msg.to_string());
         bar.tick();
     })?;
@@ -284,14 +290,19 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
         path: out_dir.clone(),
         source,
     })?;
-    let provenance = format!(
-        "calibrated by `eyebot-hil gap calibrate` on {}",
-        args.measured
-            .iter()
+    let list = |dirs: &[PathBuf]| {
+        dirs.iter()
             .map(|p| p.display().to_string())
             .collect::<Vec<_>>()
             .join(", ")
+    };
+    let mut provenance = format!(
+        "calibrated by `eyebot-hil gap calibrate` on {}",
+        list(&args.measured)
     );
+    if !args.spread_from.is_empty() {
+        provenance.push_str(&format!("; spread from {}", list(&args.spread_from)));
+    }
     let text = c.model.to_toml(&provenance, &out_dir);
     std::fs::write(&args.out, text).map_err(|source| GapError::Io {
         path: args.out.clone(),
@@ -317,10 +328,14 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
     }
     if c.spread.is_empty() {
         outln!(
-            "one baseline run: no between-run spread measured; give two or more --measured runs \
-             so `gap` knows how far an effect strays when nothing changed"
+            "one baseline run: no between-run spread measured; give two or more --measured (or \
+             --spread-from) runs so `gap` knows how far an effect strays when nothing changed"
         );
     } else {
+        outln!(
+            "between-run spread measured on {}",
+            c.spread_from.join(", ")
+        );
         outln!("| effect | parameter | between-run spread (1 sigma) |");
         for p in &c.spread {
             outln!("| {} | {} | {:.4} |", p.effect, p.parameter, p.value);

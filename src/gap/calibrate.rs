@@ -18,6 +18,11 @@
 //! Then the depth channel's duty-correlated noise level (`depth_pwm_emi`, a variance) is
 //! fitted on each baseline run of the calibrated model and its mean kept.
 //!
+//! Last, the between-run spread: how far each library effect's apparent value strays on a
+//! null run of the calibrated model, measured on repeat runs (`--spread-from`, else the
+//! baseline runs). It widens `gap`'s intervals, so it belongs to the programme later runs
+//! use: baseline runs of different programmes hold their differences in model error too.
+//!
 //! The result is written as the model's `[[calibration]]` entries: applied before any effect,
 //! and still free to be found again by `gap` as a change in a later run. Calibration reports
 //! its gap before and after on runs it was not fitted to (`--validate`).
@@ -127,9 +132,11 @@ pub struct Calibration {
     pub parameters: Vec<Parameter>,
     pub runs: Vec<RunGap>,
     pub evaluations: usize,
-    /// Between-run spread of each effect's apparent value on the baseline runs (1 sigma),
-    /// from two or more runs; empty with one.
+    /// Between-run spread of each effect's apparent value (1 sigma) on the `spread_from`
+    /// runs, or on the baseline runs when none are given; empty with one run.
     pub spread: Vec<Parameter>,
+    /// The runs the spread was measured on.
+    pub spread_from: Vec<String>,
     /// Parameters left out because none of their channels is measured.
     pub not_fitted: Vec<String>,
     /// The calibrated model's chi-square per independent sample by channel, averaged over
@@ -214,6 +221,58 @@ fn mean_level(levels: &[(f64, [f64; 2])]) -> Option<(f64, [f64; 2])> {
     }
 }
 
+/// Each library effect's apparent value when nothing changed: every candidate fitted on each
+/// of `runs` with the calibration `x` applied, and the root mean square of the per-run values
+/// (1 sigma). Runs the joint calibration was `fitted_on` are pulled towards zero by
+/// `sqrt((n - 1) / n)`, which is undone; runs it never saw are taken as they are. Needs two
+/// or more runs (none from fewer).
+fn apparent_spread(
+    runs: &[Prepared<'_>],
+    fitted_on: bool,
+    chosen: &[&'static Effect],
+    x: &DVector<f64>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Vec<(&'static Effect, Vec<f64>)>, GapError> {
+    if runs.len() < 2 {
+        return Ok(Vec::new());
+    }
+    let n = runs.len() as f64;
+    let pull = if fitted_on { n / (n - 1.0) } else { 1.0 };
+    let mut apparent: Vec<(&'static Effect, Vec<Vec<f64>>)> = Vec::new();
+    for (i, p) in runs.iter().enumerate() {
+        progress(&format!("spread: run {} of {}", i + 1, runs.len()));
+        let base = applied(&p.base, chosen, x);
+        let s = fit::setup(&p.run.m, base, &p.floors, Split::DEFAULT, &[])?;
+        for r in fit::fit_candidates(&s, &[], &mut |_| {}) {
+            let Some(e) = effects::by_name(&r.name) else {
+                continue;
+            };
+            if !r.testable || e.kind != effects::Kind::Mean {
+                continue;
+            }
+            let values: Vec<f64> = r.parameters.iter().map(|(_, v)| *v).collect();
+            match apparent.iter_mut().find(|(a, _)| a.name == e.name) {
+                Some((_, v)) => v.push(values),
+                None => apparent.push((e, vec![values])),
+            }
+        }
+    }
+    Ok(apparent
+        .into_iter()
+        .filter(|(_, per_run)| per_run.len() >= 2)
+        .map(|(e, per_run)| {
+            let values = (0..e.parameters.len())
+                .map(|j| {
+                    let ms =
+                        per_run.iter().map(|v| v[j] * v[j]).sum::<f64>() / per_run.len() as f64;
+                    (ms * pull).sqrt()
+                })
+                .collect();
+            (e, values)
+        })
+        .collect())
+}
+
 fn applied(base: &Configs, chosen: &[&'static Effect], x: &DVector<f64>) -> Configs {
     let mut c = base.clone();
     let mut k = 0;
@@ -231,17 +290,38 @@ fn applied(base: &Configs, chosen: &[&'static Effect], x: &DVector<f64>) -> Conf
 }
 
 /// Fits the calibration parameters on `baseline` runs and scores the result on `validate`
-/// runs (and on the baseline). `progress(pass, evaluations)` is called as the fit goes.
+/// runs (and on the baseline). The between-run spread comes from `spread_from` when given
+/// (two or more null runs of the programme later runs will use, none of them a baseline
+/// run), else from the baseline runs. `progress(pass, evaluations)` is called as the fit
+/// goes.
 pub fn calibrate(
     model: &GapModel,
     baseline: &[Run],
     validate: &[Run],
+    spread_from: &[Run],
     progress: &mut dyn FnMut(&str),
 ) -> Result<Calibration, GapError> {
     if baseline.is_empty() {
         return Err(GapError::Data(
             "calibration needs at least one baseline run (--measured DIR)".into(),
         ));
+    }
+    if spread_from.len() == 1 {
+        return Err(GapError::Data(format!(
+            "--spread-from {}: one run gives no spread; give two or more null runs of the \
+             programme you will analyse",
+            spread_from[0].dir.display()
+        )));
+    }
+    if let Some(r) = spread_from
+        .iter()
+        .find(|r| baseline.iter().any(|b| b.dir == r.dir))
+    {
+        return Err(GapError::Data(format!(
+            "--spread-from {}: also a --measured baseline run; the spread is measured on runs \
+             the calibration was not fitted to",
+            r.dir.display()
+        )));
     }
     progress("noise floors");
     let prepared: Vec<Prepared<'_>> = baseline
@@ -402,58 +482,35 @@ pub fn calibrate(
         }
     }
 
-    // Between-run spread: every candidate fitted on each baseline run of the calibrated
-    // model. The joint calibration pulls each run's apparent value towards zero by
-    // sqrt((n - 1) / n), which the spread undoes.
+    // Between-run spread: every candidate fitted on each run of the calibrated model, on
+    // the `spread_from` runs when given, else on the baseline runs.
+    let spread_prepared: Vec<Prepared<'_>> = spread_from
+        .iter()
+        .map(|r| prepare(model, r))
+        .collect::<Result<_, _>>()?;
+    let (spread_runs, fitted_on) = if spread_prepared.is_empty() {
+        (&prepared, true)
+    } else {
+        (&spread_prepared, false)
+    };
     let mut spread = Vec::new();
-    if prepared.len() >= 2 {
-        let n = prepared.len() as f64;
-        let mut apparent: Vec<(&'static Effect, Vec<Vec<f64>>)> = Vec::new();
-        for (i, p) in prepared.iter().enumerate() {
-            progress(&format!("spread: run {} of {}", i + 1, prepared.len()));
-            let base = applied(&p.base, &chosen, &x);
-            let s = fit::setup(&p.run.m, base, &p.floors, Split::DEFAULT, &[])?;
-            for r in fit::fit_candidates(&s, &[], &mut |_| {}) {
-                let Some(e) = effects::by_name(&r.name) else {
-                    continue;
-                };
-                if !r.testable || e.kind != effects::Kind::Mean {
-                    continue;
-                }
-                let values: Vec<f64> = r.parameters.iter().map(|(_, v)| *v).collect();
-                match apparent.iter_mut().find(|(a, _)| a.name == e.name) {
-                    Some((_, v)) => v.push(values),
-                    None => apparent.push((e, vec![values])),
-                }
-            }
-        }
-        for (e, runs) in apparent {
-            if runs.len() < 2 {
-                continue;
-            }
-            let values: Vec<f64> = (0..e.parameters.len())
-                .map(|j| {
-                    let ms = runs.iter().map(|v| v[j] * v[j]).sum::<f64>() / runs.len() as f64;
-                    (ms * n / (n - 1.0)).sqrt()
-                })
-                .collect();
-            for (j, v) in values.iter().enumerate() {
-                spread.push(Parameter {
-                    effect: e.name.to_string(),
-                    parameter: e.parameters[j].to_string(),
-                    value: *v,
-                    ci95: [f64::NAN, f64::NAN],
-                    at_bound: false,
-                });
-            }
-            calibrated.spread.retain(|s| s.effect.name != e.name);
-            calibrated.spread.push(EnabledEffect {
-                effect: e,
-                ci95: values.iter().map(|v| [*v, *v]).collect(),
-                values,
-                delta_bic: None,
+    for (e, values) in apparent_spread(spread_runs, fitted_on, &chosen, &x, progress)? {
+        for (j, v) in values.iter().enumerate() {
+            spread.push(Parameter {
+                effect: e.name.to_string(),
+                parameter: e.parameters[j].to_string(),
+                value: *v,
+                ci95: [f64::NAN, f64::NAN],
+                at_bound: false,
             });
         }
+        calibrated.spread.retain(|s| s.effect.name != e.name);
+        calibrated.spread.push(EnabledEffect {
+            effect: e,
+            ci95: values.iter().map(|v| [*v, *v]).collect(),
+            values,
+            delta_bic: None,
+        });
     }
 
     progress("scoring");
@@ -495,8 +552,56 @@ pub fn calibrate(
         runs,
         evaluations,
         spread,
+        spread_from: if spread_from.is_empty() {
+            baseline
+        } else {
+            spread_from
+        }
+        .iter()
+        .map(|r| r.dir.display().to_string())
+        .collect(),
         not_fitted,
         discrepancy,
         model: calibrated,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fixture(case: &str) -> Run {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("pty-tests/fixtures/gap")
+            .join(case);
+        Run::load(&dir).expect("fixture loads")
+    }
+
+    fn model() -> GapModel {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/models/mako.toml");
+        GapModel::load(&path).expect("model loads")
+    }
+
+    fn refused(baseline: &[Run], spread_from: &[Run]) -> String {
+        match calibrate(&model(), baseline, &[], spread_from, &mut |_| {}) {
+            Err(GapError::Data(msg)) => msg,
+            Err(e) => panic!("expected a data error, got {e}"),
+            Ok(_) => panic!("calibration accepted spread runs it cannot use"),
+        }
+    }
+
+    /// A spread needs two or more runs the calibration was not fitted to; the error names
+    /// the flag, the run and what was expected, before any fitting starts.
+    #[test]
+    fn spread_runs_it_cannot_use_are_refused_naming_the_run() {
+        let base = [fixture("null")];
+        let one = refused(&base, &[fixture("drag-mismatch")]);
+        assert!(one.contains("--spread-from"), "{one}");
+        assert!(one.contains("drag-mismatch"), "{one}");
+        assert!(one.contains("two or more"), "{one}");
+        let overlap = refused(&base, &[fixture("drag-mismatch"), fixture("null")]);
+        assert!(overlap.contains("--spread-from"), "{overlap}");
+        assert!(overlap.contains("null"), "{overlap}");
+        assert!(overlap.contains("not fitted to"), "{overlap}");
+    }
 }

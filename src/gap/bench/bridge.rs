@@ -7,8 +7,8 @@
 //! [`edits_for`]), in the library effect's own parameters, so the right answer is exact.
 //!
 //! Calibration runs: `timer_square` (a square course at depth, the pilot and a 10 ms paddle
-//! timer), `spot_turn`, `heading_hold`; the run it is scored on and every case:
-//! `timer_square`. The case loop and scoring are [`super::calibrated`]'s.
+//! timer), `spot_turn`, `heading_hold`; the run it is scored on, the [`SPREAD_RUNS`] runs the
+//! spread is measured on and every case: `timer_square`. The case loop and scoring are [`super::calibrated`]'s.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -26,6 +26,9 @@ pub const CASE_PROGRAM: &str = "timer_square";
 /// The calibration runs' programs, in order (the last is the run it is scored on).
 pub const BASELINE_PROGRAMS: [&str; 4] =
     ["timer_square", "spot_turn", "heading_hold", "timer_square"];
+/// Null runs of [`CASE_PROGRAM`] the between-run spread is measured on: the calibration
+/// runs are three programmes, whose differences in model error are no spread of a case.
+pub const SPREAD_RUNS: usize = 3;
 /// The overhead camera's noise on the converted track (m, 1 sigma).
 pub const CAMERA_STD_M: f64 = 0.01;
 
@@ -457,6 +460,10 @@ impl Truth for Bridge {
             .iter()
             .map(|(n, v)| (n.to_string(), v.to_vec()))
             .collect())
+    }
+
+    fn spread_runs(&self) -> usize {
+        SPREAD_RUNS
     }
 
     fn baseline(&self, index: usize, seed: u64, out: &Path) -> Result<(), GapError> {

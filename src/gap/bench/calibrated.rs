@@ -5,7 +5,8 @@
 //!
 //! For a seed S: [`BASELINE_RUNS`] null baseline runs and one more null run (seeds drawn from
 //! S); the embedded model is calibrated on the baselines ([`crate::gap::calibrate::calibrate`],
-//! with the between-run spread) and its gap before and after is reported on the further run.
+//! with the between-run spread, measured on [`Truth::spread_runs`] null cases when the source
+//! has them) and its gap before and after is reported on the further run.
 //! Then, per hidden effect, N runs with the effect hidden, each analysed with the calibrated
 //! model and the default options (re-anchored re-simulation), and N null runs.
 //!
@@ -66,6 +67,11 @@ pub trait Truth {
     /// Writes null run `index` of the calibration set (`index == BASELINE_RUNS`: the run it
     /// is scored on) as a measurement directory `out`.
     fn baseline(&self, index: usize, seed: u64, out: &Path) -> Result<(), GapError>;
+    /// Null runs of the case programme the between-run spread is measured on (none: on the
+    /// baseline runs, which then must be runs of that programme).
+    fn spread_runs(&self) -> usize {
+        0
+    }
     /// Writes one case as a measurement directory `out`: `hidden` with its physical size,
     /// or a null run.
     fn case(
@@ -213,6 +219,10 @@ pub fn run(
             size: Vec::new(),
         });
     }
+    // Drawn after the plan, so a source without spread runs keeps its cases.
+    let spread_seeds: Vec<u64> = (0..truth.spread_runs())
+        .map(|_| rng.random_range(1_000..1_000_000_000u64))
+        .collect();
     let total = shard.count(plan.len());
 
     let scratch = match &opts.keep {
@@ -227,10 +237,16 @@ pub fn run(
         runs.push(Run::load(&dir)?);
     }
     let validate = runs.split_off(BASELINE_RUNS);
+    let mut spread_from = Vec::new();
+    for (i, seed) in spread_seeds.iter().enumerate() {
+        let dir = scratch.0.join(format!("spread-{i}"));
+        truth.case(*seed, None, &dir)?;
+        spread_from.push(Run::load(&dir)?);
+    }
     let model_text = Embedded.read(MODEL)?;
     let model = GapModel::from_text(&Embedded.describe(MODEL), &model_text, ".".into())?;
     let t0 = Instant::now();
-    let cal = calibrate::calibrate(&model, &runs, &validate, &mut |_| {})?;
+    let cal = calibrate::calibrate(&model, &runs, &validate, &spread_from, &mut |_| {})?;
     let seconds = t0.elapsed().as_secs_f64();
     let calibration = cal.runs.iter().find(|r| !r.fitted).map(|r| CalibrationGap {
         gap_before: r.gap_before,
@@ -248,7 +264,7 @@ pub fn run(
         );
         std::fs::write(&path, cal.model.to_toml(&provenance, &scratch.0)).map_err(io(&path))?;
     }
-    for r in runs.iter().chain(&validate) {
+    for r in runs.iter().chain(&validate).chain(&spread_from) {
         scratch.done(&r.dir)?;
     }
 
