@@ -80,7 +80,7 @@ pub struct Effect {
 }
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 26] = [
+pub const LIBRARY: [Effect; 27] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -229,6 +229,32 @@ pub const LIBRARY: [Effect; 26] = [
         bounds: &[(-0.9, 5.0)],
         signature: "every motor stronger or weaker alike, the vertical pair too: speed, turn rate, \
                     acceleration at thrust steps and depth response off in proportion to thrust",
+        channels: &[
+            "x_m",
+            "y_m",
+            "surge_mps",
+            "paddle_speed_mps",
+            "compass_deg",
+            "depth_adc",
+            "accel_x_adc",
+            "accel_y_adc",
+            "accel_z_adc",
+        ],
+        kind: Kind::Mean,
+        physics: true,
+    },
+    // The static curve's shape: thrust ~ ((on - deadband) / (1 - deadband))^exponent. A
+    // propeller's thrust grows with rpm|rpm|, and rpm less than linearly with duty, so the
+    // exponent of a real motor is rarely the model's 1: a depth hold near half power, a cruise
+    // leg and a full-power spin are then off in different proportions, which no common gain
+    // can express.
+    Effect {
+        name: "thrust_curve",
+        parameters: &["exponent_scale"],
+        scales: &[0.2],
+        bounds: &[(-0.5, 2.0)],
+        signature: "thrust off in a proportion that changes with the command: part-power legs and \
+                    depth holds disagree more or less than full-power spins and dives",
         channels: &[
             "x_m",
             "y_m",
@@ -439,6 +465,10 @@ pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
         "thrust_gain" => {
             c.vehicle.thruster_common.forward_max_n =
                 (c.vehicle.thruster_common.forward_max_n * (1.0 + p(0))).max(1e-3);
+        }
+        "thrust_curve" => {
+            c.vehicle.thruster_common.exponent =
+                (c.vehicle.thruster_common.exponent * (1.0 + p(0))).max(0.1);
         }
         "compass_offset" => {
             c.sensors.compass.errors.bias += p(0);

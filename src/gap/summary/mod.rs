@@ -163,7 +163,7 @@ pub fn signature_kinds(effect: &Effect) -> &'static [Behaviour] {
         | "yaw_damping_quadratic"
         | "sway_yaw_coupling" => &[Behaviour::Turn],
         "drag_mismatch" | "added_mass" | "thruster_lag" => &[Behaviour::Speed],
-        "water_current" | "thrust_gain" => &[Behaviour::Speed, Behaviour::Turn],
+        "water_current" | "thrust_gain" | "thrust_curve" => &[Behaviour::Speed, Behaviour::Turn],
         _ => &[],
     }
 }
