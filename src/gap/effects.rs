@@ -79,6 +79,20 @@ pub struct Effect {
     pub physics: bool,
 }
 
+/// Where a change common to every thruster shows: the track, speed, heading, depth and every
+/// accelerometer axis.
+const ALL_THRUSTERS: [&str; 9] = [
+    "x_m",
+    "y_m",
+    "surge_mps",
+    "paddle_speed_mps",
+    "compass_deg",
+    "depth_adc",
+    "accel_x_adc",
+    "accel_y_adc",
+    "accel_z_adc",
+];
+
 /// The library. Its order is the order candidates are fitted and reported in.
 pub const LIBRARY: [Effect; 27] = [
     Effect {
@@ -229,17 +243,7 @@ pub const LIBRARY: [Effect; 27] = [
         bounds: &[(-0.9, 5.0)],
         signature: "every motor stronger or weaker alike, the vertical pair too: speed, turn rate, \
                     acceleration at thrust steps and depth response off in proportion to thrust",
-        channels: &[
-            "x_m",
-            "y_m",
-            "surge_mps",
-            "paddle_speed_mps",
-            "compass_deg",
-            "depth_adc",
-            "accel_x_adc",
-            "accel_y_adc",
-            "accel_z_adc",
-        ],
+        channels: &ALL_THRUSTERS,
         kind: Kind::Mean,
         physics: true,
     },
@@ -255,17 +259,7 @@ pub const LIBRARY: [Effect; 27] = [
         bounds: &[(-0.5, 2.0)],
         signature: "thrust off in a proportion that changes with the command: part-power legs and \
                     depth holds disagree more or less than full-power spins and dives",
-        channels: &[
-            "x_m",
-            "y_m",
-            "surge_mps",
-            "paddle_speed_mps",
-            "compass_deg",
-            "depth_adc",
-            "accel_x_adc",
-            "accel_y_adc",
-            "accel_z_adc",
-        ],
+        channels: &ALL_THRUSTERS,
         kind: Kind::Mean,
         physics: true,
     },
