@@ -96,9 +96,21 @@ impl Scratch {
     }
 
     /// The user's directory `path`: created if missing, and it and what is written into it
-    /// stay.
+    /// stay. A directory that already holds something is refused: a campaign writes runs
+    /// under fixed names, so it would overwrite an earlier one's runs and leave their other
+    /// files (another source's `truth.json`) beside its own.
     pub fn kept(path: &Path) -> Result<Self, GapError> {
         std::fs::create_dir_all(path).map_err(io(path))?;
+        let first = std::fs::read_dir(path).map_err(io(path))?.next();
+        if let Some(entry) = first {
+            let entry = entry.map_err(io(path))?;
+            return Err(GapError::Data(format!(
+                "gap-bench --keep {}: the directory is not empty (it holds `{}`); expected a new \
+                 or empty directory, so no kept run is overwritten",
+                path.display(),
+                entry.file_name().to_string_lossy()
+            )));
+        }
         Ok(Self(path.to_path_buf(), true))
     }
 
@@ -358,5 +370,32 @@ mod tests {
             post_hoc_sigma(&[1.0], &[[f64::NEG_INFINITY, f64::INFINITY]]),
             Some(0.0)
         );
+    }
+
+    /// A kept directory is made when missing and used when empty; one holding an earlier
+    /// campaign is refused, naming the directory and what it holds, and left as it was.
+    #[test]
+    fn a_kept_directory_must_be_new_or_empty() {
+        let root = std::env::temp_dir().join(format!("eyebot-keep-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let fresh = root.join("fresh");
+        assert!(Scratch::kept(&fresh).is_ok());
+        assert!(fresh.is_dir());
+        assert!(
+            Scratch::kept(&fresh).is_ok(),
+            "an empty directory is accepted"
+        );
+
+        let earlier = root.join("earlier");
+        std::fs::create_dir_all(earlier.join("case-0-water_current")).unwrap();
+        let err = match Scratch::kept(&earlier) {
+            Ok(_) => panic!("a directory holding a run was accepted"),
+            Err(e) => e.to_string(),
+        };
+        assert!(err.contains("earlier"), "{err}");
+        assert!(err.contains("case-0-water_current"), "{err}");
+        assert!(err.contains("not empty"), "{err}");
+        assert!(earlier.join("case-0-water_current").is_dir());
+        std::fs::remove_dir_all(&root).unwrap();
     }
 }
