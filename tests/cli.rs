@@ -124,3 +124,38 @@ fn replay_to_a_pty_carries_on_when_its_stdout_is_closed() {
         "the pty's symlink is removed"
     );
 }
+
+/// `gap-bench` refuses a source-specific flag given with a source that does not read it,
+/// naming the flag and the source it goes with, before any case runs: `--keep` with the
+/// simulator source used to be accepted and kept nothing.
+#[test]
+fn gap_bench_refuses_a_flag_its_source_does_not_read() {
+    let dir = TempDir::new("gap-bench-flags");
+    let cases: [(&[&str], &str, &str); 3] = [
+        (&["--keep"], "--keep", "--source independent or bridge"),
+        (
+            &["--source", "independent", "--programs"],
+            "--programs",
+            "--source bridge",
+        ),
+        (
+            &["--source", "bridge", "--independent"],
+            "--independent",
+            "--source independent",
+        ),
+    ];
+    for (args, flag, expected) in cases {
+        let out = Command::new(BIN)
+            .arg("gap-bench")
+            .args(["--cases", "1"])
+            .args(args)
+            .arg(dir.join("x"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}: {out:?}");
+        assert!(stderr.contains(flag), "{args:?}: {stderr}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!dir.join("x").exists(), "{args:?}: nothing is written");
+    }
+}

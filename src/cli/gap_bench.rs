@@ -6,6 +6,7 @@
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
+use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::cli::CliError;
@@ -78,7 +79,39 @@ pub enum GapBenchCommand {
     },
 }
 
+/// A source-specific flag given with a source that does not read it: refused, not ignored.
+fn check_flags_fit_source(args: &GapBenchArgs) -> Result<(), CliError> {
+    let misplaced = [
+        (
+            args.keep.is_some() && args.source == SourceArg::Simulator,
+            "--keep",
+            "--source independent or bridge (the simulator source calibrates nothing and \
+             writes no runs to keep; `eyebot-hil gap generate` makes one of its cases)",
+        ),
+        (
+            args.programs.is_some() && args.source != SourceArg::Bridge,
+            "--programs",
+            "--source bridge",
+        ),
+        (
+            args.independent.is_some() && args.source != SourceArg::Independent,
+            "--independent",
+            "--source independent",
+        ),
+    ];
+    match misplaced.iter().find(|(bad, _, _)| *bad) {
+        Some((_, flag, expected)) => Err(CliError::Usage(format!(
+            "{flag} is not read by --source {}; it goes with {expected}",
+            args.source
+                .to_possible_value()
+                .map_or_else(String::new, |v| v.get_name().to_string())
+        ))),
+        None => Ok(()),
+    }
+}
+
 fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
+    check_flags_fit_source(args)?;
     let source = match args.source {
         SourceArg::Simulator => Source::Simulator,
         SourceArg::Independent => Source::Independent,
