@@ -328,16 +328,11 @@ fn enabled(doc: &Document, table: &str, raw: &[RawEffect]) -> Result<Vec<Enabled
     Ok(out)
 }
 
-/// `v` as a TOML float that reads back as the same `f64`: what the file holds is what was
-/// calibrated and validated, so an analysis with the written model equals one with the model
-/// in memory. `Debug` gives the shortest round-trip form, with `.0` or an exponent as TOML
-/// needs; TOML spells not-a-number `nan`.
+/// `v` as a TOML float that reads back as the same `f64` (the `toml` crate's own writer):
+/// what the file holds is what was calibrated and validated, so an analysis with the written
+/// model equals one with the model in memory.
 fn exact(v: f64) -> String {
-    if v.is_nan() {
-        "nan".to_string()
-    } else {
-        format!("{v:?}")
-    }
+    toml::Value::Float(v).to_string()
 }
 
 /// `target` relative to `from` (both absolute), if they share a root.
