@@ -143,6 +143,173 @@ PROGRAMS = {
 }
 
 
+# ---------------------------------------------------------------------------------------------
+# The structure family (--structure-seed N): what is drawn, its range, and why. U(a, b) is
+# uniform; "p 0.5" is the chance a term is present. Every part has its own random stream
+# (`structure/N/part`), apart from the noise seed. `draw_structure` implements this table.
+# ---------------------------------------------------------------------------------------------
+STRUCTURE_FAMILY = [
+    ("mass", "rigid mass U(33.5, 36.5) kg; added mass surge U(2, 8), sway U(20, 36), heave "
+     "U(22, 40) kg; yaw, pitch, roll inertia x U(0.8, 1.25)",
+     "Mako is weighed (35 kg) but its added mass is only estimated"),
+    ("thrust", "full forward thrust U(1.4, 2.0) N per motor; gain per motor U(0.92, 1.04); "
+     "reverse/forward ratio U(0.40, 0.70)",
+     "hobby thrusters differ from motor to motor and run less well in reverse"),
+    ("thruster map", "per motor: dead band U(3, 14) % of full command; saturation (rpm full "
+     "from) 100 % (p 0.5) or U(85, 98) %; rpm = x^k, forward k U(0.5, 0.9) and reverse k "
+     "U(0.5, 1.0) (each x U(0.95, 1.05) per motor); spin-up lag U(0.2, 0.6) s, spin-down "
+     "U(0.35, 0.9) s; thrust ~ rpm|rpm|",
+     "the map from PWM to thrust is never linear and never the same forward and back"),
+    ("surge drag", "law drawn from linear+quadratic, quadratic, linear+quadratic+cubic, "
+     "linear+cubic, quadratic+cubic with weights U(0.2, 1.0), scaled so that 100/100 % runs "
+     "at a top speed of 0.44 m/s x U(0.8, 1.2); surge drag growing with sway X = -c u|v|, c "
+     "U(5, 30) N s^2/m^2 (p 0.5)",
+     "the thesis measured 0.44 m/s; the law's form is what a calibrated model cannot know"),
+    ("sway drag", "55 v x U(0.7, 1.4) + 120 v|v| x U(0.6, 1.6), + c v^3 with c U(100, 600) "
+     "(p 0.5)", "the hull's cross-flow drag is not measured"),
+    ("yaw damping", "(2.05 x U(0.75, 1.3) + 4.0 x U(0, 1.5) |u|) r + 1.6 x U(0.6, 1.6) r|r|, "
+     "+ c r^3 with c U(0.5, 3) (p 0.5)",
+     "spot turns keep their ~23 s period within about -40/+60 %"),
+    ("couplings", "Munk moment on (p 0.7) or off; sway-yaw cross damping Y_r and N_v each off "
+     "(p 1/3), positive or negative, |Y_r| U(0.1, 0.6), |N_v| U(0.5, 3); N_vu -12 x U(0.6, 1.4) "
+     "with the Munk moment, -12 x U(0, 0.8) without",
+     "the surge-sway-yaw coupling of a two-hull vehicle is not known even in sign"),
+    ("heave, pitch, roll", "heave 6 w x U(0.6, 1.6) + 70 w|w| x U(0.7, 1.4); surface damping "
+     "U(80, 160) N s/m; pitch and roll damping x U(0.7, 1.4); righting moments 12 N m/rad x "
+     "U(0.7, 1.4)", "vertical dynamics are only seen through the depth channel"),
+    ("buoyancy", "reserve buoyancy U(1.0, 2.0) N; top of the hull U(0.21, 0.27) m and bottom "
+     "U(0.19, 0.25) m from the CG; waterplane 0.09 m^2 x U(0.8, 1.2); centre of buoyancy "
+     "U(-3, 3) mm ahead of and U(-1.5, 1.5) mm to starboard of the CG (a trim of a few "
+     "degrees); thrust line U(0.01, 0.07) m above the CG; thruster levers x U(0.93, 1.07) "
+     "sideways, x U(0.9, 1.1) fore-aft",
+     "it floats at rest (reserve buoyancy > 0) with the CG at a depth the user does not know"),
+    ("sensor placement", "depth port at x U(-0.60, -0.35), y U(-0.05, 0.05), z U(0.05, 0.20) "
+     "m; accelerometer at x U(0.0, 0.2) m (the model's specific force uses x only); camera "
+     "marker at x U(-0.05, 0.15), y U(-0.04, 0.04) m",
+     "lever arms are measured with a ruler, if at all"),
+    ("initial state", "true start = stated start + an offset: horizontal U(0, 0.3) m (uniform "
+     "in a disc), depth U(-0.3, 0.3) m, heading U(-20, 20) deg; experiment.toml states the "
+     "nominal start (the nominal float depth), truth.json the true one",
+     "a user writes down where the vehicle was meant to start"),
+    ("program", "`--program random`: one of the programs above, uniformly",
+     "closed-loop data of several kinds"),
+]
+
+SURGE_LAWS = [("linear", "quadratic"), ("quadratic",), ("linear", "quadratic", "cubic"),
+              ("linear", "cubic"), ("quadratic", "cubic")]
+START_OFFSET_LIMITS = (0.3, 0.3, 20.0)  # m horizontal, m depth, deg heading
+
+
+def draw_structure(n):
+    """The vehicle (parameters, sensor placement) that structure seed `n` draws from
+    STRUCTURE_FAMILY, and a description of its discrete choices."""
+    def part(name):
+        return random.Random(f"structure/{n}/{name}")
+
+    def on(r, chance, lo, hi):
+        """A term present with probability `chance`, then U(lo, hi); else 0."""
+        return r.uniform(lo, hi) if r.random() < chance else 0.0
+
+    p = json.loads(json.dumps(NOMINAL))
+    sp = json.loads(json.dumps(SENSORS))
+    r = part("mass")
+    p["mass_kg"] = r.uniform(33.5, 36.5)
+    p["m_surge_kg"] = p["mass_kg"] + r.uniform(2.0, 8.0)
+    p["m_sway_kg"] = p["mass_kg"] + r.uniform(20.0, 36.0)
+    p["m_heave_kg"] = p["mass_kg"] + r.uniform(22.0, 40.0)
+    for k in ("i_yaw_kgm2", "i_pitch_kgm2", "i_roll_kgm2"):
+        p[k] *= r.uniform(0.8, 1.25)
+    r = part("thrust")
+    p["thrust_fwd_n"] = r.uniform(1.4, 2.0)
+    p["gains"] = [r.uniform(0.92, 1.04) for _ in range(4)]
+    p["reverse_ratio"] = r.uniform(0.40, 0.70)
+    r = part("thruster map")
+    k_fwd, k_rev = r.uniform(0.5, 0.9), r.uniform(0.5, 1.0)
+    p["thruster_maps"] = [{
+        "deadband": r.uniform(0.03, 0.14),
+        "saturation": 1.0 if r.random() < 0.5 else r.uniform(0.85, 0.98),
+        "exponent_forward": k_fwd * r.uniform(0.95, 1.05),
+        "exponent_reverse": k_rev * r.uniform(0.95, 1.05),
+        "tau_spin_up_s": r.uniform(0.2, 0.6),
+        "tau_spin_down_s": r.uniform(0.35, 0.9)} for _ in range(4)]
+    for k in ("deadband", "rpm_exponent", "tau_spin_up_s", "tau_spin_down_s"):
+        del p[k]  # the maps above replace the nominal's single map
+    r = part("surge drag")
+    top_mps = 0.44 * r.uniform(0.8, 1.2)
+    law = r.choice(SURGE_LAWS)
+    w = {term: r.uniform(0.2, 1.0) for term in law}
+    full_n = p["thrust_fwd_n"] * (p["gains"][0] + p["gains"][1])  # both stern motors at 100 %
+    scale = full_n / sum(w.values())
+    p["surge_lin"] = scale * w.get("linear", 0.0) / top_mps
+    p["surge_quad"] = scale * w.get("quadratic", 0.0) / top_mps ** 2
+    p["surge_cubic"] = scale * w.get("cubic", 0.0) / top_mps ** 3
+    p["surge_per_sway"] = on(r, 0.5, 5.0, 30.0)
+    r = part("sway drag")
+    p["sway_lin"] *= r.uniform(0.7, 1.4)
+    p["sway_quad"] *= r.uniform(0.6, 1.6)
+    p["sway_cubic"] = on(r, 0.5, 100.0, 600.0)
+    r = part("yaw damping")
+    p["yaw_lin"] *= r.uniform(0.75, 1.3)
+    p["yaw_lin_per_speed"] *= r.uniform(0.0, 1.5)
+    p["yaw_quad"] *= r.uniform(0.6, 1.6)
+    p["yaw_cubic"] = on(r, 0.5, 0.5, 3.0)
+    r = part("couplings")
+    p["munk_factor"] = 1.0 if r.random() < 0.7 else 0.0
+    p["y_r"] = r.choice([0.0, -1.0, 1.0]) * r.uniform(0.1, 0.6)
+    p["n_v"] = r.choice([0.0, -1.0, 1.0]) * r.uniform(0.5, 3.0)
+    p["n_v_per_speed"] *= r.uniform(0.6, 1.4) if p["munk_factor"] else r.uniform(0.0, 0.8)
+    r = part("heave, pitch, roll")
+    p["heave_lin"] *= r.uniform(0.6, 1.6)
+    p["heave_quad"] *= r.uniform(0.7, 1.4)
+    p["surface_damping"] = r.uniform(80.0, 160.0)
+    for k in ("pitch_lin", "pitch_quad", "roll_lin", "roll_quad"):
+        p[k] *= r.uniform(0.7, 1.4)
+    for k in ("righting_pitch_nm", "righting_roll_nm"):
+        p[k] *= r.uniform(0.7, 1.4)
+    r = part("buoyancy")
+    p["reserve_buoyancy_n"] = r.uniform(1.0, 2.0)
+    p["top_above_com_m"] = r.uniform(0.21, 0.27)
+    p["bottom_below_com_m"] = r.uniform(0.19, 0.25)
+    p["waterplane_m2"] *= r.uniform(0.8, 1.2)
+    p["cb_ahead_of_cg_m"] = r.uniform(-0.003, 0.003)
+    p["cb_starboard_of_cg_m"] = r.uniform(-0.0015, 0.0015)
+    p["thrust_line_above_com_m"] = r.uniform(0.01, 0.07)
+    p["lever_horizontal_m"] *= r.uniform(0.93, 1.07)
+    p["lever_vertical_m"] *= r.uniform(0.9, 1.1)
+    r = part("sensor placement")
+    sp["depth_port_body_m"] = [r.uniform(-0.60, -0.35), r.uniform(-0.05, 0.05), r.uniform(0.05, 0.20)]
+    sp["accel_body_m"] = [r.uniform(0.0, 0.2), sp["accel_body_m"][1], sp["accel_body_m"][2]]
+    sp["camera_marker_body_m"] = [r.uniform(-0.05, 0.15), r.uniform(-0.04, 0.04)]
+
+    def sign(v):
+        return "off" if v == 0.0 else ("positive" if v > 0.0 else "negative")
+
+    b = p["mass_kg"] * POOL["g"] + p["reserve_buoyancy_n"]
+    kinds = {
+        "structure_seed": n,
+        "surge_drag_law": "+".join(law),
+        "top_speed_design_mps": top_mps,
+        "surge_drag_grows_with_sway": p["surge_per_sway"] > 0.0,
+        "sway_drag_cubic": p["sway_cubic"] > 0.0,
+        "yaw_damping_cubic": p["yaw_cubic"] > 0.0,
+        "munk_moment": p["munk_factor"] > 0.0,
+        "sway_yaw_cross_damping": {"y_r": sign(p["y_r"]), "n_v": sign(p["n_v"])},
+        "saturating_thrusters": [m["saturation"] < 1.0 for m in p["thruster_maps"]],
+        "trim_deg": {  # where the righting moment balances the buoyancy's moment
+            "pitch": math.degrees(math.atan(b * p["cb_ahead_of_cg_m"] / p["righting_pitch_nm"])),
+            "roll": math.degrees(math.atan(-b * p["cb_starboard_of_cg_m"] / p["righting_roll_nm"]))},
+        "float_depth_m": float_depth_m(p),
+    }
+    return p, sp, kinds
+
+
+def draw_start_offset(r):
+    """(north m, east m, down m, heading deg) within START_OFFSET_LIMITS, from stream `r`."""
+    horizontal, depth, heading = START_OFFSET_LIMITS
+    a, d = r.uniform(0.0, 2.0 * math.pi), horizontal * math.sqrt(r.random())
+    return [d * math.cos(a), d * math.sin(a), r.uniform(-depth, depth), r.uniform(-heading, heading)]
+
+
 def wrap180(a):
     return (a + 180.0) % 360.0 - 180.0
 
@@ -185,20 +352,30 @@ class Vehicle:
         self.contacts = 0
         self.in_contact = False
         self.walls = True
-        self.up = 1.0 - math.exp(-DT_S / p["tau_spin_up_s"])
-        self.down = 1.0 - math.exp(-DT_S / p["tau_spin_down_s"])
+        self.maps = thruster_maps(p)
+        self.up = [1.0 - math.exp(-DT_S / m["tau_spin_up_s"]) for m in self.maps]
+        self.down = [1.0 - math.exp(-DT_S / m["tau_spin_down_s"]) for m in self.maps]
         self.n_ss = [0.0] * 4
+        # terms only a drawn structure has (absent: the nominal equations, bit for bit)
+        self.surge_per_sway = p.get("surge_per_sway", 0.0)
+        self.sway_cubic = p.get("sway_cubic", 0.0)
+        self.yaw_cubic = p.get("yaw_cubic", 0.0)
+        self.munk = p.get("munk_factor", 1.0)
+        b = p.get("mass_kg", 0.0) * POOL["g"] + p["reserve_buoyancy_n"]  # buoyancy submerged
+        self.trim_pitch_nm = b * p.get("cb_ahead_of_cg_m", 0.0)
+        self.trim_roll_nm = -b * p.get("cb_starboard_of_cg_m", 0.0)
 
     def command(self, percent):
-        """MOTORDrive percent -> steady rpm fraction (deadband, motor curve)."""
-        p = self.p
+        """MOTORDrive percent -> steady rpm fraction (deadband, saturation, motor curve)."""
         self.cmd = list(percent)
         for i, c in enumerate(percent):
+            m = self.maps[i]
             f = abs(c) / 100.0
-            if f <= p["deadband"]:
+            if f <= m["deadband"]:
                 self.n_ss[i] = 0.0
             else:
-                e = ((f - p["deadband"]) / (1.0 - p["deadband"])) ** p["rpm_exponent"]
+                x = min(1.0, (f - m["deadband"]) / (m["saturation"] - m["deadband"]))
+                e = x ** (m["exponent_forward"] if c > 0 else m["exponent_reverse"])
                 self.n_ss[i] = e if c > 0 else -e
 
     def slow_noise(self):
@@ -217,7 +394,7 @@ class Vehicle:
     def step(self):
         p, dt = self.p, DT_S
         for i in range(4):
-            a = self.up if abs(self.n_ss[i]) > abs(self.n[i]) else self.down
+            a = self.up[i] if abs(self.n_ss[i]) > abs(self.n[i]) else self.down[i]
             self.n[i] += (self.n_ss[i] - self.n[i]) * a
         tp, ts, tb, tst = self.thrusts()
         c, s = math.cos(self.psi), math.sin(self.psi)
@@ -229,11 +406,17 @@ class Vehicle:
               - (p["surge_lin"] * ur + p["surge_quad"] * ur * abs(ur) + p["surge_cubic"] * ur ** 3)
               + p["dist_surge_n"] * self.ds[0])
         sway_drag = p["sway_lin"] * vr + p["sway_quad"] * vr * abs(vr)
+        if self.surge_per_sway:  # surge resistance that grows with the sway speed
+            fx -= self.surge_per_sway * ur * abs(vr)
+        if self.sway_cubic:
+            sway_drag += self.sway_cubic * vr ** 3
         fy = -m11 * ur * r - sway_drag - p["y_r"] * r + p["dist_sway_n"] * self.ds[1]
-        nz = (p["lever_horizontal_m"] * (tp - ts) - (m22 - m11) * ur * vr
+        nz = (p["lever_horizontal_m"] * (tp - ts) - self.munk * (m22 - m11) * ur * vr
               - ((p["yaw_lin"] + p["yaw_lin_per_speed"] * abs(ur)) * r + p["yaw_quad"] * r * abs(r))
               - (p["n_v"] + p["n_v_per_speed"] * ur) * vr
               + p["dist_yaw_nm"] * self.ds[2])
+        if self.yaw_cubic:
+            nz -= self.yaw_cubic * r ** 3
         # walls: only near them
         if self.walls and (self.x < 0.8 or self.y < 0.8 or self.x > POOL["length_m"] - 0.8
                 or self.y > POOL["width_m"] - 0.8):
@@ -256,6 +439,9 @@ class Vehicle:
               - p["pitch_lin"] * self.q - p["pitch_quad"] * self.q * abs(self.q))
         mx = (0.06 * sway_drag - p["righting_roll_nm"] * math.sin(self.phi)
               - p["roll_lin"] * self.p_rate - p["roll_quad"] * self.p_rate * abs(self.p_rate))
+        if self.trim_pitch_nm or self.trim_roll_nm:  # centre of buoyancy off the CG's vertical
+            my += self.trim_pitch_nm * math.cos(self.theta)
+            mx += self.trim_roll_nm * math.cos(self.phi)
         # semi-implicit Euler: velocities first, positions with the new velocities
         self.du, self.dv, self.dr = fx / m11, fy / m22, nz / m66
         self.dw = fz / p["m_heave_kg"]
@@ -351,8 +537,11 @@ class Sensors:
 
     # depth -------------------------------------------------------------------------------
     def depth_port_m(self, veh):
-        bx, _, bz = self.sp["depth_port_body_m"]
-        return veh.z - bx * math.sin(veh.theta) + bz * math.cos(veh.theta) * math.cos(veh.phi)
+        bx, by, bz = self.sp["depth_port_body_m"]
+        d = veh.z - bx * math.sin(veh.theta) + bz * math.cos(veh.theta) * math.cos(veh.phi)
+        if by:
+            d += by * math.cos(veh.theta) * math.sin(veh.phi)
+        return d
 
     def depth_track(self, veh):
         """Every physics step: the sensor's front end (gauge pressure, amplifier, RC filter)."""
@@ -500,8 +689,12 @@ class Sensors:
 # Hidden effects
 # ---------------------------------------------------------------------------------------------
 class Effects:
-    def __init__(self, name, size):
+    """The hidden effects of a run: one (`name`, `size`), or several (`parts`, a list of
+    (name, size); then `name` is their names joined by "+" and `size` the list of sizes)."""
+
+    def __init__(self, name, size, parts=None):
         self.name, self.size = name, size
+        self.parts = [(name, size)] if parts is None else list(parts)
         self.current = [0.0, 0.0]
         self.hard_iron = [0.0, 0.0]
         self.compass_latency_s = 0.0
@@ -511,6 +704,17 @@ class Effects:
         self.depth_gain = 0.0
         self.accel_offset_v = [0.0, 0.0, 0.0]
         self.velocity_scale = 0.0
+        for n, s in self.parts:
+            self.apply_sensor_effect(n, s)
+
+    @classmethod
+    def several(cls, parts):
+        """Several effects at once; a single part gives the same object as `Effects(name, size)`."""
+        if len(parts) == 1:
+            return cls(*parts[0])
+        return cls("+".join(n for n, _ in parts), [s for _, s in parts], parts)
+
+    def apply_sensor_effect(self, name, size):
         if name == "water_current":
             self.current = list(size)
         elif name == "compass_hard_iron":
@@ -530,26 +734,50 @@ class Effects:
         elif name == "velocity_sensor_scale":
             self.velocity_scale = size
 
-    def vehicle_params(self, nominal):
-        p = json.loads(json.dumps(nominal))
-        n, s = self.name, self.size
-        if n == "thruster_imbalance":
-            p["gains"][0] *= 1.0 + s / 2.0
-            p["gains"][1] *= 1.0 - s / 2.0
-        elif n == "thrust_gain":
-            p["thrust_fwd_n"] *= 1.0 + s
-        elif n == "thruster_lag":
-            p["tau_spin_up_s"] += s
-            p["tau_spin_down_s"] += s
-        elif n == "drag":
-            for k in ("surge_lin", "surge_quad", "surge_cubic", "sway_lin", "sway_quad"):
-                p[k] *= s
-        elif n == "yaw_damping":
-            p["yaw_lin"] *= s
-            p["yaw_quad"] *= s
-        elif n == "sway_yaw_coupling":
-            p["n_v"] += s
+    def vehicle_params(self, base):
+        """`base` (NOMINAL or a drawn structure) with the hidden vehicle effects applied."""
+        p = json.loads(json.dumps(base))
+        for n, s in self.parts:
+            if n == "thruster_imbalance":
+                p["gains"][0] *= 1.0 + s / 2.0
+                p["gains"][1] *= 1.0 - s / 2.0
+            elif n == "thrust_gain":
+                p["thrust_fwd_n"] *= 1.0 + s
+            elif n == "thruster_lag":
+                if "thruster_maps" in p:
+                    for m in p["thruster_maps"]:
+                        m["tau_spin_up_s"] += s
+                        m["tau_spin_down_s"] += s
+                else:
+                    p["tau_spin_up_s"] += s
+                    p["tau_spin_down_s"] += s
+            elif n == "drag":
+                for k in ("surge_lin", "surge_quad", "surge_cubic", "sway_lin", "sway_quad",
+                          "surge_per_sway", "sway_cubic"):
+                    if k in p:
+                        p[k] *= s
+            elif n == "yaw_damping":
+                for k in ("yaw_lin", "yaw_quad", "yaw_cubic"):
+                    if k in p:
+                        p[k] *= s
+            elif n == "sway_yaw_coupling":
+                p["n_v"] += s
         return p
+
+
+def thruster_maps(p):
+    """Per-thruster command -> rpm maps: a drawn structure's own, or the nominal one four times."""
+    if "thruster_maps" in p:
+        return p["thruster_maps"]
+    return [{"deadband": p["deadband"], "saturation": 1.0, "exponent_forward": p["rpm_exponent"],
+             "exponent_reverse": p["rpm_exponent"], "tau_spin_up_s": p["tau_spin_up_s"],
+             "tau_spin_down_s": p["tau_spin_down_s"]} for _ in range(4)]
+
+
+def float_depth_m(p):
+    """Depth of the centre of mass when the vehicle floats at rest, motors off: the top of the
+    hull emerges until the lost displacement equals the reserve buoyancy."""
+    return p["top_above_com_m"] - p["reserve_buoyancy_n"] / (POOL["rho"] * POOL["g"] * p["waterplane_m2"])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -973,18 +1201,25 @@ def start_pose(program, rng):
     return 10.5 + 4.0 * rng.random(), 5.5 + 1.5 * rng.random(), rng.uniform(0.0, 360.0)
 
 
-def simulate(program, seed, duration_s, effect, camera=True):
+def simulate(program, seed, duration_s, effect, camera=True, structure=None, offset=None):
+    """One run. `structure` is (params, sensors) from `draw_structure` (None: NOMINAL and
+    SENSORS); `offset` (north m, east m, down m, heading deg) moves the true start away from
+    the stated one, the nominal vehicle floating at rest."""
     rng = stream(seed, "program")
     x0, y0, h0 = start_pose(program, rng)
     h0 %= 360.0
-    p = effect.vehicle_params(NOMINAL)
-    z0 = p["top_above_com_m"] - p["reserve_buoyancy_n"] / (POOL["rho"] * POOL["g"] * p["waterplane_m2"])
-    veh = Vehicle(p, seed, x0, y0, h0, z0, effect.current)
-    sen = Sensors(SENSORS, seed, effect)
+    base, sp = structure if structure is not None else (NOMINAL, SENSORS)
+    p = effect.vehicle_params(base)
+    z0 = float_depth_m(NOMINAL)
+    true = (x0, y0, z0, h0)
+    if offset is not None:
+        true = (x0 + offset[0], y0 + offset[1], z0 + offset[2], (h0 + offset[3]) % 360.0)
+    xt, yt, zt, ht = true
+    veh = Vehicle(p, seed, xt, yt, ht, zt, effect.current)
+    sen = Sensors(sp, seed, effect)
     eb = EyeBot(veh, sen, camera)
     eb.duration_s = duration_s
     prog = PROGRAM_CLASSES[program](stream(seed, "plan"))
-    sp = SENSORS
     period = round(prog.period_s * TICKS_PER_S)
     compass_period = round(sp["compass_period_s"] * TICKS_PER_S)
     compass_phase = stream(seed, "compass-phase").randrange(compass_period)
@@ -1052,8 +1287,8 @@ def simulate(program, seed, duration_s, effect, camera=True):
     if hasattr(prog, "log") and prog.log and prog.log[-1][1] is None:
         a, _, target = prog.log[-1]
         prog.log[-1] = (a, duration_s, target)
-    return {"eb": eb, "veh": veh, "track": track, "start": (x0, y0, z0, h0), "params": p,
-            "program": prog}
+    return {"eb": eb, "veh": veh, "track": track, "start": (x0, y0, z0, h0), "true_start": true,
+            "params": p, "sensors": sp, "program": prog}
 
 
 def port_clearance(veh):
@@ -1064,10 +1299,9 @@ def port_clearance(veh):
     return walls[best] - 0.32
 
 
-def derived(effect):
-    """The hidden effect in other units a scorer may want (ADC codes, degrees)."""
+def derived(n, v):
+    """Hidden effect `n` of size `v` in other units a scorer may want (ADC codes, degrees)."""
     lsb = SENSORS["adc_ref_v"] / SENSORS["adc_codes"]
-    n, v = effect.name, effect.size
     h_ut = SENSORS["field_ut"] * math.cos(math.radians(SENSORS["inclination_deg"]))
     if n == "water_current":
         return {"speed_mps": math.hypot(*v), "direction_deg": math.degrees(math.atan2(v[1], v[0])) % 360.0}
@@ -1087,13 +1321,23 @@ def derived(effect):
     return {}
 
 
-def write_run(out, args, effect, res):
+def hidden_truth(name, size):
+    return {"name": name, "size": size, "default_size": EFFECTS[name][0], "unit": EFFECTS[name][1],
+            "meaning": EFFECTS[name][2], "derived": derived(name, size)}
+
+
+def write_run(out, args, effect, res, drawn=None):
+    """Writes the measurement and truth.json. `drawn` says what was drawn beyond the noise:
+    the structure's description, the start offset, the program's draw (all optional)."""
+    drawn = drawn or {}
     os.makedirs(out, exist_ok=True)
     eb = res["eb"]
     x0, y0, z0, h0 = res["start"]
     name = f"independent-{args.program}-seed{args.seed}-{effect.name}"
     desc = (f"{VERSION}: program {args.program}, seed {args.seed}, hidden {effect.name}. "
             "Written by pty-tests/independent/mako_independent.py, not by eyebot-hil.")
+    if drawn.get("structure") is not None:
+        name += f"-structure{drawn['structure']['structure_seed']}"
     lines = [
         f"name = {json.dumps(name)}",
         f"description = {json.dumps(desc)}",
@@ -1128,20 +1372,27 @@ def write_run(out, args, effect, res):
         for tick in sorted(eb.rows):
             row = eb.rows[tick]
             f.write(f"{tick / TICKS_PER_S:.3f}," + ",".join(row.get(c, "") for c in cols) + "\n")
+    parts = [hidden_truth(n, v) for n, v in effect.parts]
+    xt, yt, zt, ht = res["true_start"]
     truth = {
         "generator": VERSION,
         "program": args.program,
+        "program_drawn": drawn.get("program"),
         "seed": args.seed,
         "duration_s": args.duration,
         "camera": args.camera,
-        "hidden": {"name": effect.name, "size": effect.size, "default_size": EFFECTS[effect.name][0],
-                   "unit": EFFECTS[effect.name][1], "meaning": EFFECTS[effect.name][2],
-                   "derived": derived(effect)},
-        "start": {"x_m": x0, "y_m": y0, "z_m": z0, "heading_deg": h0},
+        "hidden": parts[0] if len(parts) == 1 else {"name": effect.name, "effects": parts},
+        "hidden_effects": parts,
+        # the true initial state; `stated_start` is what experiment.toml says
+        "start": {"x_m": xt, "y_m": yt, "z_m": zt, "heading_deg": ht},
+        "stated_start": {"x_m": x0, "y_m": y0, "z_m": z0, "heading_deg": h0},
+        "start_offset": drawn.get("start_offset"),
+        "float_depth_m": float_depth_m(res["params"]),
+        "structure": drawn.get("structure"),
         "wall_contacts": res["veh"].contacts,
         "vehicle": res["params"],
         "nominal_vehicle": NOMINAL,
-        "sensors": SENSORS,
+        "sensors": res["sensors"],
         "pool": POOL,
     }
     with open(os.path.join(out, "truth.json"), "w", newline="\n") as f:
@@ -1213,15 +1464,59 @@ def summarise(program, res):
     return out
 
 
-def manoeuvres(effect):
-    """Open-loop checks against thesis 4.5-4.7, on the true vehicle without sensors or noise."""
-    p = effect.vehicle_params(NOMINAL)
+def quiet(p):
+    """`p` without process noise or rpm fluctuation, for open-loop checks."""
+    p = json.loads(json.dumps(p))
     for k in ("rpm_fluctuation_rel", "dist_surge_n", "dist_sway_n", "dist_yaw_nm", "dist_heave_n"):
         p[k] = 0.0
+    return p
+
+
+def plausibility(p):
+    """What makes a drawn vehicle a plausible Mako, measured open loop without noise in open
+    water: top speed after 40 s at 100/100 %; seconds for one spot turn at +-100 % each way
+    (after 10 s of spin-up; None when it does not turn 360 deg within 60 s); the centre of
+    mass's depth and heave speed 60 s after release at 1 m, motors off."""
+    p = quiet(p)
+
+    def fresh(z=None):
+        v = Vehicle(p, 0, 12.5, 6.25, 0.0, float_depth_m(p) if z is None else z, [0.0, 0.0])
+        v.walls = False
+        return v
+
+    veh = fresh()
+    veh.command([100, 100, 0, 0])
+    for _ in range(40 * TICKS_PER_S):
+        veh.step()
+    out = {"top_speed_mps": math.hypot(veh.u, veh.v)}
+    for name, cmd in (("spot_turn_clockwise_s", [100, -100, 0, 0]),
+                      ("spot_turn_anticlockwise_s", [-100, 100, 0, 0])):
+        veh = fresh()
+        veh.command(cmd)
+        for _ in range(10 * TICKS_PER_S):
+            veh.step()
+        psi0, n = veh.psi, 0
+        while abs(veh.psi - psi0) < 2.0 * math.pi and n < 60 * TICKS_PER_S:
+            veh.step()
+            n += 1
+        out[name] = n * DT_S if abs(veh.psi - psi0) >= 2.0 * math.pi else None
+    veh = fresh(1.0)
+    for _ in range(60 * TICKS_PER_S):
+        veh.step()
+    out["depth_after_release_m"], out["heave_after_release_mps"] = veh.z, veh.w
+    out["float_depth_m"] = float_depth_m(p)
+    return out
+
+
+def manoeuvres(effect, base=None):
+    """Open-loop checks against thesis 4.5-4.7, on the true vehicle without sensors or noise;
+    `base` is a drawn structure's parameters (None: NOMINAL)."""
+    p = quiet(effect.vehicle_params(NOMINAL if base is None else base))
+    z_start = 0.238 if base is None else float_depth_m(p)
     lines = []
 
     def fresh(heading=0.0):
-        v = Vehicle(p, 0, 12.5, 6.25, heading, 0.238, effect.current)
+        v = Vehicle(p, 0, 12.5, 6.25, heading, z_start, effect.current)
         v.walls = False  # open water: the straight run and coast-down need ~25 m
         return v
 
@@ -1273,7 +1568,7 @@ def manoeuvres(effect):
         veh.n = list(veh.n_ss)
         net = sum(veh.thrusts()[2:]) - p["reserve_buoyancy_n"]
         lo, hi = (mid, hi) if net < 0.0 else (lo, mid)
-    lines.append(f"bow = stern = {lo:.0f} % balances the {p['reserve_buoyancy_n']} N reserve buoyancy")
+    lines.append(f"bow = stern = {lo:.0f} % balances the {p['reserve_buoyancy_n']:.3g} N reserve buoyancy")
     veh = fresh()
     veh.z = 1.0
     veh.command([0, 0, 100, 100])
@@ -1312,19 +1607,67 @@ def parse_size(name, text):
     return v
 
 
+def parse_hidden(hidden, size):
+    """`--hidden A` or `--hidden A+B` with `--size SA` or `--size SA;SB` (`-` in a place: that
+    effect's default size) -> Effects."""
+    names = hidden.split("+")
+    for n in names:
+        if n not in EFFECTS:
+            raise SystemExit(f"error: --hidden: expected one of {', '.join(EFFECTS)}, or two of "
+                             f"them joined by `+`; found `{hidden}`")
+    if len(names) > 1:
+        if len(names) != 2 or names[0] == names[1] or "none" in names:
+            raise SystemExit(f"error: --hidden: expected two different effects other than `none` "
+                             f"joined by `+` (A+B); found `{hidden}`")
+    sizes = [None] * len(names) if size is None else size.split(";")
+    if len(sizes) != len(names):
+        raise SystemExit(f"error: --size: `{hidden}` takes {len(names)} sizes separated by `;` "
+                         f"(`-` for a default), found {len(sizes)} in `{size}`")
+    parts = [(n, parse_size(n, None if t is None or (len(names) > 1 and t.strip() == "-") else t))
+             for n, t in zip(names, sizes)]
+    return Effects.several(parts)
+
+
+def parse_start_offset(text):
+    """`--start-offset NORTH,EAST,DOWN,HEADING` (m, m, m, deg) within START_OFFSET_LIMITS."""
+    horizontal, depth, heading = START_OFFSET_LIMITS
+    want = (f"four comma-separated numbers NORTH_M,EAST_M,DOWN_M,HEADING_DEG with at most "
+            f"{horizontal} m horizontally, {depth} m in depth and {heading} deg, or `random`")
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise SystemExit(f"error: --start-offset: expected {want}; found `{text}`")
+    if len(vals) != 4 or not all(math.isfinite(v) for v in vals):
+        raise SystemExit(f"error: --start-offset: expected {want}; found `{text}`")
+    if (math.hypot(vals[0], vals[1]) > horizontal + 1e-12 or abs(vals[2]) > depth
+            or abs(vals[3]) > heading):
+        raise SystemExit(f"error: --start-offset: expected {want}; found `{text}`")
+    return vals
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--program", choices=sorted(PROGRAM_CLASSES), help="the EyeBot control program")
+    ap.add_argument("--program", choices=sorted(PROGRAM_CLASSES) + ["random"],
+                    help="the EyeBot control program; `random`: drawn (under the structure seed "
+                         "when given, else the seed)")
     ap.add_argument("--seed", type=int, default=1, help="random seed (integer)")
+    ap.add_argument("--structure-seed", type=int, default=None,
+                    help="draw the vehicle's structure from the family (see --list); absent: "
+                         "the nominal vehicle")
+    ap.add_argument("--start-offset", default=None,
+                    help="true start minus stated start: NORTH_M,EAST_M,DOWN_M,HEADING_DEG, or "
+                         "`random`; drawn by default with --structure-seed (0,0,0,0 for none)")
     ap.add_argument("--duration", type=float, default=180.0, help="run length in seconds (10..1800)")
-    ap.add_argument("--hidden", default="none", help="hidden effect (see --list)")
-    ap.add_argument("--size", default=None, help="effect size in the effect's unit (see --list)")
+    ap.add_argument("--hidden", default="none", help="hidden effect, or two as A+B (see --list)")
+    ap.add_argument("--size", default=None,
+                    help="effect size in the effect's unit (see --list); two effects: SA;SB")
     ap.add_argument("--camera", dest="camera", action="store_true", default=True,
                     help="write the overhead-camera track x_m, y_m (default)")
     ap.add_argument("--no-camera", dest="camera", action="store_false", help="no camera track")
     ap.add_argument("--out", help="measurement directory to write")
-    ap.add_argument("--list", action="store_true", help="list programs and effects, then exit")
+    ap.add_argument("--list", action="store_true",
+                    help="list programs, effects and the structure family, then exit")
     ap.add_argument("--summary", action="store_true", help="print a summary of the true track")
     ap.add_argument("--manoeuvres", action="store_true",
                     help="print open-loop checks (top speed, coast-down, spot turns) and exit")
@@ -1337,26 +1680,47 @@ def main(argv=None):
         for k, (d, unit, what) in EFFECTS.items():
             ds = "-" if d is None else (",".join(f"{v:g}" for v in d) if isinstance(d, list) else f"{d:g}")
             print(f"  {k:22s} {ds:>12s} {unit:38s} {what}")
+        # unindented lines: readers of the effect lines above take indented lines only
+        print("structure family (--structure-seed N; absent: the nominal vehicle):")
+        for part, what, why in STRUCTURE_FAMILY:
+            print(f"- {part}: {what}. Why: {why}.")
         return 0
+    structure = None if args.structure_seed is None else draw_structure(args.structure_seed)
     if args.manoeuvres:
-        if args.hidden not in EFFECTS:
-            ap.error(f"--hidden: expected one of {', '.join(EFFECTS)}; found `{args.hidden}`")
-        for line in manoeuvres(Effects(args.hidden, parse_size(args.hidden, args.size))):
+        effect = parse_hidden(args.hidden, args.size)
+        for line in manoeuvres(effect, None if structure is None else structure[0]):
             print(line)
         return 0
     if args.program is None:
-        ap.error("--program: expected one of " + ", ".join(sorted(PROGRAM_CLASSES)))
+        ap.error("--program: expected one of " + ", ".join(sorted(PROGRAM_CLASSES) + ["random"]))
     if args.out is None:
         ap.error("--out: expected the measurement directory to write")
-    if args.hidden not in EFFECTS:
-        ap.error(f"--hidden: expected one of {', '.join(EFFECTS)}; found `{args.hidden}`")
     if not (10.0 <= args.duration <= 1800.0):
         ap.error(f"--duration: expected seconds in 10..1800, found {args.duration}")
-    size = parse_size(args.hidden, args.size)
-    effect = Effects(args.hidden, size)
+    effect = parse_hidden(args.hidden, args.size)
+    drawn = {}
+    if args.program == "random":
+        r = (random.Random(f"structure/{args.structure_seed}/program") if structure is not None
+             else stream(args.seed, "program kind"))
+        args.program = r.choice(sorted(PROGRAM_CLASSES))
+        drawn["program"] = {"argument": "random", "from": sorted(PROGRAM_CLASSES),
+                            "stream": "structure seed" if structure is not None else "seed"}
+    offset = None
+    if args.start_offset is not None and args.start_offset != "random":
+        offset = parse_start_offset(args.start_offset)
+    elif args.start_offset == "random" or structure is not None:
+        r = (random.Random(f"structure/{args.structure_seed}/initial state") if structure is not None
+             else stream(args.seed, "start offset"))
+        offset = draw_start_offset(r)
+    if offset is not None:
+        drawn["start_offset"] = {"north_m": offset[0], "east_m": offset[1], "down_m": offset[2],
+                                 "heading_deg": offset[3]}
+    if structure is not None:
+        drawn["structure"] = structure[2]
     t0 = time.perf_counter()
-    res = simulate(args.program, args.seed, args.duration, effect, args.camera)
-    write_run(args.out, args, effect, res)
+    res = simulate(args.program, args.seed, args.duration, effect, args.camera,
+                   None if structure is None else structure[:2], offset)
+    write_run(args.out, args, effect, res, drawn)
     if args.summary:
         for line in summarise(args.program, res):
             print(line)

@@ -2,7 +2,9 @@
 
 import csv
 import filecmp
+import hashlib
 import json
+import math
 import os
 import subprocess
 import sys
@@ -19,6 +21,224 @@ import mako_independent as model  # noqa: E402
 def run(out, *args):
     subprocess.run([sys.executable, PROGRAM, "--out", out, *args], check=True,
                    stdout=subprocess.DEVNULL)
+
+
+def read(d, name):
+    with open(os.path.join(d, name)) as f:
+        return f.read()
+
+
+def truth(d):
+    return json.loads(read(d, "truth.json"))
+
+
+# Runs of the nominal vehicle (no --structure-seed) and the first 16 hex digits of the sha256
+# of experiment.toml, commands.csv, measured.csv and truth.json, taken from the program before
+# the structure family existed. truth.json has gained keys since (NEW_TRUTH_KEYS); the old
+# ones are compared by removing the new ones and writing the file the way the program does.
+NOMINAL_RUNS = [
+    ("mixed", 7301, 180, "none", None, ['cb11995e3933b10d', 'b47e9e2b9d838724', 'acbee1da617bcc0a', '17d89ee463c7c65f']),
+    ("mixed", 9, 60, "compass_latency", None, ['52607c793857bc88', '98350234cf2d8446', 'f096c01353dc92af', 'fd35cfc9bae8f00f']),
+    ("mixed", 4, 60, "thruster_lag", '0.5', ['40dc42786b6eda87', '27a2db8477a19b62', '3cabf3d397f1c2be', '187f1fce9dc0ebfc']),
+    ("mixed", 4, 60, "drag", None, ['b30dc160dc547c78', '4811c76bef7bda6a', '65e06b82f758567c', 'c85ecd1498bff1e0']),
+    ("depth_hold", 4, 60, "depth_emi", None, ['53128e53e83c6ec3', '78a4e359722b439d', '645f73b6ab235d78', '82e474e57f961fde']),
+    ("heading_hold", 3, 40, "water_current", '0.03,-0.01', ['dca787d27e539a3a', 'd0f00bd0ebdf7717', 'fcd59e8d997a53ab', '842fad2a5a7a4ffa']),
+    ("spins", 3, 40, "thruster_imbalance", None, ['2d295ee50ad504d8', '32dbc42e89666c64', 'fae226a2d30903e3', '34057759b2eabe80']),
+    ("square", 3, 40, "yaw_damping", None, ['a5dce5f3fa8542a5', '98823d684ecb1db7', '525ee3b998fd6778', 'be077a71bb7ed267']),
+    ("wall_run", 3, 40, "none", None, ['3d0684cfd4b11813', '21a2b414b102ac82', '3ab5de72e7df917a', 'd08e1190dc8f2221']),
+]
+NEW_TRUTH_KEYS = {"float_depth_m", "hidden_effects", "program_drawn", "stated_start", "start_offset",
+                  "structure"}
+
+
+def sha(text):
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+class NominalVehicle(unittest.TestCase):
+    def test_output_without_a_structure_seed_is_the_same_as_before_the_family(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            for prog, seed, duration, hidden, size, want in NOMINAL_RUNS:
+                d = os.path.join(tmp, f"{prog}-{seed}-{hidden}")
+                args = ["--program", prog, "--seed", str(seed), "--duration", str(duration),
+                        "--hidden", hidden] + (["--size", size] if size else [])
+                run(d, *args)
+                got = [sha(read(d, n)) for n in ("experiment.toml", "commands.csv", "measured.csv")]
+                old = {k: v for k, v in truth(d).items() if k not in NEW_TRUTH_KEYS}
+                got.append(sha(json.dumps(old, indent=1, sort_keys=True) + "\n"))
+                self.assertEqual(got, want, d)
+
+    def test_nominal_truth_states_the_float_depth_and_an_untouched_start(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            run(tmp + "/a", "--program", "spins", "--seed", "2", "--duration", "10")
+            t = truth(tmp + "/a")
+            self.assertAlmostEqual(t["float_depth_m"], 0.2383, places=4)
+            self.assertEqual(t["start"], t["stated_start"])
+            self.assertIsNone(t["structure"])
+            self.assertIsNone(t["start_offset"])
+
+
+class StructureFamily(unittest.TestCase):
+    def test_same_arguments_same_bytes_with_everything_drawn(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            a, b = os.path.join(tmp, "a"), os.path.join(tmp, "b")
+            for d in (a, b):
+                run(d, "--program", "random", "--seed", "9", "--structure-seed", "5",
+                    "--duration", "60", "--hidden", "compass_latency+thrust_gain")
+            for name in ("experiment.toml", "commands.csv", "measured.csv", "truth.json"):
+                self.assertTrue(filecmp.cmp(os.path.join(a, name), os.path.join(b, name),
+                                            shallow=False), name)
+
+    def test_structure_seeds_draw_different_structures(self):
+        drawn = [model.draw_structure(n) for n in range(20)]
+        params = [json.dumps(p, sort_keys=True) for p, _, _ in drawn]
+        self.assertEqual(len(set(params)), 20)
+        sensors = [json.dumps(sp, sort_keys=True) for _, sp, _ in drawn]
+        self.assertEqual(len(set(sensors)), 20)
+        kinds = [k for _, _, k in drawn]
+        self.assertGreaterEqual(len({k["surge_drag_law"] for k in kinds}), 3)
+        self.assertEqual({k["munk_moment"] for k in kinds}, {True, False})
+        self.assertEqual({k["sway_yaw_cross_damping"]["n_v"] for k in kinds},
+                         {"off", "positive", "negative"})
+        self.assertEqual({k["surge_drag_grows_with_sway"] for k in kinds}, {True, False})
+        # the same structure seed draws the same vehicle whatever the noise seed
+        self.assertEqual(model.draw_structure(3), model.draw_structure(3))
+        with tempfile.TemporaryDirectory() as tmp:
+            for name, structure, seed in (("s1", "1", "4"), ("s2", "2", "4"), ("s1b", "1", "5")):
+                run(os.path.join(tmp, name), "--program", "mixed", "--seed", seed,
+                    "--structure-seed", structure, "--duration", "30", "--start-offset", "0,0,0,0")
+            s1, s2, s1b = (truth(os.path.join(tmp, n)) for n in ("s1", "s2", "s1b"))
+            self.assertNotEqual(s1["vehicle"], s2["vehicle"])
+            self.assertNotEqual(s1["vehicle"], s1["nominal_vehicle"])
+            self.assertEqual(s1["vehicle"], s1b["vehicle"])
+            self.assertEqual(s1["structure"]["structure_seed"], 1)
+            self.assertNotEqual(read(os.path.join(tmp, "s1"), "measured.csv"),
+                                read(os.path.join(tmp, "s2"), "measured.csv"))
+
+    def test_every_drawn_vehicle_is_a_plausible_mako(self):
+        """Top speed within 30 % of 0.44 m/s, a spot turn each way within 60 s, and it floats:
+        released at 1 m with the motors off it rests at its float depth, the hull's top out."""
+        for n in range(40):
+            p, _, _ = model.draw_structure(n)
+            got = model.plausibility(p)
+            with self.subTest(structure_seed=n, got=got):
+                self.assertTrue(0.7 * 0.44 <= got["top_speed_mps"] <= 1.3 * 0.44)
+                self.assertIsNotNone(got["spot_turn_clockwise_s"])
+                self.assertIsNotNone(got["spot_turn_anticlockwise_s"])
+                self.assertTrue(0.0 < got["float_depth_m"] < p["top_above_com_m"])
+                self.assertAlmostEqual(got["depth_after_release_m"], got["float_depth_m"], delta=0.005)
+                self.assertLess(abs(got["heave_after_release_mps"]), 0.001)
+
+    def test_the_true_start_is_off_the_stated_one_and_truth_says_by_how_much(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            run(tmp + "/drawn", "--program", "depth_hold", "--seed", "6", "--structure-seed", "8",
+                "--duration", "20")
+            run(tmp + "/none", "--program", "depth_hold", "--seed", "6", "--structure-seed", "8",
+                "--duration", "20", "--start-offset", "0,0,0,0")
+            run(tmp + "/given", "--program", "depth_hold", "--seed", "6", "--duration", "20",
+                "--start-offset", "0.1,-0.2,0.3,-15")
+            for name in ("drawn", "none", "given"):
+                self.assertEqual(read(tmp + "/" + name, "experiment.toml").count("z_m = 0.238"), 1, name)
+            t = truth(tmp + "/drawn")
+            off, true, stated = t["start_offset"], t["start"], t["stated_start"]
+            self.assertLessEqual(math.hypot(off["north_m"], off["east_m"]), 0.3)
+            self.assertLessEqual(abs(off["down_m"]), 0.3)
+            self.assertLessEqual(abs(off["heading_deg"]), 20.0)
+            self.assertGreater(abs(off["down_m"]) + abs(off["heading_deg"]), 0.0)
+            self.assertAlmostEqual(true["x_m"] - stated["x_m"], off["north_m"])
+            self.assertAlmostEqual(true["z_m"] - stated["z_m"], off["down_m"])
+            self.assertAlmostEqual(model.wrap180(true["heading_deg"] - stated["heading_deg"]),
+                                   off["heading_deg"])
+            self.assertAlmostEqual(t["float_depth_m"], t["structure"]["float_depth_m"])
+            self.assertEqual(t["float_depth_m"], model.float_depth_m(t["vehicle"]))
+            self.assertNotEqual(read(tmp + "/drawn", "measured.csv"),
+                                read(tmp + "/none", "measured.csv"))
+            g = truth(tmp + "/given")
+            self.assertEqual([g["start_offset"][k] for k in ("north_m", "east_m", "down_m", "heading_deg")],
+                             [0.1, -0.2, 0.3, -15.0])
+            self.assertAlmostEqual(g["start"]["z_m"], g["stated_start"]["z_m"] + 0.3)
+            self.assertIsNone(g["structure"])
+
+    def test_random_program_draws_several_kinds_and_truth_names_it(self):
+        seen = set()
+        with tempfile.TemporaryDirectory() as tmp:
+            for seed in range(12):
+                d = os.path.join(tmp, str(seed))
+                run(d, "--program", "random", "--seed", str(seed), "--duration", "10")
+                t = truth(d)
+                self.assertIn(t["program"], model.PROGRAM_CLASSES)
+                self.assertEqual(t["program_drawn"]["argument"], "random")
+                self.assertIn(f"independent-{t['program']}-seed{seed}-",
+                              read(d, "experiment.toml"))
+                seen.add(t["program"])
+        self.assertGreaterEqual(len(seen), 4, seen)
+
+
+class TwoEffects(unittest.TestCase):
+    def test_two_effects_differ_from_each_alone_and_truth_records_both(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            data = {}
+            for hidden in ("none", "compass_latency", "thrust_gain", "compass_latency+thrust_gain"):
+                d = os.path.join(tmp, hidden)
+                run(d, "--program", "mixed", "--seed", "4", "--duration", "60", "--hidden", hidden)
+                data[hidden] = read(d, "measured.csv")
+            self.assertEqual(len(set(data.values())), 4)
+            t = truth(os.path.join(tmp, "compass_latency+thrust_gain"))
+            self.assertEqual([(h["name"], h["size"]) for h in t["hidden_effects"]],
+                             [("compass_latency", 0.4), ("thrust_gain", -0.2)])
+            self.assertEqual(t["hidden"]["name"], "compass_latency+thrust_gain")
+            self.assertAlmostEqual(t["vehicle"]["thrust_fwd_n"], 1.68 * 0.8)
+
+    def test_sizes_of_two_effects_are_separated_by_a_semicolon(self):
+        e = model.Effects.several([("thruster_lag", 0.5), ("drag", 1.2)])
+        p = e.vehicle_params(model.NOMINAL)
+        self.assertAlmostEqual(p["tau_spin_up_s"], 0.85)
+        self.assertAlmostEqual(p["surge_lin"], 4.2 * 1.2)
+        with tempfile.TemporaryDirectory() as tmp:
+            run(tmp + "/a", "--program", "spins", "--seed", "1", "--duration", "10",
+                "--hidden", "water_current+compass_offset", "--size", "0.01,0.02;-")
+            t = truth(tmp + "/a")
+            self.assertEqual([h["size"] for h in t["hidden_effects"]], [[0.01, 0.02], 6.0])
+
+    def test_bad_two_effect_and_start_arguments_name_the_argument(self):
+        for args, word in ((["--hidden", "drag+drag"], "--hidden"),
+                           (["--hidden", "none+drag"], "--hidden"),
+                           (["--hidden", "drag+bogus"], "--hidden"),
+                           (["--hidden", "drag+thrust_gain+thruster_lag"], "--hidden"),
+                           (["--hidden", "drag+thrust_gain", "--size", "1.2"], "--size"),
+                           (["--hidden", "drag+thrust_gain", "--size", "1.2;x"], "--size"),
+                           (["--start-offset", "0.5,0,0,0"], "--start-offset"),
+                           (["--start-offset", "0,0,0,25"], "--start-offset"),
+                           (["--start-offset", "0,0,0"], "--start-offset"),
+                           (["--structure-seed", "x"], "--structure-seed")):
+            p = subprocess.run([sys.executable, PROGRAM, "--program", "spins", "--out",
+                                os.devnull + "-x", *args], capture_output=True, text=True)
+            self.assertNotEqual(p.returncode, 0, args)
+            self.assertIn(word, p.stderr, args)
+
+
+class ListFormat(unittest.TestCase):
+    def test_effect_lines_still_read_as_the_benchmark_reads_them(self):
+        """The Rust benchmark (`default_sizes` in src/gap/bench/independent.rs) reads every
+        indented line after `hidden effects` as a name and a size (`-` or numbers)."""
+        text = subprocess.run([sys.executable, PROGRAM, "--list"], capture_output=True, text=True,
+                              check=True).stdout
+        sizes, in_effects = {}, False
+        for line in text.splitlines():
+            if line.startswith("hidden effects"):
+                in_effects = True
+                continue
+            if not in_effects or not line.startswith(" "):
+                continue
+            name, size = line.split()[:2]
+            if size != "-":
+                sizes[name] = [float(v) for v in size.split(",")]
+        want = {k: (d if isinstance(d, list) else [d]) for k, (d, _, _) in model.EFFECTS.items()
+                if d is not None}
+        self.assertEqual(sizes, want)
+        family = text.split("structure family")[1]
+        for part, _, _ in model.STRUCTURE_FAMILY:
+            self.assertIn(f"\n- {part}: ", family)
 
 
 class Format(unittest.TestCase):
