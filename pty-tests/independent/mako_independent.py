@@ -169,7 +169,7 @@ STRUCTURE_FAMILY = [
      "(p 0.5)", "the hull's cross-flow drag is not measured"),
     ("yaw damping", "(2.05 x U(0.75, 1.3) + 4.0 x U(0, 1.5) |u|) r + 1.6 x U(0.6, 1.6) r|r|, "
      "+ c r^3 with c U(0.5, 3) (p 0.5)",
-     "spot turns keep their ~23 s period within about -40/+60 %"),
+     "yaw damping was only inferred from spot-turn times; the lift term's size is a guess"),
     ("couplings", "Munk moment on (p 0.7) or off; sway-yaw cross damping Y_r and N_v each off "
      "(p 1/3), positive or negative, |Y_r| U(0.1, 0.6), |N_v| U(0.5, 3); N_vu -12 x U(0.6, 1.4) "
      "with the Munk moment, -12 x U(0, 0.8) without",
@@ -179,20 +179,20 @@ STRUCTURE_FAMILY = [
      "U(0.7, 1.4)", "vertical dynamics are only seen through the depth channel"),
     ("buoyancy", "reserve buoyancy U(1.0, 2.0) N; top of the hull U(0.21, 0.27) m and bottom "
      "U(0.19, 0.25) m from the CG; waterplane 0.09 m^2 x U(0.8, 1.2); centre of buoyancy "
-     "U(-3, 3) mm ahead of and U(-1.5, 1.5) mm to starboard of the CG (a trim of a few "
-     "degrees); thrust line U(0.01, 0.07) m above the CG; thruster levers x U(0.93, 1.07) "
+     "U(-2, 2) mm ahead of and U(-1, 1) mm to starboard of the CG (a trim at rest, "
+     "`--check-family`); thrust line U(0.01, 0.07) m above the CG; thruster levers x U(0.93, 1.07) "
      "sideways, x U(0.9, 1.1) fore-aft",
      "it floats at rest (reserve buoyancy > 0) with the CG at a depth the user does not know"),
     ("sensor placement", "depth port at x U(-0.60, -0.35), y U(-0.05, 0.05), z U(0.05, 0.20) "
      "m; accelerometer at x U(0.0, 0.2) m (the model's specific force uses x only); camera "
      "marker at x U(-0.05, 0.15), y U(-0.04, 0.04) m",
      "lever arms are measured with a ruler, if at all"),
-    ("initial state", "true start = stated start + an offset: horizontal U(0, 0.3) m (uniform "
-     "in a disc), depth U(-0.3, 0.3) m, heading U(-20, 20) deg; experiment.toml states the "
-     "nominal start (the nominal float depth), truth.json the true one",
-     "a user writes down where the vehicle was meant to start"),
-    ("program", "`--program random`: one of the programs above, uniformly",
-     "closed-loop data of several kinds"),
+    ("initial state", "per run (structure seed and seed): true start = stated start + an "
+     "offset, horizontal U(0, 0.3) m (uniform in a disc), depth U(-0.3, 0.3) m, heading "
+     "U(-20, 20) deg; experiment.toml states the nominal start at the nominal float depth, "
+     "truth.json the true one", "a user writes down where the vehicle was meant to start"),
+    ("program", "`--program random`, per run (structure seed, if any, and seed): one of the "
+     "programs above, uniformly", "closed-loop data of several kinds"),
 ]
 
 SURGE_LAWS = [("linear", "quadratic"), ("quadratic",), ("linear", "quadratic", "cubic"),
@@ -271,8 +271,8 @@ def draw_structure(n):
     p["top_above_com_m"] = r.uniform(0.21, 0.27)
     p["bottom_below_com_m"] = r.uniform(0.19, 0.25)
     p["waterplane_m2"] *= r.uniform(0.8, 1.2)
-    p["cb_ahead_of_cg_m"] = r.uniform(-0.003, 0.003)
-    p["cb_starboard_of_cg_m"] = r.uniform(-0.0015, 0.0015)
+    p["cb_ahead_of_cg_m"] = r.uniform(-0.002, 0.002)
+    p["cb_starboard_of_cg_m"] = r.uniform(-0.001, 0.001)
     p["thrust_line_above_com_m"] = r.uniform(0.01, 0.07)
     p["lever_horizontal_m"] *= r.uniform(0.93, 1.07)
     p["lever_vertical_m"] *= r.uniform(0.9, 1.1)
@@ -1476,7 +1476,7 @@ def plausibility(p):
     """What makes a drawn vehicle a plausible Mako, measured open loop without noise in open
     water: top speed after 40 s at 100/100 %; seconds for one spot turn at +-100 % each way
     (after 10 s of spin-up; None when it does not turn 360 deg within 60 s); the centre of
-    mass's depth and heave speed 60 s after release at 1 m, motors off."""
+    mass's depth, heave speed, pitch and roll 60 s after release at 1 m, motors off."""
     p = quiet(p)
 
     def fresh(z=None):
@@ -1504,8 +1504,24 @@ def plausibility(p):
     for _ in range(60 * TICKS_PER_S):
         veh.step()
     out["depth_after_release_m"], out["heave_after_release_mps"] = veh.z, veh.w
+    out["pitch_at_rest_deg"], out["roll_at_rest_deg"] = math.degrees(veh.theta), math.degrees(veh.phi)
     out["float_depth_m"] = float_depth_m(p)
     return out
+
+
+def check_family(count):
+    """The range of every `plausibility` figure over structure seeds 0..count-1."""
+    rows = [plausibility(draw_structure(n)[0]) for n in range(count)]
+    nominal = plausibility(NOMINAL)
+    lines = [f"{count} vehicles drawn (structure seeds 0..{count - 1}), open loop, no noise:"]
+    for key in rows[0]:
+        vals = [r[key] for r in rows]
+        done = [v for v in vals if v is not None]
+        missing = len(vals) - len(done)
+        lines.append(f"{key}: {min(done):.3f} .. {max(done):.3f}"
+                     + (f" ({missing} without a value)" if missing else "")
+                     + f"; nominal {nominal[key]:.3f}")
+    return lines
 
 
 def manoeuvres(effect, base=None):
@@ -1671,7 +1687,16 @@ def main(argv=None):
     ap.add_argument("--summary", action="store_true", help="print a summary of the true track")
     ap.add_argument("--manoeuvres", action="store_true",
                     help="print open-loop checks (top speed, coast-down, spot turns) and exit")
+    ap.add_argument("--check-family", type=int, default=None, metavar="COUNT",
+                    help="print the range of the plausibility checks over structure seeds "
+                         "0..COUNT-1, then exit")
     args = ap.parse_args(argv)
+    if args.check_family is not None:
+        if args.check_family < 1:
+            ap.error(f"--check-family: expected a count >= 1, found {args.check_family}")
+        for line in check_family(args.check_family):
+            print(line)
+        return 0
     if args.list:
         print("programs:")
         for k in sorted(PROGRAMS):
@@ -1699,19 +1724,18 @@ def main(argv=None):
         ap.error(f"--duration: expected seconds in 10..1800, found {args.duration}")
     effect = parse_hidden(args.hidden, args.size)
     drawn = {}
+    # the programme and the start are drawn per run: from the seed, and from the structure
+    # seed too when there is one (one vehicle, many runs that each start differently)
+    per_run = f"{args.seed}" if structure is None else f"structure/{args.structure_seed}/{args.seed}"
     if args.program == "random":
-        r = (random.Random(f"structure/{args.structure_seed}/program") if structure is not None
-             else stream(args.seed, "program kind"))
-        args.program = r.choice(sorted(PROGRAM_CLASSES))
+        args.program = random.Random(f"{per_run}/program kind").choice(sorted(PROGRAM_CLASSES))
         drawn["program"] = {"argument": "random", "from": sorted(PROGRAM_CLASSES),
-                            "stream": "structure seed" if structure is not None else "seed"}
+                            "stream": f"{per_run}/program kind"}
     offset = None
     if args.start_offset is not None and args.start_offset != "random":
         offset = parse_start_offset(args.start_offset)
     elif args.start_offset == "random" or structure is not None:
-        r = (random.Random(f"structure/{args.structure_seed}/initial state") if structure is not None
-             else stream(args.seed, "start offset"))
-        offset = draw_start_offset(r)
+        offset = draw_start_offset(random.Random(f"{per_run}/start offset"))
     if offset is not None:
         drawn["start_offset"] = {"north_m": offset[0], "east_m": offset[1], "down_m": offset[2],
                                  "heading_deg": offset[3]}

@@ -159,6 +159,21 @@ class StructureFamily(unittest.TestCase):
             self.assertAlmostEqual(g["start"]["z_m"], g["stated_start"]["z_m"] + 0.3)
             self.assertIsNone(g["structure"])
 
+    def test_one_vehicle_starts_each_run_differently(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            for seed in ("6", "7"):
+                run(os.path.join(tmp, seed), "--program", "spins", "--seed", seed,
+                    "--structure-seed", "8", "--duration", "10")
+            a, b = truth(os.path.join(tmp, "6")), truth(os.path.join(tmp, "7"))
+            self.assertEqual(a["vehicle"], b["vehicle"])
+            self.assertNotEqual(a["start_offset"], b["start_offset"])
+
+    def test_readme_describes_every_part_of_the_family(self):
+        with open(os.path.join(HERE, "README.md")) as f:
+            text = f.read()
+        for part, _, _ in model.STRUCTURE_FAMILY:
+            self.assertIn(f"| {part} |", text)
+
     def test_random_program_draws_several_kinds_and_truth_names_it(self):
         seen = set()
         with tempfile.TemporaryDirectory() as tmp:
