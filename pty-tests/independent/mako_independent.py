@@ -188,9 +188,10 @@ STRUCTURE_FAMILY = [
      "marker at x U(-0.05, 0.15), y U(-0.04, 0.04) m",
      "lever arms are measured with a ruler, if at all"),
     ("initial state", "per run (structure seed and seed): true start = stated start + an "
-     "offset, horizontal U(0, 0.3) m (uniform in a disc), depth U(-0.3, 0.3) m, heading "
-     "U(-20, 20) deg; experiment.toml states the nominal start at the nominal float depth, "
-     "truth.json the true one", "a user writes down where the vehicle was meant to start"),
+     "offset, horizontal U(0, 0.3) m (uniform in a disc), heading U(-20, 20) deg; the CG "
+     "starts U(-0.03, 0.26) m below its own float depth (released under water or bobbing); "
+     "experiment.toml states the nominal start at the nominal float depth, truth.json the "
+     "true one", "a user writes down where the vehicle was meant to start"),
     ("program", "`--program random`, per run (structure seed, if any, and seed): one of the "
      "programs above, uniformly", "closed-loop data of several kinds"),
 ]
@@ -303,11 +304,16 @@ def draw_structure(n):
     return p, sp, kinds
 
 
-def draw_start_offset(r):
-    """(north m, east m, down m, heading deg) within START_OFFSET_LIMITS, from stream `r`."""
-    horizontal, depth, heading = START_OFFSET_LIMITS
+def draw_start_offset(r, float_shift_m=0.0):
+    """(north m, east m, down m, heading deg) from stream `r`: the true start minus the stated
+    one. The stated depth is the nominal float depth; the true one is the vehicle's own float
+    depth (`float_shift_m` below the nominal one) plus U(-0.03, 0.26) m: released under water
+    or bobbing, never dropped in from the air (the waterplane model would plunge it deep).
+    Within START_OFFSET_LIMITS while |float_shift_m| <= 0.04."""
+    horizontal, _, heading = START_OFFSET_LIMITS
     a, d = r.uniform(0.0, 2.0 * math.pi), horizontal * math.sqrt(r.random())
-    return [d * math.cos(a), d * math.sin(a), r.uniform(-depth, depth), r.uniform(-heading, heading)]
+    return [d * math.cos(a), d * math.sin(a), float_shift_m + r.uniform(-0.03, 0.26),
+            r.uniform(-heading, heading)]
 
 
 def wrap180(a):
@@ -1735,7 +1741,8 @@ def main(argv=None):
     if args.start_offset is not None and args.start_offset != "random":
         offset = parse_start_offset(args.start_offset)
     elif args.start_offset == "random" or structure is not None:
-        offset = draw_start_offset(random.Random(f"{per_run}/start offset"))
+        shift = 0.0 if structure is None else float_depth_m(structure[0]) - float_depth_m(NOMINAL)
+        offset = draw_start_offset(random.Random(f"{per_run}/start offset"), shift)
     if offset is not None:
         drawn["start_offset"] = {"north_m": offset[0], "east_m": offset[1], "down_m": offset[2],
                                  "heading_deg": offset[3]}

@@ -143,6 +143,8 @@ class StructureFamily(unittest.TestCase):
             off, true, stated = t["start_offset"], t["start"], t["stated_start"]
             self.assertLessEqual(math.hypot(off["north_m"], off["east_m"]), 0.3)
             self.assertLessEqual(abs(off["down_m"]), 0.3)
+            # released under water or bobbing at the surface, not dropped in from the air
+            self.assertTrue(-0.03 <= true["z_m"] - t["float_depth_m"] <= 0.26, true)
             self.assertLessEqual(abs(off["heading_deg"]), 20.0)
             self.assertGreater(abs(off["down_m"]) + abs(off["heading_deg"]), 0.0)
             self.assertAlmostEqual(true["x_m"] - stated["x_m"], off["north_m"])
