@@ -1671,8 +1671,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--program", choices=sorted(PROGRAM_CLASSES) + ["random"],
-                    help="the EyeBot control program; `random`: drawn (under the structure seed "
-                         "when given, else the seed)")
+                    help="the EyeBot control program; `random`: drawn per run from the seed "
+                         "and, when given, the structure seed")
     ap.add_argument("--seed", type=int, default=1, help="random seed (integer)")
     ap.add_argument("--structure-seed", type=int, default=None,
                     help="draw the vehicle's structure from the family (see --list); absent: "
