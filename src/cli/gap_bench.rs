@@ -150,9 +150,12 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
         Source::Independent | Source::Bridge => {
             let (all, by_name): (&'static [bench::calibrated::Hidden], fn(&str) -> _) =
                 if source == Source::Bridge {
-                    (&bench::bridge::HIDDEN, bench::bridge::by_name)
+                    (bench::bridge::HIDDEN.as_slice(), bench::bridge::by_name)
                 } else {
-                    (&bench::independent::HIDDEN, bench::independent::by_name)
+                    (
+                        bench::independent::HIDDEN.as_slice(),
+                        bench::independent::by_name,
+                    )
                 };
             opts.hidden = if names.is_empty() {
                 all.iter().collect()

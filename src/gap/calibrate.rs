@@ -2,7 +2,7 @@
 //! for anything new (the thesis's own order: calibrate Mako against baseline runs, then
 //! explain what changes).
 //!
-//! The parameters are the library's effects listed in [`PARAMETERS`] (thrust gain and curve, drag,
+//! The parameters are those of the library's effects marked [`Effect::calibrated`] (thrust gain and curve, drag,
 //! added mass, yaw damping, thruster balance and lag, sensor offsets and gains), fitted
 //! jointly with the bounded engine ([`crate::gap::lsq`]) on the re-anchored residuals of every
 //! baseline run. Two things keep a fit of twenty-odd parameters on data that never match the
@@ -37,37 +37,12 @@ use serde::Serialize;
 
 use crate::gap::GapError;
 use crate::gap::anchor::Shooting;
-use crate::gap::effects::{self, Configs, Effect};
+use crate::gap::effects::{self, Calibration as Fitted, Configs, Effect};
 use crate::gap::fit::{self, Setup, Split};
 use crate::gap::format::Measurement;
 use crate::gap::lsq::{self, Bounds};
 use crate::gap::model::{EnabledEffect, GapModel};
 use crate::gap::resim::{self, Floor};
-
-/// The effects whose parameters calibration fits, when the data hold one of their channels.
-pub const PARAMETERS: [&str; 21] = [
-    "thrust_gain",
-    "thrust_curve",
-    "reverse_thrust_asymmetry",
-    "thruster_imbalance",
-    "drag_mismatch",
-    "added_mass",
-    "thruster_lag",
-    "yaw_damping",
-    "yaw_damping_quadratic",
-    "sway_yaw_coupling",
-    "compass_offset",
-    "compass_hard_iron",
-    "depth_offset",
-    "depth_gain",
-    "accel_x_offset",
-    "accel_y_offset",
-    "accel_z_offset",
-    "accel_x_gain",
-    "accel_y_gain",
-    "accel_z_gain",
-    "velocity_sensor_scale",
-];
 
 /// Width of the prior on each parameter, in units of its typical size.
 pub const PRIOR_WIDTH: f64 = 10.0;
@@ -277,27 +252,24 @@ fn apparent_spread(
         .collect())
 }
 
-/// Where the joint fit starts: the model as given, and the same with the thrust curve's
-/// exponent raised by [`CURVE_START`]. The thrust curve's scale (`thrust_gain`) and shape
-/// (`thrust_curve`) trade off against each other, and from the linear curve alone the fit can
-/// stop at half the exponent a propeller's thrust has (thrust ~ rpm^2, rpm less than linear
-/// in duty), with a larger gap left on the baseline runs.
+/// Where the joint fit starts: the model as given, and one more start per effect with a
+/// second start ([`Fitted::JointTwoStarts`]). The thrust curve's scale (`thrust_gain`)
+/// and shape (`thrust_curve`) trade off against each other, and from the linear curve alone
+/// the fit can stop at half the exponent a propeller's thrust has (thrust ~ rpm^2, rpm less
+/// than linear in duty), with a larger gap left on the baseline runs.
 fn starts(chosen: &[&'static Effect], dims: usize) -> Vec<DVector<f64>> {
     let mut out = vec![DVector::zeros(dims)];
     let mut k = 0;
     for e in chosen {
-        if e.name == "thrust_curve" {
+        if let Fitted::JointTwoStarts(start) = e.calibration {
             let mut x = DVector::zeros(dims);
-            x[k] = CURVE_START / e.scales[0];
+            x[k] = start / e.scales[0];
             out.push(x);
         }
         k += e.parameters.len();
     }
     out
 }
-
-/// The second start's change of the thrust curve's exponent (`exponent_scale`).
-const CURVE_START: f64 = 0.3;
 
 fn applied(base: &Configs, chosen: &[&'static Effect], x: &DVector<f64>) -> Configs {
     let mut c = base.clone();
@@ -368,14 +340,14 @@ pub fn calibrate(
         .collect();
     let mut chosen: Vec<&'static Effect> = Vec::new();
     let mut not_fitted = Vec::new();
-    for name in PARAMETERS {
-        let Some(e) = effects::by_name(name) else {
-            continue;
-        };
+    for e in effects::LIBRARY
+        .iter()
+        .filter(|e| matches!(e.calibration, Fitted::Joint | Fitted::JointTwoStarts(_)))
+    {
         if e.channels.iter().any(|c| measured.contains(c)) {
             chosen.push(e);
         } else {
-            not_fitted.push(name.to_string());
+            not_fitted.push(e.name.to_string());
         }
     }
     let scales: Vec<f64> = chosen
@@ -492,13 +464,13 @@ pub fn calibrate(
         k += n;
     }
 
-    // Noise levels: the motor noise on the depth channel (`depth_pwm_emi`, a variance, not a
-    // mean: fitted on each baseline run of the calibrated model, its mean over the runs).
-    // Without it a vehicle whose depth jitters with the stern duty, whatever the cause, would
-    // report that jitter as new in every later run.
-    if let Some(emi) = effects::by_name("depth_pwm_emi")
-        && measured.iter().any(|c| emi.channels.contains(c))
-    {
+    // Noise levels (the motor noise on the depth channel: a variance, not a mean), fitted on
+    // each baseline run of the calibrated model, their mean over the runs. Without them a
+    // vehicle whose depth jitters with the stern duty, whatever the cause, would report that
+    // jitter as new in every later run.
+    for emi in effects::LIBRARY.iter().filter(|e| {
+        e.calibration == Fitted::NoiseLevel && measured.iter().any(|c| e.channels.contains(c))
+    }) {
         progress("noise levels");
         let mut levels = Vec::new();
         for p in &prepared {

@@ -6,6 +6,9 @@
 //! Every extension changes existing configuration parameters; nothing in `physics` or
 //! `sensors` had to change for the library.
 
+use serde::Serialize;
+
+use crate::gap::edit::{Change, Edit, File::*, edit};
 use crate::gap::run::Shooting;
 use crate::physics::state::{PORT, STARBOARD};
 use crate::physics::{VehicleConfig, WorldConfig};
@@ -61,8 +64,17 @@ pub enum Kind {
     Variance,
 }
 
-/// One candidate effect.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Which physical behaviour a summary quantity shows: straight-line speed or turning.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Behaviour {
+    Speed,
+    Turn,
+}
+
+/// One candidate effect: everything the workflow and the benchmarks know of it. Every other
+/// module iterates over [`LIBRARY`]; none names an effect.
+#[derive(Debug, Clone, Copy)]
 pub struct Effect {
     pub name: &'static str,
     pub parameters: &'static [&'static str],
@@ -77,6 +89,65 @@ pub struct Effect {
     pub kind: Kind,
     /// True when the extension changes the physics (the trajectory must be re-run).
     pub physics: bool,
+    /// The model extension: how the parameters (in `parameters` order; a missing one is 0)
+    /// change the configurations. Scale parameters multiply by `1 + p`, offsets add; results
+    /// stay in each configured value's physical range. Called through [`apply`].
+    pub extend: fn(&[f64], &mut Configs),
+    /// True when the effect changes what a re-anchored re-simulation anchors to (the compass
+    /// or the depth sensor), so its fit re-runs the physics even though it is a sensor's.
+    pub moves_anchors: bool,
+    /// The behaviours its physics changes, for summary observations (empty for a sensor).
+    pub summary: &'static [Behaviour],
+    /// Whether and how `gap calibrate` fits it (when the data hold one of its channels).
+    pub calibration: Calibration,
+    /// True when its one parameter only makes sense with one sign (a delay, an amplitude).
+    pub positive: bool,
+    /// True for a gain, an offset or the water current: the effects whose parameter error the
+    /// simulator benchmark's target covers.
+    pub parameter_error_target: bool,
+    /// How the calibrated benchmarks' truth sources hide it (`None`: they do not).
+    pub hidden: Option<Hiding>,
+}
+
+/// Whether and how `gap calibrate` fits an effect into the base model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Calibration {
+    /// Left to `gap`, to be found as new.
+    No,
+    /// Fitted jointly with the other calibrated effects on the baseline runs' residuals.
+    Joint,
+    /// Fitted jointly, and the joint fit also starts from this value of its first parameter
+    /// (an effect that trades off against another, so that one start can stop short).
+    JointTwoStarts(f64),
+    /// A noise level (a variance effect): fitted on each baseline run of the jointly
+    /// calibrated model, its mean over the runs enters the model.
+    NoiseLevel,
+}
+
+/// How the bridge and the independent model hide an effect.
+#[derive(Debug, Clone, Copy)]
+pub struct Hiding {
+    /// The bridge's default size, in the library effect's parameters (a factor where
+    /// `factor`). The same sizes as the independent model's where it has the effect; the lag
+    /// is smaller, because the library's bound is 2 s.
+    pub bridge_size: &'static [f64],
+    /// The edits of the bridge's configuration files that hide `size` (the bridge's units).
+    pub bridge: fn(&[f64]) -> Vec<Edit>,
+    /// The independent model's name for it (`mako_independent.py --list`).
+    pub independent: &'static str,
+    /// The sources' size is a factor (no effect at 1; the library parameter is `size - 1`).
+    pub factor: bool,
+}
+
+impl PartialEq for Effect {
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name
+    }
+}
+
+/// Parameter `i` of `params`, 0 ("no change") where it is missing.
+fn at(params: &[f64], i: usize) -> f64 {
+    params.get(i).copied().unwrap_or(0.0)
 }
 
 /// Where a change common to every thruster shows: the track, speed, heading, depth and every
@@ -104,6 +175,36 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| {
+            c.vehicle.thrusters[PORT].gain =
+                (c.vehicle.thrusters[PORT].gain * (1.0 + at(p, 0) / 2.0)).clamp(0.1, 2.0);
+            c.vehicle.thrusters[STARBOARD].gain =
+                (c.vehicle.thrusters[STARBOARD].gain * (1.0 - at(p, 0) / 2.0)).clamp(0.1, 2.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[0.08],
+            bridge: |p| {
+                vec![
+                    edit(
+                        Vehicle,
+                        "thruster[0].gain",
+                        Change::Scale(1.0 + at(p, 0) / 2.0),
+                    ),
+                    edit(
+                        Vehicle,
+                        "thruster[1].gain",
+                        Change::Scale(1.0 - at(p, 0) / 2.0),
+                    ),
+                ]
+            },
+            independent: "thruster_imbalance",
+            factor: false,
+        }),
     },
     Effect {
         name: "reverse_thrust_asymmetry",
@@ -114,6 +215,18 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["x_m", "y_m", "compass_deg", "accel_x_adc"],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| {
+            for i in [PORT, STARBOARD] {
+                let t = &mut c.vehicle.thrusters[i];
+                t.reverse_ratio = (t.reverse_ratio * (1.0 + at(p, 0))).clamp(0.0, 1.0);
+            }
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: true,
+        hidden: None,
     },
     Effect {
         name: "drag_mismatch",
@@ -124,6 +237,13 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps", "accel_x_adc"],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 0, 1.0 + at(p, 0), 1.0 + at(p, 1)),
+        moves_anchors: false,
+        summary: &[Behaviour::Speed],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: true,
+        hidden: None,
     },
     Effect {
         name: "added_mass",
@@ -134,6 +254,15 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps", "accel_x_adc"],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| {
+            c.vehicle.added_mass[0] = (c.vehicle.added_mass[0] + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "thruster_lag",
@@ -151,6 +280,21 @@ pub const LIBRARY: [Effect; 27] = [
         ],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| {
+            let lag = &mut c.vehicle.thruster_common.lag_s;
+            *lag = (*lag + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed],
+        calibration: Calibration::Joint,
+        positive: true,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.25],
+            bridge: |p| vec![edit(Vehicle, "thrusters.lag_s", Change::Add(at(p, 0)))],
+            independent: "thruster_lag",
+            factor: false,
+        }),
     },
     Effect {
         name: "water_current",
@@ -161,6 +305,26 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["x_m", "y_m"],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| {
+            c.world.current_mps.x += at(p, 0);
+            c.world.current_mps.y += at(p, 1);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed, Behaviour::Turn],
+        calibration: Calibration::No,
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[0.02, -0.015],
+            bridge: |p| {
+                vec![
+                    edit(World, "water.current_mps[0]", Change::Add(at(p, 0))),
+                    edit(World, "water.current_mps[1]", Change::Add(at(p, 1))),
+                ]
+            },
+            independent: "water_current",
+            factor: false,
+        }),
     },
     Effect {
         name: "compass_hard_iron",
@@ -171,6 +335,26 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| {
+            c.sensors.compass.hard_iron_ut[0] += at(p, 0);
+            c.sensors.compass.hard_iron_ut[1] += at(p, 1);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[3.0, 2.0],
+            bridge: |p| {
+                vec![
+                    edit(Sensors, "compass.hard_iron_ut[0]", Change::Add(at(p, 0))),
+                    edit(Sensors, "compass.hard_iron_ut[1]", Change::Add(at(p, 1))),
+                ]
+            },
+            independent: "compass_hard_iron",
+            factor: false,
+        }),
     },
     Effect {
         name: "compass_soft_iron",
@@ -181,6 +365,19 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| {
+            let s = &mut c.sensors.compass.soft_iron;
+            s[0][0] += at(p, 0) / 2.0;
+            s[1][1] -= at(p, 0) / 2.0;
+            s[0][1] += at(p, 1);
+            s[1][0] += at(p, 1);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::No,
+        positive: false,
+        parameter_error_target: true,
+        hidden: None,
     },
     Effect {
         name: "compass_tilt",
@@ -191,6 +388,16 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| {
+            let i = &mut c.sensors.compass.inclination_deg;
+            *i = (*i + at(p, 0)).clamp(-90.0, 90.0);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::No,
+        positive: true,
+        parameter_error_target: true,
+        hidden: None,
     },
     Effect {
         name: "sensor_latency",
@@ -201,6 +408,27 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| {
+            let l = &mut c.sensors.compass.errors.latency_s;
+            *l = (*l + at(p, 0)).max(0.0);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::No,
+        positive: true,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.4],
+            bridge: |p| {
+                vec![edit(
+                    Sensors,
+                    "compass.errors.latency_s",
+                    Change::Add(at(p, 0)),
+                )]
+            },
+            independent: "compass_latency",
+            factor: false,
+        }),
     },
     Effect {
         name: "depth_pwm_emi",
@@ -211,6 +439,27 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["depth_adc"],
         kind: Kind::Variance,
         physics: false,
+        extend: |p, c| {
+            let e = &mut c.sensors.depth.emi_v_rms_full_duty;
+            *e = (*e + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::NoiseLevel,
+        positive: true,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.03],
+            bridge: |p| {
+                vec![edit(
+                    Sensors,
+                    "depth.emi_v_rms_full_duty",
+                    Change::Add(at(p, 0)),
+                )]
+            },
+            independent: "depth_emi",
+            factor: false,
+        }),
     },
     Effect {
         name: "velocity_sensor_scale",
@@ -221,6 +470,27 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["paddle_speed_mps"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| {
+            let s = &mut c.sensors.velocity.firmware_scale;
+            *s = (*s * (1.0 + at(p, 0))).max(0.01);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[0.25],
+            bridge: |p| {
+                vec![edit(
+                    Sensors,
+                    "velocity.pulses_per_metre",
+                    Change::Scale(1.0 + at(p, 0)),
+                )]
+            },
+            independent: "velocity_sensor_scale",
+            factor: false,
+        }),
     },
     Effect {
         name: "sonar_incidence_dropout",
@@ -231,6 +501,16 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["sonar1_m", "sonar2_m", "sonar3_m", "sonar4_m"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| {
+            let m = &mut c.sensors.sonar.max_incidence_deg;
+            *m = (*m + at(p, 0)).clamp(0.0, 90.0);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::No,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     // SubSim's lumped thrust constant was wrong by a factor (thesis 5.1, 5.4), which no
     // per-motor difference can express. `forward_max_n` is shared by all four thrusters, so
@@ -246,6 +526,27 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &ALL_THRUSTERS,
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| {
+            let f = &mut c.vehicle.thruster_common.forward_max_n;
+            *f = (*f * (1.0 + at(p, 0))).max(1e-3);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed, Behaviour::Turn],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[-0.2],
+            bridge: |p| {
+                vec![edit(
+                    Vehicle,
+                    "thrusters.forward_max_n",
+                    Change::Scale(1.0 + at(p, 0)),
+                )]
+            },
+            independent: "thrust_gain",
+            factor: false,
+        }),
     },
     // The static curve's shape: thrust ~ ((on - deadband) / (1 - deadband))^exponent. A
     // propeller's thrust grows with rpm|rpm|, and rpm less than linearly with duty, so the
@@ -262,6 +563,16 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &ALL_THRUSTERS,
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| {
+            let e = &mut c.vehicle.thruster_common.exponent;
+            *e = (*e * (1.0 + at(p, 0))).max(0.1);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed, Behaviour::Turn],
+        calibration: Calibration::JointTwoStarts(0.3),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "compass_offset",
@@ -273,6 +584,18 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| c.sensors.compass.errors.bias += at(p, 0),
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[6.0],
+            bridge: |p| vec![edit(Sensors, "compass.errors.bias", Change::Add(at(p, 0)))],
+            independent: "compass_offset",
+            factor: false,
+        }),
     },
     Effect {
         name: "depth_offset",
@@ -284,6 +607,18 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["depth_adc"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| c.sensors.depth.errors.bias += at(p, 0),
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.08],
+            bridge: |p| vec![edit(Sensors, "depth.errors.bias", Change::Add(at(p, 0)))],
+            independent: "depth_offset",
+            factor: false,
+        }),
     },
     Effect {
         name: "depth_gain",
@@ -295,6 +630,27 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["depth_adc"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| {
+            let g = &mut c.sensors.depth.volts_per_m;
+            *g = (*g * (1.0 + at(p, 0))).max(1e-3);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.1],
+            bridge: |p| {
+                vec![edit(
+                    Sensors,
+                    "depth.volts_per_m",
+                    Change::Scale(1.0 + at(p, 0)),
+                )]
+            },
+            independent: "depth_gain",
+            factor: false,
+        }),
     },
     Effect {
         name: "accel_x_offset",
@@ -305,6 +661,13 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["accel_x_adc"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| c.analog.accel_offset_lsb[0] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "accel_y_offset",
@@ -315,6 +678,13 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["accel_y_adc"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| c.analog.accel_offset_lsb[1] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "accel_z_offset",
@@ -325,6 +695,13 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["accel_z_adc"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| c.analog.accel_offset_lsb[2] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "accel_x_gain",
@@ -335,6 +712,13 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["accel_x_adc"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| c.analog.accel_gain_scale[0] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "accel_y_gain",
@@ -345,6 +729,13 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["accel_y_adc"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| c.analog.accel_gain_scale[1] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "accel_z_gain",
@@ -355,6 +746,13 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["accel_z_adc"],
         kind: Kind::Mean,
         physics: false,
+        extend: |p, c| c.analog.accel_gain_scale[2] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "yaw_damping",
@@ -366,6 +764,23 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 5, 1.0 + at(p, 0), 1.0 + at(p, 0)),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[1.5],
+            bridge: |p| {
+                vec![
+                    edit(Vehicle, "damping.linear[5]", Change::Scale(at(p, 0))),
+                    edit(Vehicle, "damping.quadratic[5]", Change::Scale(at(p, 0))),
+                ]
+            },
+            independent: "yaw_damping",
+            factor: true,
+        }),
     },
     Effect {
         name: "yaw_damping_quadratic",
@@ -377,6 +792,13 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 5, 1.0, 1.0 + at(p, 0)),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
     Effect {
         name: "sway_yaw_coupling",
@@ -389,6 +811,18 @@ pub const LIBRARY: [Effect; 27] = [
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
         kind: Kind::Mean,
         physics: true,
+        extend: |p, c| c.vehicle.damping_sway_yaw[1] += at(p, 0),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint,
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[5.0],
+            bridge: |p| vec![edit(Vehicle, "damping.sway_yaw[1]", Change::Add(at(p, 0)))],
+            independent: "sway_yaw_coupling",
+            factor: false,
+        }),
     },
 ];
 /// Looks an effect up by name.
@@ -396,98 +830,9 @@ pub fn by_name(name: &str) -> Option<&'static Effect> {
     LIBRARY.iter().find(|e| e.name == name)
 }
 
-/// Applies `effect` with `params` (same order as `effect.parameters`) to `c`. Values are
-/// changes relative to the configuration: scale parameters multiply by `1 + p`, offsets add.
-/// Results are clamped into each parameter's physical range.
+/// Applies `effect` with `params` (same order as `effect.parameters`) to `c`.
 pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
-    let p = |i: usize| params.get(i).copied().unwrap_or(0.0);
-    match effect.name {
-        "thruster_imbalance" => {
-            c.vehicle.thrusters[PORT].gain =
-                (c.vehicle.thrusters[PORT].gain * (1.0 + p(0) / 2.0)).clamp(0.1, 2.0);
-            c.vehicle.thrusters[STARBOARD].gain =
-                (c.vehicle.thrusters[STARBOARD].gain * (1.0 - p(0) / 2.0)).clamp(0.1, 2.0);
-        }
-        "reverse_thrust_asymmetry" => {
-            for i in [PORT, STARBOARD] {
-                let t = &mut c.vehicle.thrusters[i];
-                t.reverse_ratio = (t.reverse_ratio * (1.0 + p(0))).clamp(0.0, 1.0);
-            }
-        }
-        "drag_mismatch" => scale_damping(&mut c.vehicle, 0, 1.0 + p(0), 1.0 + p(1)),
-        "added_mass" => {
-            c.vehicle.added_mass[0] = (c.vehicle.added_mass[0] + p(0)).max(0.0);
-        }
-        "thruster_lag" => {
-            c.vehicle.thruster_common.lag_s = (c.vehicle.thruster_common.lag_s + p(0)).max(0.0);
-        }
-        "water_current" => {
-            c.world.current_mps.x += p(0);
-            c.world.current_mps.y += p(1);
-        }
-        "compass_hard_iron" => {
-            c.sensors.compass.hard_iron_ut[0] += p(0);
-            c.sensors.compass.hard_iron_ut[1] += p(1);
-        }
-        "compass_soft_iron" => {
-            let s = &mut c.sensors.compass.soft_iron;
-            s[0][0] += p(0) / 2.0;
-            s[1][1] -= p(0) / 2.0;
-            s[0][1] += p(1);
-            s[1][0] += p(1);
-        }
-        "compass_tilt" => {
-            c.sensors.compass.inclination_deg =
-                (c.sensors.compass.inclination_deg + p(0)).clamp(-90.0, 90.0);
-        }
-        "sensor_latency" => {
-            c.sensors.compass.errors.latency_s =
-                (c.sensors.compass.errors.latency_s + p(0)).max(0.0);
-        }
-        "depth_pwm_emi" => {
-            c.sensors.depth.emi_v_rms_full_duty =
-                (c.sensors.depth.emi_v_rms_full_duty + p(0)).max(0.0);
-        }
-        "velocity_sensor_scale" => {
-            c.sensors.velocity.firmware_scale =
-                (c.sensors.velocity.firmware_scale * (1.0 + p(0))).max(0.01);
-        }
-        "sonar_incidence_dropout" => {
-            c.sensors.sonar.max_incidence_deg =
-                (c.sensors.sonar.max_incidence_deg + p(0)).clamp(0.0, 90.0);
-        }
-        "thrust_gain" => {
-            c.vehicle.thruster_common.forward_max_n =
-                (c.vehicle.thruster_common.forward_max_n * (1.0 + p(0))).max(1e-3);
-        }
-        "thrust_curve" => {
-            c.vehicle.thruster_common.exponent =
-                (c.vehicle.thruster_common.exponent * (1.0 + p(0))).max(0.1);
-        }
-        "compass_offset" => {
-            c.sensors.compass.errors.bias += p(0);
-        }
-        "depth_offset" => {
-            c.sensors.depth.errors.bias += p(0);
-        }
-        "depth_gain" => {
-            c.sensors.depth.volts_per_m = (c.sensors.depth.volts_per_m * (1.0 + p(0))).max(1e-3);
-        }
-        "accel_x_offset" | "accel_y_offset" | "accel_z_offset" => {
-            let axis = axis_of(effect.name);
-            c.analog.accel_offset_lsb[axis] += p(0);
-        }
-        "accel_x_gain" | "accel_y_gain" | "accel_z_gain" => {
-            let axis = axis_of(effect.name);
-            c.analog.accel_gain_scale[axis] += p(0);
-        }
-        "yaw_damping" => scale_damping(&mut c.vehicle, 5, 1.0 + p(0), 1.0 + p(0)),
-        "yaw_damping_quadratic" => scale_damping(&mut c.vehicle, 5, 1.0, 1.0 + p(0)),
-        "sway_yaw_coupling" => {
-            c.vehicle.damping_sway_yaw[1] += p(0);
-        }
-        _ => {}
-    }
+    (effect.extend)(params, c);
 }
 
 /// Scales `axis`'s linear and quadratic damping by `linear` and `quadratic` (each kept >= 0),
@@ -499,30 +844,6 @@ fn scale_damping(v: &mut VehicleConfig, axis: usize, linear: f64, quadratic: f64
     if v.damping_linear[axis] + v.damping_quadratic[axis] <= 0.0 {
         v.damping_linear[axis] = 1e-3;
     }
-}
-
-/// The accelerometer axis (0 = x, 1 = y, 2 = z) an `accel_*` effect acts on.
-fn axis_of(name: &str) -> usize {
-    match name.as_bytes().get(6) {
-        Some(b'y') => 1,
-        Some(b'z') => 2,
-        _ => 0,
-    }
-}
-
-/// True when `effect` changes what a re-anchored re-simulation anchors to (the compass or the
-/// depth sensor), so its fit re-runs the physics even though the effect is a sensor's.
-pub fn moves_anchors(effect: &Effect) -> bool {
-    matches!(
-        effect.name,
-        "compass_offset"
-            | "compass_hard_iron"
-            | "compass_soft_iron"
-            | "compass_tilt"
-            | "sensor_latency"
-            | "depth_offset"
-            | "depth_gain"
-    )
 }
 
 /// True when `values` lie strictly inside `effect`'s bounds (an end on a bound is not a fit).
@@ -610,6 +931,66 @@ mod tests {
                 "{} left its signature channels unchanged",
                 effect.name
             );
+        }
+    }
+
+    /// An effect is one entry of [`LIBRARY`]: no other source file of the crate names it
+    /// outside its tests, the effect library's doc has its row, and the independent model
+    /// knows every effect the benchmarks hide under the name its entry gives.
+    #[test]
+    fn every_effect_lives_in_its_entry_its_doc_row_and_the_independent_model() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut sources = Vec::new();
+        let mut stack = vec![root.join("src")];
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir).expect("src is readable") {
+                let path = entry.expect("entry").path();
+                if path.is_dir() {
+                    stack.push(path);
+                } else if path.extension().is_some_and(|e| e == "rs")
+                    && !path.ends_with("gap/effects.rs")
+                {
+                    let text = std::fs::read_to_string(&path).expect("source is UTF-8");
+                    // Unit tests and comments may name effects; the code may not.
+                    let code: String = text
+                        .split("#[cfg(test)]")
+                        .next()
+                        .unwrap_or("")
+                        .lines()
+                        .filter(|l| !l.trim_start().starts_with("//"))
+                        .collect::<Vec<_>>()
+                        .join("\n");
+                    sources.push((path, code));
+                }
+            }
+        }
+        let doc = std::fs::read_to_string(root.join("docs/gap/effects.md")).expect("doc");
+        let independent =
+            std::fs::read_to_string(root.join("pty-tests/independent/mako_independent.py"))
+                .expect("independent model");
+        for e in &LIBRARY {
+            let quoted = format!("\"{}\"", e.name);
+            for (path, code) in &sources {
+                assert!(
+                    !code.contains(&quoted),
+                    "{} names the effect `{}`: iterate over the library instead",
+                    path.display(),
+                    e.name
+                );
+            }
+            assert!(
+                doc.contains(&format!("| `{}` |", e.name)),
+                "docs/gap/effects.md has no row for `{}`",
+                e.name
+            );
+            if let Some(h) = e.hidden {
+                assert!(
+                    independent.contains(&format!("\"{}\":", h.independent)),
+                    "the independent model has no effect `{}` (the benchmarks hide `{}` as it)",
+                    h.independent,
+                    e.name
+                );
+            }
         }
     }
 

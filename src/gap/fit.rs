@@ -246,7 +246,7 @@ impl Setup<'_> {
 
     /// True when a fit of `effect` must re-run the physics.
     fn resimulates(&self, effect: &Effect) -> bool {
-        effect.physics || (self.base.shooting.segment_s.is_some() && effects::moves_anchors(effect))
+        effect.physics || (self.base.shooting.segment_s.is_some() && effect.moves_anchors)
     }
 
     /// Residuals with `effect` applied at `params`.

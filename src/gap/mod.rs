@@ -29,6 +29,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod candidate;
 pub mod convert;
+pub mod edit;
 pub mod effects;
 pub mod fit;
 pub mod format;

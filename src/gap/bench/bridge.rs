@@ -12,11 +12,14 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::LazyLock;
 
 use crate::config::{ConfigSource, Embedded};
 use crate::gap::GapError;
-use crate::gap::bench::calibrated::{Hidden, Truth, hidden, io};
+use crate::gap::bench::calibrated::{Hidden, Truth, io};
 use crate::gap::convert::{ConvertOptions, convert};
+pub use crate::gap::edit::{Change, Edit, File, edit};
+use crate::gap::effects;
 
 /// Simulated length of a case (s): `timer_square` dives, flies its four legs and surfaces
 /// (about 97 s; the programs that do not end by themselves are stopped here).
@@ -40,54 +43,6 @@ pub struct BridgeOptions {
     /// A directory with host builds of the C examples (`make -C firmware-protocol/c
     /// OUT=DIR`); default: built into a scratch directory with `make`.
     pub programs: Option<PathBuf>,
-}
-
-/// Which configuration file an edit changes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum File {
-    Vehicle,
-    Sensors,
-    World,
-}
-
-impl File {
-    /// The embedded file the bridge's copy starts from.
-    pub fn embedded(self) -> &'static str {
-        match self {
-            File::Vehicle => "vehicles/mako.toml",
-            File::Sensors => "sensors/mako-2008.toml",
-            File::World => "worlds/pool.toml",
-        }
-    }
-
-    fn file_name(self) -> &'static str {
-        match self {
-            File::Vehicle => "vehicle.toml",
-            File::Sensors => "sensors.toml",
-            File::World => "world.toml",
-        }
-    }
-}
-
-/// How an edit changes a number (a missing key counts as 0, or is created by `Set`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Change {
-    Set(f64),
-    Scale(f64),
-    Add(f64),
-}
-
-/// One edit of a configuration file: `key` is a dotted path with `[i]` indices
-/// (`damping.linear[5]`, `thruster[1].gain`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Edit {
-    pub file: File,
-    pub key: &'static str,
-    pub change: Change,
-}
-
-const fn edit(file: File, key: &'static str, change: Change) -> Edit {
-    Edit { file, key, change }
 }
 
 /// How the bridge's vehicle and sensors differ from the model's files, before anything is
@@ -125,46 +80,25 @@ pub const FORM: [Edit; 22] = [
     edit(File::Sensors, "velocity.pulse_fraction", Change::Set(0.4)),
 ];
 
-/// The effects the bridge source hides, by their library names, in the default order.
-pub const HIDDEN: [Hidden; 13] = [
-    hidden("water_current", Some("water_current"), false),
-    hidden("compass_hard_iron", Some("compass_hard_iron"), false),
-    hidden("sensor_latency", Some("sensor_latency"), false),
-    hidden("compass_offset", Some("compass_offset"), true),
-    hidden("thruster_imbalance", Some("thruster_imbalance"), true),
-    hidden("depth_pwm_emi", Some("depth_pwm_emi"), false),
-    hidden("depth_offset", Some("depth_offset"), true),
-    hidden("depth_gain", Some("depth_gain"), true),
-    hidden("velocity_sensor_scale", Some("velocity_sensor_scale"), true),
-    hidden("thrust_gain", Some("thrust_gain"), true),
-    hidden("thruster_lag", Some("thruster_lag"), false),
-    Hidden {
-        name: "yaw_damping",
-        library: Some("yaw_damping"),
-        signed: true,
-        scale: true,
-    },
-    hidden("sway_yaw_coupling", Some("sway_yaw_coupling"), true),
-];
+/// The effects the bridge source hides, by their library names, in the library's order.
+pub static HIDDEN: LazyLock<Vec<Hidden>> = LazyLock::new(|| {
+    effects::LIBRARY
+        .iter()
+        .filter_map(|e| {
+            let h = e.hidden?;
+            Some(Hidden::of(e, e.name, h.factor))
+        })
+        .collect()
+});
 
-/// Default sizes, in the library effect's parameters (a scale: the factor). The same sizes
-/// as the independent model's where it has the effect; the lag is smaller, because the
-/// library's bound is 2 s.
-pub const DEFAULT_SIZES: [(&str, &[f64]); 13] = [
-    ("water_current", &[0.02, -0.015]),
-    ("compass_hard_iron", &[3.0, 2.0]),
-    ("sensor_latency", &[0.4]),
-    ("compass_offset", &[6.0]),
-    ("thruster_imbalance", &[0.08]),
-    ("depth_pwm_emi", &[0.03]),
-    ("depth_offset", &[0.08]),
-    ("depth_gain", &[0.1]),
-    ("velocity_sensor_scale", &[0.25]),
-    ("thrust_gain", &[-0.2]),
-    ("thruster_lag", &[0.25]),
-    ("yaw_damping", &[1.5]),
-    ("sway_yaw_coupling", &[5.0]),
-];
+/// Default sizes of the hidden effects, in the library effect's parameters (a factor where
+/// the size is one).
+pub fn default_sizes() -> Vec<(String, Vec<f64>)> {
+    effects::LIBRARY
+        .iter()
+        .filter_map(|e| Some((e.name.to_string(), e.hidden?.bridge_size.to_vec())))
+        .collect()
+}
 
 /// The effect the bridge source calls `name`.
 pub fn by_name(name: &str) -> Result<&'static Hidden, GapError> {
@@ -179,48 +113,9 @@ pub fn by_name(name: &str) -> Result<&'static Hidden, GapError> {
 /// The edits that hide `name` with `size` (the library effect's parameters, as
 /// [`crate::gap::effects::apply`] applies them to the model).
 pub fn edits_for(name: &str, size: &[f64]) -> Vec<Edit> {
-    let p = |i: usize| size.get(i).copied().unwrap_or(0.0);
-    let v = File::Vehicle;
-    let s = File::Sensors;
-    match name {
-        "water_current" => vec![
-            edit(File::World, "water.current_mps[0]", Change::Add(p(0))),
-            edit(File::World, "water.current_mps[1]", Change::Add(p(1))),
-        ],
-        "compass_hard_iron" => vec![
-            edit(s, "compass.hard_iron_ut[0]", Change::Add(p(0))),
-            edit(s, "compass.hard_iron_ut[1]", Change::Add(p(1))),
-        ],
-        "sensor_latency" => vec![edit(s, "compass.errors.latency_s", Change::Add(p(0)))],
-        "compass_offset" => vec![edit(s, "compass.errors.bias", Change::Add(p(0)))],
-        "thruster_imbalance" => vec![
-            edit(v, "thruster[0].gain", Change::Scale(1.0 + p(0) / 2.0)),
-            edit(v, "thruster[1].gain", Change::Scale(1.0 - p(0) / 2.0)),
-        ],
-        "depth_pwm_emi" => vec![edit(s, "depth.emi_v_rms_full_duty", Change::Add(p(0)))],
-        "depth_offset" => vec![edit(s, "depth.errors.bias", Change::Add(p(0)))],
-        "depth_gain" => vec![edit(s, "depth.volts_per_m", Change::Scale(1.0 + p(0)))],
-        // More pulses per metre of water: the program's speed reads (1 + s) times too high.
-        "velocity_sensor_scale" => {
-            vec![edit(
-                s,
-                "velocity.pulses_per_metre",
-                Change::Scale(1.0 + p(0)),
-            )]
-        }
-        "thrust_gain" => vec![edit(
-            v,
-            "thrusters.forward_max_n",
-            Change::Scale(1.0 + p(0)),
-        )],
-        "thruster_lag" => vec![edit(v, "thrusters.lag_s", Change::Add(p(0)))],
-        "yaw_damping" => vec![
-            edit(v, "damping.linear[5]", Change::Scale(p(0))),
-            edit(v, "damping.quadratic[5]", Change::Scale(p(0))),
-        ],
-        "sway_yaw_coupling" => vec![edit(v, "damping.sway_yaw[1]", Change::Add(p(0)))],
-        _ => Vec::new(),
-    }
+    effects::by_name(name)
+        .and_then(|e| e.hidden)
+        .map_or_else(Vec::new, |h| (h.bridge)(size))
 }
 
 /// One step of an edit's key.
@@ -456,10 +351,7 @@ fn build_examples(out: &Path) -> Result<(), GapError> {
 
 impl Truth for Bridge {
     fn default_sizes(&self) -> Result<Vec<(String, Vec<f64>)>, GapError> {
-        Ok(DEFAULT_SIZES
-            .iter()
-            .map(|(n, v)| (n.to_string(), v.to_vec()))
-            .collect())
+        Ok(default_sizes())
     }
 
     fn spread_runs(&self) -> usize {
@@ -491,13 +383,14 @@ mod tests {
     /// name.
     #[test]
     fn every_hidden_effect_has_edits_and_a_size() {
-        for h in &HIDDEN {
+        let sizes = default_sizes();
+        for h in HIDDEN.iter() {
             assert_eq!(h.library, Some(h.name));
             assert!(effects::by_name(h.name).is_some(), "{}", h.name);
-            let size = DEFAULT_SIZES
+            let size = sizes
                 .iter()
-                .find(|(n, _)| *n == h.name)
-                .map(|(_, s)| *s)
+                .find(|(n, _)| n == h.name)
+                .map(|(_, s)| s)
                 .unwrap_or_else(|| panic!("{}: no default size", h.name));
             assert!(!edits_for(h.name, size).is_empty(), "{}", h.name);
         }
@@ -509,8 +402,12 @@ mod tests {
     fn the_bridge_set_up_and_every_hidden_effect_load() {
         use crate::physics::VehicleConfig;
         use crate::sensors::SensorsConfig;
-        for h in &HIDDEN {
-            let size = DEFAULT_SIZES.iter().find(|(n, _)| *n == h.name).unwrap().1;
+        for h in HIDDEN.iter() {
+            let size = &effects::by_name(h.name)
+                .unwrap()
+                .hidden
+                .unwrap()
+                .bridge_size;
             let edits = edits_for(h.name, size);
             for file in [File::Vehicle, File::Sensors, File::World] {
                 let mut doc: toml::Table =
@@ -563,8 +460,12 @@ mod tests {
     /// the library the program's factor; the program's speed changes by the same factor.
     #[test]
     fn hidden_edits_are_the_library_effect() {
-        for h in &HIDDEN {
-            let size = DEFAULT_SIZES.iter().find(|(n, _)| *n == h.name).unwrap().1;
+        for h in HIDDEN.iter() {
+            let size = &effects::by_name(h.name)
+                .unwrap()
+                .hidden
+                .unwrap()
+                .bridge_size;
             let hidden = loaded(&edits_for(h.name, size));
             let mut applied = loaded(&[]);
             let truth = crate::gap::bench::calibrated::library_truth(h, size);

@@ -28,6 +28,7 @@ use rand::RngExt;
 use crate::config::{ConfigSource, Embedded};
 use crate::gap::bench::{BenchOptions, CalibrationGap, CaseResult, MODEL, Outcome, Shard};
 use crate::gap::calibrate::{self, Run};
+use crate::gap::effects::Effect;
 use crate::gap::format::Measurement;
 use crate::gap::model::GapModel;
 use crate::gap::{GapError, Options};
@@ -50,13 +51,16 @@ pub struct Hidden {
     pub scale: bool,
 }
 
-/// An additive hidden effect.
-pub const fn hidden(name: &'static str, library: Option<&'static str>, signed: bool) -> Hidden {
-    Hidden {
-        name,
-        library,
-        signed,
-        scale: false,
+impl Hidden {
+    /// The library effect `effect` as a source hides it under `name`: signed unless its
+    /// parameter takes one sign only or it is a vector (which keeps its direction).
+    pub fn of(effect: &'static Effect, name: &'static str, factor: bool) -> Hidden {
+        Hidden {
+            name,
+            library: Some(effect.name),
+            signed: !effect.positive && effect.parameters.len() == 1,
+            scale: factor,
+        }
     }
 }
 
@@ -351,7 +355,12 @@ mod tests {
         let down = physical_size(&yaw, &[1.5], 3.0, false);
         assert!((down[0] - 0.4).abs() < 1e-12);
         assert_eq!(library_truth(&yaw, &up), vec![1.5]);
-        let wc = hidden("water_current", Some("water_current"), false);
+        let wc = Hidden {
+            name: "water_current",
+            library: Some("water_current"),
+            signed: false,
+            scale: false,
+        };
         assert_eq!(
             physical_size(&wc, &[0.02, -0.015], 2.0, true),
             vec![0.04, -0.03]

@@ -6,36 +6,27 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::LazyLock;
 
 use crate::gap::GapError;
-use crate::gap::bench::calibrated::{Hidden, Truth, hidden};
+use crate::gap::bench::calibrated::{Hidden, Truth};
+use crate::gap::effects;
 
 /// Length of every run (s).
 pub const DURATION_S: f64 = 180.0;
 /// The program every run drives.
 pub const PROGRAM: &str = "mixed";
 
-/// The independent model's effects the benchmark runs, in the default order.
-pub const HIDDEN: [Hidden; 13] = [
-    hidden("water_current", Some("water_current"), false),
-    hidden("compass_hard_iron", Some("compass_hard_iron"), false),
-    hidden("compass_latency", Some("sensor_latency"), false),
-    hidden("compass_offset", Some("compass_offset"), true),
-    hidden("thruster_imbalance", Some("thruster_imbalance"), true),
-    hidden("depth_emi", Some("depth_pwm_emi"), false),
-    hidden("depth_offset", Some("depth_offset"), true),
-    hidden("depth_gain", Some("depth_gain"), true),
-    hidden("velocity_sensor_scale", Some("velocity_sensor_scale"), true),
-    hidden("thrust_gain", Some("thrust_gain"), true),
-    hidden("thruster_lag", Some("thruster_lag"), false),
-    Hidden {
-        name: "yaw_damping",
-        library: Some("yaw_damping"),
-        signed: true,
-        scale: true,
-    },
-    hidden("sway_yaw_coupling", Some("sway_yaw_coupling"), true),
-];
+/// The independent model's effects the benchmark runs, in the library's order.
+pub static HIDDEN: LazyLock<Vec<Hidden>> = LazyLock::new(|| {
+    effects::LIBRARY
+        .iter()
+        .filter_map(|e| {
+            let h = e.hidden?;
+            Some(Hidden::of(e, h.independent, h.factor))
+        })
+        .collect()
+});
 
 /// The effect the independent model calls `name`.
 pub fn by_name(name: &str) -> Result<&'static Hidden, GapError> {

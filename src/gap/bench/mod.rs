@@ -32,7 +32,7 @@ pub use simulator::{
     CAMERA_STD_M, MODEL, SCHEDULE, SIZE_RANGE, SONAR_SCHEDULE, START, excess, mirrored, size_sigma,
     sonar_deviance, sonar_only, sonar_truth_gap, training, truth_gap,
 };
-pub use table::{GAINS_OFFSETS_CURRENT, table};
+pub use table::table;
 
 /// Where a benchmark's data come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

@@ -291,14 +291,6 @@ pub fn size_sigma(
     Ok(if n == 0 { 0.0 } else { (sum / n as f64).sqrt() })
 }
 
-/// Parameters that only make sense with one sign (a delay, an amplitude).
-fn positive_only(effect: &Effect) -> bool {
-    matches!(
-        effect.name,
-        "thruster_lag" | "sensor_latency" | "depth_pwm_emi" | "compass_tilt"
-    )
-}
-
 /// One manoeuvre the cases run: the training schedule, its mirrored held-out schedule,
 /// whether the sonar is pinged, and the shipped model's prediction and floor on it.
 struct Scene {
@@ -448,7 +440,7 @@ pub fn run(
             let (mut dir, mut target) = (Vec::new(), 0.0);
             if let Some(effect) = kind {
                 dir = if effect.parameters.len() == 1 {
-                    vec![if positive_only(effect) || rng.random::<bool>() {
+                    vec![if effect.positive || rng.random::<bool>() {
                         1.0
                     } else {
                         -1.0

@@ -2,6 +2,7 @@
 //! overall. Each source has its own columns.
 
 use crate::gap::bench::{CalibrationGap, CaseResult, Source};
+use crate::gap::effects;
 
 fn median(mut v: Vec<f64>) -> Option<f64> {
     if v.is_empty() {
@@ -67,23 +68,6 @@ fn simulator_row(label: &str, cases: &[&CaseResult]) -> String {
     )
 }
 
-/// The effects whose parameters are gains (multiplying a configured value: per-motor and
-/// common thrust, the reverse ratio, the drag coefficients, the paddle-wheel scale, the
-/// soft-iron matrix), offsets (added to one: hard iron, the field inclination) or the water
-/// current: the effects whose parameter error the benchmark's target covers.
-/// Left out: added mass, the two delays, the EMI amplitude and the sonar incidence limit.
-pub const GAINS_OFFSETS_CURRENT: [&str; 9] = [
-    "thruster_imbalance",
-    "reverse_thrust_asymmetry",
-    "drag_mismatch",
-    "thrust_gain",
-    "velocity_sensor_scale",
-    "compass_soft_iron",
-    "compass_hard_iron",
-    "compass_tilt",
-    "water_current",
-];
-
 /// The benchmark table (markdown) of `source`; the independent source's starts with the
 /// calibration's line.
 pub fn table(
@@ -126,7 +110,8 @@ pub fn simulator_table(results: &[CaseResult]) -> String {
         .filter(|r| {
             r.effect
                 .as_deref()
-                .is_some_and(|e| GAINS_OFFSETS_CURRENT.contains(&e))
+                .and_then(effects::by_name)
+                .is_some_and(|e| e.parameter_error_target)
         })
         .collect();
     if !target.is_empty() {

@@ -97,13 +97,7 @@ pub enum Bound {
     Lower,
 }
 
-/// Which physical behaviour a quantity shows: straight-line speed or turning.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Behaviour {
-    Speed,
-    Turn,
-}
+pub use crate::gap::effects::Behaviour;
 
 impl Quantity {
     pub const ALL: [Quantity; 6] = [
@@ -150,22 +144,10 @@ impl Quantity {
     }
 }
 
-/// The behaviours each physics candidate is expected to change (its summary-level
-/// signature). Thruster imbalance and reverse asymmetry act through the turning moment (the
-/// thesis's spot turn runs one motor in reverse); drag, added mass and thruster lag shape the
-/// speed runs; a current and a common thrust gain change both. Effects that only change
-/// sensors move none.
+/// The behaviours a physics candidate is expected to change (its summary-level signature,
+/// [`Effect::summary`]). Effects that only change sensors move none.
 pub fn signature_kinds(effect: &Effect) -> &'static [Behaviour] {
-    match effect.name {
-        "thruster_imbalance"
-        | "reverse_thrust_asymmetry"
-        | "yaw_damping"
-        | "yaw_damping_quadratic"
-        | "sway_yaw_coupling" => &[Behaviour::Turn],
-        "drag_mismatch" | "added_mass" | "thruster_lag" => &[Behaviour::Speed],
-        "water_current" | "thrust_gain" | "thrust_curve" => &[Behaviour::Speed, Behaviour::Turn],
-        _ => &[],
-    }
+    effect.summary
 }
 
 #[derive(Debug, Deserialize)]
