@@ -220,6 +220,19 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         }
         None => outln!("no significant missing effect"),
     }
+    for (when, run) in [
+        ("before", &analysis.clean_before),
+        ("after", &analysis.clean_after),
+    ] {
+        for d in &run.divergences {
+            outln!(
+                "diverged ({when} the fit): segment from {:.1} s, at {:.2} s: {} (held to the segment's end, counted as disagreement)",
+                d.segment_start_s,
+                d.t_s,
+                d.what
+            );
+        }
+    }
     for u in &analysis.unexplained {
         outln!(
             "still off: {} (chi2/n {:.2}){}",

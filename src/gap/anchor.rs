@@ -122,6 +122,17 @@ pub fn invert_compass(
     yaw.rem_euclid(std::f64::consts::TAU)
 }
 
+/// True when the depth channel's sample nearest `t_s` sits on the ADC's surface clamp (the
+/// sensor at or above the surface: the reading says only "at most this deep").
+pub fn depth_on_surface_clamp(c: &Configs, m: &Measurement, t_s: f64) -> bool {
+    m.channel("depth_adc")
+        .and_then(|ch| nearest(ch, t_s, 0.25))
+        .is_some_and(|(_, code)| code <= c.sensors.adc.offset_lsb + SURFACE_CLAMP_LSB)
+}
+
+/// Codes within this many LSB of the ADC offset are the depth sensor's surface clamp.
+const SURFACE_CLAMP_LSB: f64 = 2.0;
+
 /// The anchor at `t_s` for a state that the previous segment ended in.
 pub fn estimate(
     c: &Configs,
@@ -154,7 +165,7 @@ pub fn estimate(
         let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
         // Below about 2 LSB the reading sits on the surface clamp and says only "at most
         // this deep"; the state keeps its own depth there.
-        if code > c.sensors.adc.offset_lsb + 2.0 && d.volts_per_m > 0.0 {
+        if code > c.sensors.adc.offset_lsb + SURFACE_CLAMP_LSB && d.volts_per_m > 0.0 {
             let volts = (code - c.sensors.adc.offset_lsb) * lsb;
             let sensor_depth = volts / d.volts_per_m - d.errors.bias;
             let lever = state.attitude * Vector3::from(d.position_body_m);

@@ -31,7 +31,7 @@ pub fn json(a: &Analysis) -> Value {
         })
     };
     let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
-    json!({
+    let mut out = json!({
         "effects": a.accepted.iter().map(effect).collect::<Vec<_>>(),
         "verdict": a.verdict,
         "bic_margin": fit::BIC_MARGIN,
@@ -71,7 +71,13 @@ pub fn json(a: &Analysis) -> Value {
             "heldout_gain": c.heldout_gain, "guards": c.guards, "evaluations": c.evaluations,
             "delta_bic_uncalibrated": finite(c.delta_bic_uncalibrated),
         })).collect::<Vec<_>>()).collect::<Vec<_>>(),
-    })
+    });
+    // Segments the re-simulation could not step to their end, before and after the fit.
+    out["diverged"] = json!({
+        "before": a.clean_before.divergences,
+        "after": a.clean_after.divergences,
+    });
+    out
 }
 
 /// `report.md`.
@@ -130,6 +136,16 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
                 w.join(", ")
             }
         );
+    }
+    for (when, run) in [("before", &a.clean_before), ("after", &a.clean_after)] {
+        for d in &run.divergences {
+            let _ = writeln!(
+                s,
+                "- the re-simulation {when} the fit diverged in the segment from {:.1} s at \
+                 {:.2} s ({}): held there to the segment's end, counted as disagreement",
+                d.segment_start_s, d.t_s, d.what
+            );
+        }
     }
     for n in &m.notices {
         let _ = writeln!(s, "- notice: {n}");

@@ -12,7 +12,7 @@ use crate::gap::anchor;
 pub use crate::gap::anchor::{compass_heading_deg, wrap_deg};
 use crate::gap::effects::Configs;
 use crate::gap::format::{Channel, Measurement};
-pub use crate::gap::run::{ENSEMBLE, Floor, Run};
+pub use crate::gap::run::{Divergence, ENSEMBLE, Floor, Run};
 use crate::physics::state::STERN;
 use crate::physics::{InitialState, Model, ThrusterCommand, hdt_command};
 use crate::sensors::accelerometer::G0_MPS2;
@@ -43,6 +43,18 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
 
 /// Runs the model from the measurement's initial state under its commands. `noise_seed`
 /// `None` switches the thrust fluctuation off (the mean prediction).
+///
+/// **The initial state is estimated, not trusted.** With re-anchored segments the start is
+/// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
+/// from the measurement through the candidate's sensor models), the experiment's `[initial]`
+/// serving as the prior for what the data do not say; a depth sensor on its surface clamp at
+/// the start says the vehicle floats, so the start is the model's floating depth. Open loop
+/// (`segment_s = None`, for generated data) starts where the experiment says.
+///
+/// **A diverging segment is no error.** A step the physics refuses (the state left the pool
+/// or became non-finite) is recorded in [`Run::divergences`]; the vehicle is held at its last
+/// good state, at rest, until the next segment start re-anchors it (open loop: to the end),
+/// so the residuals there count as disagreement and the analysis still ends in a verdict.
 pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result<Run, GapError> {
     let mut vehicle = c.vehicle.clone();
     if noise_seed.is_none() {
@@ -66,9 +78,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     let steps = (m.experiment.duration_s / dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut percent = Vec::with_capacity(steps + 1);
-    states.push(model.vehicle_state(&state));
     let mut p = m.percent_at(0.0);
-    percent.push(p);
     let tables: [[f64; 11]; 4] = std::array::from_fn(|k| model.vehicle().thrusters[k].hdt_duty);
     let mut commands: [ThrusterCommand; 4] = std::array::from_fn(|k| hdt_command(&tables[k], p[k]));
     let segment_steps = c
@@ -84,23 +94,41 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                 dt_s: dt,
                 states: vec![model.vehicle_state(&state)],
                 percent: vec![p],
+                divergences: Vec::new(),
             };
             anchor_noise(c, m, &probe)
         });
         (noise.unwrap_or_default(), rng::stream(seed, "gap-anchor"))
     });
+    let mut anchor_at = |state: &mut crate::physics::SimState, t: f64, first: bool| {
+        let here = model.vehicle_state(state);
+        let mut a = anchor::estimate(c, m, &earth, t, &here);
+        if first && a.depth_m.is_none() && anchor::depth_on_surface_clamp(c, m, t) {
+            a.depth_m = Some(model.floating_depth_m());
+        }
+        if let Some((noise, rng)) = anchor_draw.as_mut() {
+            noise.perturb(&mut a, &mut || rng.sample(StandardNormal));
+        }
+        model.reanchor(state, &a);
+    };
+    if segment_steps.is_some() {
+        anchor_at(&mut state, 0.0, true);
+    }
+    states.push(model.vehicle_state(&state));
+    percent.push(p);
+    let mut divergences = Vec::new();
+    // Set while the current segment is held after a divergence.
+    let mut held = false;
+    let mut segment_start_s = 0.0;
     for k in 0..steps {
         let t = k as f64 * dt;
         if let Some(n) = segment_steps
             && k > 0
             && k % n == 0
         {
-            let here = model.vehicle_state(&state);
-            let mut a = anchor::estimate(c, m, &earth, t, &here);
-            if let Some((noise, rng)) = anchor_draw.as_mut() {
-                noise.perturb(&mut a, &mut || rng.sample(StandardNormal));
-            }
-            model.reanchor(&mut state, &a);
+            anchor_at(&mut state, t, false);
+            held = false;
+            segment_start_s = t;
             // The boundary's state is the anchored one: predictions at `t` start the segment.
             if let Some(last) = states.last_mut() {
                 *last = model.vehicle_state(&state);
@@ -111,12 +139,21 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
             p = now;
             commands = std::array::from_fn(|j| hdt_command(&tables[j], p[j]));
         }
-        model
-            .step(&mut state, &commands)
-            .map_err(|source| GapError::Physics {
-                experiment: m.experiment.name.clone(),
-                source,
-            })?;
+        if held {
+            model.hold(&mut state);
+        } else {
+            let before = state.clone();
+            if let Err(e) = model.step(&mut state, &commands) {
+                divergences.push(Divergence {
+                    segment_start_s,
+                    t_s: t,
+                    what: e.to_string(),
+                });
+                state = before;
+                model.hold(&mut state);
+                held = true;
+            }
+        }
         states.push(model.vehicle_state(&state));
         percent.push(p);
     }
@@ -124,6 +161,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
         dt_s: dt,
         states,
         percent,
+        divergences,
     })
 }
 
@@ -375,6 +413,7 @@ pub fn noise_floor(
 #[cfg(test)]
 mod tests {
     use crate::config::{ConfigSource, Document, Embedded};
+    use crate::gap::anchor::Shooting;
     use crate::gap::{Verdict, analyse_with, bench, generate, model::GapModel};
     use crate::physics::experiment::Experiment;
 
@@ -425,5 +464,121 @@ mod tests {
             let (verdict, named) = null_verdict(seed);
             assert_eq!(verdict, Verdict::None, "null seed {seed} named {named:?}");
         }
+    }
+
+    /// The benchmark's manoeuvre, generated with the shipped model, and that model's
+    /// configurations.
+    fn manoeuvre(
+        seed: u64,
+    ) -> (
+        crate::gap::effects::Configs,
+        crate::gap::format::Measurement,
+    ) {
+        let text = Embedded.read(bench::MODEL).unwrap();
+        let model =
+            GapModel::from_text(&Embedded.describe(bench::MODEL), &text, ".".into()).unwrap();
+        let sched_text = Embedded.read(bench::SCHEDULE).unwrap();
+        let schedule = bench::training(
+            &Experiment::from_document(&Document::new(
+                Embedded.describe(bench::SCHEDULE),
+                &sched_text,
+            ))
+            .unwrap(),
+        );
+        let info = generate::setup(&model, &schedule, bench::CAMERA_STD_M);
+        let c = model.configs(&info, std::path::Path::new(".")).unwrap();
+        let m = generate::generate(
+            &c,
+            &schedule,
+            &info.world,
+            &info.sensors,
+            bench::CAMERA_STD_M,
+            seed,
+        )
+        .unwrap();
+        (c, m)
+    }
+
+    /// Regression (a diverging re-simulation killed the analysis: "distance of the CG outside
+    /// the pool exceeds the divergence limit", no report): a model whose thrusters are ten
+    /// thousand times too strong leaves the pool in the first segment with thrust; the
+    /// re-simulation records the segment, holds the vehicle there, re-anchors at the next
+    /// segment start and runs to the end.
+    #[test]
+    fn a_diverging_segment_is_recorded_and_the_run_goes_on() {
+        let (mut c, m) = manoeuvre(5);
+        c.vehicle.thruster_common.forward_max_n *= 1e4;
+        for shooting in [Shooting::DEFAULT, Shooting::OPEN_LOOP] {
+            c.shooting = shooting;
+            let run = super::simulate(&c, &m, None).expect("a diverging run is no error");
+            let steps = (m.experiment.duration_s / run.dt_s).round() as usize;
+            assert_eq!(
+                run.states.len(),
+                steps + 1,
+                "{shooting:?}: every step has a state"
+            );
+            assert!(
+                !run.divergences.is_empty(),
+                "{shooting:?}: the divergence is recorded"
+            );
+            let d = &run.divergences[0];
+            assert!(d.t_s >= d.segment_start_s, "{d:?}");
+            assert!(!d.what.is_empty());
+            assert!(
+                run.states
+                    .iter()
+                    .all(|s| s.position_m.iter().all(|v| v.is_finite())),
+                "{shooting:?}: held states stay finite"
+            );
+            if shooting.segment_s.is_some() {
+                // Re-anchored at each segment start: later segments start inside the pool
+                // again, and each divergence is its own segment's.
+                let starts: Vec<f64> = run.divergences.iter().map(|d| d.segment_start_s).collect();
+                assert!(starts.windows(2).all(|w| w[0] < w[1]), "{starts:?}");
+            } else {
+                assert_eq!(run.divergences.len(), 1, "open loop holds to the end");
+            }
+        }
+        // The ensemble members diverge too, and the floor still comes out.
+        c.shooting = Shooting::DEFAULT;
+        let clean = super::simulate(&c, &m, None).unwrap();
+        let floors = super::noise_floor(&c, &m, &clean).expect("the floor of a diverging model");
+        assert!(floors.iter().any(Option::is_some));
+    }
+
+    /// The start is estimated from the data when the re-simulation is re-anchored: an
+    /// `[initial]` off by 0.3 m in depth, 0.3 m in position and 20 deg in heading gives the
+    /// start the true one gives, within the anchors' own noise.
+    #[test]
+    fn a_wrong_initial_state_is_estimated_from_the_data() {
+        let (mut c, m) = manoeuvre(6);
+        c.shooting = Shooting::DEFAULT;
+        let truth = super::simulate(&c, &m, None).unwrap();
+        let mut wrong = m.clone();
+        let i = &mut wrong.experiment.initial;
+        i.x_m += 0.3;
+        i.y_m -= 0.3;
+        i.z_m = Some(i.z_m.unwrap_or(0.2) + 0.3);
+        i.heading_deg += 20.0;
+        let moved = super::simulate(&c, &wrong, None).unwrap();
+        let (a, b) = (&truth.states[0], &moved.states[0]);
+        assert!(
+            (a.position_m - b.position_m).norm() < 0.05,
+            "{:?} vs {:?}",
+            a.position_m,
+            b.position_m
+        );
+        let (_, _, ya) = a.euler_rad();
+        let (_, _, yb) = b.euler_rad();
+        assert!(
+            super::wrap_deg((ya - yb).to_degrees()).abs() < 2.0,
+            "heading {} vs {}",
+            ya.to_degrees(),
+            yb.to_degrees()
+        );
+        // Open loop trusts the experiment: the same change moves the start.
+        c.shooting = Shooting::OPEN_LOOP;
+        let open = super::simulate(&c, &wrong, None).unwrap();
+        assert!((open.states[0].position_m - a.position_m).norm() > 0.3);
     }
 }

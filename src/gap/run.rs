@@ -2,6 +2,8 @@
 //! made of: the run of states ([`Run`]), a channel's floor ([`Floor`]) and the ensemble
 //! size. `resim` makes them; `anchor`, `sonar`, `fit` and `report` read them.
 
+use serde::Serialize;
+
 use crate::physics::state::VehicleState;
 
 /// How the re-simulation is cut.
@@ -42,6 +44,19 @@ pub struct Run {
     pub dt_s: f64,
     pub states: Vec<VehicleState>,
     pub percent: Vec<[f64; 4]>,
+    /// Segments the physics could not step to their end, in time order.
+    pub divergences: Vec<Divergence>,
+}
+
+/// A segment of a re-simulation that diverged: held from `t_s` to the segment's end.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Divergence {
+    /// Start of the segment (s; 0 for an open-loop run).
+    pub segment_start_s: f64,
+    /// When the physics refused the step (s).
+    pub t_s: f64,
+    /// The quantity and value that diverged, as the physics said it.
+    pub what: String,
 }
 
 impl Run {

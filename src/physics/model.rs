@@ -320,6 +320,26 @@ impl Model {
         );
     }
 
+    /// Advances the clock one step with the vehicle held where it is, at rest over ground and
+    /// with no thrust: what a re-simulation does with a state it could not step (diverged)
+    /// until it can re-anchor it.
+    pub fn hold(&self, state: &mut SimState) {
+        let current_body = state.attitude.inverse() * self.world.current_mps;
+        state.nu_r = Vector6::new(
+            -current_body.x,
+            -current_body.y,
+            -current_body.z,
+            0.0,
+            0.0,
+            0.0,
+        );
+        state.thrust_lagged_n = [0.0; 4];
+        state.thrust_n = [0.0; 4];
+        state.tau_thrust = Vector6::zeros();
+        state.contact_accel = Vector6::zeros();
+        state.step += 1;
+    }
+
     /// Sets the steady water current (world frame, NED, m/s) from now on.
     pub fn set_current(&mut self, current_mps: Vector3<f64>) {
         self.world.current_mps = current_mps;
