@@ -223,9 +223,8 @@ BOOL PSDCheck(void) {
     psd_poll();
     if (P.started != 0 && (P.measured & P.started) == P.started) return TRUE;
     if (P.started != 0 && eb_lockstep() && !eb_in_timer()) {
-        /* nothing arrives unless simulated time moves */
-        eb_time_until(eb_now_ticks() + 1);
-        psd_poll();
+        /* nothing arrives unless simulated time moves: one tick, timers included */
+        OSWait(1);
     }
     return P.started != 0 && (P.measured & P.started) == P.started;
 }
