@@ -33,6 +33,7 @@ fn build(target: Target) -> PathBuf {
         program("quad_servo.c"),
         program("cam_radio.c"),
         program("missing_devices.c"),
+        program("image_ops.c"),
     ];
     let refs: Vec<&Path> = singles.iter().map(PathBuf::as_path).collect();
     let sources = format!(
@@ -89,7 +90,14 @@ fn text(o: &Output) -> String {
 fn robios6_programs_build_unchanged_for_the_host_and_the_68k() {
     for target in [Target::Host, Target::M68k] {
         let out = build(target);
-        for name in ["subsim_wall", "quad_servo", "cam_radio", "missing_devices", "multi"] {
+        for name in [
+            "subsim_wall",
+            "quad_servo",
+            "cam_radio",
+            "missing_devices",
+            "image_ops",
+            "multi",
+        ] {
             assert!(
                 out.join(name).is_file(),
                 "{target:?}: {name} was not built in {}",
@@ -285,5 +293,27 @@ fn a_bad_latch_script_is_refused_naming_it() {
             err.contains("eyebot: EYEBOT_LATCH: ") && err.contains(said),
             "{script}: {err}"
         );
+    }
+}
+
+/// RoBIOS's image processing calls on a picture with a vertical edge from 20 to 220 between
+/// columns 40 and 41: Laplace 200 on both sides of the edge and 0 elsewhere (60 rows x 2
+/// columns, 4680 flat pixels), Sobel (|Gx| + |Gy|) / 4 = 200, the 2 x 2 dither pattern, the
+/// difference, the grey of (30, 60, 90); host and qemu-m68k alike.
+#[test]
+fn image_processing_calls_compute_their_operators() {
+    let expected = "\
+laplace 200 200 at edge 120 4680 border 0
+sobel 0 200 200 0
+dither 255 0 255 255
+differ 0 200
+grey 60
+null -1
+";
+    for target in [Target::Host, Target::M68k] {
+        let out = build(target);
+        let o = run(target, &out.join("image_ops"), &[]);
+        assert!(o.status.success(), "{target:?}: {}", text(&o));
+        assert_eq!(String::from_utf8_lossy(&o.stdout), expected, "{target:?}");
     }
 }

@@ -473,6 +473,13 @@ int AURecordSample(BYTE *buf, long len, long freq);      /* -1: no microphone in
 int AUCheckRecord(void);
 int AUCaptureMic(int mode);                              /* -1 */
 
+/* ---- Basic image processing (eb_image.c): 0 on success, -1 for a NULL image ---------------- */
+int IPLaplace(image *src, image *dest);
+int IPSobel(image *src, image *dest);
+int IPDither(image *src, image *dest);
+int IPDiffer(image *current, image *last, image *dest);
+int IPColor2Grey(colimage *src, image *dest);
+
 /* ---- More keys and LCD ------------------------------------------------------------------- */
 int KEYGetBuf(char *buf);                                /* KEYGet into *buf */
 int LCDSetPixel(int row, int col, int val);              /* graphics: accepted, not drawn */
