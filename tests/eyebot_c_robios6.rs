@@ -188,10 +188,14 @@ fn devices_mako_has_not_got_fail_as_robios_does_and_say_so_once() {
     }
 }
 
-/// The distances (mm) the wall follower printed ("left N mm").
-fn left_readings(out: &str) -> Vec<i64> {
+/// The (time s, distance mm) pairs the wall follower printed ("t 12.3 s left 1100 mm").
+fn left_readings(out: &str) -> Vec<(f64, i64)> {
     out.lines()
-        .filter_map(|l| l.split_once(" left ")?.1.strip_suffix(" mm")?.parse().ok())
+        .filter_map(|l| {
+            let rest = l.strip_prefix("t ")?;
+            let (t, rest) = rest.split_once(" s left ")?;
+            Some((t.parse().ok()?, rest.strip_suffix(" mm")?.parse().ok()?))
+        })
         .collect()
 }
 
@@ -233,23 +237,38 @@ fn subsim_wall_follower_follows_the_wall_on_the_sonar_host_and_m68k_alike() {
     let printed = std::fs::read_to_string(host_out.join("program.out")).expect("program.out");
     let printed68 = std::fs::read_to_string(m68k_out.join("program.out")).expect("program.out");
     assert_eq!(printed, printed68, "the programs printed different text");
-    // plausible sonar distances: the wall 1.5 m off is 1.55 m along a beam 15 deg off its
-    // normal; every reading is in the sonar's 0.3..4.4 m or "nothing in range"
+    // plausible sonar distances: each reading in range is the slant range from transducer 1
+    // (0.32 m to port of the centre line, 75 deg to port of the bow) to the west wall at the
+    // recorded pose, (east - 0.32 m) / cos(15 deg + yaw), within 0.25 m (readings come in
+    // 0.1 m steps and are up to 2.5 s old); "nothing in range" is 9999
+    let states = Recording::read(&host_out.join("rec")).states;
     let readings = left_readings(&printed);
-    let in_range: Vec<i64> = readings
-        .iter()
-        .copied()
-        .filter(|&mm| mm != 9999)
-        .collect();
-    assert!(readings.len() >= 20, "{printed}");
+    assert!(readings.len() >= 80, "{printed}");
+    let mut in_range = 0;
+    for &(t_s, mm) in &readings {
+        if mm == 9999 {
+            continue;
+        }
+        in_range += 1;
+        let row = states
+            .iter()
+            .find(|r| r.t_s >= t_s)
+            .expect("a state at the reading's time");
+        let slant_m = (row.y_m - 0.32) / (row.yaw_rad + 15f64.to_radians()).cos();
+        let error_m = mm as f64 / 1000.0 - slant_m;
+        assert!(
+            error_m.abs() <= 0.25,
+            "at {t_s} s PSD_LEFT read {mm} mm, the wall is {slant_m:.3} m along the beam"
+        );
+    }
     assert!(
-        in_range.iter().all(|&mm| (300..=4400).contains(&mm)),
-        "{readings:?}"
+        in_range >= 20,
+        "only {in_range} of {} readings in range: {readings:?}",
+        readings.len()
     );
-    assert!(
-        in_range.iter().filter(|&&mm| (900..=2200).contains(&mm)).count() * 10
-            >= readings.len() * 7,
-        "fewer than 70 % of the readings are 0.9..2.2 m: {readings:?}"
+    eprintln!(
+        "{in_range} of {} readings in range, each within 0.25 m of the slant range",
+        readings.len()
     );
 }
 

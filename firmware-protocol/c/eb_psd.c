@@ -5,9 +5,12 @@
  *
  * POSIX back-end. A measurement of transducer t is what Mako's thesis programs do: send the
  * select "@S<t>" CR, wait for the acknowledgement "@A<t>" (2 s, sent up to 3 times), then take
- * the first depth sentence ($..DBT or $..DPT) as t's distance, in millimetres. No sentence
- * within RANGE_TIMEOUT_TICKS is "nothing in range": PSD_OUT_OF_RANGE. PSDStart measures the
- * started transducers in turn, once or (cycle) until PSDStop.
+ * the first depth sentence ($..DBT or $..DPT) as t's distance, in millimetres. A transducer
+ * an earlier acknowledged select left connected is not selected again (each select costs its
+ * controller a re-acquiring ping, so a PSD read over and over would hardly ever answer): its
+ * measurement is the next sentence. No sentence within RANGE_TIMEOUT_TICKS is "nothing in
+ * range": PSD_OUT_OF_RANGE. PSDStart measures the started transducers in turn, once or
+ * (cycle) until PSDStop.
  *
  * The measuring runs while time passes: on a timer of one tick (OSAttachTimer), so in OSWait,
  * OSSleep and KEYWait as RoBIOS's interrupt-driven PSDs do, and in PSDCheck, which lets one
@@ -49,6 +52,7 @@ static struct {
     int attempts;       /* selects sent for it */
     long deadline;      /* program tick its wait ends */
     TimerHandle timer;  /* the one-tick timer that runs the measuring */
+    int connected[2];   /* transducer each controller's relays connect, 0 = not known */
     int value_mm[TRANSDUCERS];
     char line[LINE_MAX];
     int line_len;
@@ -79,7 +83,14 @@ static void next_transducer(void) {
         if (!P.cycle && (P.measured & (1 << (t - 1)))) continue;
         P.current = t;
         P.attempts = 0;
-        send_select();
+        if (P.connected[(t - 1) / 2] == t) {
+            /* already connected by an acknowledged select: another select would only
+             * cost the controller a re-acquiring ping */
+            P.state = WAIT_RANGE;
+            P.deadline = eb_now_ticks() + RANGE_TIMEOUT_TICKS;
+        } else {
+            send_select();
+        }
         return;
     }
     P.state = IDLE; /* a single start has measured every transducer */
@@ -115,6 +126,7 @@ static void handle_line(void) {
     const char *line = P.line;
     if (P.state == WAIT_ACK) {
         if (line[0] == '@' && line[1] == 'A' && line[2] == '0' + P.current) {
+            P.connected[(P.current - 1) / 2] = P.current;
             P.state = WAIT_RANGE;
             P.deadline = eb_now_ticks() + RANGE_TIMEOUT_TICKS;
         }

@@ -39,7 +39,7 @@ int main(void)
     else                           { l = SPEED; r = SPEED; }
     MOTORDrive(left, l);
     MOTORDrive(right, r);
-    if (loops % 50 == 0) printf("t %d.%d s left %d mm\n", OSGetCount() / 100, OSGetCount() / 10 % 10, dist);
+    if (loops % 10 == 0) printf("t %d.%d s left %d mm\n", OSGetCount() / 100, OSGetCount() / 10 % 10, dist);
     loops++;
     OSWait(10);
     key = KEYRead();
