@@ -128,30 +128,95 @@ psd 0
 #[test]
 fn devices_mako_has_not_got_fail_as_robios_does_and_say_so_once() {
     let families: [(&str, &[&str]); 9] = [
-        ("Mako has no servos", &["SERVOInit", "SERVOSet", "SERVOSetRaw", "SERVORelease"]),
+        (
+            "Mako has no servos",
+            &["SERVOInit", "SERVOSet", "SERVOSetRaw", "SERVORelease"],
+        ),
         (
             "Mako has no shaft encoders",
-            &["QUADInit", "QUADRead", "QUADReset", "QUADRelease", "QUADGetMotor", "QUADODORead", "QUADODOReset"],
+            &[
+                "QUADInit",
+                "QUADRead",
+                "QUADReset",
+                "QUADRelease",
+                "QUADGetMotor",
+                "QUADODORead",
+                "QUADODOReset",
+            ],
         ),
         (
             "Mako has no differential drive",
-            &["VWInit", "VWSetSpeed", "VWGetSpeed", "VWSetPosition", "VWGetPosition", "VWStartControl", "VWStopControl", "VWDriveStraight", "VWDriveTurn", "VWDriveCurve", "VWDriveRemain", "VWDriveDone", "VWDriveWait", "VWStalled", "VWRelease"],
+            &[
+                "VWInit",
+                "VWSetSpeed",
+                "VWGetSpeed",
+                "VWSetPosition",
+                "VWGetPosition",
+                "VWStartControl",
+                "VWStopControl",
+                "VWDriveStraight",
+                "VWDriveTurn",
+                "VWDriveCurve",
+                "VWDriveRemain",
+                "VWDriveDone",
+                "VWDriveWait",
+                "VWStalled",
+                "VWRelease",
+            ],
         ),
-        ("Mako has no bumpers", &["BUMPInit", "BUMPCheck", "BUMPRelease"]),
-        ("Mako has no infrared sensors", &["IRInit", "IRRead", "IRRelease"]),
+        (
+            "Mako has no bumpers",
+            &["BUMPInit", "BUMPCheck", "BUMPRelease"],
+        ),
+        (
+            "Mako has no infrared sensors",
+            &["IRInit", "IRRead", "IRRelease"],
+        ),
         (
             "Mako's EyeBot has no camera",
-            &["CAMInit", "CAMGetFrame", "CAMGetColFrame", "CAMGetFrameMono", "CAMGetFrameRGB", "CAMGetFrameBayer", "CAMSet", "CAMGet", "CAMMode"],
+            &[
+                "CAMInit",
+                "CAMGetFrame",
+                "CAMGetColFrame",
+                "CAMGetFrameMono",
+                "CAMGetFrameRGB",
+                "CAMGetFrameBayer",
+                "CAMSet",
+                "CAMGet",
+                "CAMMode",
+            ],
         ),
         (
             "Mako has no radio module",
-            &["RADIOInit", "RADIOSend", "RADIOCheck", "RADIORecv", "RADIOStatus", "RADIOSetIoctl", "RADIOGetIoctl", "RADIOTerm"],
+            &[
+                "RADIOInit",
+                "RADIOSend",
+                "RADIOCheck",
+                "RADIORecv",
+                "RADIOStatus",
+                "RADIOSetIoctl",
+                "RADIOGetIoctl",
+                "RADIOTerm",
+            ],
         ),
         (
             "Mako has no infrared remote-control receiver",
-            &["IRTVInit", "IRTVPressed", "IRTVRead", "IRTVGet", "IRTVFlushBuffer", "IRTVSetHoldDelay", "IRTVGetControlBit", "IRTVSetControlBit", "IRTVTerm"],
+            &[
+                "IRTVInit",
+                "IRTVPressed",
+                "IRTVRead",
+                "IRTVGet",
+                "IRTVFlushBuffer",
+                "IRTVSetHoldDelay",
+                "IRTVGetControlBit",
+                "IRTVSetControlBit",
+                "IRTVTerm",
+            ],
         ),
-        ("no microphone input", &["AURecordSample", "AUCheckRecord", "AUCaptureMic"]),
+        (
+            "no microphone input",
+            &["AURecordSample", "AUCheckRecord", "AUCaptureMic"],
+        ),
     ];
     for target in [Target::Host, Target::M68k] {
         let out = build(target);
@@ -173,7 +238,11 @@ fn devices_mako_has_not_got_fail_as_robios_does_and_say_so_once() {
                     .lines()
                     .filter(|l| l.starts_with(&format!("eyebot: {call}: ")))
                     .collect();
-                assert_eq!(lines.len(), 1, "{target:?} {call}: said {lines:?}\n{stderr}");
+                assert_eq!(
+                    lines.len(),
+                    1,
+                    "{target:?} {call}: said {lines:?}\n{stderr}"
+                );
                 assert!(
                     lines[0].contains(why) && lines[0].contains("; returns "),
                     "{target:?} {call}: {}",
@@ -286,7 +355,10 @@ fn the_latch_script_drives_osreadinlatch_in_check() {
     eprintln!("{}", text(&o));
     assert!(o.status.success(), "{}", text(&o));
     let printed = std::fs::read_to_string(dir.join("out/program.out")).expect("program.out");
-    assert!(printed.contains("latch 1 0xFF"), "latch 1 keeps its idle level: {printed}");
+    assert!(
+        printed.contains("latch 1 0xFF"),
+        "latch 1 keeps its idle level: {printed}"
+    );
 }
 
 /// A latch script the library cannot read ends the program with status 2, naming the

@@ -1,13 +1,14 @@
 /*
- * eyebot.h - the RoBIOS MK4 calls a Mako control program uses, for running that program
- * unchanged against the eyebot-hil bridge.
+ * eyebot.h - the RoBIOS 6 API, for running an EyeBot program (written for Mako, SubSim,
+ * EyeSim or another RoBIOS 6 robot) unchanged against the eyebot-hil bridge.
  *
- * A Mako program includes this header instead of RoBIOS's own eyebot.h and links against
- * libeyebot.a. The calls keep the names and argument order of the EyeBot MK4's RoBIOS
- * operating system; underneath, the analog inputs, the compass, the
- * thrusters and the clock are served by the bridge over the sensor link (PROTOCOL.md
- * section 2), and the serial ports are ordinary serial ports (the sonar multiplexer is one of
- * them, PROTOCOL.md section 1).
+ * A program includes this header instead of RoBIOS's own eyebot.h and links against
+ * libeyebot.a. The calls keep the names, types and signatures of RoBIOS 6 (docs/eyebot.md,
+ * "RoBIOS 6 calls", names the source of each); underneath, the analog inputs, the compass,
+ * the thrusters and the clock are served by the bridge over the sensor link (PROTOCOL.md
+ * section 2), the serial ports are ordinary serial ports (the sonar multiplexer is one of
+ * them, PROTOCOL.md section 1), PSDs are the sonar transducers, and the devices Mako has not
+ * got answer as RoBIOS does on a robot without them.
  *
  * Two back-ends, chosen when the library is compiled (see docs/eyebot.md):
  *   - default: POSIX (termios). For a host build and for a 68k Linux build under qemu-m68k.
