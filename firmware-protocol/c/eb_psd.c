@@ -6,9 +6,9 @@
  * POSIX back-end. A measurement of transducer t is what Mako's thesis programs do: send the
  * select "@S<t>" CR, wait for the acknowledgement "@A<t>" (2 s, sent up to 3 times), then take
  * the first depth sentence ($..DBT or $..DPT) as t's distance, in millimetres. A transducer
- * an earlier acknowledged select left connected is not selected again (each select costs its
- * controller a re-acquiring ping, so a PSD read over and over would hardly ever answer): its
- * measurement is the next sentence. No sentence within RANGE_TIMEOUT_TICKS is "nothing in
+ * an earlier acknowledged select left connected is not selected again (that select would
+ * move no relay and only open a window, up to its ack, in which the multiplexer forwards
+ * nothing): its measurement is the next sentence. No sentence within RANGE_TIMEOUT_TICKS is "nothing in
  * range": PSD_OUT_OF_RANGE. PSDStart measures the started transducers in turn, once or
  * (cycle) until PSDStop.
  *
@@ -84,8 +84,8 @@ static void next_transducer(void) {
         P.current = t;
         P.attempts = 0;
         if (P.connected[(t - 1) / 2] == t) {
-            /* already connected by an acknowledged select: another select would only
-             * cost the controller a re-acquiring ping */
+            /* already connected by an acknowledged select: another select would move no
+             * relay, only silence the line until its ack */
             P.state = WAIT_RANGE;
             P.deadline = eb_now_ticks() + RANGE_TIMEOUT_TICKS;
         } else {
