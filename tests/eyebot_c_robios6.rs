@@ -257,13 +257,15 @@ fn devices_mako_has_not_got_fail_as_robios_does_and_say_so_once() {
     }
 }
 
-/// The (time s, distance mm) pairs the wall follower printed ("t 12.3 s left 1100 mm").
+/// The (time s, distance mm) pairs of PSD_LEFT the wall follower printed ("t 12.3 s left
+/// 1100 mm front 9999 mm").
 fn left_readings(out: &str) -> Vec<(f64, i64)> {
     out.lines()
         .filter_map(|l| {
             let rest = l.strip_prefix("t ")?;
             let (t, rest) = rest.split_once(" s left ")?;
-            Some((t.parse().ok()?, rest.strip_suffix(" mm")?.parse().ok()?))
+            let (mm, _front) = rest.split_once(" mm front ")?;
+            Some((t.parse().ok()?, mm.parse().ok()?))
         })
         .collect()
 }

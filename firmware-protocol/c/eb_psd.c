@@ -53,6 +53,7 @@ static struct {
     long deadline;      /* program tick its wait ends */
     TimerHandle timer;  /* the one-tick timer that runs the measuring */
     int connected[2];   /* transducer each controller's relays connect, 0 = not known */
+    int ever_started;   /* PSDStart was called: PSDGet no longer starts measuring */
     int value_mm[TRANSDUCERS];
     char line[LINE_MAX];
     int line_len;
@@ -211,6 +212,7 @@ int PSDStart(PSDHandle bitmask, BOOL cycle) {
         psd_report(text);
         return -1;
     }
+    P.ever_started = 1;
     /* A start while measuring adds the new PSDs to the round. */
     P.started = P.state == IDLE ? bitmask : (P.started | bitmask);
     P.cycle = cycle ? 1 : (P.state == IDLE ? 0 : P.cycle);
@@ -225,6 +227,7 @@ int PSDStart(PSDHandle bitmask, BOOL cycle) {
 }
 
 int PSDStop(void) {
+    P.ever_started = 1;
     P.cycle = 0;
     P.started = 0;
     P.state = IDLE;
@@ -255,9 +258,26 @@ static int single_handle(const char *call, PSDHandle handle) {
     return 0;
 }
 
+/* SubSim's PSDs measure without PSDStart: a program written for SubSim calls PSDGet alone.
+ * Until the program calls PSDStart, a PSDGet adds its PSD to a round measured in cycle. */
+static void start_on_demand(PSDHandle handle) {
+    if (P.ever_started || (P.started & handle)) return;
+    if (P.started == 0)
+        psd_report("PSDGet without PSDStart: measuring each PSD the program reads, in turn, "
+                   "until PSDStart or PSDStop (SubSim's PSDs measured without PSDStart)");
+    P.started |= handle;
+    P.cycle = 1;
+    if (P.timer == 0) P.timer = OSAttachTimer(1, psd_poll);
+    if (P.state == IDLE) {
+        P.current = 0;
+        next_transducer();
+    }
+}
+
 int PSDGet(PSDHandle handle) {
     int t = single_handle("PSDGet", handle);
     if (t == 0) return PSD_OUT_OF_RANGE;
+    start_on_demand(handle);
     psd_poll();
     return (P.have & handle) ? P.value_mm[t - 1] : PSD_OUT_OF_RANGE;
 }
@@ -265,6 +285,7 @@ int PSDGet(PSDHandle handle) {
 int PSDGetRaw(PSDHandle handle) {
     int t = single_handle("PSDGetRaw", handle);
     if (t == 0) return PSD_OUT_OF_RANGE;
+    start_on_demand(handle);
     psd_poll();
     return (P.have & handle) ? P.value_mm[t - 1] : PSD_OUT_OF_RANGE;
 }
@@ -276,5 +297,6 @@ int PSDRelease(void) {
     P.inited = 0;
     P.measured = 0;
     P.have = 0;
+    P.ever_started = 0;
     return 0;
 }

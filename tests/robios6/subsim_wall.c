@@ -1,7 +1,8 @@
 /* A submarine wall follower written the way SubSim's testers wrote theirs ("almost identical
  * to a regular C program written for the EyeBot"): RoBIOS motor and PSD handles, the PSDs
- * SubSim's HDT names, KEYRead polled until KEY4, printf and OSWait(10). It knows nothing of
- * Mako's sonar multiplexer. It keeps the wall on its left between 1.2 and 1.6 m. */
+ * SubSim's HDT names, PSDGet without PSDStart (SubSim's PSDs measured by themselves),
+ * KEYRead polled until KEY4, printf and OSWait(10). It knows nothing of Mako's sonar
+ * multiplexer. It keeps the wall on its left between 1.2 and 1.6 m. */
 #include <stdio.h>
 #include "eyebot.h"
 
@@ -27,19 +28,21 @@ int main(void)
     printf("init failed\n");
     return 1;
   }
-  PSDStart(psdleft, TRUE);
   printf("wall follower: KEY4 ends\n");
 
   while (key != KEY4)
   {
     dist = PSDGet(psdleft);
+    ahead = PSDGet(front);
     if (dist == PSD_OUT_OF_RANGE)  { l = SPEED - STEER; r = SPEED + STEER; }  /* find the wall */
     else if (dist < NEAR_MM)       { l = SPEED + STEER; r = SPEED - STEER; }  /* too close */
     else if (dist > FAR_MM)        { l = SPEED - STEER; r = SPEED + STEER; }  /* too far */
     else                           { l = SPEED; r = SPEED; }
     MOTORDrive(left, l);
     MOTORDrive(right, r);
-    if (loops % 10 == 0) printf("t %d.%d s left %d mm\n", OSGetCount() / 100, OSGetCount() / 10 % 10, dist);
+    if (loops % 10 == 0)
+      printf("t %d.%d s left %d mm front %d mm\n", OSGetCount() / 100, OSGetCount() / 10 % 10,
+             dist, ahead);
     loops++;
     OSWait(10);
     key = KEYRead();
