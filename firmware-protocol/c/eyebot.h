@@ -358,9 +358,24 @@ typedef BYTE colimage[imagerows][imagecolumns][3];
 #define NORMAL 0
 #define NOCAM 255
 #define INITERROR 254
-/* CAMMode modes. */
+/* CAMMode modes; CAMSet frame rates. */
 #define AUTOBRIGHTNESS 1
 #define NOAUTOBRIGHTNESS 0
+#define FPS60 0
+#define FPS30 1
+#define FPS15 2
+#define FPS7_5 3
+#define FPS3_75 4
+#define FPS1_875 5
+
+/* IRTVInit code types and modes. */
+#define SPACE_CODE 1
+#define PULSE_CODE 2
+#define MANCHESTER_CODE 3
+#define RAW_CODE 4
+#define DEFAULT_MODE 0
+#define SLOPPY_MODE 1
+#define REPCODE_MODE 2
 
 /* Radio: a message to every robot, and the status list. */
 #define BROADCAST 0xFF
