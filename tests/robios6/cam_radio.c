@@ -26,9 +26,11 @@ int main(void)
   LCDPrintf("RADIOInit %d\n", rad);
   msg[0] = 'h';
   LCDPrintf("RADIOSend %d RADIOCheck %d\n", RADIOSend(BROADCAST, 1, msg), RADIOCheck());
-  LCDPrintf("RADIORecv %d size %d\n", RADIORecv(&from, &size, msg), size);
+  rad = RADIORecv(&from, &size, msg);
+  LCDPrintf("RADIORecv %d size %d\n", rad, size);
   others.count = 5;
-  LCDPrintf("RADIOStatus %d count %d\n", RADIOStatus(&others), others.count);
+  rad = RADIOStatus(&others);
+  LCDPrintf("RADIOStatus %d count %d\n", rad, others.count);
   LCDPrintf("AUPlaySample %d AUCheckSample %d\n", AUPlaySample(sample), AUCheckSample());
   LCDPrintf("AURecordSample %d\n", AURecordSample(sample, 64, 5000));
   LCDPrintf("IRTVInit %d IRTVPressed %d\n", IRTVInit(1, 13, 0, 0, 0, 4, 10), IRTVPressed());
