@@ -120,7 +120,7 @@ cam 1 -1 -1 -1 -1 -1 pixel 9 9 -1 -1 -1 params 1 2 3
 radio -1 -1 0 -1 size 0 -1 count 0 -1 -1 -1
 irtv -1 0 0 0 -1 -1 -1 -1 -1
 mic -1 -1 -1 buf 9
-psd 0
+psd 0 start -1 get 9999
 ";
 
 /// Each device family Mako has not got: the init call returns RoBIOS's failure value, every
@@ -246,10 +246,13 @@ fn devices_mako_has_not_got_fail_as_robios_does_and_say_so_once() {
                 );
             }
         }
-        assert!(
-            stderr.contains("eyebot: PSDInit(0x608): the HDT names no PSD so (it has PSD_LEFT,"),
-            "{target:?}: {stderr}"
-        );
+        for said in [
+            "eyebot: PSDInit(0x608): the HDT names no PSD so (it has PSD_LEFT,",
+            "eyebot: PSDStart(0x40): not PSD handles from PSDInit",
+            "eyebot: PSDGet(0x40): not one PSD handle from PSDInit; returns PSD_OUT_OF_RANGE",
+        ] {
+            assert!(stderr.contains(said), "{target:?}: {stderr}");
+        }
     }
 }
 

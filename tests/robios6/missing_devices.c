@@ -103,7 +103,9 @@ int main(void)
     r[1] = AUCheckRecord();
     r[2] = AUCaptureMic(0);
     printf("mic %d %d %d buf %d\n", r[0], r[1], r[2], buf[0]);
-    printf("psd %d\n", none);
+    r[0] = PSDStart(0x40, TRUE);
+    r[1] = PSDGet(0x40);
+    printf("psd %d start %d get %d\n", none, r[0], r[1]);
   }
   printf("done\n");
   return 0;
