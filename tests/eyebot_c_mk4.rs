@@ -55,7 +55,7 @@ OSGetTime after 150 ticks: 12:34:57 50
 OSSetTime(25, 0, 0): -1
 OSVersion: non-empty
 OSMachineSpeed 35000000 type 1 (VEHICLE 1) name Mako id 1
-latch: write 0 read 3 write 3 read 10 in 0
+latch: write 0 read 3 write 3 read 10 in 255
 LCD:   3.142|  2.50|FF|0A|   42|set7| pos 3 4
 tone done at once: 0, after 20 ticks: 1
 warning 7

@@ -22,4 +22,9 @@ void eb_time_until(long tick);
 /* Real time only: sleeps n ticks measured from now (OSWait's plain relative wait). */
 void eb_time_sleep(long n);
 
+/* The program's serial port on the bridge's sonar line (EYEBOT_SONAR_PORT, default 2). */
+int eb_sonar_port(void);
+/* 1 while a timer function (OSAttachTimer) runs: it must not let time pass. */
+int eb_in_timer(void);
+
 #endif

@@ -31,7 +31,7 @@
 #include "eb_port.h"
 #include "eyebot.h"
 
-static char msg[240];
+static char msg[320];
 
 static void die(int status, const char *what) {
     snprintf(msg, sizeof msg, "eyebot: %s", what);
@@ -47,6 +47,8 @@ static struct {
     long due; /* the program tick it runs next */
 } timers[MAX_TIMERS];
 static int in_timer;
+
+int eb_in_timer(void) { return in_timer; }
 
 TimerHandle OSAttachTimer(int scale, TimerFnc function) {
     int i;
@@ -224,8 +226,8 @@ int OSMTInit(BYTE mode) {
     return 0;
 }
 
-void OSPermit(void) {}
-void OSForbid(void) {}
+int OSPermit(void) { return 0; }
+int OSForbid(void) { return 0; }
 
 /* getcontext in a function of its own: the context is only ever a template for makecontext
  * (nothing returns to it twice), and the caller's locals stay out of returns_twice rules. */
@@ -271,15 +273,23 @@ int OSSuspend(struct tcb *thread) {
     return 0;
 }
 
-void OSReschedule(void) {
+int OSRun(struct tcb *thread) {
+    int r = OSReady(thread);
+    if (r == 0) OSYield();
+    return r;
+}
+
+int OSReschedule(void) {
     need_mt("OSReschedule");
     if (current == &main_tcb) main_tcb.state = T_MAIN_WAITING;
     schedule();
+    return 0;
 }
 
-void OSYield(void) {
+int OSYield(void) {
     need_mt("OSYield");
     schedule();
+    return 0;
 }
 
 int OSKill(struct tcb *thread) {
@@ -292,7 +302,7 @@ int OSKill(struct tcb *thread) {
     return 0;
 }
 
-void OSExit(int code) {
+int OSExit(int code) {
     if (current == NULL || current == &main_tcb) {
         fflush(stdout);
         exit(code);
@@ -300,6 +310,7 @@ void OSExit(int code) {
     current->state = T_DONE;
     schedule();
     die(5, "a finished thread was scheduled");
+    return -1;
 }
 
 int OSGetUID(struct tcb *thread) {
@@ -307,17 +318,18 @@ int OSGetUID(struct tcb *thread) {
     return thread ? thread->uid : 0;
 }
 
-void OSSemInit(struct sem *sem, int val) {
-    if (sem == NULL) return;
+int OSSemInit(struct sem *sem, int val) {
+    if (sem == NULL) return -1;
     sem->count = val;
     sem->waiting = NULL;
+    return 0;
 }
 
-void OSSemP(struct sem *sem) {
-    if (sem == NULL) return;
+int OSSemP(struct sem *sem) {
+    if (sem == NULL) return -1;
     if (sem->count > 0) {
         sem->count--;
-        return;
+        return 0;
     }
     need_mt("OSSemP on a semaphore at 0 (it would wait forever)");
     {
@@ -328,22 +340,24 @@ void OSSemP(struct sem *sem) {
     }
     current->state = T_BLOCKED;
     schedule(); /* OSSemV hands the count straight to this thread */
+    return 0;
 }
 
-void OSSemV(struct sem *sem) {
+int OSSemV(struct sem *sem) {
     struct tcb *t;
-    if (sem == NULL) return;
+    if (sem == NULL) return -1;
     t = sem->waiting;
     while (t && t->state != T_BLOCKED) t = t->next_wait; /* skip killed waiters */
     if (t == NULL) {
         sem->waiting = NULL;
         sem->count++;
-        return;
+        return 0;
     }
     sem->waiting = t->next_wait;
     t->state = T_READY;
     t->wake = 0;
     if (current && t->pri > current->pri) schedule();
+    return 0;
 }
 
 /* ---- OSWait ------------------------------------------------------------------------------- */
@@ -431,13 +445,82 @@ int OSPanic(char *text) {
     return -1;
 }
 
-/* ---- latches: no lines on the bridge ----------------------------------------------------- */
+/* ---- latches ------------------------------------------------------------------------------
+ * Inputs are inputs of the run, from the script in EYEBOT_LATCH: comma-separated entries
+ * [LATCH:]VALUE[@SECONDS] (latch 0..3, default 0; value 0..255, decimal or 0x hex; from that
+ * program time on, default at once). A latch reads the value of its entry with the latest
+ * time not after now (the later entry of two with the same time), and LATCH_IDLE before its
+ * first entry: the EyeBot's digital inputs are pulled up, so an input nothing drives reads 1.
+ * Outputs are kept (OSReadOutLatch returns what was written). */
 #define LATCHES 4
+#define LATCH_IDLE 0xFF
+#define LATCH_ENTRIES 64
 static BYTE out_latch[LATCHES];
+static struct {
+    int latch;
+    BYTE value;
+    long due_ticks;
+} latch_in[LATCH_ENTRIES];
+static int latch_count = -1;
+
+static void latch_script_error(const char *what, const char *at) {
+    snprintf(msg, sizeof msg,
+             "eyebot: EYEBOT_LATCH: %s at \"%.60s\" (expected entries [LATCH:]VALUE[@SECONDS], "
+             "LATCH 0..3, VALUE 0..255, e.g. 255,0:127@5.5)",
+             what, at);
+    eb_exit(2, msg);
+}
+
+static void latch_load(void) {
+    const char *s = getenv("EYEBOT_LATCH");
+    latch_count = 0;
+    while (s && *s) {
+        const char *entry = s;
+        char *end;
+        long latch = 0, value;
+        double at = 0.0;
+        if (latch_count == LATCH_ENTRIES) latch_script_error("more than 64 entries", entry);
+        value = strtol(s, &end, 0);
+        if (end == s) latch_script_error("expected a number", entry);
+        s = end;
+        if (*s == ':') {
+            latch = value;
+            if (latch < 0 || latch >= LATCHES) latch_script_error("latch not 0..3", entry);
+            value = strtol(s + 1, &end, 0);
+            if (end == s + 1) latch_script_error("expected a value after ':'", entry);
+            s = end;
+        }
+        if (value < 0 || value > 255) latch_script_error("value not 0..255", entry);
+        if (*s == '@') {
+            at = strtod(s + 1, &end);
+            if (end == s + 1 || at < 0.0) latch_script_error("expected seconds >= 0 after '@'", entry);
+            s = end;
+        }
+        latch_in[latch_count].latch = (int)latch;
+        latch_in[latch_count].value = (BYTE)value;
+        latch_in[latch_count].due_ticks = (long)(at * 100.0 + 0.5);
+        latch_count++;
+        if (*s == ',') s++;
+        else if (*s != '\0') latch_script_error("unexpected text", s);
+    }
+}
 
 BYTE OSReadInLatch(int latchnr) {
-    (void)latchnr;
-    return 0;
+    long now, best_due = -1;
+    BYTE value = LATCH_IDLE;
+    int i;
+    if (latch_count < 0) latch_load();
+    if (latchnr < 0 || latchnr >= LATCHES) return 0;
+    if (latch_count == 0) return LATCH_IDLE;
+    now = eb_now_ticks();
+    for (i = 0; i < latch_count; i++) {
+        if (latch_in[i].latch != latchnr || latch_in[i].due_ticks > now) continue;
+        if (latch_in[i].due_ticks >= best_due) {
+            best_due = latch_in[i].due_ticks;
+            value = latch_in[i].value;
+        }
+    }
+    return value;
 }
 
 BYTE OSWriteOutLatch(int latchnr, BYTE mask, BYTE value) {

@@ -147,7 +147,7 @@ static int ring_pop(int port, uint8_t *b) {
     return 1;
 }
 
-static char msgbuf[200];
+static char msgbuf[320];
 
 static int link_failed;
 
@@ -665,6 +665,11 @@ int OSSleep(int n) {
 
 int OSGetCount(void) { return (int)eb_now_ticks(); }
 
+int eb_sonar_port(void) {
+    ensure_session();
+    return R.sonar_port;
+}
+
 /* ---- serial ports ----------------------------------------------------------------------- */
 static int valid_port(int port) { return port >= 1 && port <= 3; }
 
@@ -877,14 +882,9 @@ int COMPASSRelease(void) {
 }
 
 /* ---- thrusters ---------------------------------------------------------------------------- */
+/* The thruster the HDT's device list names `semantics`, or -1. */
 static int thruster_of(DeviceSemantics semantics) {
-    switch ((int)semantics) {
-    case MOTOR_PORT: return 0;
-    case MOTOR_STARBOARD: return 1;
-    case MOTOR_BOW: return 2;
-    case MOTOR_STERN: return 3;
-    default: return -1;
-    }
+    return eb_hdt_device(EB_HDT_MOTOR, (int)semantics);
 }
 
 #include <stdint.h>
@@ -905,11 +905,17 @@ static void motor_misuse(const char *call, MotorHandle handle) {
 MotorHandle MOTORInit(DeviceSemantics semantics) {
     int i = thruster_of(semantics);
     if (i < 0) {
-        snprintf(msgbuf, sizeof msgbuf,
-                 "eyebot: MOTORInit(0x%x): not a thruster semantics (MOTOR_PORT, "
-                 "MOTOR_STARBOARD, MOTOR_BOW, MOTOR_STERN or MOTOR_LEFT/RIGHT/FRONT/BACK); "
-                 "returns 0",
-                 (unsigned)semantics);
+        size_t k, used;
+        const char *name;
+        used = (size_t)snprintf(msgbuf, sizeof msgbuf,
+                                "eyebot: MOTORInit(0x%x): the HDT names no thruster so (it "
+                                "has",
+                                (unsigned)semantics);
+        for (k = 0; (name = eb_hdt_name(EB_HDT_MOTOR, k)) != NULL && used < sizeof msgbuf; k++)
+            used += (size_t)snprintf(msgbuf + used, sizeof msgbuf - used, "%s %s",
+                                     k ? "," : "", name);
+        if (used < sizeof msgbuf)
+            snprintf(msgbuf + used, sizeof msgbuf - used, "); returns 0");
         eb_report(msgbuf);
         return HANDLE_OF(-1);
     }

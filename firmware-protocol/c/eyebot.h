@@ -1,13 +1,14 @@
 /*
- * eyebot.h - the RoBIOS MK4 calls a Mako control program uses, for running that program
- * unchanged against the eyebot-hil bridge.
+ * eyebot.h - the RoBIOS 6 API, for running an EyeBot program (written for Mako, SubSim,
+ * EyeSim or another RoBIOS 6 robot) unchanged against the eyebot-hil bridge.
  *
- * A Mako program includes this header instead of RoBIOS's own eyebot.h and links against
- * libeyebot.a. The calls keep the names and argument order of the EyeBot MK4's RoBIOS
- * operating system; underneath, the analog inputs, the compass, the
- * thrusters and the clock are served by the bridge over the sensor link (PROTOCOL.md
- * section 2), and the serial ports are ordinary serial ports (the sonar multiplexer is one of
- * them, PROTOCOL.md section 1).
+ * A program includes this header instead of RoBIOS's own eyebot.h and links against
+ * libeyebot.a. The calls keep the names, types and signatures of RoBIOS 6 (docs/eyebot.md,
+ * "RoBIOS 6 calls", names the source of each); underneath, the analog inputs, the compass,
+ * the thrusters and the clock are served by the bridge over the sensor link (PROTOCOL.md
+ * section 2), the serial ports are ordinary serial ports (the sonar multiplexer is one of
+ * them, PROTOCOL.md section 1), PSDs are the sonar transducers, and the devices Mako has not
+ * got answer as RoBIOS does on a robot without them.
  *
  * Two back-ends, chosen when the library is compiled (see docs/eyebot.md):
  *   - default: POSIX (termios). For a host build and for a 68k Linux build under qemu-m68k.
@@ -114,8 +115,9 @@ struct sem {
 
 #endif /* EYEBOT_BACKEND_ROBIOS */
 
-/* Device semantics for Mako's HDT (thruster order of PROTOCOL.md 2.7: port, starboard, bow,
- * stern). The MOTOR_LEFT/RIGHT/FRONT/BACK names are the usual RoBIOS HDT names. */
+/* Device semantics: names of the devices in the HDT (eb_hdt.c's device list maps each onto a
+ * Mako device). Thrusters in the order of PROTOCOL.md 2.7: port, starboard, bow, stern.
+ * MOTOR_LEFT/RIGHT/FRONT/BACK are the RoBIOS and SubSim HDT names of the same four. */
 #ifndef MOTOR_PORT
 #define MOTOR_PORT 0x0401
 #define MOTOR_STARBOARD 0x0402
@@ -123,10 +125,10 @@ struct sem {
 #define MOTOR_STERN 0x0404
 #endif
 #ifndef MOTOR_LEFT
-#define MOTOR_LEFT MOTOR_PORT
-#define MOTOR_RIGHT MOTOR_STARBOARD
-#define MOTOR_FRONT MOTOR_BOW
-#define MOTOR_BACK MOTOR_STERN
+#define MOTOR_LEFT 0x0411
+#define MOTOR_RIGHT 0x0412
+#define MOTOR_FRONT 0x0413
+#define MOTOR_BACK 0x0414
 #endif
 #ifndef COMPASS
 #define COMPASS 0x0501
@@ -200,16 +202,17 @@ int OSMTInit(BYTE mode);                /* COOP or PREEMPT; 0 on success */
 struct tcb *OSSpawn(char *name, void (*code)(void), int stksiz, int pri, int uid);
 int OSReady(struct tcb *thread);        /* suspended -> ready; 0 on success */
 int OSSuspend(struct tcb *thread);      /* ready -> suspended; 0 on success */
-void OSReschedule(void);                /* main: run the threads until none is left */
-void OSYield(void);                     /* let the other ready threads run first */
+int OSRun(struct tcb *thread);          /* OSReady, then let it run (OSYield); 0 on success */
+int OSReschedule(void);                 /* main: run the threads until none is left */
+int OSYield(void);                      /* let the other ready threads run first */
 int OSKill(struct tcb *thread);         /* end a thread; 0 on success */
-void OSExit(int code);                  /* end the calling thread (main: the program) */
+int OSExit(int code);                   /* end the calling thread (main: the program) */
 int OSGetUID(struct tcb *thread);       /* the uid given to OSSpawn; NULL = calling thread */
-void OSPermit(void);                    /* preemption on (no effect: see docs/eyebot.md) */
-void OSForbid(void);                    /* preemption off (no effect) */
-void OSSemInit(struct sem *sem, int val);
-void OSSemP(struct sem *sem);           /* wait until count > 0, then count-- */
-void OSSemV(struct sem *sem);           /* count++, waking the first waiting thread */
+int OSPermit(void);                     /* preemption on (no effect: see docs/eyebot.md) */
+int OSForbid(void);                     /* preemption off (no effect) */
+int OSSemInit(struct sem *sem, int val); /* 0 on success */
+int OSSemP(struct sem *sem);            /* wait until count > 0, then count--; 0 */
+int OSSemV(struct sem *sem);            /* count++, waking the first waiting thread; 0 */
 
 /* ---- Time of day, system --------------------------------------------------------------------- */
 int OSSetTime(int hrs, int mins, int secs);                  /* 0 on success */
@@ -224,7 +227,8 @@ BYTE OSMachineID(void);
 int OSError(char *msg, int number, BOOL deadend);
 int OSPanic(char *msg);            /* prints msg and ends the program (status 6) */
 
-/* ---- Latches (no bridge meaning: inputs read 0, outputs are kept) --------------------------- */
+/* ---- Latches: inputs from the run's latch script (EYEBOT_LATCH; default 0xFF, the idle
+ * level of the pulled-up inputs), outputs are kept ---------------------------------------- */
 BYTE OSReadInLatch(int latchnr);
 BYTE OSWriteOutLatch(int latchnr, BYTE mask, BYTE value); /* (old & mask) | value; old */
 BYTE OSReadOutLatch(int latchnr);
@@ -269,6 +273,241 @@ int AUCheckTone(void);           /* 1 when the last tone has finished */
 int KEYGet(void);            /* waits for the next key */
 int KEYRead(void);           /* the key due now, or NOKEY */
 int KEYWait(int excode);     /* waits for the key(s) in excode; returns the key */
+
+/* ==== The rest of the RoBIOS 6 API ==========================================================
+ * Names, types, constants and signatures of the RoBIOS 6 library (docs/eyebot.md "RoBIOS 6
+ * calls" names the source of each group and what each call does here). Devices Mako has
+ * not got (servos, encoders, the v-omega driver, camera, radio, infrared, bumpers,
+ * microphone) answer as RoBIOS does on a robot without them: the init call returns RoBIOS's
+ * failure value (0 handle, NOCAM, ...) and the first call of each kind logs once, on stderr,
+ * which call and why. PSDs are Mako's sonar transducers (eb_psd.c). */
+
+/* Device semantics of the other RoBIOS 6 devices (values ours; programs use the names). */
+#define PSD_FRONT 0x0601
+#define PSD_BACK 0x0602
+#define PSD_LEFT 0x0603
+#define PSD_RIGHT 0x0604
+#define PSD_FRONTLEFT 0x0605
+#define PSD_FRONTRIGHT 0x0606
+#define PSD_BACKLEFT 0x0607
+#define PSD_BACKRIGHT 0x0608
+#define QUAD_LEFT 0x0701
+#define QUAD_RIGHT 0x0702
+#define QUAD_FRONT 0x0703
+#define QUAD_BACK 0x0704
+#define SERVO1 0x0801
+#define SERVO2 0x0802
+#define SERVO3 0x0803
+#define SERVO4 0x0804
+#define SERVO5 0x0805
+#define SERVO6 0x0806
+#define SERVO7 0x0807
+#define SERVO8 0x0808
+#define SERVO9 0x0809
+#define SERVO10 0x080A
+#define SERVO11 0x080B
+#define SERVO12 0x080C
+#define SERVO13 0x080D
+#define SERVO14 0x080E
+#define SERVO15 0x080F
+#define SERVO16 0x0810
+#define VW_DRIVE 0x0901
+#define BUMP_FRONT 0x0A01
+#define BUMP_BACK 0x0A02
+#define BUMP_LEFT 0x0A03
+#define BUMP_RIGHT 0x0A04
+#define IR_FRONT 0x0B01
+#define IR_BACK 0x0B02
+#define IR_LEFT 0x0B03
+#define IR_RIGHT 0x0B04
+
+/* Handles. PSD handles are bits, OR-ed together for PSDStart; 0 is the failure value of
+ * every init call. */
+typedef int PSDHandle;
+typedef int ServoHandle;
+typedef int QuadHandle;
+typedef int VWHandle;
+typedef int BumpHandle;
+typedef int IRHandle;
+
+/* PSDGet when the sensor saw nothing in range (RoBIOS: 9999). */
+#define PSD_OUT_OF_RANGE 9999
+
+/* v-omega units and records. */
+typedef float meter;
+typedef float meterPerSec;
+typedef float radians;
+typedef float radPerSec;
+typedef struct {
+    meter x;
+    meter y;
+    radians phi;
+} PositionType;
+typedef struct {
+    meterPerSec v;
+    radPerSec w;
+} SpeedType;
+
+/* Camera images: 80x60 with a border of 1 pixel. */
+#define imagecolumns 82
+#define imagerows 62
+typedef BYTE image[imagerows][imagecolumns];
+typedef BYTE colimage[imagerows][imagecolumns][3];
+
+/* CAMInit's mode, and its results when there is no camera, or it did not start. */
+#define NORMAL 0
+#define NOCAM 255
+#define INITERROR 254
+/* CAMMode modes; CAMSet frame rates. */
+#define AUTOBRIGHTNESS 1
+#define NOAUTOBRIGHTNESS 0
+#define FPS60 0
+#define FPS30 1
+#define FPS15 2
+#define FPS7_5 3
+#define FPS3_75 4
+#define FPS1_875 5
+
+/* IRTVInit code types and modes. */
+#define SPACE_CODE 1
+#define PULSE_CODE 2
+#define MANCHESTER_CODE 3
+#define RAW_CODE 4
+#define DEFAULT_MODE 0
+#define SLOPPY_MODE 1
+#define REPCODE_MODE 2
+
+/* Radio: a message to every robot, and the status list. */
+#define BROADCAST 0xFF
+#define MAXMSGLEN 300
+typedef struct {
+    int count;
+    BYTE robotlist[256];
+} IDList;
+typedef struct {
+    int interface;
+    int speed;
+    int id;
+    int remoteOn;
+    int imageTransfer;
+    int debug;
+} RadioIOParameters;
+
+/* LCD modes (LCDMode). */
+#define SCROLLING 1
+#define NOSCROLLING 2
+#define NOCURSOR 4
+#define CURSOR 8
+
+/* ---- PSD: Mako's sonar transducers, over the multiplexer line (eb_psd.c) ------------------ */
+/* The handle of the transducer the HDT names `semantics` (PSD_FRONT, ...), or 0. Opens the
+ * sonar line (EYEBOT_SONAR_PORT, default SERIAL2) at 4800 baud. */
+PSDHandle PSDInit(DeviceSemantics semantics);
+int PSDRelease(void);                    /* stops and forgets every PSD; 0 */
+/* Measures the PSDs in `bitmask` in turn (select, ack, first range sentence), once or,
+ * with cycle != 0, until PSDStop. 0 = ok, -1 = a handle not from PSDInit. */
+int PSDStart(PSDHandle bitmask, BOOL cycle);
+int PSDStop(void);                       /* 0 */
+BOOL PSDCheck(void);                     /* TRUE when every started PSD has a reading */
+int PSDGet(PSDHandle handle);            /* latest distance in mm, or PSD_OUT_OF_RANGE */
+int PSDGetRaw(PSDHandle handle);         /* the same (the sonar has no raw value) */
+
+/* ---- Servos, encoders, v-omega: no such devices on Mako ----------------------------------- */
+ServoHandle SERVOInit(DeviceSemantics semantics);        /* 0: no servo */
+int SERVORelease(ServoHandle handle);                    /* -1 */
+int SERVOSet(ServoHandle handle, int angle);             /* -1 */
+int SERVOSetRaw(ServoHandle handle, int angle);          /* -1 */
+QuadHandle QUADInit(DeviceSemantics semantics);          /* 0: no encoder */
+int QUADRelease(QuadHandle handle);                      /* -1 */
+int QUADReset(QuadHandle handle);                        /* -1 */
+int QUADRead(QuadHandle handle);                         /* 0 */
+DeviceSemantics QUADGetMotor(DeviceSemantics semantics); /* 0 */
+float QUADODORead(QuadHandle handle);                    /* 0.0 */
+int QUADODOReset(QuadHandle handle);                     /* -1 */
+VWHandle VWInit(DeviceSemantics semantics, int Timescale); /* 0: no differential drive */
+int VWRelease(VWHandle handle);
+int VWSetSpeed(VWHandle handle, meterPerSec v, radPerSec w);
+int VWGetSpeed(VWHandle handle, SpeedType *vw);
+int VWSetPosition(VWHandle handle, meter x, meter y, radians phi);
+int VWGetPosition(VWHandle handle, PositionType *pos);
+int VWStartControl(VWHandle handle, float Vv, float Tv, float Vw, float Tw);
+int VWStopControl(VWHandle handle);
+int VWDriveStraight(VWHandle handle, meter delta, meterPerSec v);
+int VWDriveTurn(VWHandle handle, radians delta, radPerSec w);
+int VWDriveCurve(VWHandle handle, meter delta_l, radians delta_phi, meterPerSec v);
+float VWDriveRemain(VWHandle handle);
+int VWDriveDone(VWHandle handle);
+int VWDriveWait(VWHandle handle);
+int VWStalled(VWHandle handle);
+
+/* ---- Bumpers, infrared sensors: none on Mako ---------------------------------------------- */
+BumpHandle BUMPInit(DeviceSemantics semantics);          /* 0 */
+int BUMPRelease(BumpHandle handle);
+int BUMPCheck(BumpHandle handle, int *timestamp);        /* -1 */
+IRHandle IRInit(DeviceSemantics semantics);              /* 0 */
+int IRRelease(IRHandle handle);
+int IRRead(IRHandle handle);                             /* -1 */
+
+/* ---- Camera: none on Mako's EyeBot -------------------------------------------------------- */
+int CAMInit(int mode);                                   /* NOCAM */
+int CAMRelease(void);
+int CAMGetFrame(image *buf);                             /* -1, buf untouched */
+int CAMGetColFrame(colimage *buf, int convert);
+int CAMGetFrameMono(BYTE *buf);
+int CAMGetFrameRGB(BYTE *buf);
+int CAMGetFrameBayer(BYTE *buf);
+int CAMSet(int para1, int para2, int para3);
+int CAMGet(int *para1, int *para2, int *para3);
+int CAMMode(int mode);
+
+/* ---- Radio: none on Mako ------------------------------------------------------------------ */
+int RADIOInit(void);                                     /* -1 */
+int RADIOTerm(void);
+int RADIOSend(BYTE id, int byteCount, BYTE *buffer);
+int RADIOCheck(void);                                    /* 0: nothing received */
+int RADIORecv(BYTE *id, int *bytesReceived, BYTE *buffer);
+int RADIOStatus(IDList *list);
+int RADIOSetIoctl(RadioIOParameters *params);
+int RADIOGetIoctl(RadioIOParameters *params);
+
+/* ---- Infrared remote control: none on Mako ------------------------------------------------ */
+int IRTVInit(int type, int length, int tog_mask, int inv_mask, int mode, int bufsize,
+             int delay);                                 /* -1 */
+int IRTVTerm(void);
+int IRTVPressed(void);                                   /* 0: no key */
+int IRTVRead(void);
+int IRTVGet(void);                                       /* 0 at once, never waits */
+int IRTVFlushBuffer(void);
+int IRTVSetHoldDelay(int delay);
+int IRTVGetControlBit(void);
+int IRTVSetControlBit(int bit);
+
+/* ---- Sound samples (the speaker: to the log) and the microphone (none) -------------------- */
+int AUPlaySample(BYTE *sample);                          /* logged like AUTone; 0 */
+int AUCheckSample(void);                                 /* 1: finished */
+int AURecordSample(BYTE *buf, long len, long freq);      /* -1: no microphone input */
+int AUCheckRecord(void);
+int AUCaptureMic(int mode);                              /* -1 */
+
+/* ---- Basic image processing (eb_image.c): 0 on success, -1 for a NULL image ---------------- */
+int IPLaplace(image *src, image *dest);
+int IPSobel(image *src, image *dest);
+int IPDither(image *src, image *dest);
+int IPDiffer(image *current, image *last, image *dest);
+int IPColor2Grey(colimage *src, image *dest);
+
+/* ---- More keys and LCD ------------------------------------------------------------------- */
+int KEYGetBuf(char *buf);                                /* KEYGet into *buf */
+int LCDSetPixel(int row, int col, int val);              /* graphics: accepted, not drawn */
+int LCDInvertPixel(int row, int col);
+int LCDGetPixel(int row, int col);                       /* 0 */
+int LCDLineInvert(int x1, int y1, int x2, int y2);
+int LCDAreaInvert(int x1, int y1, int x2, int y2);
+int LCDPutGraphic(image *buf);
+int LCDPutColorGraphic(colimage *buf);
+int LCDPutImage(BYTE *bwimg);
+int LCDMenuI(int pos, char *string);
+int OSOffAD(int mode);                                   /* 0 */
 #endif
 
 #ifdef __cplusplus

@@ -62,6 +62,9 @@ pub struct Scenario {
     /// EYEBOT_KEYS for the program.
     #[serde(default)]
     pub keys: Option<String>,
+    /// EYEBOT_LATCH for the program: the input latches' script.
+    #[serde(default)]
+    pub latch: Option<String>,
     #[serde(default, rename = "criterion")]
     pub criteria: Vec<Criterion>,
 }
@@ -558,6 +561,10 @@ fn run_program(
     match &scenario.keys {
         Some(k) => cmd.env("EYEBOT_KEYS", k),
         None => cmd.env_remove("EYEBOT_KEYS"),
+    };
+    match &scenario.latch {
+        Some(l) => cmd.env("EYEBOT_LATCH", l),
+        None => cmd.env_remove("EYEBOT_LATCH"),
     };
     let mut child = cmd
         .spawn()

@@ -1,0 +1,2 @@
+/* The RoBIOS distribution's programs include "include/eyebot.h": this is libeyebot's. */
+#include "../../eyebot.h"
