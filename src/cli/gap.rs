@@ -191,15 +191,20 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
     report::write_all(&analysis, &m, measured, model_path, &out)?;
     match analysis.accepted.first() {
         Some(_) => {
-            for e in &analysis.accepted {
+            for (e, share) in analysis.accepted.iter().zip(&analysis.shares_pct) {
                 let p: Vec<String> = e
                     .parameters
                     .iter()
                     .zip(&e.ci95)
                     .map(|((n, v), (_, c))| format!("{n} = {v:.4} [{:.4}, {:.4}]", c[0], c[1]))
                     .collect();
+                let share = if analysis.accepted.len() > 1 {
+                    format!(", {share:.0} % of the shrink")
+                } else {
+                    String::new()
+                };
                 outln!(
-                    "effect: {} ({}), delta BIC {:.1}",
+                    "effect: {} ({}), delta BIC {:.1}{share}",
                     e.name,
                     p.join(", "),
                     e.delta_bic
@@ -216,6 +221,12 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         None if analysis.verdict == gap::Verdict::Unexplained => {
             outln!(
                 "unexplained: the model disagrees beyond its noise floor and its known disagreement, and no effect in the library passes every guard"
+            )
+        }
+        None if analysis.verdict == gap::Verdict::Ambiguous => {
+            let [sensor, physics] = analysis.ambiguous.clone().unwrap_or_default();
+            outln!(
+                "ambiguous: the sensor effect {sensor} and the physics effect {physics} explain the same disagreement about as well; neither is named"
             )
         }
         None => outln!("no significant missing effect"),
@@ -358,6 +369,25 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
         outln!(
             "not fitted (no channel of theirs measured): {}",
             c.not_fitted.join(", ")
+        );
+    }
+    for u in &c.unidentified {
+        outln!(
+            "not identified by the baseline runs, left as the model gives it: {} ({})",
+            u.effect,
+            u.why
+        );
+    }
+    if !c.spread_unidentified.is_empty() {
+        outln!(
+            "no between-run spread (the spread runs do not identify them): {}",
+            c.spread_unidentified.join(", ")
+        );
+    }
+    if c.shrunk < 1.0 {
+        outln!(
+            "the fitted change diverged on a baseline run and was shrunk to {:.3} of itself",
+            c.shrunk
         );
     }
     if !c.discrepancy.is_empty() {

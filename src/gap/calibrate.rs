@@ -105,6 +105,13 @@ pub struct RunGap {
     pub channels: Vec<(String, f64, f64)>,
 }
 
+/// An effect calibration leaves out because the data do not identify it.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unidentified {
+    pub effect: String,
+    pub why: String,
+}
+
 /// What calibration gave.
 #[derive(Debug, Clone, Serialize)]
 pub struct Calibration {
@@ -118,6 +125,15 @@ pub struct Calibration {
     pub spread_from: Vec<String>,
     /// Parameters left out because none of their channels is measured.
     pub not_fitted: Vec<String>,
+    /// Effects the baseline runs do not identify, left as the model gives them, with why.
+    pub unidentified: Vec<Unidentified>,
+    /// Effects whose between-run spread the spread runs do not identify (their per-run fits
+    /// ended on a bound or were unbounded): no spread is kept for them, and a later fit of
+    /// theirs that ends on a bound is not named anyway.
+    pub spread_unidentified: Vec<String>,
+    /// The factor the fitted change was shrunk by so that the model re-simulates every
+    /// baseline run to its end (1: not shrunk; 0: the model as given).
+    pub shrunk: f64,
     /// The calibrated model's chi-square per independent sample by channel, averaged over
     /// the validation runs (the baseline runs when there are none): what `gap` later
     /// measures a run's gap against.
@@ -211,10 +227,11 @@ fn apparent_spread(
     chosen: &[&'static Effect],
     x: &DVector<f64>,
     progress: &mut dyn FnMut(&str),
-) -> Result<Vec<(&'static Effect, Vec<f64>)>, GapError> {
+) -> Result<(Vec<(&'static Effect, Vec<f64>)>, Vec<String>), GapError> {
     if runs.len() < 2 {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), Vec::new()));
     }
+    let mut tried: Vec<&'static Effect> = Vec::new();
     let n = runs.len() as f64;
     let pull = if fitted_on { n / (n - 1.0) } else { 1.0 };
     let mut apparent: Vec<(&'static Effect, Vec<Vec<f64>>)> = Vec::new();
@@ -229,6 +246,17 @@ fn apparent_spread(
             if !r.testable || e.kind != effects::Kind::Mean {
                 continue;
             }
+            if !tried.iter().any(|t| t.name == e.name) {
+                tried.push(e);
+            }
+            // A fit that ends on a bound or leaves a parameter unbounded measures no spread.
+            let bounded = r
+                .ci95
+                .iter()
+                .all(|(_, [a, b])| a.is_finite() && b.is_finite());
+            if !r.guards.inside_bounds || !bounded {
+                continue;
+            }
             let values: Vec<f64> = r.parameters.iter().map(|(_, v)| *v).collect();
             match apparent.iter_mut().find(|(a, _)| a.name == e.name) {
                 Some((_, v)) => v.push(values),
@@ -236,7 +264,16 @@ fn apparent_spread(
             }
         }
     }
-    Ok(apparent
+    let unidentified = tried
+        .iter()
+        .filter(|t| {
+            !apparent
+                .iter()
+                .any(|(a, per_run)| a.name == t.name && per_run.len() >= 2)
+        })
+        .map(|t| t.name.to_string())
+        .collect();
+    let spread = apparent
         .into_iter()
         .filter(|(_, per_run)| per_run.len() >= 2)
         .map(|(e, per_run)| {
@@ -249,7 +286,8 @@ fn apparent_spread(
                 .collect();
             (e, values)
         })
-        .collect())
+        .collect();
+    Ok((spread, unidentified))
 }
 
 /// Where the joint fit starts: the model as given, and one more start per effect with a
@@ -257,7 +295,8 @@ fn apparent_spread(
 /// and shape (`thrust_curve`) trade off against each other, and from the linear curve alone
 /// the fit can stop at half the exponent a propeller's thrust has (thrust ~ rpm^2, rpm less
 /// than linear in duty), with a larger gap left on the baseline runs.
-fn starts(chosen: &[&'static Effect], dims: usize) -> Vec<DVector<f64>> {
+fn starts(chosen: &[&'static Effect]) -> Vec<DVector<f64>> {
+    let dims = chosen.iter().map(|e| e.parameters.len()).sum();
     let mut out = vec![DVector::zeros(dims)];
     let mut k = 0;
     for e in chosen {
@@ -285,6 +324,155 @@ fn applied(base: &Configs, chosen: &[&'static Effect], x: &DVector<f64>) -> Conf
         effects::apply(e, &values, &mut c);
     }
     c
+}
+
+/// The joint fit of `chosen` on every prepared run: `passes` passes (channel weights from the
+/// residual at the previous pass) from each of `starts`; the start whose result leaves the
+/// smallest gap on the baseline runs is kept. Returns the point, its fit and the residual
+/// evaluations used.
+fn joint_fit(
+    prepared: &[Prepared<'_>],
+    setups: &[Setup<'_>],
+    chosen: &[&'static Effect],
+    starts: Vec<DVector<f64>>,
+    passes: usize,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(DVector<f64>, lsq::Fit, usize), GapError> {
+    let scales: Vec<f64> = chosen
+        .iter()
+        .flat_map(|e| e.scales.iter().copied())
+        .collect();
+    let bounds_raw: Vec<(f64, f64)> = chosen
+        .iter()
+        .flat_map(|e| e.bounds.iter().copied())
+        .collect();
+    let bounds = Bounds::scaled(&bounds_raw, &scales);
+    let dims = scales.len();
+    // Channel weights, one per (run, channel), from the residual at the current point.
+    let weights_at = |x: &DVector<f64>| -> Vec<Vec<f64>> {
+        prepared
+            .iter()
+            .zip(setups)
+            .map(|(p, s)| {
+                let c = applied(&p.base, chosen, x);
+                let per = channel_chi2(p, s, &c).unwrap_or_default();
+                (0..p.run.m.channels.len())
+                    .map(|i| {
+                        per.iter()
+                            .find(|(k, _)| *k == i)
+                            .map_or(1.0, |(_, c)| 1.0 / c.max(1.0).sqrt())
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let residuals_with = |x: &DVector<f64>, weights: &[Vec<f64>]| -> Option<DVector<f64>> {
+        let mut out = Vec::new();
+        for ((p, s), w) in prepared.iter().zip(setups).zip(weights) {
+            let c = applied(&p.base, chosen, x);
+            let run = resim::simulate(&c, &p.run.m, None).ok()?;
+            let r = s.residuals(&c, &run);
+            out.extend(r.values.iter().zip(&r.owner).map(|(v, o)| v * w[*o]));
+        }
+        out.extend(x.iter().map(|v| v / PRIOR_WIDTH));
+        Some(DVector::from_vec(out))
+    };
+    let mut evaluations = 0;
+    let mut best: Option<(f64, DVector<f64>, lsq::Fit)> = None;
+    for (i, start) in starts.iter().enumerate() {
+        let mut x = start.clone();
+        let mut last = None;
+        for pass in 0..passes {
+            progress(&format!(
+                "start {} of {}, pass {} of {passes}: {dims} parameters",
+                i + 1,
+                starts.len(),
+                pass + 1
+            ));
+            let weights = weights_at(&x);
+            let objective = |x: &DVector<f64>| residuals_with(x, &weights);
+            let Some(fit) = lsq::minimize(&objective, &bounds, std::slice::from_ref(&x)) else {
+                return Err(GapError::Data(
+                    "calibration: the model could not be re-simulated at the starting point".into(),
+                ));
+            };
+            evaluations += fit.evaluations;
+            x = fit.x.clone();
+            last = Some(fit);
+        }
+        let Some(fit) = last else {
+            return Err(GapError::Data("calibration: no fit".into()));
+        };
+        let gap = prepared
+            .iter()
+            .zip(setups)
+            .map(|(p, s)| {
+                excess(&channel_chi2(p, s, &applied(&p.base, chosen, &x)).unwrap_or_default())
+            })
+            .sum::<f64>();
+        if best.as_ref().is_none_or(|(b, _, _)| gap < *b) {
+            best = Some((gap, x, fit));
+        }
+    }
+    let Some((_, x, fit)) = best else {
+        return Err(GapError::Data("calibration: no fit".into()));
+    };
+    Ok((x, fit, evaluations))
+}
+
+/// The effects of `chosen` whose fit at `x` the data do not support, with the reason: an
+/// interval that is infinite or wider than the parameter's physical range, or a sensor
+/// effect's parameter on its bound.
+fn unidentified_effects(
+    chosen: &[&'static Effect],
+    x: &DVector<f64>,
+    fit: &lsq::Fit,
+) -> Vec<(&'static Effect, String)> {
+    let scales: Vec<f64> = chosen
+        .iter()
+        .flat_map(|e| e.scales.iter().copied())
+        .collect();
+    let dims = scales.len();
+    let n = fit.residuals.len() as f64;
+    let variance_factor = (fit.chi2() / (n - dims as f64).max(1.0)).max(1.0);
+    let ci = lsq::intervals(x, fit.covariance().as_ref(), &scales, variance_factor);
+    let mut out = Vec::new();
+    let mut k = 0;
+    for e in chosen {
+        let mut why = None;
+        for (j, (lo, hi)) in e.bounds.iter().enumerate() {
+            let value = x[k + j] * scales[k + j];
+            let [a, b] = ci[k + j];
+            let margin = 1e-6 * (hi - lo);
+            if !(a.is_finite() && b.is_finite()) {
+                why = Some(format!("`{}`: the data do not bound it", e.parameters[j]));
+            } else if b - a > hi - lo {
+                why = Some(format!(
+                    "`{}`: 95 % interval {:.3}..{:.3} wider than its physical range {lo}..{hi}",
+                    e.parameters[j], a, b
+                ));
+            } else if !e.physics && (value <= lo + margin || value >= hi - margin) {
+                why = Some(format!(
+                    "`{}`: driven onto its bound {value}: a disagreement this sensor effect's \
+                     signature does not explain",
+                    e.parameters[j]
+                ));
+            }
+        }
+        if let Some(why) = why {
+            out.push((*e, why));
+        }
+        k += e.parameters.len();
+    }
+    out
+}
+
+/// True when the model with `chosen` at `x` diverges on one of the runs.
+fn diverges(prepared: &[Prepared<'_>], chosen: &[&'static Effect], x: &DVector<f64>) -> bool {
+    prepared.iter().any(|p| {
+        resim::simulate(&applied(&p.base, chosen, x), &p.run.m, None)
+            .map_or(true, |run| !run.divergences.is_empty())
+    })
 }
 
 /// Fits the calibration parameters on `baseline` runs and scores the result on `validate`
@@ -350,6 +538,53 @@ pub fn calibrate(
             not_fitted.push(e.name.to_string());
         }
     }
+    let (mut x, mut fit, mut evaluations) =
+        joint_fit(&prepared, &setups, &chosen, starts(&chosen), 2, progress)?;
+    // Parameters the data do not identify are left as the model gives them, and the rest is
+    // fitted again without them: an interval that is infinite or wider than the parameter's
+    // physical range, or a sensor parameter driven onto its bound (a sensor effect taking a
+    // disagreement its own signature does not explain).
+    let mut unidentified = Vec::new();
+    for _ in 0..2 {
+        let dropped = unidentified_effects(&chosen, &x, &fit);
+        if dropped.is_empty() {
+            break;
+        }
+        let mut kept = Vec::new();
+        let mut restart = Vec::new();
+        let mut k = 0;
+        for e in &chosen {
+            let n = e.parameters.len();
+            match dropped.iter().find(|(d, _)| d.name == e.name) {
+                Some((_, why)) => unidentified.push(Unidentified {
+                    effect: e.name.to_string(),
+                    why: why.clone(),
+                }),
+                None => {
+                    kept.push(*e);
+                    restart.extend((0..n).map(|j| x[k + j]));
+                }
+            }
+            k += n;
+        }
+        chosen = kept;
+        let start = DVector::from_vec(restart);
+        let refit = joint_fit(&prepared, &setups, &chosen, vec![start], 1, progress)?;
+        x = refit.0;
+        fit = refit.1;
+        evaluations += refit.2;
+    }
+    // A model that diverges on its own runs is never written: the fitted change is shrunk
+    // towards the model as given until every baseline run re-simulates to its end.
+    let mut shrunk = 1.0;
+    while shrunk > 1e-3 && diverges(&prepared, &chosen, &x) {
+        x *= 0.5;
+        shrunk *= 0.5;
+    }
+    if shrunk <= 1e-3 {
+        x.fill(0.0);
+        shrunk = 0.0;
+    }
     let scales: Vec<f64> = chosen
         .iter()
         .flat_map(|e| e.scales.iter().copied())
@@ -358,81 +593,7 @@ pub fn calibrate(
         .iter()
         .flat_map(|e| e.bounds.iter().copied())
         .collect();
-    let bounds = Bounds::scaled(&bounds_raw, &scales);
     let dims = scales.len();
-
-    // Channel weights, one per (run, channel), from the residual at the current point.
-    let weights_at = |x: &DVector<f64>| -> Vec<Vec<f64>> {
-        prepared
-            .iter()
-            .zip(&setups)
-            .map(|(p, s)| {
-                let c = applied(&p.base, &chosen, x);
-                let per = channel_chi2(p, s, &c).unwrap_or_default();
-                (0..p.run.m.channels.len())
-                    .map(|i| {
-                        per.iter()
-                            .find(|(k, _)| *k == i)
-                            .map_or(1.0, |(_, c)| 1.0 / c.max(1.0).sqrt())
-                    })
-                    .collect()
-            })
-            .collect()
-    };
-    let residuals_with = |x: &DVector<f64>, weights: &[Vec<f64>]| -> Option<DVector<f64>> {
-        let mut out = Vec::new();
-        for ((p, s), w) in prepared.iter().zip(&setups).zip(weights) {
-            let c = applied(&p.base, &chosen, x);
-            let run = resim::simulate(&c, &p.run.m, None).ok()?;
-            let r = s.residuals(&c, &run);
-            out.extend(r.values.iter().zip(&r.owner).map(|(v, o)| v * w[*o]));
-        }
-        out.extend(x.iter().map(|v| v / PRIOR_WIDTH));
-        Some(DVector::from_vec(out))
-    };
-    // Two passes from each start; the start whose result leaves the smallest gap on the
-    // baseline runs is kept.
-    let mut evaluations = 0;
-    let mut best: Option<(f64, DVector<f64>, lsq::Fit)> = None;
-    let starts = starts(&chosen, dims);
-    for (i, start) in starts.iter().enumerate() {
-        let mut x = start.clone();
-        let mut last = None;
-        for pass in 0..2 {
-            progress(&format!(
-                "start {} of {}, pass {} of 2: {dims} parameters",
-                i + 1,
-                starts.len(),
-                pass + 1
-            ));
-            let weights = weights_at(&x);
-            let objective = |x: &DVector<f64>| residuals_with(x, &weights);
-            let Some(fit) = lsq::minimize(&objective, &bounds, std::slice::from_ref(&x)) else {
-                return Err(GapError::Data(
-                    "calibration: the model could not be re-simulated at the starting point".into(),
-                ));
-            };
-            evaluations += fit.evaluations;
-            x = fit.x.clone();
-            last = Some(fit);
-        }
-        let Some(fit) = last else {
-            return Err(GapError::Data("calibration: no fit".into()));
-        };
-        let gap = prepared
-            .iter()
-            .zip(&setups)
-            .map(|(p, s)| {
-                excess(&channel_chi2(p, s, &applied(&p.base, &chosen, &x)).unwrap_or_default())
-            })
-            .sum::<f64>();
-        if best.as_ref().is_none_or(|(b, _, _)| gap < *b) {
-            best = Some((gap, x, fit));
-        }
-    }
-    let Some((_, x, fit)) = best else {
-        return Err(GapError::Data("calibration: no fit".into()));
-    };
     // Intervals: residual variance beyond the (weighted) floor inflates them, as in `fit`.
     let n = fit.residuals.len() as f64;
     let variance_factor = (fit.chi2() / (n - dims as f64).max(1.0)).max(1.0);
@@ -481,7 +642,12 @@ pub fn calibrate(
                 Split::DEFAULT,
                 &[],
             )?;
-            if let Some(c) = fit::fit_emi(&s, emi) {
+            // Only a level with its own signature (the local variance follows the stern
+            // duty) inside its bounds: a dynamics residual never becomes noise.
+            if let Some(c) = fit::fit_emi(&s, emi)
+                && c.guards.inside_bounds
+                && c.signature_pass
+            {
                 levels.push((c.parameters[0].1, c.ci95[0].1));
             }
         }
@@ -516,7 +682,9 @@ pub fn calibrate(
         (&spread_prepared, false)
     };
     let mut spread = Vec::new();
-    for (e, values) in apparent_spread(spread_runs, fitted_on, &chosen, &x, progress)? {
+    let (apparent, spread_unidentified) =
+        apparent_spread(spread_runs, fitted_on, &chosen, &x, progress)?;
+    for (e, values) in apparent {
         for (j, v) in values.iter().enumerate() {
             spread.push(Parameter {
                 effect: e.name.to_string(),
@@ -583,6 +751,9 @@ pub fn calibrate(
         .map(|r| r.dir.display().to_string())
         .collect(),
         not_fitted,
+        unidentified,
+        spread_unidentified,
+        shrunk,
         discrepancy,
         model: calibrated,
     })

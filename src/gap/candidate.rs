@@ -159,21 +159,70 @@ pub fn select(
     max: usize,
     fit_round: &mut FitRound<'_>,
     accept: &mut Accept<'_>,
-) -> Result<(Vec<Vec<Candidate>>, Vec<Candidate>), GapError> {
+) -> Result<Selection, GapError> {
     let mut rounds = Vec::new();
     let mut accepted: Vec<Candidate> = Vec::new();
+    let mut ambiguous = None;
     for round in 0..max {
         let Some(mut results) = fit_round(round, &accepted)? else {
             break;
         };
         rank(&mut results);
         let win = winner(&results).cloned();
+        let lookalike = win
+            .as_ref()
+            .and_then(|w| physics_lookalike(&results, w))
+            .map(|alt| {
+                [
+                    win.as_ref().map_or(String::new(), |w| w.name.clone()),
+                    alt.name.clone(),
+                ]
+            });
         rounds.push(results);
         let Some(win) = win else { break };
+        if lookalike.is_some() {
+            ambiguous = lookalike;
+            break;
+        }
         accept(&win, &mut accepted)?;
         accepted.push(win);
     }
-    Ok((rounds, accepted))
+    Ok(Selection {
+        rounds,
+        accepted,
+        ambiguous,
+    })
+}
+
+/// What the greedy selection found.
+#[derive(Debug, Clone)]
+pub struct Selection {
+    /// Every round's candidates, ranked.
+    pub rounds: Vec<Vec<Candidate>>,
+    /// The accepted effects, in order.
+    pub accepted: Vec<Candidate>,
+    /// A round whose winner was a sensor effect with a physics effect that explains the same
+    /// residual about as well (both pass every guard, delta BIC within
+    /// [`crate::gap::fit::BIC_MARGIN`]): the sensor's name first. Selection stops there and
+    /// names neither: a sensor effect may take a disagreement only with its own signature,
+    /// and the data do not say which it is.
+    pub ambiguous: Option<[String; 2]>,
+}
+
+/// A physics effect of `round` that passes every guard with a delta BIC within the margin
+/// of `win`'s, when `win` is a sensor effect (library effects only).
+fn physics_lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
+    let sensor = crate::gap::effects::by_name(&win.name).is_some_and(|e| !e.physics);
+    if !sensor {
+        return None;
+    }
+    round.iter().find(|c| {
+        c.name != win.name
+            && c.testable
+            && c.guards.all()
+            && crate::gap::effects::by_name(&c.name).is_some_and(|e| e.physics)
+            && c.delta_bic_uncalibrated >= win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
+    })
 }
 
 /// The candidate table of one round (markdown): rank, effect, delta BIC, the chi-square the
@@ -249,7 +298,9 @@ mod tests {
     #[test]
     fn selection_accepts_the_best_passing_candidate_until_a_round_has_none() {
         let mut seen_accepted = Vec::new();
-        let (rounds, accepted) = select(
+        let Selection {
+            rounds, accepted, ..
+        } = select(
             3,
             &mut |round, accepted| {
                 seen_accepted.push(accepted.len());

@@ -92,6 +92,9 @@ pub enum Verdict {
     /// The data disagree with the model beyond its noise floor and nothing in the library
     /// explains it; `Analysis::unexplained` says where.
     Unexplained,
+    /// A sensor effect and a physics effect explain the same disagreement about as well
+    /// (`Analysis::ambiguous` names both), and nothing was named before them.
+    Ambiguous,
 }
 
 /// Where a gap nothing explains lies: one channel, its regimes and windows.
@@ -127,6 +130,9 @@ pub struct Analysis {
     pub after: Vec<ChannelStats>,
     /// Candidate results of each greedy round, best first.
     pub rounds: Vec<Vec<Candidate>>,
+    /// The sensor effect and the physics effect the last round could not tell apart
+    /// ([`candidate::Selection::ambiguous`]).
+    pub ambiguous: Option<[String; 2]>,
     pub accepted: Vec<Candidate>,
     pub verdict: Verdict,
     pub fitted: GapModel,
@@ -149,6 +155,9 @@ pub struct Analysis {
     pub raw: RawGap,
     /// Channels still significantly off after the accepted effects, with where.
     pub unexplained: Vec<Unexplained>,
+    /// Each accepted effect's share of the shrink (percent, in `accepted` order): how much
+    /// the gap grows back when that effect alone is left out, over the sum of those growths.
+    pub shares_pct: Vec<f64>,
     /// How the re-simulation was cut and the data split.
     pub shooting: anchor::Shooting,
     pub split: fit::Split,
@@ -294,6 +303,47 @@ pub(crate) fn reduction_pct(before: f64, after: f64) -> f64 {
     }
 }
 
+/// Each accepted effect's share of the shrink, in percent: the gap of the model with every
+/// other accepted effect, less the gap `after` with all of them, over the sum of those
+/// growths. One effect has all of it; effects that each explain the same part share it.
+fn shares(
+    model: &GapModel,
+    m: &Measurement,
+    start: &Configs,
+    accepted: &[Candidate],
+    floors: &[Option<resim::Floor>],
+    after: f64,
+) -> Result<Vec<f64>, GapError> {
+    if accepted.len() < 2 {
+        return Ok(vec![100.0; accepted.len()]);
+    }
+    let mut growth = Vec::new();
+    for left_out in 0..accepted.len() {
+        let mut c = start.clone();
+        for (k, a) in accepted.iter().enumerate() {
+            if k != left_out
+                && let Some(e) = effects::by_name(&a.name)
+            {
+                effects::apply(e, &a.values(), &mut c);
+            }
+        }
+        let run = resim::simulate(&c, m, None)?;
+        let without = stats_excess(&stats_for(model, m, &c, &run, floors), false);
+        growth.push((without - after).max(0.0));
+    }
+    let total: f64 = growth.iter().sum();
+    Ok(growth
+        .iter()
+        .map(|g| {
+            if total > 0.0 {
+                100.0 * g / total
+            } else {
+                100.0 / accepted.len() as f64
+            }
+        })
+        .collect())
+}
+
 /// Options of one analysis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Options {
@@ -355,7 +405,11 @@ pub fn analyse_with(
     // The model with the accepted effects: what each round fits against.
     let configs = std::cell::RefCell::new(start.clone());
     let fitted = std::cell::RefCell::new(model.clone());
-    let (rounds, accepted) = candidate::select(
+    let candidate::Selection {
+        rounds,
+        accepted,
+        ambiguous,
+    } = candidate::select(
         fit::MAX_EFFECTS,
         &mut |round, accepted| {
             let setup = fit::setup(
@@ -398,6 +452,7 @@ pub fn analyse_with(
     let heldout_after = heldout_excess(model, &first, &configs, &clean1, false);
     let heldout_raw_after = heldout_excess(model, &first, &configs, &clean1, true);
     let (eb, ea) = (stats_excess(&before, false), stats_excess(&after, false));
+    let shares_pct = shares(model, m, &start, &accepted, &floors, ea)?;
     let (rb, ra) = (stats_excess(&before, true), stats_excess(&after, true));
     let unexplained: Vec<Unexplained> = after
         .iter()
@@ -416,6 +471,8 @@ pub fn analyse_with(
         .collect();
     let verdict = if !accepted.is_empty() {
         Verdict::Effect
+    } else if ambiguous.is_some() {
+        Verdict::Ambiguous
     } else if before.iter().any(|s| s.significant) {
         Verdict::Unexplained
     } else {
@@ -438,11 +495,13 @@ pub fn analyse_with(
             heldout_after: heldout_raw_after,
         },
         unexplained,
+        shares_pct,
         shooting: options.shooting,
         split: options.split,
         before,
         after,
         rounds,
+        ambiguous,
         accepted,
         fitted,
         unmodelled,

@@ -34,6 +34,7 @@ pub fn json(a: &Analysis) -> Value {
     let mut out = json!({
         "effects": a.accepted.iter().map(effect).collect::<Vec<_>>(),
         "verdict": a.verdict,
+        "ambiguous": a.ambiguous,
         "bic_margin": fit::BIC_MARGIN,
         "gap_before": rms(&a.before),
         "gap_after": rms(&a.after),
@@ -73,6 +74,11 @@ pub fn json(a: &Analysis) -> Value {
         })).collect::<Vec<_>>()).collect::<Vec<_>>(),
     });
     // Segments the re-simulation could not step to their end, before and after the fit.
+    if let Some(list) = out["effects"].as_array_mut() {
+        for (e, share) in list.iter_mut().zip(&a.shares_pct) {
+            e["share_of_shrink_pct"] = json!(share);
+        }
+    }
     out["diverged"] = json!({
         "before": a.clean_before.divergences,
         "after": a.clean_after.divergences,
@@ -95,6 +101,13 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
             "**unexplained**: the model disagrees with the data beyond its noise floor and its \
              known disagreement on baseline runs, and no effect in the library passes every guard"
                 .to_string()
+        }
+        (crate::gap::Verdict::Ambiguous, None) => {
+            let [sensor, physics] = a.ambiguous.clone().unwrap_or_default();
+            format!(
+                "**ambiguous**: the sensor effect `{sensor}` and the physics effect `{physics}` \
+                 explain the same disagreement about as well; neither is named"
+            )
         }
         _ => "no significant missing effect".to_string(),
     };

@@ -384,7 +384,9 @@ pub fn analyse(
     };
     // The accepted effects with their latest (jointly refitted) values.
     let priors: std::cell::RefCell<Vec<Prior>> = std::cell::RefCell::new(Vec::new());
-    let (rounds, accepted) = candidate::select(
+    let candidate::Selection {
+        rounds, accepted, ..
+    } = candidate::select(
         fit::MAX_EFFECTS,
         &mut |round, _| {
             let priors = priors.borrow();
