@@ -221,7 +221,7 @@ fn physics_lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a 
             && c.testable
             && c.guards.all()
             && crate::gap::effects::by_name(&c.name).is_some_and(|e| e.physics)
-            && c.delta_bic_uncalibrated >= win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
+            && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
     })
 }
 
@@ -327,6 +327,51 @@ mod tests {
         );
         let names: Vec<&str> = accepted.iter().map(|c| c.name.as_str()).collect();
         assert_eq!(names, vec!["compass_offset"]);
+    }
+
+    /// Regression (a sensor effect named for a disagreement the dynamics explain as well): a
+    /// sensor winner with a physics effect that passes every guard within the delta-BIC
+    /// margin ends the selection as ambiguous, naming both and accepting neither; a physics
+    /// winner with a sensor effect close behind is named (the physics wins), and a sensor
+    /// winner clear of every physics effect is named.
+    #[test]
+    fn a_sensor_effect_is_not_named_where_a_physics_effect_explains_as_much() {
+        let run = |round0: Vec<Candidate>| {
+            select(
+                2,
+                &mut |round, _| {
+                    Ok(Some(if round == 0 {
+                        round0.clone()
+                    } else {
+                        Vec::new()
+                    }))
+                },
+                &mut |_, _| Ok(()),
+            )
+            .unwrap()
+        };
+        let close = run(vec![
+            candidate("depth_gain", 40.0, true),
+            candidate("thrust_gain", 35.0, true),
+        ]);
+        assert!(close.accepted.is_empty(), "{:?}", close.accepted);
+        assert_eq!(
+            close.ambiguous,
+            Some(["depth_gain".to_string(), "thrust_gain".to_string()])
+        );
+        let physics_first = run(vec![
+            candidate("thrust_gain", 40.0, true),
+            candidate("depth_gain", 35.0, true),
+        ]);
+        assert_eq!(physics_first.accepted[0].name, "thrust_gain");
+        assert!(physics_first.ambiguous.is_none());
+        let clear = run(vec![
+            candidate("depth_gain", 60.0, true),
+            candidate("thrust_gain", 35.0, true),
+            candidate("yaw_damping", 58.0, false),
+        ]);
+        assert_eq!(clear.accepted[0].name, "depth_gain");
+        assert!(clear.ambiguous.is_none());
     }
 
     /// A candidate is named only when every guard holds.
