@@ -19,6 +19,7 @@ fn options(seed: u64) -> BenchOptions {
         effects: vec![effects::by_name("water_current").expect("library effect")],
         hidden: Vec::new(),
         independent_path: PathBuf::new(),
+        structure_seed: None,
         bridge: Default::default(),
         keep: None,
     }

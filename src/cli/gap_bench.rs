@@ -38,6 +38,11 @@ pub struct GapBenchArgs {
     /// The independent model's program (default: the one shipped with the crate).
     #[arg(long, value_name = "PATH")]
     pub independent: Option<PathBuf>,
+    /// Independent source: a vehicle whose structure the model draws with this seed (drag
+    /// laws, couplings, thruster maps, buoyancy, lever arms), every run started away from its
+    /// stated start; absent: the model's nominal vehicle.
+    #[arg(long, value_name = "K")]
+    pub structure_seed: Option<u64>,
     /// Bridge source: a directory with host builds of the C examples (`make -C
     /// firmware-protocol/c OUT=DIR`); default: built with `make` into a scratch directory.
     #[arg(long, value_name = "DIR")]
@@ -98,6 +103,11 @@ fn check_flags_fit_source(args: &GapBenchArgs) -> Result<(), CliError> {
             "--independent",
             "--source independent",
         ),
+        (
+            args.structure_seed.is_some() && args.source != SourceArg::Independent,
+            "--structure-seed",
+            "--source independent",
+        ),
     ];
     match misplaced.iter().find(|(bad, _, _)| *bad) {
         Some((_, flag, expected)) => Err(CliError::Usage(format!(
@@ -128,6 +138,7 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
             .independent
             .clone()
             .unwrap_or_else(bench::independent::default_path),
+        structure_seed: args.structure_seed,
         bridge: bench::bridge::BridgeOptions {
             exe: None,
             programs: args.programs.clone(),

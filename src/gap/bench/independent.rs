@@ -103,10 +103,12 @@ pub fn default_sizes(program: &Path) -> Result<Vec<(String, Vec<f64>)>, GapError
     Ok(out)
 }
 
-/// Writes one run of the independent model to `out`.
+/// Writes one run of the independent model to `out`; with a structure seed, of the vehicle
+/// that seed draws, started away from its stated start.
 fn generate(
     program: &Path,
     seed: u64,
+    structure_seed: Option<u64>,
     hidden: Option<(&str, &[f64])>,
     out: &Path,
 ) -> Result<(), GapError> {
@@ -123,6 +125,14 @@ fn generate(
     .map(|s| s.to_string())
     .collect();
     args.push(out.display().to_string());
+    if let Some(k) = structure_seed {
+        args.extend([
+            "--structure-seed".to_string(),
+            k.to_string(),
+            "--start-offset".to_string(),
+            "random".to_string(),
+        ]);
+    }
     match hidden {
         None => args.extend(["--hidden".to_string(), "none".to_string()]),
         Some((name, size)) => {
@@ -138,21 +148,26 @@ fn generate(
     python(program, &args).map(|_| ())
 }
 
-/// The independent model as a truth source: its program at `path`.
+/// The independent model as a truth source: its program at `path`, its nominal vehicle or
+/// the one `structure_seed` draws.
 pub struct Independent<'a> {
     pub program: &'a Path,
+    pub structure_seed: Option<u64>,
 }
 
 impl Independent<'_> {
     /// Checks the program exists.
-    pub fn new(program: &Path) -> Result<Independent<'_>, GapError> {
+    pub fn new(program: &Path, structure_seed: Option<u64>) -> Result<Independent<'_>, GapError> {
         if !program.is_file() {
             return Err(GapError::Data(format!(
                 "the independent model {} does not exist (--independent PATH)",
                 program.display()
             )));
         }
-        Ok(Independent { program })
+        Ok(Independent {
+            program,
+            structure_seed,
+        })
     }
 }
 
@@ -162,7 +177,7 @@ impl Truth for Independent<'_> {
     }
 
     fn baseline(&self, _index: usize, seed: u64, out: &Path) -> Result<(), GapError> {
-        generate(self.program, seed, None, out)
+        generate(self.program, seed, self.structure_seed, None, out)
     }
 
     fn case(
@@ -171,6 +186,12 @@ impl Truth for Independent<'_> {
         hidden: Option<(&Hidden, &[f64])>,
         out: &Path,
     ) -> Result<(), GapError> {
-        generate(self.program, seed, hidden.map(|(h, s)| (h.name, s)), out)
+        generate(
+            self.program,
+            seed,
+            self.structure_seed,
+            hidden.map(|(h, s)| (h.name, s)),
+            out,
+        )
     }
 }

@@ -79,6 +79,9 @@ pub struct BenchOptions {
     pub hidden: Vec<&'static calibrated::Hidden>,
     /// The independent model's program (independent source).
     pub independent_path: std::path::PathBuf,
+    /// Independent source: draw the vehicle's structure from the model's family with this
+    /// seed (`--structure-seed` of the model), and start every run away from its stated start.
+    pub structure_seed: Option<u64>,
     /// The bridge source's set-up: where the C examples and this program are.
     pub bridge: bridge::BridgeOptions,
     /// Calibrated sources: keep the calibrated model, the baseline runs and every case's
@@ -94,6 +97,7 @@ impl BenchOptions {
             source: self.source,
             cases: self.cases,
             seed: self.seed,
+            structure_seed: self.structure_seed,
             effects: match self.source {
                 Source::Simulator => self.effects.iter().map(|e| e.name.to_string()).collect(),
                 Source::Independent | Source::Bridge => {
@@ -111,6 +115,9 @@ pub struct OptionsKey {
     pub cases: usize,
     pub seed: u64,
     pub effects: Vec<String>,
+    /// The independent model's structure seed (`None`: its nominal vehicle).
+    #[serde(default)]
+    pub structure_seed: Option<u64>,
 }
 
 /// One case and how the workflow did on it.
@@ -197,7 +204,7 @@ pub fn run(
             calibration: None,
         }),
         Source::Independent => {
-            let truth = independent::Independent::new(&opts.independent_path)?;
+            let truth = independent::Independent::new(&opts.independent_path, opts.structure_seed)?;
             calibrated::run(opts, shard, progress, &truth)
         }
         Source::Bridge => {
