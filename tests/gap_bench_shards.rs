@@ -52,7 +52,8 @@ fn parts(opts: &BenchOptions, dir: &TempDir) -> Vec<(PathBuf, Part)> {
     (1..=3)
         .map(|k| {
             let shard = Shard::new(k, 3).expect("valid shard");
-            let part = bench::run_part(opts, shard, None, &mut |_, _, _, _| {}).expect("shard runs");
+            let part =
+                bench::run_part(opts, shard, None, &mut |_, _, _, _| {}).expect("shard runs");
             let path = dir.path().join(format!("part-{k}.json"));
             part.write(&path).expect("part written");
             let back = Part::read(&path).expect("part read back");

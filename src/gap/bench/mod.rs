@@ -200,7 +200,11 @@ pub fn run(
 ) -> Result<Outcome, GapError> {
     let shard = shard.unwrap_or(Shard::WHOLE);
     if let Some(c) = calibration {
-        c.check(&opts.key(), &base_model_sha256()?, truth_sha256(opts)?.as_deref())?;
+        c.check(
+            &opts.key(),
+            &base_model_sha256()?,
+            truth_sha256(opts)?.as_deref(),
+        )?;
     }
     let shared = calibration.and_then(Calibration::calibrated);
     match opts.source {

@@ -131,9 +131,17 @@ impl Calibration {
         if self.model.is_some() != calibrates {
             return refuse(format!(
                 "it {} a calibrated model, but the {} source {}",
-                if self.model.is_some() { "holds" } else { "lacks" },
+                if self.model.is_some() {
+                    "holds"
+                } else {
+                    "lacks"
+                },
                 options.source.name(),
-                if calibrates { "analyses with one" } else { "calibrates nothing" }
+                if calibrates {
+                    "analyses with one"
+                } else {
+                    "calibrates nothing"
+                }
             ));
         }
         Ok(())
@@ -423,6 +431,9 @@ mod tests {
         assert!(e.to_string().contains("calibration.json"), "{e}");
         std::fs::write(&path, "{}").expect("written");
         let e = Calibration::read(&path).expect_err("not a calibration");
-        assert!(e.to_string().contains("not a gap-bench calibration file"), "{e}");
+        assert!(
+            e.to_string().contains("not a gap-bench calibration file"),
+            "{e}"
+        );
     }
 }
