@@ -8,7 +8,8 @@
 //! with the between-run spread, measured on [`Truth::spread_runs`] null cases when the source
 //! has them) and its gap before and after is reported on the further run.
 //! Then, per hidden effect, N runs with the effect hidden, each analysed with the calibrated
-//! model and the default options (re-anchored re-simulation), and N null runs.
+//! model and the default options (re-anchored re-simulation), and N null runs. The
+//! calibration can run on its own ([`calibrate`]) and be handed to every shard ([`run`]).
 //!
 //! **Sizes.** A case's physical size is drawn uniformly between 1x and 3x the truth's default
 //! size, with a random sign where the effect allows one (not for a delay or an amplitude; a
