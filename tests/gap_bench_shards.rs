@@ -53,7 +53,8 @@ fn parts(opts: &BenchOptions, dir: &TempDir) -> Vec<(PathBuf, Part)> {
     (1..=3)
         .map(|k| {
             let shard = Shard::new(k, 3).expect("valid shard");
-            let part = bench::run_part(opts, shard, &mut |_, _, _| {}).expect("shard runs");
+            let part =
+                bench::run_part(opts, shard, None, &mut |_, _, _, _| {}).expect("shard runs");
             let path = dir.path().join(format!("part-{k}.json"));
             part.write(&path).expect("part written");
             let back = Part::read(&path).expect("part read back");
@@ -67,7 +68,7 @@ fn parts(opts: &BenchOptions, dir: &TempDir) -> Vec<(PathBuf, Part)> {
 fn three_merged_shards_equal_the_unsharded_run() {
     let dir = TempDir::new("gap-bench-shards");
     let opts = options(4242);
-    let whole = bench::run(&opts, None, &mut |_, _, _| {}).expect("unsharded run");
+    let whole = bench::run(&opts, None, None, &mut |_, _, _, _| {}).expect("unsharded run");
     assert_eq!(whole.results.len(), 4, "2 water-current and 2 null cases");
     let parts = parts(&opts, &dir);
     // Case i belongs to shard i % 3 + 1: shard 3 of 4 cases holds only case 2.

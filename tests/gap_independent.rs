@@ -242,7 +242,13 @@ fn discover_moved(name: &str, dir: &Path, edit: &dyn Fn(&mut toml::Table)) -> An
 #[test]
 fn a_wrong_stated_start_gives_the_same_answer() {
     let scratch = TempDir::new("gap-start");
-    let dir = generate(scratch.path(), "offset-7308", 7308, "compass_offset", Some("8"));
+    let dir = generate(
+        scratch.path(),
+        "offset-7308",
+        7308,
+        "compass_offset",
+        Some("8"),
+    );
     let m = Measurement::load(&dir).expect("run loads");
     let a = gap::analyse(&calibrated().model, &m, &dir, &mut |_, _| {}).expect("gap runs");
     let shift = |t: &mut toml::Table, key: &str, by: f64| {
@@ -258,7 +264,9 @@ fn a_wrong_stated_start_gives_the_same_answer() {
     assert_eq!(a.verdict, b.verdict);
     assert_eq!(names(&a), names(&b));
     for (x, y) in a.accepted.iter().zip(&b.accepted) {
-        for ((_, va), ((_, vb), (_, ci))) in x.parameters.iter().zip(y.parameters.iter().zip(&y.ci95)) {
+        for ((_, va), ((_, vb), (_, ci))) in
+            x.parameters.iter().zip(y.parameters.iter().zip(&y.ci95))
+        {
             assert!(
                 ci[0] <= *va && *va <= ci[1],
                 "{}: {va} outside the moved run's {ci:?} (value {vb})",

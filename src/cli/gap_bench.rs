@@ -1,7 +1,12 @@
 //! `eyebot-hil gap-bench [--source simulator|independent|bridge] [--cases N] [--seed S]
-//! [--effects a,b] [--shard K/N --out-part FILE] [--out FILE]`: the hidden-effect benchmark of
-//! the reality-gap workflow ([`crate::gap::bench`]); `eyebot-hil gap-bench merge PART...
-//! [--out FILE]` combines the parts of a sharded run into the table an unsharded run prints.
+//! [--effects a,b] [--calibration FILE] [--shard K/N --out-part FILE] [--out FILE]`: the
+//! hidden-effect benchmark of the reality-gap workflow ([`crate::gap::bench`]);
+//! `eyebot-hil gap-bench calibrate [same options] --out FILE` makes a campaign's calibration
+//! once for its shards; `eyebot-hil gap-bench merge PART... [--out FILE]` combines the parts
+//! of a sharded run into the table an unsharded run prints.
+//!
+//! On a terminal a progress bar shows the campaign moving; otherwise (a batch job's log) a
+//! line per finished case goes to standard error.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -10,8 +15,10 @@ use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::cli::CliError;
-use crate::cli::output::out;
-use crate::gap::bench::{self, BenchOptions, CaseResult, Outcome, Part, Shard, Source};
+use crate::cli::output::{out, outln};
+use crate::gap::bench::{
+    self, BenchOptions, Calibration, CaseResult, Outcome, Part, Shard, Source,
+};
 use crate::gap::effects::{self, Effect};
 
 #[derive(Debug, Clone, clap::Args)]
@@ -19,10 +26,32 @@ use crate::gap::effects::{self, Effect};
 pub struct GapBenchArgs {
     #[command(subcommand)]
     pub command: Option<GapBenchCommand>,
+    #[command(flatten)]
+    pub campaign: CampaignArgs,
+    /// The campaign's calibration (`gap-bench calibrate --out FILE`), made with the same
+    /// options: analyse with it instead of calibrating here.
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
+    /// Run only shard K of N: the cases whose index i in the fixed case order has
+    /// i % N == K - 1. Needs --out-part.
+    #[arg(long, value_name = "K/N", requires = "out_part")]
+    pub shard: Option<Shard>,
+    /// Write this run's results (JSON) for `gap-bench merge`.
+    #[arg(long, value_name = "FILE")]
+    pub out_part: Option<PathBuf>,
+    /// Also write the table (markdown) and one line per case (CSV-like) to this file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// What decides a campaign's cases and calibration: the same for `gap-bench`, its shards and
+/// `gap-bench calibrate`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CampaignArgs {
     /// Where the data come from: this project's simulator; the independent Python vehicle
-    /// model (`pty-tests/independent`); or closed-loop recordings of the C examples through
-    /// the bridge with a vehicle of another form. The last two are analysed after
-    /// calibration.
+    /// model (`pty-tests/independent`, built into the binary); or closed-loop recordings of
+    /// the C examples through the bridge with a vehicle of another form. The last two are
+    /// analysed after calibration.
     #[arg(long, value_enum, default_value_t = SourceArg::Simulator)]
     pub source: SourceArg,
     /// Cases per effect, and null cases.
@@ -35,7 +64,7 @@ pub struct GapBenchArgs {
     /// source every effect of the independent model that the benchmark runs).
     #[arg(long, value_delimiter = ',')]
     pub effects: Vec<String>,
-    /// The independent model's program (default: the one shipped with the crate).
+    /// The independent model's program (default: the copy built into this binary).
     #[arg(long, value_name = "PATH")]
     pub independent: Option<PathBuf>,
     /// Independent source: a vehicle whose structure the model draws with this seed (drag
@@ -47,16 +76,6 @@ pub struct GapBenchArgs {
     /// firmware-protocol/c OUT=DIR`); default: built with `make` into a scratch directory.
     #[arg(long, value_name = "DIR")]
     pub programs: Option<PathBuf>,
-    /// Run only shard K of N: the cases whose index i in the fixed case order has
-    /// i % N == K - 1. Needs --out-part.
-    #[arg(long, value_name = "K/N", requires = "out_part")]
-    pub shard: Option<Shard>,
-    /// Write this run's results (JSON) for `gap-bench merge`.
-    #[arg(long, value_name = "FILE")]
-    pub out_part: Option<PathBuf>,
-    /// Also write the table (markdown) and one line per case (CSV-like) to this file.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
     /// Independent and bridge sources: keep the calibrated model (`calibrated.toml`), the
     /// baseline runs and each case's measurement directory (`case-INDEX-EFFECT`) in DIR, to
     /// analyse a case again with `eyebot-hil gap`.
@@ -73,6 +92,15 @@ pub enum SourceArg {
 
 #[derive(Debug, Clone, clap::Subcommand)]
 pub enum GapBenchCommand {
+    /// Calibrate a campaign once, for every shard to read with `--calibration FILE` (the
+    /// simulator source calibrates nothing: its file holds only what the shards check).
+    Calibrate {
+        #[command(flatten)]
+        campaign: CampaignArgs,
+        /// Where to write the calibration (JSON).
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+    },
     /// Combine the part files of a sharded run into the table an unsharded run prints.
     Merge {
         /// The part files (`--out-part`), one per shard.
@@ -85,7 +113,7 @@ pub enum GapBenchCommand {
 }
 
 /// A source-specific flag given with a source that does not read it: refused, not ignored.
-fn check_flags_fit_source(args: &GapBenchArgs) -> Result<(), CliError> {
+fn check_flags_fit_source(args: &CampaignArgs) -> Result<(), CliError> {
     let misplaced = [
         (
             args.keep.is_some() && args.source == SourceArg::Simulator,
@@ -120,7 +148,11 @@ fn check_flags_fit_source(args: &GapBenchArgs) -> Result<(), CliError> {
     }
 }
 
-fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
+/// The options of `args`, and the built-in independent model's temporary file when the run
+/// uses it (it must outlive the run).
+fn options(
+    args: &CampaignArgs,
+) -> Result<(BenchOptions, Option<tempfile::NamedTempFile>), CliError> {
     check_flags_fit_source(args)?;
     let source = match args.source {
         SourceArg::Simulator => Source::Simulator,
@@ -134,10 +166,7 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
         seed: args.seed,
         effects: Vec::new(),
         hidden: Vec::new(),
-        independent_path: args
-            .independent
-            .clone()
-            .unwrap_or_else(bench::independent::default_path),
+        independent_path: PathBuf::new(),
         structure_seed: args.structure_seed,
         bridge: bench::bridge::BridgeOptions {
             exe: None,
@@ -145,6 +174,18 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
         },
         keep: args.keep.clone(),
     };
+    let mut embedded = None;
+    if source == Source::Independent {
+        opts.independent_path = match &args.independent {
+            Some(path) => path.clone(),
+            None => {
+                let file = bench::independent::embedded_program()?;
+                let path = file.path().to_path_buf();
+                embedded = Some(file);
+                path
+            }
+        };
+    }
     let usage = |e: crate::gap::GapError| CliError::Usage(e.to_string());
     match source {
         Source::Simulator => {
@@ -179,7 +220,7 @@ fn options(args: &GapBenchArgs) -> Result<BenchOptions, CliError> {
             }
         }
     }
-    Ok(opts)
+    Ok((opts, embedded))
 }
 
 /// The table followed by one line per case, as `--out` writes it.
@@ -227,24 +268,72 @@ fn print(source: Source, outcome: &Outcome, out_file: Option<&PathBuf>) -> Resul
     Ok(())
 }
 
+/// What the log of a campaign without a terminal says about a finished case.
+fn verdict(r: &CaseResult) -> String {
+    let named = r.named.as_deref().unwrap_or("nothing");
+    match &r.effect {
+        None if r.named.is_none() => "null, nothing named: right".to_string(),
+        None => format!("null, named {named}: false alarm"),
+        Some(_) if r.correct() => format!("named {named}: right"),
+        Some(_) => format!(
+            "named {named}, expected {}: wrong",
+            r.expected.as_deref().unwrap_or("nothing")
+        ),
+    }
+}
+
 pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
-    if let Some(GapBenchCommand::Merge { parts, out }) = &args.command {
-        let mut read = Vec::new();
-        for p in parts {
-            let part = Part::read(p)?;
-            read.push((p.clone(), part));
+    match &args.command {
+        Some(GapBenchCommand::Merge { parts, out }) => {
+            let mut read = Vec::new();
+            for p in parts {
+                let part = Part::read(p)?;
+                read.push((p.clone(), part));
+            }
+            let (key, outcome) = bench::merge(&read)?;
+            return print(key.source, &outcome, out.as_ref());
         }
-        let (key, outcome) = bench::merge(&read)?;
-        return print(key.source, &outcome, out.as_ref());
+        Some(GapBenchCommand::Calibrate { campaign, out }) => {
+            let (opts, _embedded) = options(campaign)?;
+            if !matches!(opts.source, Source::Simulator) {
+                eprintln!("gap-bench calibrate: calibrating on the baseline runs");
+            }
+            let c = bench::calibrate(&opts)?;
+            c.write(out)?;
+            match &c.gap {
+                Some(g) => outln!(
+                    "calibration: gap {:.3} -> {:.3} ({:.1} % smaller) on a null run it was not \
+                     fitted to, in {:.1} s; written to {}",
+                    g.gap_before,
+                    g.gap_after,
+                    g.reduction_pct,
+                    g.seconds,
+                    out.display()
+                ),
+                None => outln!(
+                    "calibration: the {} source calibrates nothing; its options and base model \
+                     written to {}",
+                    opts.source.name(),
+                    out.display()
+                ),
+            }
+            return Ok(());
+        }
+        None => {}
     }
     if args.out_part.is_some() && args.shard.is_none() {
         return Err(CliError::Usage(
             "--out-part: give the shard too (--shard K/N; 1/1 for the whole benchmark)".into(),
         ));
     }
-    let opts = options(args)?;
+    let (opts, _embedded) = options(&args.campaign)?;
+    let calibration = match &args.calibration {
+        Some(path) => Some(Calibration::read(path)?),
+        None => None,
+    };
     let shard = args.shard.unwrap_or(Shard::WHOLE);
-    let bar = if std::io::stderr().is_terminal() {
+    let terminal = std::io::stderr().is_terminal();
+    let bar = if terminal {
         ProgressBar::with_draw_target(Some(0), ProgressDrawTarget::stderr())
     } else {
         ProgressBar::hidden()
@@ -252,11 +341,29 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
     if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} ({eta})") {
         bar.set_style(style);
     }
-    let outcome = bench::run(&opts, Some(shard), &mut |done, total, label| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-        bar.set_message(label.to_string());
-    })?;
+    let outcome = bench::run(
+        &opts,
+        Some(shard),
+        calibration.as_ref(),
+        &mut |done, total, label, case| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+            bar.set_message(label.to_string());
+            if terminal {
+                return;
+            }
+            match case {
+                Some(r) => eprintln!(
+                    "gap-bench: shard {shard}: {done}/{total}: case {} {}: {}, {:.1} s",
+                    r.index,
+                    r.label,
+                    verdict(r),
+                    r.seconds
+                ),
+                None => eprintln!("gap-bench: shard {shard}: {label}"),
+            }
+        },
+    )?;
     bar.finish_and_clear();
     if let Some(path) = &args.out_part {
         Part::new(opts.key(), shard, bench::case_count(&opts), outcome.clone()).write(path)?;

@@ -216,6 +216,9 @@ fn mean_level(levels: &[(f64, [f64; 2])]) -> Option<(f64, [f64; 2])> {
     }
 }
 
+/// Each effect's between-run spread, per parameter (1 sigma).
+type Spread = Vec<(&'static Effect, Vec<f64>)>;
+
 /// Each library effect's apparent value when nothing changed: every candidate fitted on each
 /// of `runs` with the calibration `x` applied, and the root mean square of the per-run values
 /// (1 sigma). Runs the joint calibration was `fitted_on` are pulled towards zero by
@@ -227,7 +230,7 @@ fn apparent_spread(
     chosen: &[&'static Effect],
     x: &DVector<f64>,
     progress: &mut dyn FnMut(&str),
-) -> Result<(Vec<(&'static Effect, Vec<f64>)>, Vec<String>), GapError> {
+) -> Result<(Spread, Vec<String>), GapError> {
     if runs.len() < 2 {
         return Ok((Vec::new(), Vec::new()));
     }

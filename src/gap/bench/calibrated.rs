@@ -8,7 +8,8 @@
 //! with the between-run spread, measured on [`Truth::spread_runs`] null cases when the source
 //! has them) and its gap before and after is reported on the further run.
 //! Then, per hidden effect, N runs with the effect hidden, each analysed with the calibrated
-//! model and the default options (re-anchored re-simulation), and N null runs.
+//! model and the default options (re-anchored re-simulation), and N null runs. The
+//! calibration can run on its own ([`calibrate`]) and be handed to every shard ([`run`]).
 //!
 //! **Sizes.** A case's physical size is drawn uniformly between 1x and 3x the truth's default
 //! size, with a random sign where the effect allows one (not for a delay or an amplitude; a
@@ -26,7 +27,9 @@ use std::time::Instant;
 use rand::RngExt;
 
 use crate::config::{ConfigSource, Embedded};
-use crate::gap::bench::{BenchOptions, CalibrationGap, CaseResult, MODEL, Outcome, Shard};
+use crate::gap::bench::{
+    BenchOptions, CalibrationGap, CaseResult, MODEL, Outcome, Progress, Shard,
+};
 use crate::gap::calibrate::{self, Run};
 use crate::gap::effects::Effect;
 use crate::gap::format::Measurement;
@@ -189,14 +192,34 @@ pub fn io(path: &Path) -> impl FnOnce(std::io::Error) -> GapError + '_ {
     }
 }
 
-/// Runs the cases of `shard` on data from `truth` (calibration is done by every shard: it is
-/// deterministic).
-pub fn run(
-    opts: &BenchOptions,
-    shard: Shard,
-    progress: &mut dyn FnMut(usize, usize, &str),
-    truth: &dyn Truth,
-) -> Result<Outcome, GapError> {
+/// A campaign's calibrated model as its file text, and how it did on the null run it was not
+/// fitted to. Every case is analysed with the model read back from this text, whether the
+/// calibration ran in the same process or came from `gap-bench calibrate`, so a shard given
+/// the file analyses exactly as an unsharded run does.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibrated {
+    /// The calibrated model file ([`GapModel::to_toml`]).
+    pub model_toml: String,
+    pub gap: Option<CalibrationGap>,
+}
+
+impl Calibrated {
+    /// The model the cases are analysed with: the text read back, its references resolving
+    /// as the embedded base model's do.
+    pub fn model(&self, origin: &str) -> Result<GapModel, GapError> {
+        GapModel::from_text(origin, &self.model_toml, ".".into())
+    }
+}
+
+/// A campaign's draws: the calibration's seeds and every case, in the fixed case order.
+struct Plan {
+    baseline_seeds: Vec<u64>,
+    spread_seeds: Vec<u64>,
+    cases: Vec<Planned>,
+}
+
+/// Draws the campaign of `opts` (the same whichever shard or step asks).
+fn plan(opts: &BenchOptions, truth: &dyn Truth) -> Result<Plan, GapError> {
     let defaults = truth.default_sizes()?;
     let mut rng = crate::sensors::rng::stream(opts.seed, opts.source.rng_stream());
     let mut draw_seed = || rng.random_range(1_000..1_000_000_000u64);
@@ -239,22 +262,29 @@ pub fn run(
     let spread_seeds: Vec<u64> = (0..truth.spread_runs())
         .map(|_| rng.random_range(1_000..1_000_000_000u64))
         .collect();
-    let total = shard.count(plan.len());
+    Ok(Plan {
+        baseline_seeds,
+        spread_seeds,
+        cases: plan,
+    })
+}
 
-    let scratch = match &opts.keep {
-        Some(dir) => Scratch::kept(dir)?,
-        None => Scratch::new(opts.source.name(), opts.seed)?,
-    };
-    progress(0, total, "calibrating");
+/// Calibrates the embedded model on the baseline runs of `plan`, written into `scratch`.
+fn calibrate_on(
+    opts: &BenchOptions,
+    truth: &dyn Truth,
+    plan: &Plan,
+    scratch: &Scratch,
+) -> Result<Calibrated, GapError> {
     let mut runs = Vec::new();
-    for (i, seed) in baseline_seeds.iter().enumerate() {
+    for (i, seed) in plan.baseline_seeds.iter().enumerate() {
         let dir = scratch.0.join(format!("baseline-{i}"));
         truth.baseline(i, *seed, &dir)?;
         runs.push(Run::load(&dir)?);
     }
     let validate = runs.split_off(BASELINE_RUNS);
     let mut spread_from = Vec::new();
-    for (i, seed) in spread_seeds.iter().enumerate() {
+    for (i, seed) in plan.spread_seeds.iter().enumerate() {
         let dir = scratch.0.join(format!("spread-{i}"));
         truth.case(*seed, None, &dir)?;
         spread_from.push(Run::load(&dir)?);
@@ -264,34 +294,88 @@ pub fn run(
     let t0 = Instant::now();
     let cal = calibrate::calibrate(&model, &runs, &validate, &spread_from, &mut |_| {})?;
     let seconds = t0.elapsed().as_secs_f64();
-    let calibration = cal.runs.iter().find(|r| !r.fitted).map(|r| CalibrationGap {
+    let gap = cal.runs.iter().find(|r| !r.fitted).map(|r| CalibrationGap {
         gap_before: r.gap_before,
         gap_after: r.gap_after,
         reduction_pct: r.reduction_pct,
         seconds,
     });
-    if opts.keep.is_some() {
-        let path = scratch.0.join("calibrated.toml");
-        let provenance = format!(
-            "calibrated by `eyebot-hil gap-bench --source {} --seed {}` on baseline-0..{}",
-            opts.source.name(),
-            opts.seed,
-            BASELINE_RUNS - 1
-        );
-        std::fs::write(&path, cal.model.to_toml(&provenance, &scratch.0)).map_err(io(&path))?;
-    }
+    let provenance = format!(
+        "calibrated by `eyebot-hil gap-bench --source {} --seed {}` on baseline-0..{}",
+        opts.source.name(),
+        opts.seed,
+        BASELINE_RUNS - 1
+    );
     for r in runs.iter().chain(&validate).chain(&spread_from) {
         scratch.done(&r.dir)?;
     }
+    Ok(Calibrated {
+        model_toml: cal.model.to_toml(&provenance, Path::new(".")),
+        gap,
+    })
+}
+
+/// The scratch directory of a run: the user's `--keep` directory or a temporary one.
+fn scratch(opts: &BenchOptions) -> Result<Scratch, GapError> {
+    match &opts.keep {
+        Some(dir) => Scratch::kept(dir),
+        None => Scratch::new(opts.source.name(), opts.seed),
+    }
+}
+
+/// The calibration of the campaign `opts` on data from `truth`, on its own: what
+/// `gap-bench calibrate` writes for the shards to share.
+pub fn calibrate(opts: &BenchOptions, truth: &dyn Truth) -> Result<Calibrated, GapError> {
+    let plan = plan(opts, truth)?;
+    let scratch = scratch(opts)?;
+    let calibrated = calibrate_on(opts, truth, &plan, &scratch)?;
+    write_kept(opts, &scratch, &calibrated)?;
+    Ok(calibrated)
+}
+
+/// With `--keep`, the calibrated model beside the kept runs (`calibrated.toml`).
+fn write_kept(opts: &BenchOptions, scratch: &Scratch, cal: &Calibrated) -> Result<(), GapError> {
+    if opts.keep.is_some() {
+        let path = scratch.0.join("calibrated.toml");
+        std::fs::write(&path, &cal.model_toml).map_err(io(&path))?;
+    }
+    Ok(())
+}
+
+/// Runs the cases of `shard` on data from `truth`, analysed with `calibrated` (the campaign's
+/// shared calibration) or, when none is given, with a calibration made here first (it is
+/// deterministic: the same for every shard of a campaign).
+pub fn run(
+    opts: &BenchOptions,
+    shard: Shard,
+    calibrated: Option<&Calibrated>,
+    progress: &mut Progress<'_>,
+    truth: &dyn Truth,
+) -> Result<Outcome, GapError> {
+    let plan = plan(opts, truth)?;
+    let total = shard.count(plan.cases.len());
+    let scratch = scratch(opts)?;
+    let own;
+    let calibrated = match calibrated {
+        Some(c) => c,
+        None => {
+            progress(0, total, "calibrating", None);
+            own = calibrate_on(opts, truth, &plan, &scratch)?;
+            &own
+        }
+    };
+    write_kept(opts, &scratch, calibrated)?;
+    let model = calibrated.model("the campaign's calibrated model")?;
+    let calibration = calibrated.gap.clone();
 
     let mut out = Vec::new();
-    for p in plan.into_iter().filter(|p| shard.contains(p.index)) {
+    for p in plan.cases.into_iter().filter(|p| shard.contains(p.index)) {
         let label = p.hidden.map_or("null", |h| h.name);
         let dir = scratch.0.join(format!("case-{}-{label}", p.index));
         truth.case(p.seed, p.hidden.map(|h| (h, p.size.as_slice())), &dir)?;
         let m = Measurement::load(&dir)?;
         let t0 = Instant::now();
-        let a = crate::gap::analyse_with(&cal.model, &m, &dir, Options::default(), &mut |_, _| {})?;
+        let a = crate::gap::analyse_with(&model, &m, &dir, Options::default(), &mut |_, _| {})?;
         let seconds = t0.elapsed().as_secs_f64();
         scratch.done(&dir)?;
 
@@ -328,7 +412,7 @@ pub fn run(
             held_out_grew: Some(first.is_some() && a.heldout_gap_after > a.heldout_gap_before),
             seconds,
         });
-        progress(out.len(), total, label);
+        progress(out.len(), total, label, out.last());
     }
     Ok(Outcome {
         results: out,

@@ -4,7 +4,7 @@
 //! scoring are [`super::calibrated`]'s. Sizes are multiples of the model's default sizes (its
 //! `--list`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::sync::LazyLock;
 
@@ -39,12 +39,27 @@ pub fn by_name(name: &str) -> Result<&'static Hidden, GapError> {
     })
 }
 
-/// The program shipped with the crate.
-pub fn default_path() -> PathBuf {
-    PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/pty-tests/independent/mako_independent.py"
-    ))
+/// The program, built into the binary so a run needs no copy of the repository.
+pub const EMBEDDED: &str = include_str!("../../../pty-tests/independent/mako_independent.py");
+
+/// The embedded program written to a private temporary file (removed when dropped), for a
+/// run not given `--independent PATH`.
+pub fn embedded_program() -> Result<tempfile::NamedTempFile, GapError> {
+    let dir = std::env::temp_dir();
+    let cannot = |e: std::io::Error| {
+        GapError::Data(format!(
+            "cannot write the built-in independent model to a temporary file in {} ({e}); \
+             set TMPDIR to a writable directory or give --independent PATH",
+            dir.display()
+        ))
+    };
+    let mut file = tempfile::Builder::new()
+        .prefix("eyebot-mako_independent-")
+        .suffix(".py")
+        .tempfile_in(&dir)
+        .map_err(cannot)?;
+    std::io::Write::write_all(&mut file, EMBEDDED.as_bytes()).map_err(cannot)?;
+    Ok(file)
 }
 
 /// Runs `python3 program args`, returning its standard output; errors name the program.

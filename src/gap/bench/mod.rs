@@ -13,7 +13,9 @@
 //!
 //! A campaign can be split over machines ([`shard`]): every case is planned (its seed, size
 //! and direction drawn) in one fixed order whichever shard runs it, and the parts are merged
-//! into the table an unsharded run prints ([`table`]).
+//! into the table an unsharded run prints ([`table`]). A calibrated source's campaign
+//! calibrates once ([`calibrate`], `gap-bench calibrate`) and every shard reads that
+//! calibration ([`Calibration`]) instead of making its own.
 
 pub mod bridge;
 pub mod calibrated;
@@ -27,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use crate::gap::GapError;
 use crate::gap::effects::{self, Effect};
 
-pub use shard::{Part, Shard, merge};
+pub use shard::{Calibration, Part, Shard, merge};
 pub use simulator::{
     CAMERA_STD_M, MODEL, SCHEDULE, SIZE_RANGE, SONAR_SCHEDULE, START, excess, mirrored, size_sigma,
     sonar_deviance, sonar_only, sonar_truth_gap, training, truth_gap,
@@ -190,14 +192,28 @@ pub struct Outcome {
     pub calibration: Option<CalibrationGap>,
 }
 
-/// Runs the benchmark, or the cases of `shard` only; `progress(done, total, label)` after
-/// each case.
+/// What a benchmark reports as it goes: `(done, total, label, case)`, with the case just
+/// finished (`None` before the first, while calibrating).
+pub type Progress<'a> = dyn FnMut(usize, usize, &str, Option<&CaseResult>) + 'a;
+
+/// Runs the benchmark, or the cases of `shard` only, reporting to `progress` after each
+/// case. A calibrated source calibrates first unless `calibration` (the campaign's, from
+/// [`calibrate`]) is given; it is checked against `opts` before any case runs.
 pub fn run(
     opts: &BenchOptions,
     shard: Option<Shard>,
-    progress: &mut dyn FnMut(usize, usize, &str),
+    calibration: Option<&Calibration>,
+    progress: &mut Progress<'_>,
 ) -> Result<Outcome, GapError> {
     let shard = shard.unwrap_or(Shard::WHOLE);
+    if let Some(c) = calibration {
+        c.check(
+            &opts.key(),
+            &base_model_sha256()?,
+            truth_sha256(opts)?.as_deref(),
+        )?;
+    }
+    let shared = calibration.and_then(Calibration::calibrated);
     match opts.source {
         Source::Simulator => Ok(Outcome {
             results: simulator::run(opts, shard, progress)?,
@@ -205,13 +221,74 @@ pub fn run(
         }),
         Source::Independent => {
             let truth = independent::Independent::new(&opts.independent_path, opts.structure_seed)?;
-            calibrated::run(opts, shard, progress, &truth)
+            calibrated::run(opts, shard, shared.as_ref(), progress, &truth)
         }
         Source::Bridge => {
             let truth = bridge::Bridge::new(&opts.bridge)?;
-            calibrated::run(opts, shard, progress, &truth)
+            calibrated::run(opts, shard, shared.as_ref(), progress, &truth)
         }
     }
+}
+
+/// The campaign's calibration on its own (`gap-bench calibrate`), for every shard to read.
+/// The simulator source analyses with the base model it generates from: its calibration
+/// holds no model, only what the shards check (options and base model).
+pub fn calibrate(opts: &BenchOptions) -> Result<Calibration, GapError> {
+    let calibrated = match opts.source {
+        Source::Simulator => None,
+        Source::Independent => {
+            let truth = independent::Independent::new(&opts.independent_path, opts.structure_seed)?;
+            Some(calibrated::calibrate(opts, &truth)?)
+        }
+        Source::Bridge => {
+            let truth = bridge::Bridge::new(&opts.bridge)?;
+            Some(calibrated::calibrate(opts, &truth)?)
+        }
+    };
+    Ok(Calibration {
+        format: shard::CALIBRATION_FORMAT,
+        options: opts.key(),
+        base_model_sha256: base_model_sha256()?,
+        truth_sha256: truth_sha256(opts)?,
+        gap: calibrated.as_ref().and_then(|c| c.gap.clone()),
+        model: calibrated.map(|c| c.model_toml),
+    })
+}
+
+/// SHA-256 (hex) of the base model the benchmark starts from: the embedded model file and
+/// the configurations it names, as this build reads them.
+pub fn base_model_sha256() -> Result<String, GapError> {
+    use crate::config::{ConfigSource, Embedded};
+    use sha2::{Digest, Sha256};
+    let text = Embedded.read(MODEL)?;
+    let model =
+        crate::gap::model::GapModel::from_text(&Embedded.describe(MODEL), &text, ".".into())?;
+    let mut hash = Sha256::new();
+    hash.update(text.as_bytes());
+    for name in std::iter::once(&model.vehicle_ref)
+        .chain(&model.world_ref)
+        .chain(&model.sensors_ref)
+    {
+        let (_, named) = crate::gap::model::read_ref(&model.base, name)?;
+        hash.update([0]);
+        hash.update(named.as_bytes());
+    }
+    Ok(hex::encode(hash.finalize()))
+}
+
+/// SHA-256 (hex) of the truth source's program: the independent model's file; `None` for
+/// the other sources.
+pub fn truth_sha256(opts: &BenchOptions) -> Result<Option<String>, GapError> {
+    use sha2::{Digest, Sha256};
+    if opts.source != Source::Independent {
+        return Ok(None);
+    }
+    let path = &opts.independent_path;
+    let bytes = std::fs::read(path).map_err(|source| GapError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    Ok(Some(hex::encode(Sha256::digest(&bytes))))
 }
 
 /// Cases in the whole benchmark (every shard): per effect and for the nulls, plus the
@@ -230,9 +307,10 @@ pub fn case_count(opts: &BenchOptions) -> usize {
 pub fn run_part(
     opts: &BenchOptions,
     shard: Shard,
-    progress: &mut dyn FnMut(usize, usize, &str),
+    calibration: Option<&Calibration>,
+    progress: &mut Progress<'_>,
 ) -> Result<Part, GapError> {
-    let outcome = run(opts, Some(shard), progress)?;
+    let outcome = run(opts, Some(shard), calibration, progress)?;
     Ok(Part::new(opts.key(), shard, case_count(opts), outcome))
 }
 

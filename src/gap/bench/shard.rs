@@ -8,6 +8,13 @@
 //! **Part file** (JSON): `{"format": 1, "options": {source, cases, seed, effects}, "shard":
 //! {"k": K, "n": N}, "total": cases in the whole benchmark, "calibration": null or {gap_before,
 //! gap_after, reduction_pct, seconds}, "results": [CaseResult with its "index", ...]}`.
+//!
+//! **Calibration file** (JSON, `gap-bench calibrate --out FILE`, read by `--calibration
+//! FILE`): a campaign's calibration made once for all its shards. `{"format": 1, "options":
+//! {...}, "base_model_sha256": hex, "truth_sha256": hex or null, "gap": null or {...},
+//! "model": the calibrated model file (TOML) or null}`. A shard refuses one made with other
+//! options (source, cases, seed, effects: the calibration's seeds are drawn with the cases),
+//! from another base model, or from another independent model program.
 
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -15,10 +22,131 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use crate::gap::GapError;
+use crate::gap::bench::calibrated::Calibrated;
 use crate::gap::bench::{CalibrationGap, CaseResult, OptionsKey, Outcome};
 
 /// Version of the part file format.
 pub const FORMAT: u32 = 1;
+/// Version of the calibration file format.
+pub const CALIBRATION_FORMAT: u32 = 1;
+
+/// A campaign's calibration, made once (`gap-bench calibrate`) and read by every shard.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Calibration {
+    pub format: u32,
+    /// The campaign it was made for.
+    pub options: OptionsKey,
+    /// [`super::base_model_sha256`] of the build that made it.
+    pub base_model_sha256: String,
+    /// [`super::truth_sha256`]: the independent model program it calibrated on.
+    pub truth_sha256: Option<String>,
+    /// How the calibrated model did on the null run it was not fitted to.
+    pub gap: Option<CalibrationGap>,
+    /// The calibrated model file (TOML); `None` for the simulator source, whose cases are
+    /// analysed with the base model.
+    pub model: Option<String>,
+}
+
+impl Calibration {
+    /// The calibrated model, for the case loop.
+    pub fn calibrated(&self) -> Option<Calibrated> {
+        self.model.as_ref().map(|m| Calibrated {
+            model_toml: m.clone(),
+            gap: self.gap.clone(),
+        })
+    }
+
+    pub fn write(&self, path: &Path) -> Result<(), GapError> {
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| GapError::Data(format!("{}: cannot encode: {e}", path.display())))?;
+        std::fs::write(path, text + "\n").map_err(|source| GapError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+
+    /// Reads a calibration file; the model it holds must parse.
+    pub fn read(path: &Path) -> Result<Self, GapError> {
+        let text = std::fs::read_to_string(path).map_err(|source| GapError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let c: Calibration = serde_json::from_str(&text).map_err(|e| {
+            GapError::Data(format!(
+                "{}: not a gap-bench calibration file (expected the JSON `gap-bench calibrate \
+                 --out` writes): {e}",
+                path.display()
+            ))
+        })?;
+        if c.format != CALIBRATION_FORMAT {
+            return Err(GapError::Data(format!(
+                "{}: calibration file format {} (this build reads {CALIBRATION_FORMAT})",
+                path.display(),
+                c.format
+            )));
+        }
+        if let Some(cal) = c.calibrated() {
+            cal.model(&format!("{}: model", path.display()))?;
+        }
+        Ok(c)
+    }
+
+    /// Checks the calibration belongs to the campaign `options` of this build: the same
+    /// options, base model and truth program; and that it holds a model exactly when the
+    /// source calibrates.
+    pub fn check(
+        &self,
+        options: &OptionsKey,
+        base_model_sha256: &str,
+        truth_sha256: Option<&str>,
+    ) -> Result<(), GapError> {
+        let refuse = |what: String| {
+            Err(GapError::Data(format!(
+                "--calibration: {what}; make it with `gap-bench calibrate` and the same options \
+                 as the shards"
+            )))
+        };
+        if &self.options != options {
+            return refuse(format!(
+                "made for other options ({}) than this run's ({})",
+                describe(&self.options),
+                describe(options)
+            ));
+        }
+        if self.base_model_sha256 != base_model_sha256 {
+            return refuse(format!(
+                "made from another base model (sha256 {}, this build's is {base_model_sha256}): \
+                 another build of eyebot-hil",
+                self.base_model_sha256
+            ));
+        }
+        if self.truth_sha256.as_deref() != truth_sha256 {
+            return refuse(format!(
+                "made on another independent model program (sha256 {}, this run's is {})",
+                self.truth_sha256.as_deref().unwrap_or("none"),
+                truth_sha256.unwrap_or("none")
+            ));
+        }
+        let calibrates = options.source != super::Source::Simulator;
+        if self.model.is_some() != calibrates {
+            return refuse(format!(
+                "it {} a calibrated model, but the {} source {}",
+                if self.model.is_some() {
+                    "holds"
+                } else {
+                    "lacks"
+                },
+                options.source.name(),
+                if calibrates {
+                    "analyses with one"
+                } else {
+                    "calibrates nothing"
+                }
+            ));
+        }
+        Ok(())
+    }
+}
 
 /// Shard `k` of `n` (1-based): the cases with `index % n == k - 1`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -68,6 +196,17 @@ impl std::fmt::Display for Shard {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}/{}", self.k, self.n)
     }
+}
+
+/// Options as the command line gives them.
+fn describe(k: &OptionsKey) -> String {
+    format!(
+        "--source {} --cases {} --seed {} --effects {}",
+        k.source.name(),
+        k.cases,
+        k.seed,
+        k.effects.join(",")
+    )
 }
 
 /// One shard's results, as written to and read from a part file.
@@ -226,4 +365,76 @@ pub fn merge(parts: &[(PathBuf, Part)]) -> Result<(OptionsKey, Outcome), GapErro
             calibration,
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gap::bench::Source;
+
+    fn key(seed: u64) -> OptionsKey {
+        OptionsKey {
+            source: Source::Independent,
+            cases: 2,
+            seed,
+            effects: vec!["depth_offset".into()],
+            structure_seed: None,
+        }
+    }
+
+    fn calibration() -> Calibration {
+        Calibration {
+            format: CALIBRATION_FORMAT,
+            options: key(7),
+            base_model_sha256: "base".into(),
+            truth_sha256: Some("truth".into()),
+            gap: None,
+            model: Some("name = \"mako\"\nvehicle = \"vehicles/mako.toml\"\n".into()),
+        }
+    }
+
+    /// A shard takes the calibration of its own campaign and refuses one of another seed,
+    /// base model or independent program, or one with no model for a calibrated source,
+    /// naming what differs.
+    #[test]
+    fn a_calibration_belongs_to_one_campaign() {
+        let c = calibration();
+        assert!(c.check(&key(7), "base", Some("truth")).is_ok());
+        let refused = |r: Result<(), GapError>| match r {
+            Ok(()) => panic!("accepted"),
+            Err(e) => e.to_string(),
+        };
+        let e = refused(c.check(&key(8), "base", Some("truth")));
+        assert!(e.contains("other options") && e.contains("--seed 8"), "{e}");
+        let e = refused(c.check(&key(7), "other", Some("truth")));
+        assert!(e.contains("another base model"), "{e}");
+        let e = refused(c.check(&key(7), "base", Some("edited")));
+        assert!(e.contains("another independent model program"), "{e}");
+        let mut no_model = c.clone();
+        no_model.model = None;
+        let e = refused(no_model.check(&key(7), "base", Some("truth")));
+        assert!(e.contains("lacks a calibrated model"), "{e}");
+    }
+
+    /// A calibration file survives its file, and one whose model does not parse is refused
+    /// when read, naming the file.
+    #[test]
+    fn a_calibration_file_is_read_back_and_checked() {
+        let dir = tempfile::tempdir().expect("scratch directory");
+        let path = dir.path().join("calibration.json");
+        let c = calibration();
+        c.write(&path).expect("written");
+        assert_eq!(Calibration::read(&path).expect("read back"), c);
+        let mut bad = c.clone();
+        bad.model = Some("name = \"mako\"\n".into());
+        bad.write(&path).expect("written");
+        let e = Calibration::read(&path).expect_err("a model without a vehicle");
+        assert!(e.to_string().contains("calibration.json"), "{e}");
+        std::fs::write(&path, "{}").expect("written");
+        let e = Calibration::read(&path).expect_err("not a calibration");
+        assert!(
+            e.to_string().contains("not a gap-bench calibration file"),
+            "{e}"
+        );
+    }
 }

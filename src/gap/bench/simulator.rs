@@ -392,11 +392,11 @@ fn sonar_calibration(
     Ok(dir * 0.5 * (lo + hi))
 }
 
-/// Runs the benchmark; `progress(done, total, label)` after each case.
+/// Runs the benchmark; `progress(done, total, label, case)` after each case.
 pub fn run(
     opts: &BenchOptions,
     shard: Shard,
-    progress: &mut dyn FnMut(usize, usize, &str),
+    progress: &mut super::Progress<'_>,
 ) -> Result<Vec<CaseResult>, GapError> {
     let model_text = Embedded.read(MODEL)?;
     let model = GapModel::from_text(&Embedded.describe(MODEL), &model_text, ".".into())?;
@@ -632,7 +632,7 @@ pub fn run(
                 seconds,
             });
             done += 1;
-            progress(done, total, label);
+            progress(done, total, label, out.last());
         }
     }
     Ok(out)
