@@ -396,4 +396,40 @@ mod tests {
             );
         }
     }
+
+    /// A config comment says what a value is and why, like a code comment; where a number
+    /// came from in the project's history belongs in git. No file under `configs/` cites an
+    /// issue (`pool.toml` said "issue 3 default").
+    #[test]
+    fn config_comments_cite_no_work_history() {
+        fn walk(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+            for entry in std::fs::read_dir(dir).expect("list configs") {
+                let path = entry.expect("a directory entry").path();
+                if path.is_dir() {
+                    walk(&path, out);
+                } else {
+                    out.push(path);
+                }
+            }
+        }
+        let mut files = Vec::new();
+        walk(&Path::new(env!("CARGO_MANIFEST_DIR")).join("configs"), &mut files);
+        let mut citing = Vec::new();
+        for file in files {
+            let Ok(text) = std::fs::read_to_string(&file) else {
+                continue;
+            };
+            for (n, line) in text.lines().enumerate() {
+                let lower = line.to_lowercase();
+                let cites = lower.match_indices("issue").any(|(at, _)| {
+                    let rest = lower[at + "issue".len()..].trim_start_matches([' ', '#']);
+                    rest.starts_with(|c: char| c.is_ascii_digit())
+                });
+                if cites || lower.contains("session") {
+                    citing.push(format!("{}:{}: {line}", file.display(), n + 1));
+                }
+            }
+        }
+        assert!(citing.is_empty(), "{citing:#?}");
+    }
 }

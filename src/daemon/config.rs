@@ -441,6 +441,15 @@ impl DaemonConfig {
     }
 }
 
+/// Whether `link`, joined to a directory, names a path inside it: a relative path of plain
+/// names (`.` allowed), without `..` or a root.
+pub fn stays_inside(link: &std::path::Path) -> bool {
+    use std::path::Component;
+    link.components()
+        .all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
+        && link.components().any(|c| matches!(c, Component::Normal(_)))
+}
+
 fn resolve_link(
     doc: &Document<'_>,
     name: &str,
@@ -457,9 +466,19 @@ fn resolve_link(
         })
     };
     let endpoint = match raw.endpoint.as_str() {
-        "pty" => Endpoint::Pty {
-            link: PathBuf::from(path("the symlink to create, relative to run.run_dir")?),
-        },
+        "pty" => {
+            let link = PathBuf::from(path("the symlink to create, relative to run.run_dir")?);
+            if !stays_inside(&link) {
+                return Err(doc.invalid(
+                    &key("path"),
+                    format!(
+                        "`{}` leaves the run directory; a pty link is a name inside `run.run_dir` (no `..`, not absolute), where the daemon checks who owns the directory",
+                        link.display()
+                    ),
+                ));
+            }
+            Endpoint::Pty { link }
+        }
         "serial" => Endpoint::Serial {
             device: PathBuf::from(path("the device, e.g. /dev/ttyUSB0")?),
         },
@@ -659,6 +678,26 @@ mod tests {
         assert!(err.to_string().contains("loopback"), "{err}");
         let ok = with(&tcp("path = \"127.0.0.1:7001\"")).unwrap();
         assert!(matches!(ok.sonar.endpoint, Endpoint::Tcp { .. }));
+    }
+
+    /// A pty path that leaves the run directory is refused, naming the key, its line and the
+    /// rule (`../../../escaped-sonar` was accepted).
+    #[test]
+    fn a_pty_path_outside_the_run_directory_is_refused() {
+        for bad in ["../../../escaped-sonar", "/tmp/sonar", "a/../../sonar", ".", ".."] {
+            let by = format!("path = \"{bad}\"");
+            let err = with(&[("path = \"sonar\"", by.as_str())]).unwrap_err();
+            assert!(
+                matches!(&err, ConfigError::Invalid { key, line: Some(_), .. } if key == "links.sonar.path"),
+                "{bad}: {err}"
+            );
+            assert!(err.to_string().contains("leaves the run directory"), "{bad}: {err}");
+        }
+        for good in ["sonar", "./sonar", "links/sonar"] {
+            let by = format!("path = \"{good}\"");
+            let config = with(&[("path = \"sonar\"", by.as_str())]).unwrap();
+            assert!(matches!(config.sonar.endpoint, Endpoint::Pty { .. }), "{good}");
+        }
     }
 
     /// Two links on one path would leave one unreachable (the second symlink replaces the
