@@ -73,11 +73,13 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
         Box::new(std::io::stdout().lock())
     } else {
         Box::new(std::fs::File::create(&args.out).map_err(|e| CliError::Io {
+            doing: "create",
             path: args.out.clone(),
             source: e,
         })?)
     };
     let io = |e: std::io::Error| CliError::Io {
+        doing: "write",
         path: args.out.clone(),
         source: e,
     };

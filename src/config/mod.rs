@@ -77,7 +77,7 @@ pub enum ConfigError {
         message: String,
     },
     /// The TOML is well formed but a value is out of range or inconsistent.
-    #[error("{origin}:{}: `{key}`: {message}", line.map_or_else(|| "?".to_string(), |l| l.to_string()))]
+    #[error("{origin}:{} `{key}`: {message}", line.map_or_else(String::new, |l| format!("{l}:")))]
     Invalid {
         origin: String,
         key: String,
@@ -276,7 +276,8 @@ impl<'a> Document<'a> {
         } else {
             Err(self.invalid(
                 key,
-                format!("{value} {unit} is outside the allowed range {min}..={max} {unit}"),
+                // `{:?}` writes 1e308 as `1e308`, not as 309 digits.
+                format!("{value:?} {unit} is outside the allowed range {min}..={max} {unit}"),
             ))
         }
     }
@@ -368,6 +369,19 @@ mod tests {
             doc.check_range("hull.mass_kg", f64::NAN, 1.0, 500.0, "kg")
                 .is_err()
         );
+    }
+
+    /// A range error writes a huge or tiny value as `1e308`, not as its 309 digits.
+    #[test]
+    fn range_errors_write_extreme_values_short() {
+        let doc = Document::new("v.toml", "[hull]\nmass_kg = 1e308\n");
+        for (value, shown) in [(1e308, "1e308 kg"), (1e-300, "1e-300 kg"), (-3.0, "-3.0 kg")] {
+            let err = doc
+                .check_range("hull.mass_kg", value, 1.0, 500.0, "kg")
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(shown) && err.len() < 120, "{err}");
+        }
     }
 
     #[test]

@@ -174,6 +174,11 @@ pub struct DaemonConfig {
     pub run_dir: PathBuf,
     pub state_record_hz: f64,
     pub start: Start,
+    /// The line of `start.position_m` (`None`: the key's default), for an error found once
+    /// the world is loaded.
+    pub start_line: Option<usize>,
+    /// The configuration's name in errors: its path, or `<embedded>/default.toml`.
+    pub origin: String,
     pub sonar: LinkConfig,
     pub sensor: LinkConfig,
     /// Zero the thrusters after this long without a thruster frame; `None` = off.
@@ -240,7 +245,7 @@ impl DaemonConfig {
                     option: "--speed".into(),
                     key: "run.speed".into(),
                     message: format!(
-                        "{speed} is outside the allowed range {}..={} x real time",
+                        "{speed:?} is outside the allowed range {}..={} x real time",
                         SPEED_RANGE.start(),
                         SPEED_RANGE.end()
                     ),
@@ -418,6 +423,8 @@ impl DaemonConfig {
                 position_m: nalgebra::Vector3::from(raw.start.position_m),
                 heading_deg,
             },
+            start_line: doc.line_of("start.position_m"),
+            origin: doc.origin().to_string(),
             sonar,
             sensor,
             watchdog: (watchdog_s > 0.0).then(|| Duration::from_secs_f64(watchdog_s)),
@@ -653,7 +660,7 @@ mod tests {
             with_overrides(&lockstep, None).unwrap().time_mode,
             TimeMode::Lockstep
         );
-        for bad in [0.05, 1000.5, f64::NAN] {
+        for bad in [0.05, 1000.5, f64::NAN, 1e-300] {
             let over = Overrides {
                 speed: Some(bad),
                 ..Overrides::default()
@@ -663,6 +670,7 @@ mod tests {
                 err.starts_with("--speed") && err.contains("0.1..=1000"),
                 "{err}"
             );
+            assert!(err.len() < 160, "a value written in full: {err}");
         }
     }
 
