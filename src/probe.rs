@@ -37,7 +37,7 @@ pub enum ProbeError {
         attempts: u32,
         timeout: Duration,
     },
-    #[error("{path}: the bridge refused {what}: {code:?} (detail {detail})")]
+    #[error("{path}: the bridge refused {what}: {code:?} (detail {detail}){}", refusal_hint(what, *code))]
     Refused {
         path: String,
         what: &'static str,
@@ -46,6 +46,17 @@ pub enum ProbeError {
     },
     #[error("{path}: the link closed")]
     Closed { path: String },
+}
+
+/// What a refusal means for the user, where the code alone does not say it: a time request
+/// in real time is answered BAD_STATE (PROTOCOL.md 2.8, 2.9).
+fn refusal_hint(what: &str, code: sensor_link::ErrorCode) -> &'static str {
+    match (what, code) {
+        ("TIME_ADVANCE" | "TIME_STEP", sensor_link::ErrorCode::BadState) => {
+            ": the daemon runs in real time; start it with `--time-mode lockstep`"
+        }
+        _ => "",
+    }
 }
 
 /// Reply timeout and retries (PROTOCOL.md 2.2).

@@ -181,7 +181,7 @@ impl ConfigSource for Directory {
         read_config_file(&path)
             .map(Cow::Owned)
             .map_err(|reason| ConfigError::Unreadable {
-                origin: self.root.display().to_string(),
+                origin: path.display().to_string(),
                 name: name.to_string(),
                 reason,
             })
@@ -189,6 +189,116 @@ impl ConfigSource for Directory {
 
     fn describe(&self, name: &str) -> String {
         self.root.join(name).display().to_string()
+    }
+}
+
+/// The one rule for the files a configuration names (`vehicle`, `world`, `sensors`, an
+/// experiment's model files): read beside the configuration on disk, and when no file of
+/// that name is there, the embedded copy of the same name (the files under `configs/` at
+/// build time). A file that is there but cannot be read or parsed is an error, never
+/// replaced by the embedded copy. An error names both places looked in.
+#[derive(Debug, Clone)]
+pub struct BesideOrEmbedded {
+    /// `None` for an embedded configuration: its files are the embedded ones.
+    dir: Option<Directory>,
+    /// The configuration file itself, named on the command line: read from disk only, so a
+    /// mistyped path is an error rather than the embedded file of that name.
+    top: Option<String>,
+}
+
+impl BesideOrEmbedded {
+    pub fn new(dir: Directory) -> Self {
+        Self {
+            dir: Some(dir),
+            top: None,
+        }
+    }
+
+    /// The source of the files `file` names, and `file`'s name in it: its directory on disk,
+    /// with the embedded configs behind it. A `file` that does not exist on disk but whose
+    /// path ends in an embedded name (`configs/experiments/acceleration.toml` outside the
+    /// clone) is that embedded file.
+    pub fn for_file(file: &Path) -> (Self, String) {
+        if !file.exists()
+            && let Some(name) = embedded_name_of(file)
+        {
+            return (
+                Self {
+                    dir: None,
+                    top: None,
+                },
+                name,
+            );
+        }
+        let (dir, name) = Directory::for_file(file);
+        let source = Self {
+            dir: Some(dir),
+            top: Some(name.clone()),
+        };
+        (source, name)
+    }
+
+    /// The directory on disk, if the configuration is there.
+    pub fn root(&self) -> Option<&Path> {
+        self.dir.as_ref().map(Directory::root)
+    }
+
+    /// The directory on disk when it holds an entry `name`.
+    fn on_disk(&self, name: &str) -> Option<&Directory> {
+        self.dir
+            .as_ref()
+            .filter(|d| std::fs::symlink_metadata(d.root.join(name)).is_ok())
+    }
+}
+
+/// The embedded config that `file` names by its path in the clone (`configs/worlds/pool.toml`
+/// or `.../configs/worlds/pool.toml` -> `worlds/pool.toml`), if any. Only a path through
+/// `configs/` counts: a mistyped `my/default.toml` is an error, not the embedded default.
+fn embedded_name_of(file: &Path) -> Option<String> {
+    let text = file.to_string_lossy();
+    EMBEDDED_CONFIGS
+        .iter()
+        .map(|(n, _)| *n)
+        .find(|n| text == format!("configs/{n}") || text.ends_with(&format!("/configs/{n}")))
+        .map(str::to_string)
+}
+
+impl ConfigSource for BesideOrEmbedded {
+    fn read(&self, name: &str) -> Result<Cow<'static, str>, ConfigError> {
+        if let Some(dir) = self.on_disk(name) {
+            return dir.read(name);
+        }
+        if let Some(dir) = &self.dir
+            && self.top.as_deref() == Some(name)
+        {
+            return dir.read(name);
+        }
+        let beside = self.dir.as_ref().map_or_else(
+            || "no file on disk (the configuration is embedded)".to_string(),
+            |d| format!("{} (files a configuration names are read beside it)", d.describe(name)),
+        );
+        Embedded.read(name).map_err(|_| ConfigError::Unreadable {
+            origin: self
+                .dir
+                .as_ref()
+                .map_or_else(|| Embedded.describe(name), |d| d.describe(name)),
+            name: name.to_string(),
+            reason: format!(
+                "no such file; looked for {beside} and for an embedded `{name}` (embedded are: {})",
+                EMBEDDED_CONFIGS
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })
+    }
+
+    fn describe(&self, name: &str) -> String {
+        match self.on_disk(name) {
+            Some(dir) => dir.describe(name),
+            None => Embedded.describe(name),
+        }
     }
 }
 
@@ -445,5 +555,60 @@ mod tests {
             }
         }
         assert!(citing.is_empty(), "{citing:#?}");
+    }
+
+    /// A configuration copied out of the clone finds its model files: read beside it when
+    /// there, else the embedded copy of the same name; a file that is there but broken is
+    /// an error; a name found in neither place is an error naming both places. (A copied
+    /// `default.toml` failed with `: cannot read config`, naming no path.)
+    #[test]
+    fn files_a_configuration_names_are_read_beside_it_or_embedded() {
+        let tmp = crate::scratch::dir("beside");
+        let copy = tmp.path().join("default.toml");
+        std::fs::write(&copy, Embedded.read(DEFAULT_CONFIG).unwrap().as_ref()).unwrap();
+        let (source, name) = BesideOrEmbedded::for_file(&copy);
+        assert_eq!(name, "default.toml");
+        let embedded = Embedded.read("vehicles/mako.toml").unwrap();
+        assert_eq!(source.read("vehicles/mako.toml").unwrap(), embedded);
+        assert_eq!(source.describe("vehicles/mako.toml"), "<embedded>/vehicles/mako.toml");
+
+        std::fs::create_dir(tmp.path().join("vehicles")).unwrap();
+        let mine = tmp.path().join("vehicles/mako.toml");
+        std::fs::write(&mine, "# mine\n").unwrap();
+        assert_eq!(source.read("vehicles/mako.toml").unwrap(), "# mine\n");
+        assert_eq!(source.describe("vehicles/mako.toml"), mine.display().to_string());
+        std::fs::remove_file(&mine).unwrap();
+        std::fs::create_dir(&mine).unwrap();
+        let err = source.read("vehicles/mako.toml").unwrap_err().to_string();
+        assert!(err.contains("a directory"), "not replaced by the embedded copy: {err}");
+
+        let err = source.read("vehicles/nowhere.toml").unwrap_err().to_string();
+        let tried = tmp.path().join("vehicles/nowhere.toml").display().to_string();
+        assert!(
+            err.contains(&tried) && err.contains("embedded `vehicles/nowhere.toml`"),
+            "{err}"
+        );
+        assert!(!err.contains(": :"), "{err}");
+    }
+
+    /// A configuration named by its path in the clone is the embedded one when that path does
+    /// not exist here (the README says the configs are embedded): `simulate
+    /// configs/experiments/acceleration.toml` worked only inside the clone.
+    #[test]
+    fn a_missing_path_to_an_embedded_config_is_the_embedded_config() {
+        let tmp = crate::scratch::dir("embedded-path");
+        let path = tmp.path().join("configs/experiments/acceleration.toml");
+        let (source, name) = BesideOrEmbedded::for_file(&path);
+        assert_eq!(name, "experiments/acceleration.toml");
+        assert_eq!(source.root(), None);
+        assert_eq!(
+            source.read(&name).unwrap(),
+            Embedded.read("experiments/acceleration.toml").unwrap()
+        );
+        // A mistyped path is an error naming it, not the embedded file of that name.
+        let typo = tmp.path().join("my/default.toml");
+        let (source, name) = BesideOrEmbedded::for_file(&typo);
+        let err = source.read(&name).unwrap_err().to_string();
+        assert!(err.contains(&typo.display().to_string()), "{err}");
     }
 }
