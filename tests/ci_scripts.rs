@@ -27,11 +27,7 @@ fn executable(path: &Path, text: &str) {
 /// runs its command, and an `apt-get` that fails its first `locked` calls the way apt does when
 /// another package manager holds the lock, then fails with `then_status` (0: succeeds).
 /// Returns the script's output and the `apt-get` calls made, one a line.
-fn install_deps_with(
-    locked: u32,
-    then_status: u32,
-    wait_s: u32,
-) -> (std::process::Output, String) {
+fn install_deps_with(locked: u32, then_status: u32, wait_s: u32) -> (std::process::Output, String) {
     let bash = require_tool("bash", "bash");
     let dir = TempDir::new("install-deps");
     let bin = dir.join("bin");
@@ -76,7 +72,11 @@ fn install_deps_waits_for_a_held_apt_lock() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{out:?}");
     let calls: Vec<&str> = calls.lines().collect();
-    assert_eq!(calls.len(), 4, "two locked updates, one update, one install: {calls:?}");
+    assert_eq!(
+        calls.len(),
+        4,
+        "two locked updates, one update, one install: {calls:?}"
+    );
     assert!(calls[..3].iter().all(|c| c.contains("update")), "{calls:?}");
     assert!(calls[3].contains("install"), "{calls:?}");
     assert!(
@@ -95,7 +95,10 @@ fn install_deps_gives_up_on_a_lock_after_its_bound_and_at_once_on_other_errors()
     assert!(!out.status.success(), "{out:?}");
     assert!(stderr.contains("Could not get lock"), "{stderr}");
     assert!(stderr.contains("apt-get update failed"), "{stderr}");
-    assert!(calls.lines().count() >= 2, "retried within the bound: {calls}");
+    assert!(
+        calls.lines().count() >= 2,
+        "retried within the bound: {calls}"
+    );
 
     let (out, calls) = install_deps_with(0, 100, 60);
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -186,7 +186,12 @@ fn the_hello_reply_example_is_what_the_daemon_answers() {
     let mut sensor = Wire::open(&d.link("sensor"));
     sensor.send(&hello.bytes);
     let got = sensor.next_frame("the hello reply", WAIT);
-    assert_eq!(frame_bytes(got.seq, got.message), reply.bytes, "{:?}", got.message);
+    assert_eq!(
+        frame_bytes(got.seq, got.message),
+        reply.bytes,
+        "{:?}",
+        got.message
+    );
     d.stop();
 
     let realtime_caps = spec_hex_after("In real time the same bridge\nannounces `");

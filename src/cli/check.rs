@@ -340,7 +340,8 @@ fn fresh_dir(dir: &Path) -> Result<(), CliError> {
 }
 
 pub fn main(args: CheckArgs) -> Result<(), CliError> {
-    let text = std::fs::read_to_string(&args.scenario).map_err(|e| err_io("read", &args.scenario, e))?;
+    let text =
+        std::fs::read_to_string(&args.scenario).map_err(|e| err_io("read", &args.scenario, e))?;
     let scenario: Scenario = toml::from_str(&text).map_err(|e| {
         CliError::Usage(format!(
             "{}: not a scenario: {}",
@@ -445,8 +446,8 @@ fn start_daemon(scenario: &Scenario, base: &Path, out: &Path) -> Result<Child, C
         .stdout(Stdio::piped())
         .stderr(log);
     if let Some(config) = &scenario.config {
-        let path =
-            std::fs::canonicalize(base.join(config)).map_err(|e| err_io("read", &base.join(config), e))?;
+        let path = std::fs::canonicalize(base.join(config))
+            .map_err(|e| err_io("read", &base.join(config), e))?;
         cmd.arg("--config").arg(path);
     }
     match &scenario.start {
@@ -543,8 +544,10 @@ fn run_program(
     };
     let stdout_path = out.join("program.out");
     let stderr_path = out.join("program.err");
-    let stdout = std::fs::File::create(&stdout_path).map_err(|e| err_io("create", &stdout_path, e))?;
-    let stderr = std::fs::File::create(&stderr_path).map_err(|e| err_io("create", &stderr_path, e))?;
+    let stdout =
+        std::fs::File::create(&stdout_path).map_err(|e| err_io("create", &stdout_path, e))?;
+    let stderr =
+        std::fs::File::create(&stderr_path).map_err(|e| err_io("create", &stderr_path, e))?;
     let mut cmd = Command::new(exe);
     cmd.args(rest)
         .env("EYEBOT_RUN_DIR", out.join("run"))
@@ -622,7 +625,8 @@ fn write_junit(path: &Path, name: &str, verdicts: &[Verdict], wall_s: f64) -> Re
     }
     xml.push_str("  </testsuite>\n</testsuites>\n");
     let mut f = std::fs::File::create(path).map_err(|e| err_io("create", path, e))?;
-    f.write_all(xml.as_bytes()).map_err(|e| err_io("write", path, e))
+    f.write_all(xml.as_bytes())
+        .map_err(|e| err_io("write", path, e))
 }
 
 #[cfg(test)]

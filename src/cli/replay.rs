@@ -301,8 +301,9 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
     // A reader of standard output that stops early (`| head`) ends the replay quietly, as
     // it ends any Unix tool.
     if args.stdout
-        && let Err(crate::replay::ReplayError::Sink(crate::replay::SinkError::Io { source, .. })) =
-            &result
+        && let Err(crate::replay::ReplayError::Sink(crate::replay::SinkError::Io {
+            source, ..
+        })) = &result
         && source.kind() == std::io::ErrorKind::BrokenPipe
     {
         return Ok(());

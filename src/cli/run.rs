@@ -88,8 +88,7 @@ pub struct Loaded {
 /// Loads the daemon configuration, `--config FILE` or the embedded default, with
 /// `overrides` applied by [`DaemonConfig::resolve_with`].
 pub fn load_config(path: Option<&PathBuf>, overrides: &Overrides) -> Result<Loaded, CliError> {
-    let (source, file, base_dir): (Box<dyn ConfigSource>, String, Option<PathBuf>) = match path
-    {
+    let (source, file, base_dir): (Box<dyn ConfigSource>, String, Option<PathBuf>) = match path {
         Some(path) => {
             let (source, file) = BesideOrEmbedded::for_file(path);
             let base_dir = source.root().map(Path::to_path_buf);

@@ -275,7 +275,12 @@ impl ConfigSource for BesideOrEmbedded {
         }
         let beside = self.dir.as_ref().map_or_else(
             || "no file on disk (the configuration is embedded)".to_string(),
-            |d| format!("{} (files a configuration names are read beside it)", d.describe(name)),
+            |d| {
+                format!(
+                    "{} (files a configuration names are read beside it)",
+                    d.describe(name)
+                )
+            },
         );
         Embedded.read(name).map_err(|_| ConfigError::Unreadable {
             origin: self
@@ -485,7 +490,11 @@ mod tests {
     #[test]
     fn range_errors_write_extreme_values_short() {
         let doc = Document::new("v.toml", "[hull]\nmass_kg = 1e308\n");
-        for (value, shown) in [(1e308, "1e308 kg"), (1e-300, "1e-300 kg"), (-3.0, "-3.0 kg")] {
+        for (value, shown) in [
+            (1e308, "1e308 kg"),
+            (1e-300, "1e-300 kg"),
+            (-3.0, "-3.0 kg"),
+        ] {
             let err = doc
                 .check_range("hull.mass_kg", value, 1.0, 500.0, "kg")
                 .unwrap_err()
@@ -537,7 +546,10 @@ mod tests {
             }
         }
         let mut files = Vec::new();
-        walk(&Path::new(env!("CARGO_MANIFEST_DIR")).join("configs"), &mut files);
+        walk(
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs"),
+            &mut files,
+        );
         let mut citing = Vec::new();
         for file in files {
             let Ok(text) = std::fs::read_to_string(&file) else {
@@ -570,20 +582,36 @@ mod tests {
         assert_eq!(name, "default.toml");
         let embedded = Embedded.read("vehicles/mako.toml").unwrap();
         assert_eq!(source.read("vehicles/mako.toml").unwrap(), embedded);
-        assert_eq!(source.describe("vehicles/mako.toml"), "<embedded>/vehicles/mako.toml");
+        assert_eq!(
+            source.describe("vehicles/mako.toml"),
+            "<embedded>/vehicles/mako.toml"
+        );
 
         std::fs::create_dir(tmp.path().join("vehicles")).unwrap();
         let mine = tmp.path().join("vehicles/mako.toml");
         std::fs::write(&mine, "# mine\n").unwrap();
         assert_eq!(source.read("vehicles/mako.toml").unwrap(), "# mine\n");
-        assert_eq!(source.describe("vehicles/mako.toml"), mine.display().to_string());
+        assert_eq!(
+            source.describe("vehicles/mako.toml"),
+            mine.display().to_string()
+        );
         std::fs::remove_file(&mine).unwrap();
         std::fs::create_dir(&mine).unwrap();
         let err = source.read("vehicles/mako.toml").unwrap_err().to_string();
-        assert!(err.contains("a directory"), "not replaced by the embedded copy: {err}");
+        assert!(
+            err.contains("a directory"),
+            "not replaced by the embedded copy: {err}"
+        );
 
-        let err = source.read("vehicles/nowhere.toml").unwrap_err().to_string();
-        let tried = tmp.path().join("vehicles/nowhere.toml").display().to_string();
+        let err = source
+            .read("vehicles/nowhere.toml")
+            .unwrap_err()
+            .to_string();
+        let tried = tmp
+            .path()
+            .join("vehicles/nowhere.toml")
+            .display()
+            .to_string();
         assert!(
             err.contains(&tried) && err.contains("embedded `vehicles/nowhere.toml`"),
             "{err}"

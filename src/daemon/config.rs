@@ -692,19 +692,31 @@ mod tests {
     /// rule (`../../../escaped-sonar` was accepted).
     #[test]
     fn a_pty_path_outside_the_run_directory_is_refused() {
-        for bad in ["../../../escaped-sonar", "/tmp/sonar", "a/../../sonar", ".", ".."] {
+        for bad in [
+            "../../../escaped-sonar",
+            "/tmp/sonar",
+            "a/../../sonar",
+            ".",
+            "..",
+        ] {
             let by = format!("path = \"{bad}\"");
             let err = with(&[("path = \"sonar\"", by.as_str())]).unwrap_err();
             assert!(
                 matches!(&err, ConfigError::Invalid { key, line: Some(_), .. } if key == "links.sonar.path"),
                 "{bad}: {err}"
             );
-            assert!(err.to_string().contains("leaves the run directory"), "{bad}: {err}");
+            assert!(
+                err.to_string().contains("leaves the run directory"),
+                "{bad}: {err}"
+            );
         }
         for good in ["sonar", "./sonar", "links/sonar"] {
             let by = format!("path = \"{good}\"");
             let config = with(&[("path = \"sonar\"", by.as_str())]).unwrap();
-            assert!(matches!(config.sonar.endpoint, Endpoint::Pty { .. }), "{good}");
+            assert!(
+                matches!(config.sonar.endpoint, Endpoint::Pty { .. }),
+                "{good}"
+            );
         }
     }
 

@@ -494,10 +494,10 @@ mod tests {
     /// `the daemon configuration:?:`).
     #[test]
     fn a_start_outside_the_pool_names_file_and_line() {
-        let text = Embedded
-            .read(DEFAULT_CONFIG)
-            .unwrap()
-            .replace("position_m = [3.0, 2.5, 0.3]", "position_m = [300.0, 2.5, 0.3]");
+        let text = Embedded.read(DEFAULT_CONFIG).unwrap().replace(
+            "position_m = [3.0, 2.5, 0.3]",
+            "position_m = [300.0, 2.5, 0.3]",
+        );
         let config = DaemonConfig::resolve(&Document::new("my/default.toml", &text)).unwrap();
         let line = text
             .lines()

@@ -344,7 +344,10 @@ mod tests {
             .unwrap_err();
         let text = err.to_string();
         assert!(matches!(err, StatusError::NoDaemon { .. }), "{text}");
-        assert!(text.starts_with("no daemon runs here") && text.contains("--run-dir"), "{text}");
+        assert!(
+            text.starts_with("no daemon runs here") && text.contains("--run-dir"),
+            "{text}"
+        );
         // A socket file left by a daemon that ended: connection refused, the same answer.
         let stale = tmp.path().join("stale.sock");
         drop(std::os::unix::net::UnixListener::bind(&stale).unwrap());

@@ -477,8 +477,11 @@ mod tests {
         prop_oneof![
             Just(Before::Missing),
             Just(Before::Empty),
-            prop::collection::vec((recording_file, prop::collection::vec(any::<u8>(), 0..64)), 1..6)
-                .prop_map(Before::Recording),
+            prop::collection::vec(
+                (recording_file, prop::collection::vec(any::<u8>(), 0..64)),
+                1..6
+            )
+            .prop_map(Before::Recording),
             prop::collection::vec(("[.]?[a-z]{1,8}", 0u8..3), 1..4).prop_map(Before::Other),
         ]
     }

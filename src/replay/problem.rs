@@ -71,9 +71,7 @@ impl ProblemKind {
             ProblemKind::MissingLf => "CR without LF",
             ProblemKind::ReadFailed { .. } => "input cut short",
             ProblemKind::NoLineEnding => "no line ending at end of file",
-            ProblemKind::BadTimestamp { .. } | ProblemKind::BadRecordTime { .. } => {
-                "bad timestamp"
-            }
+            ProblemKind::BadTimestamp { .. } | ProblemKind::BadRecordTime { .. } => "bad timestamp",
             ProblemKind::TimeWentBack { .. } => "time went back",
             ProblemKind::BadRecordLine { .. } => "bad bytes.tsv line",
             ProblemKind::BadSerialComment { .. } => "bad #Serial comment",

@@ -259,6 +259,9 @@ mod tests {
         let listed: Vec<(f64, u64)> = s.gaps.iter().map(|g| (g.seconds, g.at.line)).collect();
         assert_eq!(listed, vec![(5.0, 2)]);
         let text = s.stats_text();
-        assert!(text.contains("gaps over 1 s: 1; largest:\n  5.000 s before a.log:2\n"), "{text}");
+        assert!(
+            text.contains("gaps over 1 s: 1; largest:\n  5.000 s before a.log:2\n"),
+            "{text}"
+        );
     }
 }

@@ -129,8 +129,7 @@ fn times_far_apart_do_not_overflow() {
 #[test]
 fn every_line_is_accounted_for_once() {
     let data =
-        b"#Serial: 9600 8N1\n# c\n\n1.0 $A*41\r\nbad $A*41\r\n2.0 $B*42\r\n\n#x\nxx\n3 $C"
-            .to_vec();
+        b"#Serial: 9600 8N1\n# c\n\n1.0 $A*41\r\nbad $A*41\r\n2.0 $B*42\r\n\n#x\nxx\n3 $C".to_vec();
     let mut s = from_bytes(data);
     let ev = drain(&mut s);
     let lines = ev.iter().filter(|e| matches!(e, Event::Line(_))).count() as u64;

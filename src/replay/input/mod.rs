@@ -34,10 +34,10 @@ use super::output::Shutdown;
 
 pub use super::line::{Loc, MAX_PHYSICAL_LINE, Terminator, TimestampForm};
 use super::problem::{Action, Problem, ProblemKind};
-pub use open::{STDIN, is_stdin, open_reader, read_capped, resolve_path};
-pub use timestamp::{classify, decide_form, parse_iso8601, parse_seconds};
 use open::decompressing;
+pub use open::{STDIN, is_stdin, open_reader, read_capped, resolve_path};
 use timestamp::split_prefix;
+pub use timestamp::{classify, decide_form, parse_iso8601, parse_seconds};
 
 /// How many data lines at the start of a file decide its timestamp form.
 pub const DETECT_LINES: usize = 8;
@@ -566,7 +566,6 @@ impl Source {
         }
         self.last_time_ns = Some(self.last_time_ns.map_or(time_ns, |l| l.max(time_ns)));
     }
-
 }
 
 #[cfg(test)]
