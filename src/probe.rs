@@ -288,3 +288,34 @@ async fn read_more(
         }),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A time request refused with BAD_STATE says what to do: the daemon runs in real time
+    /// (`probe advance` said only `BadState (detail 0)`). Other refusals keep the code alone.
+    #[test]
+    fn a_time_request_refused_in_real_time_says_to_start_in_lockstep() {
+        let refused = |what, code| {
+            ProbeError::Refused {
+                path: "run/sensor".into(),
+                what,
+                code,
+                detail: 0,
+            }
+            .to_string()
+        };
+        for what in ["TIME_ADVANCE", "TIME_STEP"] {
+            let text = refused(what, sensor_link::ErrorCode::BadState);
+            assert!(
+                text.ends_with(
+                    "the daemon runs in real time; start it with `--time-mode lockstep`"
+                ),
+                "{text}"
+            );
+        }
+        let other = refused("ADC_READ", sensor_link::ErrorCode::BadState);
+        assert!(other.ends_with("BadState (detail 0)"), "{other}");
+    }
+}
