@@ -37,7 +37,7 @@ pub enum ProbeError {
         attempts: u32,
         timeout: Duration,
     },
-    #[error("{path}: the bridge refused {what}: {code:?} (detail {detail})")]
+    #[error("{path}: the bridge refused {what}: {code:?} (detail {detail}){}", refusal_hint(what, *code))]
     Refused {
         path: String,
         what: &'static str,
@@ -46,6 +46,17 @@ pub enum ProbeError {
     },
     #[error("{path}: the link closed")]
     Closed { path: String },
+}
+
+/// What a refusal means for the user, where the code alone does not say it: a time request
+/// in real time is answered BAD_STATE (PROTOCOL.md 2.8, 2.9).
+fn refusal_hint(what: &str, code: sensor_link::ErrorCode) -> &'static str {
+    match (what, code) {
+        ("TIME_ADVANCE" | "TIME_STEP", sensor_link::ErrorCode::BadState) => {
+            ": the daemon runs in real time; start it with `--time-mode lockstep`"
+        }
+        _ => "",
+    }
 }
 
 /// Reply timeout and retries (PROTOCOL.md 2.2).
@@ -275,5 +286,36 @@ async fn read_more(
             path: path.to_string(),
             source,
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A time request refused with BAD_STATE says what to do: the daemon runs in real time
+    /// (`probe advance` said only `BadState (detail 0)`). Other refusals keep the code alone.
+    #[test]
+    fn a_time_request_refused_in_real_time_says_to_start_in_lockstep() {
+        let refused = |what, code| {
+            ProbeError::Refused {
+                path: "run/sensor".into(),
+                what,
+                code,
+                detail: 0,
+            }
+            .to_string()
+        };
+        for what in ["TIME_ADVANCE", "TIME_STEP"] {
+            let text = refused(what, sensor_link::ErrorCode::BadState);
+            assert!(
+                text.ends_with(
+                    "the daemon runs in real time; start it with `--time-mode lockstep`"
+                ),
+                "{text}"
+            );
+        }
+        let other = refused("ADC_READ", sensor_link::ErrorCode::BadState);
+        assert!(other.ends_with("BadState (detail 0)"), "{other}");
     }
 }

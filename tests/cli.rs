@@ -98,6 +98,66 @@ fn reports_end_quietly_when_their_reader_is_gone() {
     }
 }
 
+/// `replay --stdout | head` ends quietly with status 0 when its reader stops, as Unix tools
+/// do; it ended with `writing to stdout: Broken pipe` and status 1.
+#[test]
+fn replay_to_stdout_ends_quietly_when_its_reader_stops() {
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let out = Command::new(BIN)
+        .args(["replay", "--pacing", "fast", "--stdout"])
+        .arg(depth_log())
+        .stdout(writer)
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    assert!(!stderr.contains("Broken pipe"), "{stderr}");
+}
+
+/// `simulate configs/experiments/acceleration.toml`, the README's command, works outside the
+/// clone: the path names an embedded config (it failed with `cannot read config`).
+#[test]
+fn simulate_reads_an_embedded_experiment_by_its_path_outside_the_clone() {
+    let dir = TempDir::new("simulate-outside");
+    let out = Command::new(BIN)
+        .current_dir(dir.path())
+        .args([
+            "simulate",
+            "configs/experiments/acceleration.toml",
+            "--out",
+            "run.csv",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let csv = std::fs::read_to_string(dir.join("run.csv")).unwrap();
+    assert!(csv.lines().count() > 10, "{csv}");
+}
+
+/// `check` on a scenario file that does not exist says it cannot *read* it (it said
+/// `cannot write`).
+#[test]
+fn check_names_a_missing_scenario_as_unreadable() {
+    let dir = TempDir::new("check-missing");
+    let missing = dir.join("missing.toml");
+    let out = Command::new(BIN)
+        .arg("check")
+        .arg(&missing)
+        .args(["--out"])
+        .arg(dir.join("out"))
+        .args(["--", "true"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{out:?}");
+    assert!(
+        stderr.contains(&format!("cannot read `{}`", missing.display())),
+        "{stderr}"
+    );
+}
+
 /// A long-running command carries on when nobody reads its standard output: `replay --pty`
 /// with standard output closed still sends every sentence and removes its symlink, as the
 /// daemon ignores a closed pipe for its readiness lines. Its announcement line panicked.

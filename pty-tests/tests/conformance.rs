@@ -169,6 +169,58 @@ fn every_request_example_gets_a_reply_the_message_table_allows() {
     d.stop();
 }
 
+/// The `hello` example, sent as written to a lockstep daemon of the default configuration, is
+/// answered by the `hello-reply` example byte for byte; in real time the capabilities are the
+/// `0x003F` the text under that example gives. (The example said `0x007F`, which no bridge
+/// sends, and nothing compared it with the daemon.)
+#[test]
+fn the_hello_reply_example_is_what_the_daemon_answers() {
+    let example = |name: &str| {
+        common::examples()
+            .into_iter()
+            .find(|e| e.name == name)
+            .unwrap_or_else(|| panic!("PROTOCOL.md has no `{name}` example"))
+    };
+    let (hello, reply) = (example("hello"), example("hello-reply"));
+    let mut d = daemon("conf-hello-lockstep", true);
+    let mut sensor = Wire::open(&d.link("sensor"));
+    sensor.send(&hello.bytes);
+    let got = sensor.next_frame("the hello reply", WAIT);
+    assert_eq!(
+        frame_bytes(got.seq, got.message),
+        reply.bytes,
+        "{:?}",
+        got.message
+    );
+    d.stop();
+
+    let realtime_caps = spec_hex_after("In real time the same bridge\nannounces `");
+    let mut d = daemon("conf-hello-realtime", false);
+    let mut sensor = Wire::open(&d.link("sensor"));
+    match sensor.ask(0, Message::Hello { client_version: 1 }) {
+        Message::HelloReply { capabilities, .. } => assert_eq!(
+            capabilities, realtime_caps,
+            "real time: {capabilities:#06x}, PROTOCOL.md says {realtime_caps:#06x}"
+        ),
+        other => panic!("hello answered {other:?}"),
+    }
+    d.stop();
+}
+
+/// The hex number `0x....` that follows `prefix` in PROTOCOL.md.
+fn spec_hex_after(prefix: &str) -> u16 {
+    let at = SPEC
+        .find(prefix)
+        .unwrap_or_else(|| panic!("PROTOCOL.md lost {prefix:?}"))
+        + prefix.len();
+    let digits: String = SPEC[at..]
+        .trim_start_matches("0x")
+        .chars()
+        .take_while(char::is_ascii_hexdigit)
+        .collect();
+    u16::from_str_radix(&digits, 16).unwrap_or_else(|_| panic!("no hex after {prefix:?}"))
+}
+
 /// Section 3's receiving table, row by row against the daemon: the input the row describes,
 /// then a probe that must be answered normally; between them exactly the "bridge answer".
 #[test]

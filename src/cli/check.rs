@@ -317,8 +317,9 @@ struct Verdict {
     result: Result<String, String>,
 }
 
-fn err_io(path: &Path, source: std::io::Error) -> CliError {
+fn err_io(doing: &'static str, path: &Path, source: std::io::Error) -> CliError {
     CliError::Io {
+        doing,
         path: path.to_path_buf(),
         source,
     }
@@ -335,14 +336,15 @@ fn fresh_dir(dir: &Path) -> Result<(), CliError> {
                 dir.display()
             )));
         }
-        std::fs::remove_dir_all(dir).map_err(|e| err_io(dir, e))?;
+        std::fs::remove_dir_all(dir).map_err(|e| err_io("remove", dir, e))?;
     }
-    std::fs::create_dir_all(dir).map_err(|e| err_io(dir, e))?;
-    std::fs::write(dir.join(MARKER), "").map_err(|e| err_io(dir, e))
+    std::fs::create_dir_all(dir).map_err(|e| err_io("create", dir, e))?;
+    std::fs::write(dir.join(MARKER), "").map_err(|e| err_io("write", &dir.join(MARKER), e))
 }
 
 pub fn main(args: CheckArgs) -> Result<(), CliError> {
-    let text = std::fs::read_to_string(&args.scenario).map_err(|e| err_io(&args.scenario, e))?;
+    let text =
+        std::fs::read_to_string(&args.scenario).map_err(|e| err_io("read", &args.scenario, e))?;
     let scenario: Scenario = toml::from_str(&text).map_err(|e| {
         CliError::Usage(format!(
             "{}: not a scenario: {}",
@@ -360,7 +362,7 @@ pub fn main(args: CheckArgs) -> Result<(), CliError> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("check-{name}")));
     fresh_dir(&out)?;
-    let out = std::fs::canonicalize(&out).map_err(|e| err_io(&out, e))?;
+    let out = std::fs::canonicalize(&out).map_err(|e| err_io("resolve", &out, e))?;
     let base = args.scenario.parent().unwrap_or(Path::new("."));
 
     let mut daemon = start_daemon(&scenario, base, &out)?;
@@ -427,9 +429,9 @@ fn pool_of(scenario: &Scenario, base: &Path) -> Result<(f64, f64), CliError> {
 }
 
 fn start_daemon(scenario: &Scenario, base: &Path, out: &Path) -> Result<Child, CliError> {
-    let exe = std::env::current_exe().map_err(|e| err_io(Path::new("eyebot-hil"), e))?;
+    let exe = std::env::current_exe().map_err(|e| err_io("find", Path::new("eyebot-hil"), e))?;
     let log = std::fs::File::create(out.join("daemon.log"))
-        .map_err(|e| err_io(&out.join("daemon.log"), e))?;
+        .map_err(|e| err_io("create", &out.join("daemon.log"), e))?;
     let mut cmd = Command::new(exe);
     cmd.current_dir(out)
         .args([
@@ -447,8 +449,8 @@ fn start_daemon(scenario: &Scenario, base: &Path, out: &Path) -> Result<Child, C
         .stdout(Stdio::piped())
         .stderr(log);
     if let Some(config) = &scenario.config {
-        let path =
-            std::fs::canonicalize(base.join(config)).map_err(|e| err_io(&base.join(config), e))?;
+        let path = std::fs::canonicalize(base.join(config))
+            .map_err(|e| err_io("read", &base.join(config), e))?;
         cmd.arg("--config").arg(path);
     }
     match &scenario.start {
@@ -462,7 +464,7 @@ fn start_daemon(scenario: &Scenario, base: &Path, out: &Path) -> Result<Child, C
     }
     let mut child = cmd
         .spawn()
-        .map_err(|e| err_io(Path::new("eyebot-hil run"), e))?;
+        .map_err(|e| err_io("run", Path::new("eyebot-hil run"), e))?;
     let Some(stdout) = child.stdout.take() else {
         return Err(CliError::Usage("the daemon's stdout is not a pipe".into()));
     };
@@ -545,8 +547,10 @@ fn run_program(
     };
     let stdout_path = out.join("program.out");
     let stderr_path = out.join("program.err");
-    let stdout = std::fs::File::create(&stdout_path).map_err(|e| err_io(&stdout_path, e))?;
-    let stderr = std::fs::File::create(&stderr_path).map_err(|e| err_io(&stderr_path, e))?;
+    let stdout =
+        std::fs::File::create(&stdout_path).map_err(|e| err_io("create", &stdout_path, e))?;
+    let stderr =
+        std::fs::File::create(&stderr_path).map_err(|e| err_io("create", &stderr_path, e))?;
     let mut cmd = Command::new(exe);
     cmd.args(rest)
         .env("EYEBOT_RUN_DIR", out.join("run"))
@@ -582,7 +586,7 @@ fn run_program(
                 break Ended::TimedOut(limit);
             }
             Ok(None) => std::thread::sleep(Duration::from_millis(10)),
-            Err(e) => return Err(err_io(Path::new(exe), e)),
+            Err(e) => return Err(err_io("wait for", Path::new(exe), e)),
         }
     };
     let stderr_tail = std::fs::read_to_string(&stderr_path)
@@ -627,8 +631,9 @@ fn write_junit(path: &Path, name: &str, verdicts: &[Verdict], wall_s: f64) -> Re
         }
     }
     xml.push_str("  </testsuite>\n</testsuites>\n");
-    let mut f = std::fs::File::create(path).map_err(|e| err_io(path, e))?;
-    f.write_all(xml.as_bytes()).map_err(|e| err_io(path, e))
+    let mut f = std::fs::File::create(path).map_err(|e| err_io("create", path, e))?;
+    f.write_all(xml.as_bytes())
+        .map_err(|e| err_io("write", path, e))
 }
 
 #[cfg(test)]

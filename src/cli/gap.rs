@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::cli::CliError;
 use crate::cli::output::{errln, outln};
-use crate::config::{ConfigSource, Directory, Document};
+use crate::config::{BesideOrEmbedded, ConfigSource, Document};
 use crate::gap::format::Measurement;
 use crate::gap::model::GapModel;
 use crate::gap::{self, GapError, effects, generate, report};
@@ -559,7 +559,7 @@ fn run_convert(c: &ConvertArgs) -> Result<(), CliError> {
 
 fn run_generate(g: &GenerateArgs) -> Result<(), CliError> {
     let truth = GapModel::load(&g.truth)?;
-    let (dir, name) = Directory::for_file(&g.schedule);
+    let (dir, name) = BesideOrEmbedded::for_file(&g.schedule);
     let text = dir.read(&name)?;
     let schedule = Experiment::from_document(&Document::new(dir.describe(&name), &text))?;
     let info = generate::setup(&truth, &schedule, g.camera_std_m);

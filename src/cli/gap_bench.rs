@@ -254,6 +254,7 @@ fn report(table: &str, results: &[CaseResult]) -> String {
 
 fn write(path: &PathBuf, text: &str) -> Result<(), CliError> {
     std::fs::write(path, text).map_err(|source| CliError::Io {
+        doing: "write",
         path: path.clone(),
         source,
     })

@@ -87,8 +87,11 @@ pub enum CliError {
     CheckFailed { failed: usize, total: usize },
     #[error("{failed} of {total} validation rows failed")]
     ValidationFailed { failed: usize, total: usize },
-    #[error("cannot write `{}`: {source}", path.display())]
+    /// A file or program the command needed failed; `doing` is what was tried (`read`,
+    /// `write`, `create`, `remove`, `run`, `wait for`, `resolve`).
+    #[error("cannot {doing} `{}`: {source}", path.display())]
     Io {
+        doing: &'static str,
         path: PathBuf,
         source: std::io::Error,
     },

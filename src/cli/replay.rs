@@ -298,6 +298,16 @@ pub fn main(args: ReplayArgs) -> Result<(), ReplayCliError> {
     if let Some(bar) = &terminal.bar {
         bar.finish_and_clear();
     }
+    // A reader of standard output that stops early (`| head`) ends the replay quietly, as
+    // it ends any Unix tool.
+    if args.stdout
+        && let Err(crate::replay::ReplayError::Sink(crate::replay::SinkError::Io {
+            source, ..
+        })) = &result
+        && source.kind() == std::io::ErrorKind::BrokenPipe
+    {
+        return Ok(());
+    }
     let summary = result?;
     if stop.is_triggered() {
         errln!(

@@ -8,7 +8,7 @@ use tokio::sync::watch;
 
 use super::CliError;
 use crate::cli::output::errln;
-use crate::config::{ConfigSource, DEFAULT_CONFIG, Directory, Document, Embedded};
+use crate::config::{BesideOrEmbedded, ConfigSource, DEFAULT_CONFIG, Document, Embedded};
 use crate::daemon::config::{DaemonConfig, Overrides, TimeModeName};
 use crate::daemon::course::StartChoice;
 use crate::daemon::{self, Readiness, RunOptions};
@@ -88,10 +88,11 @@ pub struct Loaded {
 /// Loads the daemon configuration, `--config FILE` or the embedded default, with
 /// `overrides` applied by [`DaemonConfig::resolve_with`].
 pub fn load_config(path: Option<&PathBuf>, overrides: &Overrides) -> Result<Loaded, CliError> {
-    let (source, file, base_dir): (Box<dyn ConfigSource>, String, Option<&Path>) = match path {
+    let (source, file, base_dir): (Box<dyn ConfigSource>, String, Option<PathBuf>) = match path {
         Some(path) => {
-            let (dir, file) = Directory::for_file(path);
-            (Box::new(dir), file, path.parent())
+            let (source, file) = BesideOrEmbedded::for_file(path);
+            let base_dir = source.root().map(Path::to_path_buf);
+            (Box::new(source), file, base_dir)
         }
         None => (Box::new(Embedded), DEFAULT_CONFIG.to_string(), None),
     };
@@ -99,7 +100,7 @@ pub fn load_config(path: Option<&PathBuf>, overrides: &Overrides) -> Result<Load
     let config = DaemonConfig::resolve_with(
         &Document::new(source.describe(&file), &text),
         overrides,
-        base_dir,
+        base_dir.as_deref(),
     )?;
     let name = path.map_or_else(
         || format!("<embedded>/{DEFAULT_CONFIG}"),

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use crate::cli::CliError;
 use crate::cli::output::{errln, outln};
-use crate::config::{ConfigSource, Directory, Document, Embedded};
+use crate::config::{BesideOrEmbedded, ConfigSource, Document, Embedded};
 use crate::physics::experiment::{self, Experiment};
 use crate::physics::{self, DEFAULT_VEHICLE, DEFAULT_WORLD, Model};
 use crate::record::StateRow;
@@ -49,8 +49,8 @@ fn load_or_default<T>(
 ) -> Result<T, CliError> {
     Ok(match path {
         Some(p) => {
-            let (dir, name) = Directory::for_file(p);
-            load(&dir, &name)?
+            let (source, name) = BesideOrEmbedded::for_file(p);
+            load(&source, &name)?
         }
         None => load(&Embedded, default)?,
     })
@@ -63,7 +63,7 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
         physics::load_vehicle,
     )?;
     let world = load_or_default(args.world.as_deref(), DEFAULT_WORLD, physics::load_world)?;
-    let (dir, name) = Directory::for_file(&args.experiment);
+    let (dir, name) = BesideOrEmbedded::for_file(&args.experiment);
     let text = dir.read(&name)?;
     let exp = Experiment::from_document(&Document::new(dir.describe(&name), &text))?;
     let model = Model::new(vehicle, world);
@@ -73,11 +73,13 @@ pub fn run(args: &SimulateArgs) -> Result<(), CliError> {
         Box::new(std::io::stdout().lock())
     } else {
         Box::new(std::fs::File::create(&args.out).map_err(|e| CliError::Io {
+            doing: "create",
             path: args.out.clone(),
             source: e,
         })?)
     };
     let io = |e: std::io::Error| CliError::Io {
+        doing: "write",
         path: args.out.clone(),
         source: e,
     };

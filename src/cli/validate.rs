@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use crate::cli::CliError;
 use crate::cli::output::{out, outln};
-use crate::config::{ConfigSource, Directory, Embedded};
+use crate::config::{BesideOrEmbedded, ConfigSource, Directory, Embedded};
 use crate::thesis::{Context, Row, ValidateError, render_table};
 
 /// A producer of validation rows.
@@ -45,7 +45,7 @@ pub fn run(args: &ValidateArgs) -> Result<(), CliError> {
     let dir;
     let configs: &dyn ConfigSource = match &args.configs {
         Some(path) => {
-            dir = Directory::new(path);
+            dir = BesideOrEmbedded::new(Directory::new(path));
             &dir
         }
         None => &Embedded,

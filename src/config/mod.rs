@@ -77,7 +77,7 @@ pub enum ConfigError {
         message: String,
     },
     /// The TOML is well formed but a value is out of range or inconsistent.
-    #[error("{origin}:{}: `{key}`: {message}", line.map_or_else(|| "?".to_string(), |l| l.to_string()))]
+    #[error("{origin}:{} `{key}`: {message}", line.map_or_else(String::new, |l| format!("{l}:")))]
     Invalid {
         origin: String,
         key: String,
@@ -181,7 +181,7 @@ impl ConfigSource for Directory {
         read_config_file(&path)
             .map(Cow::Owned)
             .map_err(|reason| ConfigError::Unreadable {
-                origin: self.root.display().to_string(),
+                origin: path.display().to_string(),
                 name: name.to_string(),
                 reason,
             })
@@ -189,6 +189,121 @@ impl ConfigSource for Directory {
 
     fn describe(&self, name: &str) -> String {
         self.root.join(name).display().to_string()
+    }
+}
+
+/// The one rule for the files a configuration names (`vehicle`, `world`, `sensors`, an
+/// experiment's model files): read beside the configuration on disk, and when no file of
+/// that name is there, the embedded copy of the same name (the files under `configs/` at
+/// build time). A file that is there but cannot be read or parsed is an error, never
+/// replaced by the embedded copy. An error names both places looked in.
+#[derive(Debug, Clone)]
+pub struct BesideOrEmbedded {
+    /// `None` for an embedded configuration: its files are the embedded ones.
+    dir: Option<Directory>,
+    /// The configuration file itself, named on the command line: read from disk only, so a
+    /// mistyped path is an error rather than the embedded file of that name.
+    top: Option<String>,
+}
+
+impl BesideOrEmbedded {
+    pub fn new(dir: Directory) -> Self {
+        Self {
+            dir: Some(dir),
+            top: None,
+        }
+    }
+
+    /// The source of the files `file` names, and `file`'s name in it: its directory on disk,
+    /// with the embedded configs behind it. A `file` that does not exist on disk but whose
+    /// path ends in an embedded name (`configs/experiments/acceleration.toml` outside the
+    /// clone) is that embedded file.
+    pub fn for_file(file: &Path) -> (Self, String) {
+        if !file.exists()
+            && let Some(name) = embedded_name_of(file)
+        {
+            return (
+                Self {
+                    dir: None,
+                    top: None,
+                },
+                name,
+            );
+        }
+        let (dir, name) = Directory::for_file(file);
+        let source = Self {
+            dir: Some(dir),
+            top: Some(name.clone()),
+        };
+        (source, name)
+    }
+
+    /// The directory on disk, if the configuration is there.
+    pub fn root(&self) -> Option<&Path> {
+        self.dir.as_ref().map(Directory::root)
+    }
+
+    /// The directory on disk when it holds an entry `name`.
+    fn on_disk(&self, name: &str) -> Option<&Directory> {
+        self.dir
+            .as_ref()
+            .filter(|d| std::fs::symlink_metadata(d.root.join(name)).is_ok())
+    }
+}
+
+/// The embedded config that `file` names by its path in the clone (`configs/worlds/pool.toml`
+/// or `.../configs/worlds/pool.toml` -> `worlds/pool.toml`), if any. Only a path through
+/// `configs/` counts: a mistyped `my/default.toml` is an error, not the embedded default.
+fn embedded_name_of(file: &Path) -> Option<String> {
+    let text = file.to_string_lossy();
+    EMBEDDED_CONFIGS
+        .iter()
+        .map(|(n, _)| *n)
+        .find(|n| text == format!("configs/{n}") || text.ends_with(&format!("/configs/{n}")))
+        .map(str::to_string)
+}
+
+impl ConfigSource for BesideOrEmbedded {
+    fn read(&self, name: &str) -> Result<Cow<'static, str>, ConfigError> {
+        if let Some(dir) = self.on_disk(name) {
+            return dir.read(name);
+        }
+        if let Some(dir) = &self.dir
+            && self.top.as_deref() == Some(name)
+        {
+            return dir.read(name);
+        }
+        let beside = self.dir.as_ref().map_or_else(
+            || "no file on disk (the configuration is embedded)".to_string(),
+            |d| {
+                format!(
+                    "{} (files a configuration names are read beside it)",
+                    d.describe(name)
+                )
+            },
+        );
+        Embedded.read(name).map_err(|_| ConfigError::Unreadable {
+            origin: self
+                .dir
+                .as_ref()
+                .map_or_else(|| Embedded.describe(name), |d| d.describe(name)),
+            name: name.to_string(),
+            reason: format!(
+                "no such file; looked for {beside} and for an embedded `{name}` (embedded are: {})",
+                EMBEDDED_CONFIGS
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })
+    }
+
+    fn describe(&self, name: &str) -> String {
+        match self.on_disk(name) {
+            Some(dir) => dir.describe(name),
+            None => Embedded.describe(name),
+        }
     }
 }
 
@@ -276,7 +391,8 @@ impl<'a> Document<'a> {
         } else {
             Err(self.invalid(
                 key,
-                format!("{value} {unit} is outside the allowed range {min}..={max} {unit}"),
+                // `{:?}` writes 1e308 as `1e308`, not as 309 digits.
+                format!("{value:?} {unit} is outside the allowed range {min}..={max} {unit}"),
             ))
         }
     }
@@ -370,6 +486,23 @@ mod tests {
         );
     }
 
+    /// A range error writes a huge or tiny value as `1e308`, not as its 309 digits.
+    #[test]
+    fn range_errors_write_extreme_values_short() {
+        let doc = Document::new("v.toml", "[hull]\nmass_kg = 1e308\n");
+        for (value, shown) in [
+            (1e308, "1e308 kg"),
+            (1e-300, "1e-300 kg"),
+            (-3.0, "-3.0 kg"),
+        ] {
+            let err = doc
+                .check_range("hull.mass_kg", value, 1.0, 500.0, "kg")
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(shown) && err.len() < 120, "{err}");
+        }
+    }
+
     #[test]
     fn line_of_follows_arrays_of_tables() {
         let doc = Document::new("v.toml", "[[thruster]]\ngain = 1\n[[thruster]]\ngain = 2\n");
@@ -395,5 +528,115 @@ mod tests {
                 "embedded {name} differs from configs/{name}"
             );
         }
+    }
+
+    /// A config comment says what a value is and why, like a code comment; where a number
+    /// came from in the project's history belongs in git. No file under `configs/` cites an
+    /// issue (`pool.toml` said "issue 3 default").
+    #[test]
+    fn config_comments_cite_no_work_history() {
+        fn walk(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+            for entry in std::fs::read_dir(dir).expect("list configs") {
+                let path = entry.expect("a directory entry").path();
+                if path.is_dir() {
+                    walk(&path, out);
+                } else {
+                    out.push(path);
+                }
+            }
+        }
+        let mut files = Vec::new();
+        walk(
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs"),
+            &mut files,
+        );
+        let mut citing = Vec::new();
+        for file in files {
+            let Ok(text) = std::fs::read_to_string(&file) else {
+                continue;
+            };
+            for (n, line) in text.lines().enumerate() {
+                let lower = line.to_lowercase();
+                let cites = lower.match_indices("issue").any(|(at, _)| {
+                    let rest = lower[at + "issue".len()..].trim_start_matches([' ', '#']);
+                    rest.starts_with(|c: char| c.is_ascii_digit())
+                });
+                if cites || lower.contains("session") {
+                    citing.push(format!("{}:{}: {line}", file.display(), n + 1));
+                }
+            }
+        }
+        assert!(citing.is_empty(), "{citing:#?}");
+    }
+
+    /// A configuration copied out of the clone finds its model files: read beside it when
+    /// there, else the embedded copy of the same name; a file that is there but broken is
+    /// an error; a name found in neither place is an error naming both places. (A copied
+    /// `default.toml` failed with `: cannot read config`, naming no path.)
+    #[test]
+    fn files_a_configuration_names_are_read_beside_it_or_embedded() {
+        let tmp = crate::scratch::dir("beside");
+        let copy = tmp.path().join("default.toml");
+        std::fs::write(&copy, Embedded.read(DEFAULT_CONFIG).unwrap().as_ref()).unwrap();
+        let (source, name) = BesideOrEmbedded::for_file(&copy);
+        assert_eq!(name, "default.toml");
+        let embedded = Embedded.read("vehicles/mako.toml").unwrap();
+        assert_eq!(source.read("vehicles/mako.toml").unwrap(), embedded);
+        assert_eq!(
+            source.describe("vehicles/mako.toml"),
+            "<embedded>/vehicles/mako.toml"
+        );
+
+        std::fs::create_dir(tmp.path().join("vehicles")).unwrap();
+        let mine = tmp.path().join("vehicles/mako.toml");
+        std::fs::write(&mine, "# mine\n").unwrap();
+        assert_eq!(source.read("vehicles/mako.toml").unwrap(), "# mine\n");
+        assert_eq!(
+            source.describe("vehicles/mako.toml"),
+            mine.display().to_string()
+        );
+        std::fs::remove_file(&mine).unwrap();
+        std::fs::create_dir(&mine).unwrap();
+        let err = source.read("vehicles/mako.toml").unwrap_err().to_string();
+        assert!(
+            err.contains("a directory"),
+            "not replaced by the embedded copy: {err}"
+        );
+
+        let err = source
+            .read("vehicles/nowhere.toml")
+            .unwrap_err()
+            .to_string();
+        let tried = tmp
+            .path()
+            .join("vehicles/nowhere.toml")
+            .display()
+            .to_string();
+        assert!(
+            err.contains(&tried) && err.contains("embedded `vehicles/nowhere.toml`"),
+            "{err}"
+        );
+        assert!(!err.contains(": :"), "{err}");
+    }
+
+    /// A configuration named by its path in the clone is the embedded one when that path does
+    /// not exist here (the README says the configs are embedded): `simulate
+    /// configs/experiments/acceleration.toml` worked only inside the clone.
+    #[test]
+    fn a_missing_path_to_an_embedded_config_is_the_embedded_config() {
+        let tmp = crate::scratch::dir("embedded-path");
+        let path = tmp.path().join("configs/experiments/acceleration.toml");
+        let (source, name) = BesideOrEmbedded::for_file(&path);
+        assert_eq!(name, "experiments/acceleration.toml");
+        assert_eq!(source.root(), None);
+        assert_eq!(
+            source.read(&name).unwrap(),
+            Embedded.read("experiments/acceleration.toml").unwrap()
+        );
+        // A mistyped path is an error naming it, not the embedded file of that name.
+        let typo = tmp.path().join("my/default.toml");
+        let (source, name) = BesideOrEmbedded::for_file(&typo);
+        let err = source.read(&name).unwrap_err().to_string();
+        assert!(err.contains(&typo.display().to_string()), "{err}");
     }
 }

@@ -174,6 +174,11 @@ pub struct DaemonConfig {
     pub run_dir: PathBuf,
     pub state_record_hz: f64,
     pub start: Start,
+    /// The line of `start.position_m` (`None`: the key's default), for an error found once
+    /// the world is loaded.
+    pub start_line: Option<usize>,
+    /// The configuration's name in errors: its path, or `<embedded>/default.toml`.
+    pub origin: String,
     pub sonar: LinkConfig,
     pub sensor: LinkConfig,
     /// Zero the thrusters after this long without a thruster frame; `None` = off.
@@ -240,7 +245,7 @@ impl DaemonConfig {
                     option: "--speed".into(),
                     key: "run.speed".into(),
                     message: format!(
-                        "{speed} is outside the allowed range {}..={} x real time",
+                        "{speed:?} is outside the allowed range {}..={} x real time",
                         SPEED_RANGE.start(),
                         SPEED_RANGE.end()
                     ),
@@ -418,6 +423,8 @@ impl DaemonConfig {
                 position_m: nalgebra::Vector3::from(raw.start.position_m),
                 heading_deg,
             },
+            start_line: doc.line_of("start.position_m"),
+            origin: doc.origin().to_string(),
             sonar,
             sensor,
             watchdog: (watchdog_s > 0.0).then(|| Duration::from_secs_f64(watchdog_s)),
@@ -441,6 +448,15 @@ impl DaemonConfig {
     }
 }
 
+/// Whether `link`, joined to a directory, names a path inside it: a relative path of plain
+/// names (`.` allowed), without `..` or a root.
+pub fn stays_inside(link: &std::path::Path) -> bool {
+    use std::path::Component;
+    link.components()
+        .all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
+        && link.components().any(|c| matches!(c, Component::Normal(_)))
+}
+
 fn resolve_link(
     doc: &Document<'_>,
     name: &str,
@@ -457,9 +473,19 @@ fn resolve_link(
         })
     };
     let endpoint = match raw.endpoint.as_str() {
-        "pty" => Endpoint::Pty {
-            link: PathBuf::from(path("the symlink to create, relative to run.run_dir")?),
-        },
+        "pty" => {
+            let link = PathBuf::from(path("the symlink to create, relative to run.run_dir")?);
+            if !stays_inside(&link) {
+                return Err(doc.invalid(
+                    &key("path"),
+                    format!(
+                        "`{}` leaves the run directory; a pty link is a name inside `run.run_dir` (no `..`, not absolute), where the daemon checks who owns the directory",
+                        link.display()
+                    ),
+                ));
+            }
+            Endpoint::Pty { link }
+        }
         "serial" => Endpoint::Serial {
             device: PathBuf::from(path("the device, e.g. /dev/ttyUSB0")?),
         },
@@ -634,7 +660,7 @@ mod tests {
             with_overrides(&lockstep, None).unwrap().time_mode,
             TimeMode::Lockstep
         );
-        for bad in [0.05, 1000.5, f64::NAN] {
+        for bad in [0.05, 1000.5, f64::NAN, 1e-300] {
             let over = Overrides {
                 speed: Some(bad),
                 ..Overrides::default()
@@ -644,6 +670,7 @@ mod tests {
                 err.starts_with("--speed") && err.contains("0.1..=1000"),
                 "{err}"
             );
+            assert!(err.len() < 160, "a value written in full: {err}");
         }
     }
 
@@ -659,6 +686,38 @@ mod tests {
         assert!(err.to_string().contains("loopback"), "{err}");
         let ok = with(&tcp("path = \"127.0.0.1:7001\"")).unwrap();
         assert!(matches!(ok.sonar.endpoint, Endpoint::Tcp { .. }));
+    }
+
+    /// A pty path that leaves the run directory is refused, naming the key, its line and the
+    /// rule (`../../../escaped-sonar` was accepted).
+    #[test]
+    fn a_pty_path_outside_the_run_directory_is_refused() {
+        for bad in [
+            "../../../escaped-sonar",
+            "/tmp/sonar",
+            "a/../../sonar",
+            ".",
+            "..",
+        ] {
+            let by = format!("path = \"{bad}\"");
+            let err = with(&[("path = \"sonar\"", by.as_str())]).unwrap_err();
+            assert!(
+                matches!(&err, ConfigError::Invalid { key, line: Some(_), .. } if key == "links.sonar.path"),
+                "{bad}: {err}"
+            );
+            assert!(
+                err.to_string().contains("leaves the run directory"),
+                "{bad}: {err}"
+            );
+        }
+        for good in ["sonar", "./sonar", "links/sonar"] {
+            let by = format!("path = \"{good}\"");
+            let config = with(&[("path = \"sonar\"", by.as_str())]).unwrap();
+            assert!(
+                matches!(config.sonar.endpoint, Endpoint::Pty { .. }),
+                "{good}"
+            );
+        }
     }
 
     /// Two links on one path would leave one unreachable (the second symlink replaces the

@@ -110,6 +110,16 @@ pub enum EndpointError {
         #[source]
         source: PtyError,
     },
+    /// The pty link would land outside the run directory, whose owner and mode the daemon
+    /// checked; `why` says how.
+    #[error(
+        "link `{link}`: {path}: {why}; a pty link must stay inside the run directory, the one place whose owner and mode the daemon checks"
+    )]
+    LinkOutside {
+        link: &'static str,
+        path: PathBuf,
+        why: String,
+    },
     #[error("link `{link}`: {source}")]
     Serial {
         link: &'static str,
@@ -147,6 +157,31 @@ impl std::fmt::Debug for OpenEndpoint {
     }
 }
 
+/// Why the pty link `link` would not land inside `run_dir`: a `..` or a root in it (the
+/// configuration refuses those too), or a directory on the way that is a symlink (its real
+/// place could be anywhere, a world-writable directory among them). Directories on the way
+/// that do not exist yet are created as real directories inside the run directory.
+fn check_link_inside(run_dir: &Path, link: &Path) -> Result<(), String> {
+    if !super::config::stays_inside(link) {
+        return Err("leaves the run directory (`..`, or an absolute path)".into());
+    }
+    let mut dir = run_dir.to_path_buf();
+    for part in link.parent().into_iter().flat_map(Path::components) {
+        dir.push(part);
+        match std::fs::symlink_metadata(&dir) {
+            Ok(meta) if meta.file_type().is_symlink() => {
+                return Err(format!(
+                    "the directory {} on its way is a symlink",
+                    dir.display()
+                ));
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    Ok(())
+}
+
 impl OpenEndpoint {
     /// Opens `config`'s endpoint. Pty symlinks are placed relative to `run_dir`.
     pub async fn open(
@@ -157,6 +192,11 @@ impl OpenEndpoint {
         match &config.endpoint {
             Endpoint::Pty { link: symlink } => {
                 let path = run_dir.join(symlink);
+                check_link_inside(run_dir, symlink).map_err(|why| EndpointError::LinkOutside {
+                    link,
+                    path: path.clone(),
+                    why,
+                })?;
                 PtyMaster::open(Some(&path))
                     .map(|pty| {
                         // Watch before anyone can open it, so no early open is missed.
@@ -790,5 +830,67 @@ mod tests {
         );
         run.stop.send(true).unwrap();
         run.task.await.unwrap();
+    }
+
+    /// The forms a pty link path takes in a configuration, as components: plain names, a
+    /// name that is a real directory, one that is a symlink to a world-writable directory
+    /// outside, `.`, `..`, and optionally an absolute start in that outside directory.
+    fn link_path_form() -> impl proptest::strategy::Strategy<Value = (bool, Vec<&'static str>)> {
+        use proptest::prelude::*;
+        (
+            any::<bool>(),
+            prop::collection::vec(
+                prop::sample::select(vec!["sonar", "new", "real", "escape", ".", ".."]),
+                1..5,
+            ),
+        )
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+        /// Whatever the link path's form (absolute, relative, with `..`, through a symlinked
+        /// directory), the daemon makes nothing outside its checked run directory: the link
+        /// lands inside it, or opening fails naming the path. (`../../../escaped-sonar` put the
+        /// symlink and its owner file in a world-writable directory.)
+        #[test]
+        fn a_pty_link_never_lands_outside_the_run_directory((absolute, parts) in link_path_form()) {
+            use std::os::unix::fs::PermissionsExt;
+            let tmp = crate::scratch::dir("link-form");
+            let run = tmp.path().join("a/b/run");
+            let outside = tmp.path().join("outside");
+            std::fs::create_dir_all(run.join("real")).unwrap();
+            std::fs::create_dir(&outside).unwrap();
+            std::fs::set_permissions(&outside, std::fs::Permissions::from_mode(0o777)).unwrap();
+            std::os::unix::fs::symlink(&outside, run.join("escape")).unwrap();
+            let mut link = if absolute { outside.clone() } else { PathBuf::new() };
+            link.extend(&parts);
+            let config = LinkConfig {
+                endpoint: Endpoint::Pty { link: link.clone() },
+                ..pty_config()
+            };
+            let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+            let opened = rt.block_on(OpenEndpoint::open("sonar", &config, &run));
+            let outside_now: Vec<_> = std::fs::read_dir(&outside).unwrap().collect();
+            proptest::prop_assert!(outside_now.is_empty(), "{} made {outside_now:?}", link.display());
+            let above: Vec<_> = std::fs::read_dir(tmp.path().join("a/b")).unwrap()
+                .map(|e| e.unwrap().file_name())
+                .collect();
+            proptest::prop_assert_eq!(above, vec![std::ffi::OsString::from("run")]);
+            match opened {
+                Ok(endpoint) => {
+                    let (made, _) = endpoint.owned_link().expect("a pty link");
+                    let parent = made.parent().unwrap().canonicalize().unwrap();
+                    proptest::prop_assert!(
+                        parent.starts_with(run.canonicalize().unwrap()),
+                        "{} landed in {}", link.display(), parent.display()
+                    );
+                }
+                Err(e) => {
+                    let text = e.to_string();
+                    proptest::prop_assert!(text.contains(&run.join(&link).display().to_string()), "{text}");
+                }
+            }
+        }
     }
 }

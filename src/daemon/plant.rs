@@ -75,7 +75,7 @@ impl MakoPlant {
             let name = name.to_string();
             move |e: ConfigError| match e {
                 ConfigError::Unreadable { .. } => ConfigError::Referenced {
-                    origin: "the daemon configuration".into(),
+                    origin: config.origin.clone(),
                     key: key.into(),
                     name,
                     source: Box::new(e),
@@ -90,9 +90,9 @@ impl MakoPlant {
         let model = physics::Model::new(vehicle, world);
         if let Some(why) = model.world().outside_pool(&config.start.position_m) {
             return Err(ConfigError::Invalid {
-                origin: "the daemon configuration".into(),
+                origin: config.origin.clone(),
                 key: "start.position_m".into(),
-                line: None,
+                line: config.start_line,
                 message: format!("{why} (world `{}`)", config.world),
             });
         }
@@ -487,6 +487,31 @@ mod tests {
                 "{err}"
             );
         }
+    }
+
+    /// A configured start outside the pool names the file and the line of
+    /// `start.position_m`, as every other config error does (it said
+    /// `the daemon configuration:?:`).
+    #[test]
+    fn a_start_outside_the_pool_names_file_and_line() {
+        let text = Embedded.read(DEFAULT_CONFIG).unwrap().replace(
+            "position_m = [3.0, 2.5, 0.3]",
+            "position_m = [300.0, 2.5, 0.3]",
+        );
+        let config = DaemonConfig::resolve(&Document::new("my/default.toml", &text)).unwrap();
+        let line = text
+            .lines()
+            .position(|l| l.starts_with("position_m = [300.0"))
+            .unwrap()
+            + 1;
+        let err = MakoPlant::from_config(&Embedded, &config)
+            .expect_err("outside the pool")
+            .to_string();
+        assert!(
+            err.starts_with(&format!("my/default.toml:{line}: `start.position_m`: ")),
+            "{err}"
+        );
+        assert!(err.contains("outside the pool"), "{err}");
     }
 
     /// Regression: a ping's sentence is known only after the physics step that covers the

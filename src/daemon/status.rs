@@ -126,6 +126,15 @@ pub enum StatusError {
         #[source]
         source: serde_json::Error,
     },
+    /// Nothing listens on the socket: no daemon runs with this run directory.
+    #[error(
+        "no daemon runs here: nothing listens on {path} ({source}); start one with `eyebot-hil run`, or name the run directory of the one running with `--run-dir DIR`"
+    )]
+    NoDaemon {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
     #[error("status socket {path}: no answer within {timeout:?}")]
     Timeout { path: PathBuf, timeout: Duration },
     #[error(
@@ -213,7 +222,19 @@ pub async fn query(path: &Path, timeout: Duration) -> Result<StatusSnapshot, Sta
         source,
     };
     let read = async {
-        let stream = UnixStream::connect(path).await.map_err(io_err)?;
+        let stream = UnixStream::connect(path).await.map_err(|source| {
+            if matches!(
+                source.kind(),
+                io::ErrorKind::NotFound | io::ErrorKind::ConnectionRefused
+            ) {
+                StatusError::NoDaemon {
+                    path: path.to_path_buf(),
+                    source,
+                }
+            } else {
+                io_err(source)
+            }
+        })?;
         let mut doc = Vec::new();
         stream
             .take(MAX_STATUS_BYTES + 1)
@@ -312,5 +333,25 @@ mod tests {
         let err = query(&path, Duration::from_secs(10)).await.unwrap_err();
         assert!(matches!(err, StatusError::TooLarge { .. }), "{err}");
         server.abort();
+    }
+
+    /// `status` where no daemon runs says so and names `--run-dir`, not only the socket.
+    #[tokio::test]
+    async fn no_daemon_is_named_as_such() {
+        let tmp = crate::scratch::dir("status-none");
+        let err = query(&tmp.path().join("status.sock"), Duration::from_secs(1))
+            .await
+            .unwrap_err();
+        let text = err.to_string();
+        assert!(matches!(err, StatusError::NoDaemon { .. }), "{text}");
+        assert!(
+            text.starts_with("no daemon runs here") && text.contains("--run-dir"),
+            "{text}"
+        );
+        // A socket file left by a daemon that ended: connection refused, the same answer.
+        let stale = tmp.path().join("stale.sock");
+        drop(std::os::unix::net::UnixListener::bind(&stale).unwrap());
+        let err = query(&stale, Duration::from_secs(1)).await.unwrap_err();
+        assert!(matches!(err, StatusError::NoDaemon { .. }), "{err}");
     }
 }

@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::config::{ConfigError, ConfigSource, Directory, Document, Embedded};
+use crate::config::{BesideOrEmbedded, ConfigError, ConfigSource, Directory, Document};
 use crate::gap::GapError;
 use crate::gap::effects::{self, Configs, Effect};
 use crate::gap::format::ExperimentInfo;
@@ -88,14 +88,11 @@ pub struct GapModel {
     pub discrepancy: BTreeMap<String, f64>,
 }
 
-/// Reads `name` relative to `base` if such a file exists, else from the embedded configs.
+/// Reads `name` relative to `base` if such a file exists, else from the embedded configs
+/// ([`BesideOrEmbedded`], the rule of every command).
 pub fn read_ref(base: &Path, name: &str) -> Result<(String, String), ConfigError> {
-    let dir = Directory::new(base);
-    if base.join(name).is_file() {
-        Ok((dir.describe(name), dir.read(name)?.into_owned()))
-    } else {
-        Ok((Embedded.describe(name), Embedded.read(name)?.into_owned()))
-    }
+    let source = BesideOrEmbedded::new(Directory::new(base));
+    Ok((source.describe(name), source.read(name)?.into_owned()))
 }
 
 impl GapModel {

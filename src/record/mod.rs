@@ -66,6 +66,17 @@ pub enum RecordError {
         #[source]
         source: toml::ser::Error,
     },
+    /// `--record` names a directory that already holds something: nothing is written there,
+    /// so no earlier recording is lost.
+    #[error(
+        "recording {path}: the directory is not empty (it holds `{first}`{more}); a recording never writes over files: choose a new directory, or move its contents away"
+    )]
+    NotEmpty {
+        path: PathBuf,
+        first: String,
+        /// `, and N more` when it holds more than one entry.
+        more: String,
+    },
     #[error("recorder thread stopped unexpectedly")]
     ThreadGone,
 }
@@ -254,15 +265,51 @@ impl Files {
     }
 }
 
+/// [`RecordError::NotEmpty`] when `dir` holds any entry (hidden ones too).
+fn refuse_non_empty(dir: &Path) -> Result<(), RecordError> {
+    let io_err = |source| RecordError::Io {
+        path: dir.to_path_buf(),
+        source,
+    };
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io_err)? {
+        names.push(entry.map_err(io_err)?.file_name());
+    }
+    names.sort();
+    let Some(first) = names.first() else {
+        return Ok(());
+    };
+    Err(RecordError::NotEmpty {
+        path: dir.to_path_buf(),
+        first: first.to_string_lossy().into_owned(),
+        more: match names.len() {
+            1 => String::new(),
+            n => format!(", and {} more", n - 1),
+        },
+    })
+}
+
 impl Recorder {
     /// Creates `dir` and its files, writes `meta.toml`, `config.toml` (the daemon
     /// configuration `config_toml`, verbatim) and the table headers, starts the thread.
+    /// A `dir` that exists must be empty ([`RecordError::NotEmpty`] otherwise, with nothing
+    /// written).
     pub fn start(dir: &Path, meta: &Meta, config_toml: &str) -> Result<Self, RecordError> {
+        std::fs::create_dir_all(dir).map_err(|source| RecordError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+        refuse_non_empty(dir)?;
+        Self::start_in(dir, meta, config_toml)
+    }
+
+    /// [`Self::start`] in a directory that exists, whatever it holds: its files are
+    /// created or truncated.
+    fn start_in(dir: &Path, meta: &Meta, config_toml: &str) -> Result<Self, RecordError> {
         let io_err = |path: &Path| {
             let path = path.to_path_buf();
             move |source| RecordError::Io { path, source }
         };
-        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         let meta_path = dir.join(format::META_FILE);
         let meta_text = toml::to_string(meta).map_err(|source| RecordError::Meta {
             path: meta_path.clone(),
@@ -404,6 +451,111 @@ fn write_loop(rx: mpsc::Receiver<Message>, mut files: Files) -> Result<Stats, Re
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What a `--record` directory holds before the run.
+    #[derive(Debug, Clone)]
+    enum Before {
+        Missing,
+        Empty,
+        /// Some of a recording's files, with contents.
+        Recording(Vec<(&'static str, Vec<u8>)>),
+        /// Anything else: files (hidden ones too), a directory, a symlink.
+        Other(Vec<(String, u8)>),
+    }
+
+    fn before() -> impl proptest::strategy::Strategy<Value = Before> {
+        use proptest::prelude::*;
+        let recording_file = prop::sample::select(vec![
+            format::META_FILE,
+            format::CONFIG_FILE,
+            format::BYTES_FILE,
+            format::DROPS_FILE,
+            format::STATE_FILE,
+            format::EVENTS_FILE,
+            "bytes.tsv.gz",
+        ]);
+        prop_oneof![
+            Just(Before::Missing),
+            Just(Before::Empty),
+            prop::collection::vec(
+                (recording_file, prop::collection::vec(any::<u8>(), 0..64)),
+                1..6
+            )
+            .prop_map(Before::Recording),
+            prop::collection::vec(("[.]?[a-z]{1,8}", 0u8..3), 1..4).prop_map(Before::Other),
+        ]
+    }
+
+    /// Every entry under `dir` with its contents (a symlink by its target), sorted.
+    fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+        let mut out = Vec::new();
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            let meta = std::fs::symlink_metadata(&path).unwrap();
+            if meta.file_type().is_symlink() {
+                let target = std::fs::read_link(&path).unwrap();
+                out.push((path, target.into_os_string().into_encoded_bytes()));
+            } else if meta.is_dir() {
+                out.push((path.clone(), b"<dir>".to_vec()));
+                out.extend(snapshot(&path));
+            } else {
+                out.push((path.clone(), std::fs::read(&path).unwrap()));
+            }
+        }
+        out.sort();
+        out
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+        /// A recording starts in a missing or empty directory; a directory holding a
+        /// recording, or anything else, is refused by name and left as it was. (A second
+        /// `run --record DIR` replaced a recording of 1,260 chunks with an empty one.)
+        #[test]
+        fn a_recording_never_writes_over_what_a_directory_holds(before in before()) {
+            let tmp = crate::scratch::dir("rec-over");
+            let dir = tmp.path().join("rec");
+            match &before {
+                Before::Missing => {}
+                Before::Empty => std::fs::create_dir(&dir).unwrap(),
+                Before::Recording(files) => {
+                    std::fs::create_dir(&dir).unwrap();
+                    for (name, data) in files {
+                        std::fs::write(dir.join(name), data).unwrap();
+                    }
+                }
+                Before::Other(entries) => {
+                    std::fs::create_dir(&dir).unwrap();
+                    for (name, kind) in entries {
+                        let path = dir.join(name);
+                        if std::fs::symlink_metadata(&path).is_ok() {
+                            continue;
+                        }
+                        match kind {
+                            0 => std::fs::write(&path, name.as_bytes()).unwrap(),
+                            1 => std::fs::create_dir_all(path.join("inner")).unwrap(),
+                            _ => std::os::unix::fs::symlink(tmp.path(), &path).unwrap(),
+                        }
+                    }
+                }
+            }
+            let was = if dir.exists() { snapshot(&dir) } else { Vec::new() };
+            let meta = Meta::new(1, "lockstep", 1.0, "test");
+            match Recorder::start(&dir, &meta, "") {
+                Ok(rec) => {
+                    proptest::prop_assert!(was.is_empty(), "started over {was:?}");
+                    rec.finish().unwrap();
+                }
+                Err(e) => {
+                    proptest::prop_assert!(!was.is_empty(), "{e}");
+                    proptest::prop_assert!(matches!(e, RecordError::NotEmpty { .. }), "{e}");
+                    proptest::prop_assert!(e.to_string().contains(&dir.display().to_string()), "{e}");
+                    proptest::prop_assert_eq!(snapshot(&dir), was);
+                }
+            }
+        }
+    }
 
     fn state_row(t_s: f64, contact: bool) -> StateRow {
         StateRow {
@@ -637,7 +789,8 @@ mod tests {
             .custom_flags(nix::libc::O_NONBLOCK)
             .open(&fifo)
             .unwrap();
-        let rec = Recorder::start(dir, &Meta::new(1, "lockstep", 1.0, "test"), "").unwrap();
+        // The FIFO stands in for a stalled disk, so the directory is not empty.
+        let rec = Recorder::start_in(dir, &Meta::new(1, "lockstep", 1.0, "test"), "").unwrap();
         let chunk = vec![0x5A_u8; 1024];
         let total = 3 * QUEUE_MESSAGES;
         let (done_tx, done_rx) = mpsc::channel();

@@ -37,6 +37,9 @@ pub enum ProblemKind {
     TimeWentBack { by_s: f64 },
     /// A `bytes.tsv` line that does not parse.
     BadRecordLine { reason: String },
+    /// A `bytes.tsv` chunk whose `sim_s` is no simulated time (`NaN`, infinite, negative or
+    /// out of range), in seconds as read.
+    BadRecordTime { found_s: f64 },
     /// `#Serial:` with settings that do not parse.
     BadSerialComment { reason: String },
     /// `#Serial:` that disagrees with the settings in force.
@@ -68,7 +71,7 @@ impl ProblemKind {
             ProblemKind::MissingLf => "CR without LF",
             ProblemKind::ReadFailed { .. } => "input cut short",
             ProblemKind::NoLineEnding => "no line ending at end of file",
-            ProblemKind::BadTimestamp { .. } => "bad timestamp",
+            ProblemKind::BadTimestamp { .. } | ProblemKind::BadRecordTime { .. } => "bad timestamp",
             ProblemKind::TimeWentBack { .. } => "time went back",
             ProblemKind::BadRecordLine { .. } => "bad bytes.tsv line",
             ProblemKind::BadSerialComment { .. } => "bad #Serial comment",
@@ -116,6 +119,12 @@ impl fmt::Display for ProblemKind {
                 write!(f, "time goes back {by_s:.3} s from the line before")
             }
             ProblemKind::BadRecordLine { reason } => write!(f, "bytes.tsv: {reason}"),
+            // `{:?}` writes 1e300 as `1e300`, not as 301 digits.
+            ProblemKind::BadRecordTime { found_s } => write!(
+                f,
+                "bytes.tsv: column `sim_s`: expected a simulated time from 0 to {:.0} s, found {found_s:?}",
+                i64::MAX as f64 * 1e-9
+            ),
             ProblemKind::BadSerialComment { reason } => write!(f, "#Serial: {reason}"),
             ProblemKind::SerialConflict {
                 found,

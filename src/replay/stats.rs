@@ -65,7 +65,8 @@ pub struct Summary {
     pub blank_lines: u64,
     pub first_time_ns: Option<i64>,
     pub last_time_ns: Option<i64>,
-    /// Largest gaps between consecutive sentences, largest first.
+    /// Largest gaps over [`Self::gap_threshold_s`] between consecutive sentences, largest
+    /// first.
     pub gaps: Vec<Gap>,
     pub gap_threshold_s: f64,
     pub gaps_over_threshold: u64,
@@ -95,9 +96,13 @@ impl Summary {
         if let Some(prev) = self.prev_time_ns {
             // Two valid times can be further apart than i64 nanoseconds hold.
             let seconds = (i128::from(time_ns) - i128::from(prev)) as f64 * 1e-9;
-            if seconds > self.gap_threshold_s {
-                self.gaps_over_threshold += 1;
+            // Only gaps over the threshold are counted and listed, so the list never holds
+            // more than the count, nor a time that went back.
+            if seconds <= self.gap_threshold_s {
+                self.prev_time_ns = Some(time_ns);
+                return;
             }
+            self.gaps_over_threshold += 1;
             let smallest = self.gaps.last().map_or(f64::NEG_INFINITY, |g| g.seconds);
             if self.gaps.len() < GAPS_LISTED || seconds > smallest {
                 self.gaps.push(Gap {
@@ -227,5 +232,36 @@ impl fmt::Display for Summary {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+    use std::sync::Arc;
+
+    use super::*;
+
+    /// The gaps listed are gaps over the threshold, never more than counted: a time that went
+    /// back, or a gap under the threshold, was listed under "largest".
+    #[test]
+    fn only_gaps_over_the_threshold_are_listed() {
+        let mut s = Summary::new(1.0);
+        let file: Arc<Path> = Arc::from(Path::new("a.log"));
+        for (line, t_s) in [(1, 0.0), (2, 5.0), (3, 1.0), (4, 2.0), (5, 2.5)] {
+            let loc = Loc {
+                file: file.clone(),
+                line,
+            };
+            s.note_time((t_s * 1e9) as i64, &loc);
+        }
+        assert_eq!(s.gaps_over_threshold, 1);
+        let listed: Vec<(f64, u64)> = s.gaps.iter().map(|g| (g.seconds, g.at.line)).collect();
+        assert_eq!(listed, vec![(5.0, 2)]);
+        let text = s.stats_text();
+        assert!(
+            text.contains("gaps over 1 s: 1; largest:\n  5.000 s before a.log:2\n"),
+            "{text}"
+        );
     }
 }

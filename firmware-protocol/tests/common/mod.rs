@@ -139,7 +139,7 @@ pub fn expected(name: &str) -> Option<LineItem> {
             0x00,
             Message::HelloReply {
                 protocol_version: 1,
-                capabilities: 0x007F,
+                capabilities: 0x017F,
                 tick_us: 10_000,
                 max_payload: 64,
             },
