@@ -28,6 +28,7 @@ pub mod replay;
 mod scratch;
 pub mod sensors;
 pub mod thesis;
+pub mod transcript;
 pub mod transport;
 pub mod view;
 
