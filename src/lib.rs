@@ -19,6 +19,7 @@ pub mod cli;
 pub mod config;
 pub mod daemon;
 pub mod devices;
+pub mod engine;
 pub mod gap;
 pub mod physics;
 pub mod probe;

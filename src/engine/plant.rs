@@ -10,12 +10,8 @@ use firmware_protocol::sensor_link::{
 };
 use nalgebra::{UnitQuaternion, Vector3};
 
-use super::config::DaemonConfig;
-use super::engine::Model;
+use super::Model;
 use crate::SimNanos;
-use crate::config::{ConfigError, ConfigSource};
-use crate::devices::multiplexer::Multiplexer;
-use crate::devices::sensor_board::{BoardSettings, SensorBoard};
 use crate::devices::{CalibrationProgress, CalibrationRefused, CompassSample, Plant, SonarEvent};
 use crate::physics::state::VehicleState;
 use crate::physics::{self, InitialState, PhysicsError, Simulation};
@@ -65,59 +61,24 @@ fn ns(t_s: f64) -> SimNanos {
 }
 
 impl MakoPlant {
-    /// Builds the vehicle, world and sensors named by `config` from `source`.
-    pub fn from_config(
-        source: &dyn ConfigSource,
-        config: &DaemonConfig,
-    ) -> Result<Self, ConfigError> {
-        // A file that cannot be read is reported with the key that named it.
-        let named_by = |key: &'static str, name: &str| {
-            let name = name.to_string();
-            move |e: ConfigError| match e {
-                ConfigError::Unreadable { .. } => ConfigError::Referenced {
-                    origin: "the daemon configuration".into(),
-                    key: key.into(),
-                    name,
-                    source: Box::new(e),
-                },
-                other => other,
-            }
-        };
-        let vehicle = physics::load_vehicle(source, &config.vehicle)
-            .map_err(named_by("vehicle", &config.vehicle))?;
-        let world =
-            physics::load_world(source, &config.world).map_err(named_by("world", &config.world))?;
-        let model = physics::Model::new(vehicle, world);
-        if let Some(why) = model.world().outside_pool(&config.start.position_m) {
-            return Err(ConfigError::Invalid {
-                origin: "the daemon configuration".into(),
-                key: "start.position_m".into(),
-                line: None,
-                message: format!("{why} (world `{}`)", config.world),
-            });
-        }
-        let sensors_config = SensorsConfig::load(source, &config.sensors)
-            .map_err(named_by("sensors", &config.sensors))?;
+    /// A plant at rest at `position_m` heading `heading_deg` (its reset pose too), in `model`'s
+    /// world, with `sensors_config`'s sensors; `seed` draws every noise stream.
+    pub fn at_start(
+        model: physics::Model,
+        sensors_config: &SensorsConfig,
+        position_m: Vector3<f64>,
+        heading_deg: f64,
+        seed: u64,
+    ) -> Self {
         let initial = InitialState {
-            position_m: config.start.position_m,
-            attitude: UnitQuaternion::from_euler_angles(
-                0.0,
-                0.0,
-                config.start.heading_deg.to_radians(),
-            ),
+            position_m,
+            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, heading_deg.to_radians()),
             velocity_body_mps: Vector3::zeros(),
             angular_velocity_body_radps: Vector3::zeros(),
         };
-        let mut plant = Self::new(
-            Simulation::new(model, &initial, config.seed),
-            &sensors_config,
-            config.seed,
-        );
-        plant.start = (
-            config.start.position_m,
-            config.start.heading_deg.to_radians(),
-        );
-        Ok(plant)
+        let mut plant = Self::new(Simulation::new(model, &initial, seed), sensors_config, seed);
+        plant.start = (position_m, heading_deg.to_radians());
+        plant
     }
 
     /// A plant from an already built simulation and sensor settings.
@@ -387,7 +348,7 @@ impl Model for MakoPlant {
         self.sim.contact_count()
     }
 
-    fn place(&mut self, p: &super::engine::Placement) -> Result<(), String> {
+    fn place(&mut self, p: &super::Placement) -> Result<(), String> {
         let pool = self.sim.model().world().pool_m;
         for (name, value, max) in [
             ("x_m", p.x_m, pool.x),
@@ -437,57 +398,17 @@ impl Model for MakoPlant {
 /// The strongest water current the live view may set (a pool has none near it).
 pub const MAX_CURRENT_MPS: f64 = 2.0;
 
-/// The device emulators for `config`.
-pub fn devices(config: &DaemonConfig) -> (SensorBoard, Multiplexer) {
-    let shared = config.sensor.endpoint == super::config::Endpoint::SharedWithSonar;
-    let line = if shared {
-        config.sonar.line
-    } else {
-        config.sensor.line
-    };
-    let board = SensorBoard::new(BoardSettings {
-        tick_ns: config.tick.as_nanos() as u64,
-        lockstep: config.time_mode == super::clock::TimeMode::Lockstep,
-        compass_period_ns: config.compass_period.as_nanos() as u64,
-        line_chars_per_s: 1.0 / line.char_time_s(),
-        watchdog_ns: config.watchdog.map(|d| d.as_nanos() as u64),
-        sonar_on_this_line: shared,
-    });
-    (board, Multiplexer::new(config.multiplexer.clone()))
-}
-
 #[cfg(test)]
 mod tests {
     use firmware_protocol::Frame;
     use firmware_protocol::sensor_link::{AdcChannel, Message, Reading, Readings};
 
     use super::*;
-    use crate::config::{DEFAULT_CONFIG, Document, Embedded};
-    use crate::daemon::engine::{Carries, Engine, LineSpec};
+    use crate::config::{ConfigSource, DEFAULT_CONFIG, Document, Embedded};
+    use crate::daemon::config::DaemonConfig;
+    use crate::daemon::plant::devices;
+    use crate::engine::{Carries, Engine, LineSpec};
     use crate::transport::LineSettings;
-
-    /// A model file that cannot be read is reported with the key that named it.
-    #[test]
-    fn a_missing_model_file_names_its_key() {
-        let text = Embedded.read(DEFAULT_CONFIG).unwrap();
-        let good = DaemonConfig::resolve(&Document::new("default", &text)).unwrap();
-        for key in ["vehicle", "world", "sensors"] {
-            let mut config = good.clone();
-            let slot = match key {
-                "vehicle" => &mut config.vehicle,
-                "world" => &mut config.world,
-                _ => &mut config.sensors,
-            };
-            *slot = "nowhere/missing.toml".into();
-            let err = MakoPlant::from_config(&Embedded, &config)
-                .expect_err("a missing file is an error")
-                .to_string();
-            assert!(
-                err.starts_with(&format!("`{key}` = \"nowhere/missing.toml\"")),
-                "{err}"
-            );
-        }
-    }
 
     /// Regression: a ping's sentence is known only after the physics step that covers the
     /// ping, and no deadline announced that step. A realtime bridge with no other traffic
@@ -533,7 +454,7 @@ mod tests {
     fn lockstep_core() -> Engine<MakoPlant> {
         let text = Embedded.read(DEFAULT_CONFIG).unwrap();
         let mut config = DaemonConfig::resolve(&Document::new("default", &text)).unwrap();
-        config.time_mode = super::super::clock::TimeMode::Lockstep;
+        config.time_mode = crate::daemon::clock::TimeMode::Lockstep;
         let plant = MakoPlant::from_config(&Embedded, &config).unwrap();
         let (board, mux) = devices(&config);
         let line = |name, carries, baud| LineSpec {
