@@ -125,7 +125,92 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
     // Decode every link and direction in order.
     let bytes_path = dir.join(record::format::BYTES_FILE);
     let chunks = record::read_bytes(dir).map_err(recording_error)?;
-    let mut notices = Vec::new();
+    let Decoded {
+        mut commands,
+        mut samples,
+        velocity_codes,
+        notices,
+    } = decode(&chunks, t0, &tables, &sensors);
+    if let Some(speed) = paddle_speed(&velocity_codes, &sensors) {
+        samples.insert("paddle_speed_mps".into(), speed);
+    }
+    let last_state = states.last().map_or(t0, |row| row.t_s);
+    let duration_s = last_state - t0;
+    if duration_s <= 0.0 {
+        return Err(GapError::Data(format!(
+            "{}: the recording covers no simulated time",
+            state_path.display()
+        )));
+    }
+    let mut camera_std = 0.01;
+    if let Some(std) = opts.camera_std_m {
+        if !(std.is_finite() && std > 0.0) {
+            return Err(GapError::Data(format!(
+                "camera noise must be a positive number of metres, got {std}"
+            )));
+        }
+        camera_std = std;
+        let (xs, ys) = camera_track(&states, t0, std, opts.seed);
+        samples.insert("x_m".into(), xs);
+        samples.insert("y_m".into(), ys);
+    }
+    let channels = measured_channels(samples, duration_s);
+    if channels.is_empty() {
+        return Err(GapError::Data(format!(
+            "{}: the bridge sent no sensor replies that convert into measured channels",
+            bytes_path.display()
+        )));
+    }
+    commands.retain(|c| c.t_s <= duration_s);
+    let name = dir.file_name().map_or_else(
+        || "recording".to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    Ok(Conversion {
+        measurement: Measurement {
+            experiment: ExperimentInfo {
+                name,
+                description: format!(
+                    "converted from the recording {} by `eyebot-hil gap convert`{}",
+                    dir.display(),
+                    if opts.camera_std_m.is_some() {
+                        "; x_m, y_m: ground truth plus seeded camera noise"
+                    } else {
+                        ""
+                    }
+                ),
+                duration_s,
+                world: world_ref,
+                sensors: sensors_ref,
+                initial,
+                camera_position_std_m: camera_std,
+                camera_speed_std_mps: 0.02,
+            },
+            commands,
+            channels,
+            notices: Vec::new(),
+        },
+        notices,
+    })
+}
+
+/// What the recording's links said, in the measured-data format's terms.
+struct Decoded {
+    commands: Vec<CommandRow>,
+    samples: BTreeMap<String, Vec<(f64, f64)>>,
+    /// The velocity channel's codes, for the paddle-wheel count.
+    velocity_codes: Vec<(f64, f64)>,
+    notices: Vec<String>,
+}
+
+/// Decodes every link and direction in order through the one transcript decoder; times from
+/// `t0`.
+fn decode(
+    chunks: &[record::ByteChunk],
+    t0: f64,
+    tables: &[[f64; 11]; 4],
+    sensors: &SensorsConfig,
+) -> Decoded {
     let mut transcript = Transcript::new();
     let mut commands: Vec<CommandRow> = vec![CommandRow {
         t_s: 0.0,
@@ -135,7 +220,7 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
     let mut velocity_codes: Vec<(f64, f64)> = Vec::new();
     let (mut ambiguous_sonar, mut raw_compass, mut link_errors) = (0usize, 0usize, 0usize);
     let adc_name = |ch: u8| -> Option<AdcSource> { *sensors.adc.channels.get(usize::from(ch))? };
-    for chunk in &chunks {
+    for chunk in chunks {
         let t = chunk.sim_s - t0;
         transcript.feed(
             chunk.sim_s,
@@ -183,7 +268,28 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
             },
         );
     }
-    let unused_readings = transcript.step_values_unused();
+    let notices = left_out_notices(
+        transcript.step_values_unused(),
+        ambiguous_sonar,
+        raw_compass,
+        link_errors,
+    );
+    Decoded {
+        commands,
+        samples,
+        velocity_codes,
+        notices,
+    }
+}
+
+/// What the conversion left out, one notice per kind that occurred.
+fn left_out_notices(
+    unused_readings: usize,
+    ambiguous_sonar: usize,
+    raw_compass: usize,
+    link_errors: usize,
+) -> Vec<String> {
+    let mut notices = Vec::new();
     if unused_readings > 0 {
         notices.push(format!(
             "{unused_readings} values of STEP replies left out: the EyeBot took them back \
@@ -206,43 +312,39 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
             "{link_errors} undecodable stretches of bytes skipped"
         ));
     }
-    if let Some(speed) = paddle_speed(&velocity_codes, &sensors) {
-        samples.insert("paddle_speed_mps".into(), speed);
-    }
-    let last_state = states.last().map_or(t0, |row| row.t_s);
-    let duration_s = last_state - t0;
-    if duration_s <= 0.0 {
-        return Err(GapError::Data(format!(
-            "{}: the recording covers no simulated time",
-            state_path.display()
-        )));
-    }
-    let mut camera_std = 0.01;
-    if let Some(std) = opts.camera_std_m {
-        if !(std.is_finite() && std > 0.0) {
-            return Err(GapError::Data(format!(
-                "camera noise must be a positive number of metres, got {std}"
-            )));
+    notices
+}
+
+/// The thesis's overhead camera (4.5): a frame every 200 ms of the ground-truth position plus
+/// seeded Gaussian noise of `std` m; times from `t0`.
+fn camera_track(
+    states: &[record::StateRow],
+    t0: f64,
+    std: f64,
+    seed: u64,
+) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+    let mut cam = rng::stream(seed, "gap-convert-camera");
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    let mut next = 0.0;
+    for row in states {
+        let ts = row.t_s - t0;
+        if ts + 1e-9 < next {
+            continue;
         }
-        camera_std = std;
-        let mut cam = rng::stream(opts.seed, "gap-convert-camera");
-        let (mut xs, mut ys) = (Vec::new(), Vec::new());
-        // The thesis's camera: a frame every 200 ms (4.5).
-        let mut next = 0.0;
-        for row in &states {
-            let ts = row.t_s - t0;
-            if ts + 1e-9 < next {
-                continue;
-            }
-            next = ts + 0.2;
-            let (nx, ny): (f64, f64) = (cam.sample(StandardNormal), cam.sample(StandardNormal));
-            xs.push((ts, row.x_m + std * nx));
-            ys.push((ts, row.y_m + std * ny));
-        }
-        samples.insert("x_m".into(), xs);
-        samples.insert("y_m".into(), ys);
+        next = ts + 0.2;
+        let (nx, ny): (f64, f64) = (cam.sample(StandardNormal), cam.sample(StandardNormal));
+        xs.push((ts, row.x_m + std * nx));
+        ys.push((ts, row.y_m + std * ny));
     }
-    let channels: Vec<Channel> = crate::gap::format::CHANNELS
+    (xs, ys)
+}
+
+/// The channels `gap` knows, in its order: samples inside the run, in time order, one per time.
+fn measured_channels(
+    mut samples: BTreeMap<String, Vec<(f64, f64)>>,
+    duration_s: f64,
+) -> Vec<Channel> {
+    crate::gap::format::CHANNELS
         .iter()
         .filter_map(|name| {
             let mut s = samples.remove(*name)?;
@@ -254,44 +356,7 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
                 samples: s,
             })
         })
-        .collect();
-    if channels.is_empty() {
-        return Err(GapError::Data(format!(
-            "{}: the bridge sent no sensor replies that convert into measured channels",
-            bytes_path.display()
-        )));
-    }
-    commands.retain(|c| c.t_s <= duration_s);
-    let name = dir.file_name().map_or_else(
-        || "recording".to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    );
-    Ok(Conversion {
-        measurement: Measurement {
-            experiment: ExperimentInfo {
-                name,
-                description: format!(
-                    "converted from the recording {} by `eyebot-hil gap convert`{}",
-                    dir.display(),
-                    if opts.camera_std_m.is_some() {
-                        "; x_m, y_m: ground truth plus seeded camera noise"
-                    } else {
-                        ""
-                    }
-                ),
-                duration_s,
-                world: world_ref,
-                sensors: sensors_ref,
-                initial,
-                camera_position_std_m: camera_std,
-                camera_speed_std_mps: 0.02,
-            },
-            commands,
-            channels,
-            notices: Vec::new(),
-        },
-        notices,
-    })
+        .collect()
 }
 
 /// Appends the thruster commands at `t` (from 0) unless they are the last ones again; commands
