@@ -315,14 +315,12 @@ fn left_out_notices(
     notices
 }
 
+/// One channel's samples: (time s, value).
+type Samples = Vec<(f64, f64)>;
+
 /// The thesis's overhead camera (4.5): a frame every 200 ms of the ground-truth position plus
 /// seeded Gaussian noise of `std` m; times from `t0`.
-fn camera_track(
-    states: &[record::StateRow],
-    t0: f64,
-    std: f64,
-    seed: u64,
-) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+fn camera_track(states: &[record::StateRow], t0: f64, std: f64, seed: u64) -> (Samples, Samples) {
     let mut cam = rng::stream(seed, "gap-convert-camera");
     let (mut xs, mut ys) = (Vec::new(), Vec::new());
     let mut next = 0.0;
