@@ -145,8 +145,8 @@ impl Measurement {
     pub fn load(dir: &Path) -> Result<Self, GapError> {
         if dir.is_dir() && !FILES.iter().any(|name| dir.join(name).exists()) {
             return Err(GapError::Data(format!(
-                "{}: not a measurement directory: expected {} (docs/gap.md, \"The measured-data \
-                 format\"; `eyebot-hil gap convert` makes one from a recording)",
+                "{}: not a measurement directory: expected {} (docs/gap.md, \"A measurement: a \
+                 directory of three files\"; `eyebot-hil gap convert` makes one from a recording)",
                 dir.display(),
                 FILES.join(", ")
             )));
