@@ -19,6 +19,7 @@ pub mod cli;
 pub mod config;
 pub mod daemon;
 pub mod devices;
+pub mod engine;
 pub mod gap;
 pub mod physics;
 pub mod probe;
@@ -28,6 +29,7 @@ pub mod replay;
 mod scratch;
 pub mod sensors;
 pub mod thesis;
+pub mod transcript;
 pub mod transport;
 pub mod view;
 

@@ -442,3 +442,198 @@ fn count_frames(addr: SocketAddr, token: &str, span: Duration) -> usize {
     let text = String::from_utf8_lossy(&text);
     text.matches("event: frame").count()
 }
+
+/// In lockstep with TIME_STEP, the C library's default, the thrusters travel inside the
+/// request and the readings come back as STEP values. The live page shows both; the page over
+/// the recording, `gap convert` and `export --mcap` read the same values from the recording,
+/// each the ones the client was sent. (The view's decoder once knew no TIME_STEP or STEP: the
+/// page showed no thruster commands and no ADC values of such a run.)
+#[test]
+fn a_time_step_run_shows_the_same_thrusters_and_readings_everywhere() {
+    use firmware_protocol::sensor_link::{
+        AdcChannel, Direction as Spin, Reading, Readings, ThrusterCommand,
+    };
+    use firmware_protocol::{HeadingFormat, HeadingWord};
+
+    let mut daemon = Daemon::options(BIN, "view-step")
+        .lockstep()
+        .record()
+        .args(&["--view"])
+        .start();
+    let url = daemon
+        .view_url
+        .clone()
+        .expect("run --view prints `view: URL`");
+    let mut drive = LockstepDriver::new(&daemon, "time-step view test");
+    let mut browser = Browser::open(daemon.dir.path(), "chromium-step", &url);
+    // The loop hands bytes over only while a page watches.
+    browser.wait_eval(
+        "the page connected",
+        WAIT,
+        "!!(window.eyebotView && eyebotView.frame)",
+        |v| v == &Value::Bool(true),
+    );
+    let adc = |c: u8| Reading::Adc(AdcChannel::new(c).expect("channel 0..8"));
+    // Depth (channel 0), accel_x (channel 2) and the compass, as `configs/sensors` wires them.
+    let codes = [adc(0), adc(2), Reading::Compass];
+    let step = |drive: &mut LockstepDriver, used: u8, thrusters, readings: &[Reading]| {
+        let reply = drive.ask(Message::TimeStep {
+            used,
+            stop_on_sonar: false,
+            ticks: 5,
+            thrusters,
+            readings: Readings::new(readings.iter().copied()).expect("at most 16 readings"),
+        });
+        match reply {
+            Message::Step { ticks, values, .. } => (ticks, values.as_slice().to_vec()),
+            other => panic!("TIME_STEP answered {other:?}"),
+        }
+    };
+    let mut sent = Vec::new();
+    let mut duty = 0;
+    for k in 0..20u8 {
+        duty = 0x30 + k;
+        let thrusters = [
+            ThrusterCommand {
+                duty,
+                direction: Spin::Forward,
+            },
+            ThrusterCommand {
+                duty,
+                direction: Spin::Reverse,
+            },
+            ThrusterCommand::OFF,
+            ThrusterCommand::OFF,
+        ];
+        let used = if k == 0 { 0 } else { 3 };
+        sent.push(step(&mut drive, used, Some(thrusters), &codes));
+    }
+    // The last reply's values used, then time moves on without new readings.
+    step(&mut drive, 3, None, &[]);
+    for _ in 0..3 {
+        step(&mut drive, 0, None, &[]);
+    }
+    let (last_ticks, last) = sent.last().cloned().expect("twenty steps");
+    let heading = |word: u16| {
+        HeadingWord(word)
+            .decode(HeadingFormat::Binary)
+            .map(f64::from)
+            .expect("a binary heading word")
+    };
+    let want_adc = [Some(last[0]), None, Some(last[1])];
+    let want_compass = heading(last[2]);
+
+    let shown = browser.wait_eval(
+        "the thrusters and ADC values of the last TIME_STEP",
+        WAIT,
+        "window.eyebotView && eyebotView.frame && eyebotView.frame.readings",
+        |r| {
+            r["thrusters"][0]["duty"] == duty
+                && r["thrusters"][1]["reverse"] == true
+                && r["adc"][0] == last[0]
+                && r["adc"][2] == last[1]
+                && r["compass_deg"].as_f64() == Some(want_compass)
+        },
+    );
+    let thrust_text = browser.eval("document.getElementById('v-thrust').textContent");
+    let want_cmd = format!("cmd +{duty:02x} -{duty:02x} +ff +ff");
+    assert!(
+        thrust_text.as_str().is_some_and(|t| t.contains(&want_cmd)),
+        "{thrust_text} lacks `{want_cmd}`; readings {shown}"
+    );
+    let adc_text = browser.eval("document.getElementById('v-adc').textContent");
+    assert!(
+        adc_text
+            .as_str()
+            .is_some_and(|t| t.starts_with(&format!("{} - {}", last[0], last[1]))),
+        "{adc_text}"
+    );
+    let shot = artefact("time-step.png");
+    std::fs::write(&shot, browser.screenshot()).expect("write the screenshot");
+    eprintln!("screenshot: {}", shot.display());
+    drop(browser);
+    drop(drive);
+    daemon.stop();
+    let record = daemon.record_dir().to_path_buf();
+
+    // The page over the recording reads the bytes through the same `WireWatch`.
+    let mut wire = eyebot_hil::view::wire::WireWatch::new();
+    for c in eyebot_hil::record::read_bytes(&record).expect("bytes.tsv") {
+        wire.feed(c.sim_s, &c.link, c.dir, &c.data, |_| {});
+    }
+    let r = wire.readings();
+    assert_eq!(r.adc[..3], want_adc, "{r:?}");
+    assert_eq!(r.compass_deg, Some(want_compass));
+    assert_eq!(
+        r.thrusters[1].map(|t| (t.duty, t.reverse)),
+        Some((duty, true))
+    );
+
+    // `gap convert`: every used STEP value at its tick, every command.
+    let conv = eyebot_hil::gap::convert::convert(&record, &Default::default())
+        .expect("the recording converts");
+    let t0 = eyebot_hil::record::read_state(&record).expect("state.csv")[0].t_s;
+    let series = |name: &str| {
+        conv.measurement
+            .channel(name)
+            .map(|c| c.samples.clone())
+            .unwrap_or_default()
+    };
+    let at = |ticks: u32| f64::from(ticks) * 0.01 - t0;
+    let close_series = |got: Vec<(f64, f64)>, want: Vec<(f64, f64)>, name: &str| {
+        assert_eq!(got.len(), want.len(), "{name}: {got:?} != {want:?}");
+        for (g, w) in got.iter().zip(&want) {
+            assert!(
+                (g.0 - w.0).abs() < 1e-9 && g.1 == w.1,
+                "{name}: {got:?} != {want:?}"
+            );
+        }
+    };
+    let value = |i: usize| -> Vec<(f64, f64)> {
+        sent.iter()
+            .map(|(t, v)| (at(*t), f64::from(v[i])))
+            .collect()
+    };
+    close_series(series("depth_adc"), value(0), "depth_adc");
+    close_series(series("accel_x_adc"), value(1), "accel_x_adc");
+    let compass: Vec<(f64, f64)> = sent.iter().map(|(t, v)| (at(*t), heading(v[2]))).collect();
+    close_series(series("compass_deg"), compass, "compass_deg");
+    let times: Vec<f64> = conv.measurement.commands.iter().map(|c| c.t_s).collect();
+    let want_times: Vec<f64> = (0..sent.len()).map(|k| at(5 * k as u32)).collect();
+    assert!(
+        times.len() == want_times.len()
+            && times
+                .iter()
+                .zip(&want_times)
+                .all(|(a, b)| (a - b).abs() < 1e-9),
+        "one row per TIME_STEP, at its request (the first at the start): {times:?}"
+    );
+    assert!(
+        !conv.notices.iter().any(|n| n.contains("STEP")),
+        "every value was used: {:?}",
+        conv.notices
+    );
+
+    // `export --mcap`: the last state row's sensors and thrusters.
+    let out = daemon.dir.join("step.mcap");
+    eyebot_hil::view::foxglove::export_mcap(&record, &out).expect("the export");
+    let bytes = std::fs::read(&out).expect("the MCAP file");
+    let (mut sensors, mut thrusters) = (Value::Null, Value::Null);
+    for message in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let message = message.expect("a readable message");
+        let slot = match message.channel.topic.as_str() {
+            "/sensors" => &mut sensors,
+            "/thrusters" => &mut thrusters,
+            _ => continue,
+        };
+        *slot = serde_json::from_slice(&message.data).expect("a JSON message");
+    }
+    assert_eq!(
+        sensors["adc"][0], last[0],
+        "/sensors at the end (last STEP at tick {last_ticks}): {sensors}"
+    );
+    assert_eq!(sensors["adc"][2], last[1], "{sensors}");
+    assert_eq!(sensors["compass_deg"].as_f64(), Some(want_compass));
+    assert_eq!(thrusters["duty"][0], duty, "{thrusters}");
+    assert_eq!(thrusters["reverse"][1], true, "{thrusters}");
+}

@@ -16,9 +16,9 @@ use std::time::Instant;
 
 use eyebot_hil::config::{ConfigSource, DEFAULT_CONFIG, Document, Embedded};
 use eyebot_hil::daemon::config::DaemonConfig;
-use eyebot_hil::daemon::engine::Model as _;
 use eyebot_hil::daemon::plant::MakoPlant;
 use eyebot_hil::devices::Plant;
+use eyebot_hil::engine::Model as _;
 use eyebot_hil::physics::{InitialState, Simulation, load_model};
 use firmware_protocol::sensor_link::{Direction, ThrusterCommand};
 use nalgebra::{UnitQuaternion, Vector3};

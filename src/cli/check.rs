@@ -598,39 +598,37 @@ fn run_program(
     Ok(ProgramEnd { ended, stderr_tail })
 }
 
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
+/// The verdicts as a JUnit XML report (one test suite, one test case per criterion),
+/// written by `quick-junit`.
+fn junit_report(name: &str, verdicts: &[Verdict], wall_s: f64) -> quick_junit::Report {
+    use quick_junit::{NonSuccessKind, Report, TestCase, TestCaseStatus, TestSuite};
+    let mut suite = TestSuite::new(name);
+    suite.set_time(std::time::Duration::from_secs_f64(wall_s.max(0.0)));
+    for v in verdicts {
+        let status = match &v.result {
+            Ok(_) => TestCaseStatus::success(),
+            Err(why) => {
+                let mut status = TestCaseStatus::non_success(NonSuccessKind::Failure);
+                status.set_message(why.as_str());
+                status
+            }
+        };
+        let mut case = TestCase::new(v.label.as_str(), status);
+        case.set_classname(name);
+        if let Ok(said) = &v.result {
+            case.set_system_out(said.as_str());
+        }
+        suite.add_test_case(case);
+    }
+    let mut report = Report::new(name);
+    report.add_test_suite(suite);
+    report
 }
 
 fn write_junit(path: &Path, name: &str, verdicts: &[Verdict], wall_s: f64) -> Result<(), CliError> {
-    let failures = verdicts.iter().filter(|v| v.result.is_err()).count();
-    let mut xml = format!(
-        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<testsuites>\n  <testsuite \
-         name=\"{}\" tests=\"{}\" failures=\"{failures}\" errors=\"0\" time=\"{wall_s:.3}\">\n",
-        xml_escape(name),
-        verdicts.len()
-    );
-    for v in verdicts {
-        let case = format!(
-            "    <testcase classname=\"{}\" name=\"{}\"",
-            xml_escape(name),
-            xml_escape(&v.label)
-        );
-        match &v.result {
-            Ok(s) => xml.push_str(&format!(
-                "{case}>\n      <system-out>{}</system-out>\n    </testcase>\n",
-                xml_escape(s)
-            )),
-            Err(s) => xml.push_str(&format!(
-                "{case}>\n      <failure message=\"{}\"/>\n    </testcase>\n",
-                xml_escape(s)
-            )),
-        }
-    }
-    xml.push_str("  </testsuite>\n</testsuites>\n");
+    let xml = junit_report(name, verdicts, wall_s)
+        .to_string()
+        .map_err(|e| err_io("write", path, std::io::Error::other(e)))?;
     let mut f = std::fs::File::create(path).map_err(|e| err_io("create", path, e))?;
     f.write_all(xml.as_bytes())
         .map_err(|e| err_io("write", path, e))
@@ -639,6 +637,40 @@ fn write_junit(path: &Path, name: &str, verdicts: &[Verdict], wall_s: f64) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A verdict with markup and control characters in its text gives well-formed XML that
+    /// says the same (a hand-written escape once missed control characters).
+    #[test]
+    fn junit_reports_escape_whatever_a_verdict_says() {
+        let verdicts = [
+            Verdict {
+                label: "depth <0.8> & \"more\"".into(),
+                result: Err("at t 3 s: depth 0.5 m\u{1b}[31m <- bell \u{7}".into()),
+            },
+            Verdict {
+                label: "no_contact".into(),
+                result: Ok("no contact in 60 s".into()),
+            },
+        ];
+        let xml = junit_report("dive & hold", &verdicts, 1.5)
+            .to_string()
+            .unwrap();
+        assert!(!xml.contains('\u{1b}') && !xml.contains('\u{7}'), "{xml}");
+        assert!(xml.contains("name=\"dive &amp; hold\""), "{xml}");
+        assert!(
+            xml.contains("tests=\"2\"") && xml.contains("failures=\"1\""),
+            "{xml}"
+        );
+        assert!(
+            xml.contains("depth &lt;0.8&gt; &amp; &quot;more&quot;"),
+            "{xml}"
+        );
+        assert!(
+            xml.contains("<failure message=\"at t 3 s: depth 0.5 m"),
+            "{xml}"
+        );
+        assert!(xml.contains("no contact in 60 s"), "{xml}");
+    }
 
     fn criterion(text: &str) -> Criterion {
         toml::from_str(text).expect("criterion parses")

@@ -223,33 +223,10 @@ fn options(
     Ok((opts, embedded))
 }
 
-/// The table followed by one line per case, as `--out` writes it.
-fn report(table: &str, results: &[CaseResult]) -> String {
-    let mut text = table.to_string();
-    text.push_str(
-        "\nindex,effect,seed,size_sigma,named,truth,fitted,ci95,parameter_error,ci_covers,held_out_reduction_pct,held_out_truth_reduction_pct,held_out_raw_reduction_pct,held_out_grew,seconds\n",
-    );
-    for r in results {
-        text.push_str(&format!(
-            "{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:.2}\n",
-            r.index,
-            r.label,
-            r.seed,
-            r.size_sigma.map_or("-".to_string(), |s| format!("{s:.2}")),
-            r.named.as_deref().unwrap_or("none"),
-            r.truth,
-            r.fitted,
-            r.ci95,
-            r.parameter_error,
-            r.ci_covers,
-            r.held_out_reduction_pct,
-            r.held_out_truth_reduction_pct,
-            r.held_out_raw_reduction_pct,
-            r.held_out_grew,
-            r.seconds
-        ));
-    }
-    text
+/// The table followed by one CSV line per case (`bench::table::cases_csv`), as `--out`
+/// writes it.
+fn report(table: &str, results: &[CaseResult]) -> Result<String, csv::Error> {
+    Ok(format!("{table}\n{}", bench::table::cases_csv(results)?))
 }
 
 fn write(path: &PathBuf, text: &str) -> Result<(), CliError> {
@@ -264,7 +241,12 @@ fn print(source: Source, outcome: &Outcome, out_file: Option<&PathBuf>) -> Resul
     let table = bench::table(source, &outcome.results, outcome.calibration.as_ref());
     out!("{table}");
     if let Some(path) = out_file {
-        write(path, &report(&table, &outcome.results))?;
+        let text = report(&table, &outcome.results).map_err(|e| CliError::Io {
+            doing: "write",
+            path: path.clone(),
+            source: std::io::Error::other(e),
+        })?;
+        write(path, &text)?;
     }
     Ok(())
 }

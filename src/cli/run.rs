@@ -153,7 +153,6 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
         config_toml: text,
         config_name: name,
         leftovers: leftovers.clone(),
-        view,
     };
 
     let runtime = super::runtime()?;
@@ -164,17 +163,26 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
         tracing::error!(error = %e, "cannot install signal handlers; stop with kill -9");
     }
     let summary = runtime.block_on(async move {
-        daemon::run(&config, model, board, mux, options, stop_rx, |event| {
+        let mut bridge = daemon::Daemon::start(&config, model, board, mux, options).await?;
+        let observers = match view {
+            Some(view) => match watch_with_view(&mut bridge, view).await {
+                Ok(observers) => observers,
+                Err(e) => {
+                    // What `start` made is removed before the error is reported.
+                    let _ = bridge.finish().await;
+                    return Err(CliError::from(e));
+                }
+            },
+            None => Vec::new(),
+        };
+        let summary = daemon::serve_started(bridge, observers, stop_rx, |event| {
             let mut out = std::io::stdout().lock();
             match event {
                 Readiness::Link { name, path } => {
                     let _ = writeln!(out, "link {name}: {path}");
                 }
-                Readiness::View { url } => {
-                    let _ = writeln!(out, "view: {url}");
-                }
-                Readiness::Foxglove { url } => {
-                    let _ = writeln!(out, "foxglove: {url}");
+                Readiness::Observer { name, url } => {
+                    let _ = writeln!(out, "{name}: {url}");
                 }
                 Readiness::Ready { status_socket } => {
                     let _ = writeln!(out, "ready (status: {})", status_socket.display());
@@ -183,7 +191,8 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
             }
             let _ = out.flush();
         })
-        .await
+        .await?;
+        Ok::<_, CliError>(summary)
     })?;
     errln!(
         "eyebot-hil: stopped at simulated time {:.3} s ({} overruns){}",
@@ -198,4 +207,26 @@ pub fn main(args: RunArgs) -> Result<(), CliError> {
             .unwrap_or_default()
     );
     Ok(())
+}
+
+/// Connects the live view and Foxglove, as `view` asks, to the daemon's observer; returns
+/// where each is reached, to be announced before `ready`.
+async fn watch_with_view<M: crate::engine::Model>(
+    bridge: &mut daemon::Daemon<M>,
+    view: crate::view::ViewOptions,
+) -> Result<Vec<Readiness>, crate::view::ViewError> {
+    let observation = bridge.observe();
+    let started = crate::view::start_live(view, observation, bridge.status_updates()).await?;
+    bridge.spawn_service("view", started.service);
+    let mut observers = Vec::new();
+    if let Some(url) = started.page_url {
+        observers.push(Readiness::Observer { name: "view", url });
+    }
+    if let Some(url) = started.foxglove_url {
+        observers.push(Readiness::Observer {
+            name: "foxglove",
+            url,
+        });
+    }
+    Ok(observers)
 }

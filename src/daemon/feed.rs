@@ -80,6 +80,15 @@ impl std::fmt::Debug for Schedule {
     }
 }
 
+impl crate::engine::FeedSchedule for Schedule {
+    fn next_time(&self) -> Option<SimNanos> {
+        Schedule::next_time(self)
+    }
+    fn pop(&mut self) -> Option<(SimNanos, Bytes)> {
+        Schedule::pop(self)
+    }
+}
+
 impl Schedule {
     /// Opens the log and reads its first sentence (so a log that cannot be read fails here,
     /// before the daemon reports ready).

@@ -12,9 +12,10 @@
 pub mod clock;
 pub mod config;
 pub mod course;
-pub mod engine;
 pub mod feed;
+mod lines;
 pub mod link;
+pub mod observer;
 pub mod pid_file;
 pub mod plant;
 pub mod run_dir;
@@ -33,11 +34,13 @@ use tokio::time::Instant;
 
 use self::clock::{RealtimeMap, TimeMode};
 use self::config::{DaemonConfig, Endpoint};
-use self::engine::{Carries, Engine, LineSpec, Model};
+use self::lines::{LineRuntime, Spawned, flush_outputs, open_lines, snapshot, spawn_link_tasks};
 use self::link::{EndpointError, Inbound, LineContext, LinkCounters, OpenEndpoint, Outbound};
+use self::observer::{Control, Observation, ObserverEnd};
 use self::pid_file::PidFile;
 use self::status::{LinkStatus, Pose, StatusServer, StatusSnapshot};
-use crate::record::{DropReason, RecordError, Recorder};
+use crate::engine::{self, Carries, Engine, Journal, LineSpec, Model};
+use crate::record::{DropReason, RecordError, RecordHandle, Recorder, StateRow};
 
 /// How often the realtime loop wakes when nothing is due (bounds the physics lag).
 pub const IDLE_WAKE: Duration = Duration::from_millis(20);
@@ -67,8 +70,6 @@ pub enum DaemonError {
     },
     #[error(transparent)]
     Feed(#[from] feed::FeedError),
-    #[error(transparent)]
-    View(#[from] crate::view::ViewError),
     #[error("the simulation stopped: {0}")]
     Model(#[source] Box<dyn std::error::Error + Send + Sync>),
 }
@@ -88,8 +89,6 @@ pub struct RunOptions {
     /// Filled with what the run creates (symlinks, sockets, pid file), for the process-level
     /// shutdown guard ([`shutdown::spawn_signal_guard`]).
     pub leftovers: shutdown::Leftovers,
-    /// Serve the live view (`run --view`).
-    pub view: Option<crate::view::ViewOptions>,
 }
 
 /// What the daemon reports as it comes up.
@@ -97,10 +96,9 @@ pub struct RunOptions {
 pub enum Readiness {
     /// A link is open; the EyeBot side connects at `path`.
     Link { name: &'static str, path: String },
-    /// The live view is served at `url` (it carries the token).
-    View { url: String },
-    /// Foxglove connects at `url` (`ws://HOST:PORT`).
-    Foxglove { url: String },
+    /// Something the caller connected to the daemon's observer (the live view: `view`,
+    /// Foxglove: `foxglove`) is reached at `url`.
+    Observer { name: &'static str, url: String },
     /// Everything is up.
     Ready { status_socket: PathBuf },
 }
@@ -124,19 +122,6 @@ pub struct LinkInfo {
     pub path: String,
 }
 
-struct LineRuntime {
-    /// The line's name, counters and recorder, shared with its link task.
-    cx: LineContext,
-    describe: String,
-    to_link: mpsc::Sender<Outbound>,
-    /// Released bytes the link task has not taken yet, sent as one chunk when it has room.
-    backlog: bytes::BytesMut,
-    /// Beyond this many waiting bytes the client is taken for not reading: drop and count.
-    backlog_limit: usize,
-    /// When bytes last arrived (lockstep's wall-clock idle limit).
-    last_rx_wall: Instant,
-}
-
 /// The bridge, started: endpoints open, link tasks and services running, recording begun.
 ///
 /// [`Daemon::start`] brings it up, [`Daemon::serve`] runs the simulation loop until a
@@ -155,7 +140,8 @@ pub struct Daemon<M: Model> {
     inbound: mpsc::Receiver<Inbound>,
     feed: mpsc::Receiver<feed::FeedEvent>,
     status: watch::Sender<StatusSnapshot>,
-    /// Tasks beside the links (the status socket, the sonar feed), stopped by `stop`.
+    /// Tasks beside the links (the status socket, the sonar feed, what watches the run),
+    /// stopped by `stop`.
     services: Vec<Service>,
     status_socket: PathBuf,
     /// Tells the link tasks and services to stop (sent by `finish`).
@@ -166,15 +152,20 @@ pub struct Daemon<M: Model> {
     leftovers: shutdown::Leftovers,
     /// Held until `finish` has removed what the run made.
     run_dir_lock: Option<run_dir::RunDirLock>,
-    view: Option<ViewHook>,
+    /// The recording, when recording (the engine and the link tasks hold handles on it).
+    recorder: Option<Recorder>,
+    /// The loop's end of the observer, once something asked to watch.
+    observer: Option<ObserverEnd>,
 }
 
-/// The loop's side of a live view.
-struct ViewHook {
-    side: crate::view::DaemonSide,
-    url: Option<String>,
-    foxglove_url: Option<String>,
-    next_state: Instant,
+/// The engine reports to the recording through a handle.
+impl Journal for RecordHandle {
+    fn bytes(&self, sim_s: f64, line: &'static str, dir: crate::record::Direction, data: &[u8]) {
+        RecordHandle::bytes(self, sim_s, line, dir, data);
+    }
+    fn state(&self, row: StateRow) {
+        RecordHandle::state(self, row);
+    }
 }
 
 /// A task that runs beside the links for the life of the daemon.
@@ -238,16 +229,23 @@ impl<M: Model> Daemon<M> {
         let feed_path = run_dir.join(feed::FEED_SOCKET);
         let feed_listener = feed::bind(&feed_path)?;
         leftovers.socket(&feed_path);
-        if let Some(dir) = &options.record {
-            let meta = crate::record::Meta::new(
-                config.seed,
-                config.time_mode.name(),
-                config.time_mode.speed(),
-                &options.config_name,
-            );
-            let recorder = Recorder::start(dir, &meta, &options.config_toml)?;
-            engine.set_recorder(recorder, (1e9 / config.state_record_hz) as u64);
-        }
+        let recorder = match &options.record {
+            Some(dir) => {
+                let meta = crate::record::Meta::new(
+                    config.seed,
+                    config.time_mode.name(),
+                    config.time_mode.speed(),
+                    &options.config_name,
+                );
+                let recorder = Recorder::start(dir, &meta, &options.config_toml)?;
+                engine.set_journal(
+                    Box::new(recorder.handle()),
+                    (1e9 / config.state_record_hz) as u64,
+                );
+                Some(recorder)
+            }
+            None => None,
+        };
 
         let (stop, stop_rx) = watch::channel(false);
         let Spawned {
@@ -255,29 +253,15 @@ impl<M: Model> Daemon<M> {
             links,
             link_tasks,
             inbound,
-        } = spawn_link_tasks(&specs, endpoints, engine.recorder_handle(), &stop_rx);
+        } = spawn_link_tasks(
+            &specs,
+            endpoints,
+            recorder.as_ref().map(Recorder::handle),
+            &stop_rx,
+        );
 
         let (feed_tx, feed) = mpsc::channel(64);
         let (status, status_rx) = watch::channel(StatusSnapshot::default());
-        let view = match options.view {
-            Some(view) => {
-                let started = crate::view::start_live(view, status.subscribe()).await?;
-                Some((
-                    ViewHook {
-                        side: started.side,
-                        url: started.page_url,
-                        foxglove_url: started.foxglove_url,
-                        next_state: Instant::now(),
-                    },
-                    started.service,
-                ))
-            }
-            None => None,
-        };
-        let (view, view_service) = match view {
-            Some((hook, service)) => (Some(hook), Some(service)),
-            None => (None, None),
-        };
         let started = Instant::now();
         let mut daemon = Self {
             config: config.clone(),
@@ -306,11 +290,9 @@ impl<M: Model> Daemon<M> {
             pid_file,
             leftovers,
             run_dir_lock: Some(run_dir_lock),
-            view,
+            recorder,
+            observer: None,
         };
-        if let Some(service) = view_service {
-            daemon.spawn_service("view", service);
-        }
         daemon.spawn_service("sonar feed", |stop| {
             feed::serve(feed_listener, feed_path, feed_tx, stop)
         });
@@ -351,14 +333,14 @@ impl<M: Model> Daemon<M> {
         &self.status_socket
     }
 
-    /// The live view's URL (with its token), when serving one.
-    pub fn view_url(&self) -> Option<&str> {
-        self.view.as_ref().and_then(|v| v.url.as_deref())
-    }
-
-    /// Where Foxglove connects (`ws://HOST:PORT`), when serving it.
-    pub fn foxglove_url(&self) -> Option<&str> {
-        self.view.as_ref().and_then(|v| v.foxglove_url.as_deref())
+    /// Starts handing what crosses the links, the vehicle's state and the controls coming
+    /// back to a watcher (the live view, Foxglove), through the returned [`Observation`]; a
+    /// second call replaces the first watcher. The loop never waits for it
+    /// ([`observer`]).
+    pub fn observe(&mut self) -> Observation {
+        let (end, observation) = observer::observer();
+        self.observer = Some(end);
+        observation
     }
 
     /// Runs the simulation until `shutdown` resolves, every link task has ended, or the model
@@ -395,16 +377,14 @@ impl<M: Model> Daemon<M> {
         loop {
             self.catch_up()?;
             self.flush_idle_lockstep()?;
-            flush_outputs(&mut self.engine, &mut self.lines, self.view.as_ref());
+            flush_outputs(&mut self.engine, &mut self.lines, self.observer.as_ref());
             let now = Instant::now();
-            if let Some(view) = self.view.as_mut()
-                && now >= view.next_state
+            if let Some(observer) = self.observer.as_mut()
+                && now >= observer.next_state
             {
                 let state = self.engine.model().state();
-                view.side
-                    .tap
-                    .state(crate::record::StateRow::from_state(&state));
-                view.next_state = now + crate::view::tap::VIEW_PERIOD;
+                observer.tap.state(StateRow::from_state(&state));
+                observer.next_state = now + observer::OBSERVER_PERIOD;
             }
             if now >= self.pacing.next_status {
                 self.status.send_replace(snapshot(
@@ -421,12 +401,12 @@ impl<M: Model> Daemon<M> {
             if let Some(idle) = self.next_idle_flush_lockstep() {
                 wake_at = wake_at.min(idle.max(now));
             }
-            if let Some(view) = &self.view {
-                wake_at = wake_at.min(view.next_state.max(now));
+            if let Some(observer) = &self.observer {
+                wake_at = wake_at.min(observer.next_state.max(now));
             }
             let control = async {
-                match self.view.as_mut() {
-                    Some(view) => view.side.controls.recv().await,
+                match self.observer.as_mut() {
+                    Some(observer) => observer.controls.recv().await,
                     None => std::future::pending().await,
                 }
             };
@@ -434,10 +414,10 @@ impl<M: Model> Daemon<M> {
                 inbound = self.inbound.recv() => match inbound {
                     Some(inbound) => {
                         self.advance_to_wall()?;
-                        if let Some(view) = &self.view {
+                        if let Some(observer) = &self.observer {
                             let name = self.engine.line_name(inbound.line);
                             let t_s = self.engine.now() as f64 * 1e-9;
-                            view.side.tap.bytes(t_s, name, crate::record::Direction::Rx, inbound.data.clone());
+                            observer.tap.bytes(t_s, name, crate::record::Direction::Rx, inbound.data.clone());
                         }
                         self.engine.receive(inbound.line, &inbound.data).map_err(model_error)?;
                         if let Some(line) = self.lines.get_mut(inbound.line) {
@@ -465,10 +445,9 @@ impl<M: Model> Daemon<M> {
         }
     }
 
-    /// Applies a control from the live view at the current simulated time and records it as
+    /// Applies a control from the observer at the current simulated time and records it as
     /// an event; `Err` says why it was refused (nothing changed then).
-    fn apply_control(&mut self, control: &crate::view::tap::Control) -> Result<String, String> {
-        use crate::view::tap::Control;
+    fn apply_control(&mut self, control: &Control) -> Result<String, String> {
         let wall = self.pacing.started.elapsed();
         let lockstep = "lockstep: simulated time moves only on the client's time frames";
         let done = match control {
@@ -494,8 +473,8 @@ impl<M: Model> Daemon<M> {
                     }
                     _ => {}
                 }
-                if let Some(view) = &self.view {
-                    view.side.tap.paused(map.is_paused());
+                if let Some(observer) = &self.observer {
+                    observer.tap.paused(map.is_paused());
                 }
                 format!("{} (speed {})", control.name(), map.speed())
             }
@@ -521,8 +500,8 @@ impl<M: Model> Daemon<M> {
                 east_mps,
             } => {
                 self.engine.set_current(*north_mps, *east_mps)?;
-                if let Some(view) = &self.view {
-                    view.side.tap.current(*north_mps, *east_mps);
+                if let Some(observer) = &self.observer {
+                    observer.tap.current(*north_mps, *east_mps);
                 }
                 format!("water current {north_mps} m/s north, {east_mps} m/s east")
             }
@@ -532,7 +511,7 @@ impl<M: Model> Daemon<M> {
             }
         };
         let t_s = self.engine.now() as f64 * 1e-9;
-        if let Some(recorder) = self.engine.recorder_handle() {
+        if let Some(recorder) = &self.recorder {
             recorder.event(t_s, control.name(), &control.detail());
         }
         tracing::info!(sim_s = t_s, control = control.name(), "{done}");
@@ -605,7 +584,7 @@ impl<M: Model> Daemon<M> {
     /// endpoints and remove their symlinks) and the services, finishes the recording,
     /// removes the pid file and the sockets.
     pub async fn finish(mut self) -> Result<Summary, DaemonError> {
-        flush_outputs(&mut self.engine, &mut self.lines, self.view.as_ref());
+        flush_outputs(&mut self.engine, &mut self.lines, self.observer.as_ref());
         let sim_time_s = self.engine.now() as f64 * 1e-9;
         let overruns = self.pacing.map.as_ref().map_or(0, RealtimeMap::overruns);
         self.stop.send_replace(true);
@@ -658,7 +637,8 @@ impl<M: Model> Daemon<M> {
                 service.task.abort();
             }
         }
-        let records = match self.engine.take_recorder() {
+        drop(self.engine.take_journal());
+        let records = match self.recorder.take() {
             Some(recorder) => Some(recorder.finish()?),
             None => None,
         };
@@ -672,96 +652,6 @@ impl<M: Model> Daemon<M> {
             overruns,
         })
     }
-}
-
-/// The lines the configuration asks for, each with its endpoint opened: the sonar line
-/// (carrying the sensor link too when it is shared), then the sensor line. Symlinks we own
-/// are noted in `leftovers`.
-async fn open_lines(
-    config: &DaemonConfig,
-    run_dir: &Path,
-    leftovers: &shutdown::Leftovers,
-) -> Result<(Vec<LineSpec>, Vec<OpenEndpoint>), DaemonError> {
-    let shared = config.sensor.endpoint == Endpoint::SharedWithSonar;
-    let line_spec = |name, carries, link: &config::LinkConfig| LineSpec {
-        name,
-        carries,
-        settings: link.line,
-        tx_queue_bytes: link.tx_queue_bytes,
-        release_quantum_ns: config.release_quantum.as_nanos() as u64,
-    };
-    let mut specs = vec![if shared {
-        line_spec("shared", Carries::SHARED, &config.sonar)
-    } else {
-        line_spec("sonar", Carries::SONAR, &config.sonar)
-    }];
-    let mut endpoints = vec![OpenEndpoint::open("sonar", &config.sonar, run_dir).await?];
-    if !shared {
-        specs.push(line_spec("sensor", Carries::SENSOR, &config.sensor));
-        endpoints.push(OpenEndpoint::open("sensor", &config.sensor, run_dir).await?);
-    }
-    for endpoint in &endpoints {
-        if let Some((path, target)) = endpoint.owned_link() {
-            leftovers.symlink(path, target);
-        }
-    }
-    Ok((specs, endpoints))
-}
-
-/// What [`spawn_link_tasks`] started.
-struct Spawned {
-    lines: Vec<LineRuntime>,
-    links: Vec<LinkInfo>,
-    link_tasks: Vec<tokio::task::JoinHandle<()>>,
-    /// Everything the link tasks read, in arrival order.
-    inbound: mpsc::Receiver<Inbound>,
-}
-
-/// One link task per line, on its endpoint; the loop's side of each in `lines`.
-fn spawn_link_tasks(
-    specs: &[LineSpec],
-    endpoints: Vec<OpenEndpoint>,
-    recorder: Option<crate::record::RecordHandle>,
-    stop: &watch::Receiver<bool>,
-) -> Spawned {
-    let (in_tx, inbound) = mpsc::channel::<Inbound>(256);
-    let mut spawned = Spawned {
-        lines: Vec::new(),
-        links: Vec::new(),
-        link_tasks: Vec::new(),
-        inbound,
-    };
-    for ((index, endpoint), spec) in endpoints.into_iter().enumerate().zip(specs) {
-        let describe = endpoint.describe();
-        spawned.links.push(LinkInfo {
-            name: spec.name,
-            path: describe.clone(),
-        });
-        let (out_tx, out_rx) = mpsc::channel(link::TX_CHANNEL_CHUNKS);
-        let counters = Arc::new(LinkCounters::default());
-        let cx = LineContext {
-            line: index,
-            name: spec.name,
-            counters,
-            recorder: recorder.clone(),
-        };
-        spawned.link_tasks.push(tokio::spawn(link::run_line(
-            cx.clone(),
-            endpoint,
-            in_tx.clone(),
-            out_rx,
-            stop.clone(),
-        )));
-        spawned.lines.push(LineRuntime {
-            cx,
-            describe,
-            to_link: out_tx,
-            backlog: bytes::BytesMut::new(),
-            backlog_limit: spec.tx_queue_bytes,
-            last_rx_wall: Instant::now(),
-        });
-    }
-    spawned
 }
 
 impl LoopClock {
@@ -783,37 +673,44 @@ impl LoopClock {
 }
 
 /// Runs the bridge until `shutdown` turns true (or its sender is dropped): [`Daemon::start`],
-/// readiness reported through `on_ready` (each link, then `Ready`), [`Daemon::serve`],
-/// [`Daemon::finish`]. The daemon is finished even when serving failed; the serving error is
-/// returned first.
+/// then [`serve_started`].
 pub async fn run<M>(
     config: &DaemonConfig,
     model: M,
     board: crate::devices::sensor_board::SensorBoard,
     mux: crate::devices::multiplexer::Multiplexer,
     options: RunOptions,
+    shutdown: watch::Receiver<bool>,
+    on_ready: impl FnMut(Readiness),
+) -> Result<Summary, DaemonError>
+where
+    M: Model,
+{
+    let daemon = Daemon::start(config, model, board, mux, options).await?;
+    serve_started(daemon, Vec::new(), shutdown, on_ready).await
+}
+
+/// Serves a started daemon until `shutdown` turns true (or its sender is dropped): readiness
+/// reported through `on_ready` (each link, then `observers`, what the caller connected to
+/// [`Daemon::observe`], then `Ready`), [`Daemon::serve`], [`Daemon::finish`]. The daemon is
+/// finished even when serving failed; the serving error is returned first.
+pub async fn serve_started<M>(
+    mut daemon: Daemon<M>,
+    observers: Vec<Readiness>,
     mut shutdown: watch::Receiver<bool>,
     mut on_ready: impl FnMut(Readiness),
 ) -> Result<Summary, DaemonError>
 where
     M: Model,
 {
-    let mut daemon = Daemon::start(config, model, board, mux, options).await?;
     for link in daemon.links() {
         on_ready(Readiness::Link {
             name: link.name,
             path: link.path.clone(),
         });
     }
-    if let Some(url) = daemon.view_url() {
-        on_ready(Readiness::View {
-            url: url.to_string(),
-        });
-    }
-    if let Some(url) = daemon.foxglove_url() {
-        on_ready(Readiness::Foxglove {
-            url: url.to_string(),
-        });
+    for observer in observers {
+        on_ready(observer);
     }
     on_ready(Readiness::Ready {
         status_socket: daemon.status_socket().to_path_buf(),
@@ -833,490 +730,5 @@ fn model_error<E: std::error::Error + Send + Sync + 'static>(e: E) -> DaemonErro
     DaemonError::Model(Box::new(e))
 }
 
-/// Hands released bytes to the link tasks. Paced bytes are released a few at a time, so the
-/// hand-over channel (counted in chunks) fills after a short stall of the link task even
-/// when the client reads: bytes that do not fit wait in the line's backlog and go as one
-/// chunk next time. Only when the channel is full and the backlog would exceed the line's
-/// `tx_queue_bytes` (a client that does not read, or is gone) are the newly released bytes
-/// dropped, counted and recorded as drops (the older ones keep their place, as in a UART
-/// overrun); the daemon never blocks on a client.
-fn flush_outputs<M: Model>(
-    core: &mut Engine<M>,
-    lines: &mut [LineRuntime],
-    view: Option<&ViewHook>,
-) {
-    let sim_s = core.now() as f64 * 1e-9;
-    for (index, line) in lines.iter_mut().enumerate() {
-        let waiting = line.backlog.len();
-        while let Some(data) = core.take_output(index) {
-            line.backlog.extend_from_slice(&data);
-            if let Some(view) = view {
-                view.side
-                    .tap
-                    .bytes(sim_s, line.cx.name, crate::record::Direction::Tx, data);
-            }
-        }
-        if line.backlog.is_empty() {
-            continue;
-        }
-        let chunk = Outbound {
-            sim_s,
-            data: line.backlog.split().freeze(),
-        };
-        match line.to_link.try_send(chunk) {
-            Ok(()) => {}
-            Err(mpsc::error::TrySendError::Full(chunk))
-                if chunk.data.len() <= line.backlog_limit =>
-            {
-                line.backlog.extend_from_slice(&chunk.data);
-            }
-            Err(mpsc::error::TrySendError::Full(chunk)) => {
-                line.backlog.extend_from_slice(&chunk.data[..waiting]);
-                line.cx
-                    .dropped(sim_s, DropReason::NotRead, &chunk.data[waiting..]);
-            }
-            Err(mpsc::error::TrySendError::Closed(chunk)) => {
-                line.cx
-                    .dropped(sim_s, DropReason::EndpointGone, &chunk.data);
-            }
-        }
-    }
-}
-
-fn snapshot<M: Model>(
-    core: &Engine<M>,
-    lines: &[LineRuntime],
-    started: Instant,
-    config: &DaemonConfig,
-    map: Option<&RealtimeMap>,
-    record: Option<&Path>,
-) -> StatusSnapshot {
-    let state = core.model().state();
-    let (roll, pitch, yaw) = state.euler_rad();
-    StatusSnapshot {
-        pid: std::process::id(),
-        version: env!("CARGO_PKG_VERSION").to_string(),
-        uptime_s: started.elapsed().as_secs_f64(),
-        sim_time_s: core.now() as f64 * 1e-9,
-        time_mode: config.time_mode.name().to_string(),
-        speed: map.map_or(0.0, RealtimeMap::speed),
-        overruns: map.map_or(0, RealtimeMap::overruns),
-        links: lines
-            .iter()
-            .enumerate()
-            .map(|(i, l)| {
-                let c = core.line_counters(i);
-                LinkStatus {
-                    name: l.cx.name.to_string(),
-                    path: l.describe.clone(),
-                    bytes_rx: l.cx.counters.bytes_rx.load(Ordering::Relaxed),
-                    bytes_tx: l.cx.counters.bytes_tx.load(Ordering::Relaxed),
-                    frames_rx: c.frames_rx,
-                    frames_tx: c.frames_tx,
-                    errors: c.errors + l.cx.counters.io_errors.load(Ordering::Relaxed),
-                    dropped_tx: c.dropped_tx + l.cx.counters.dropped_tx.load(Ordering::Relaxed),
-                    reconnects: l.cx.counters.reconnects.load(Ordering::Relaxed),
-                }
-            })
-            .collect(),
-        pose: Pose {
-            x_m: state.position_m.x,
-            y_m: state.position_m.y,
-            depth_m: state.position_m.z,
-            roll_deg: roll.to_degrees(),
-            pitch_deg: pitch.to_degrees(),
-            heading_deg: yaw.to_degrees().rem_euclid(360.0),
-            surge_mps: state.velocity_body_mps.x,
-        },
-        contacts: core.model().contacts(),
-        recording: record.map(|p| p.display().to_string()),
-    }
-}
-
 #[cfg(test)]
-mod tests {
-    use bytes::BytesMut;
-    use firmware_protocol::sensor_link::Message;
-    use firmware_protocol::sonar_link::SonarCommand;
-    use firmware_protocol::{Frame, LineDecoder, LineItem, Talker, Transducer};
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-
-    use super::*;
-    use crate::config::{ConfigSource, DEFAULT_CONFIG, Document, Embedded};
-    use crate::daemon::engine::fake::FakeModel;
-    use crate::devices::multiplexer::{
-        DepthSentence, InvalidEcho, Multiplexer, MultiplexerSettings,
-    };
-    use crate::devices::sensor_board::{BoardSettings, SensorBoard};
-    use crate::transport::serial;
-
-    fn config(run_dir: &Path) -> DaemonConfig {
-        let text = Embedded.read(DEFAULT_CONFIG).unwrap();
-        let mut config = DaemonConfig::resolve(&Document::new("default", &text)).unwrap();
-        config.time_mode = TimeMode::Lockstep;
-        config.run_dir = run_dir.to_path_buf();
-        config
-    }
-
-    /// A fresh scratch directory (removed when it drops) and the default configuration in
-    /// `time_mode` with its run directory inside.
-    fn scratch(tag: &str, time_mode: TimeMode) -> (tempfile::TempDir, DaemonConfig) {
-        let dir = crate::scratch::dir(tag);
-        let mut config = config(&dir.path().join("run"));
-        config.time_mode = time_mode;
-        (dir, config)
-    }
-
-    fn devices() -> (SensorBoard, Multiplexer) {
-        let board = SensorBoard::new(BoardSettings {
-            tick_ns: 10_000_000,
-            lockstep: true,
-            compass_period_ns: 400_000_000,
-            line_chars_per_s: 11_520.0,
-            watchdog_ns: None,
-            sonar_on_this_line: false,
-        });
-        let mux = Multiplexer::new(MultiplexerSettings {
-            sentence: DepthSentence::Dbt,
-            talker: Talker::SOUNDER,
-            invalid_echo: InvalidEcho::Omit,
-            proprietary: false,
-        });
-        (board, mux)
-    }
-
-    async fn read_item(
-        port: &mut tokio_serial::SerialStream,
-        buf: &mut BytesMut,
-        decoder: &mut LineDecoder,
-    ) -> LineItem {
-        loop {
-            if let Some(item) = decoder.decode(buf) {
-                return item;
-            }
-            let mut chunk = [0u8; 256];
-            let n = tokio::time::timeout(Duration::from_secs(5), port.read(&mut chunk))
-                .await
-                .expect("reply within 5 s")
-                .unwrap();
-            buf.extend_from_slice(&chunk[..n]);
-        }
-    }
-
-    /// `run` on a fake model with the test devices, as a task.
-    fn spawn_run(
-        config: DaemonConfig,
-        options: RunOptions,
-        stop: watch::Receiver<bool>,
-        on_ready: impl FnMut(Readiness) + Send + 'static,
-    ) -> tokio::task::JoinHandle<Result<Summary, DaemonError>> {
-        let (board, mux) = devices();
-        tokio::spawn(async move {
-            run(
-                &config,
-                FakeModel::default(),
-                board,
-                mux,
-                options,
-                stop,
-                on_ready,
-            )
-            .await
-        })
-    }
-
-    /// Sends `message` as frame `seq` on the sensor link and returns the reply to it.
-    async fn ask(
-        (port, buf, decoder): &mut (
-            &mut tokio_serial::SerialStream,
-            &mut BytesMut,
-            &mut LineDecoder,
-        ),
-        seq: u8,
-        message: Message,
-    ) -> Message {
-        let mut frame = BytesMut::new();
-        Frame::new(seq, message).encode(&mut frame);
-        port.write_all(&frame).await.unwrap();
-        match read_item(port, buf, decoder).await {
-            LineItem::Frame(reply) if reply.seq == seq => reply.message,
-            other => panic!("expected the reply to frame {seq}, got {other:?}"),
-        }
-    }
-
-    /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
-    /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
-    /// the time; shutdown removes the links and finishes the recording.
-    /// Regression: every released chunk went to the link task's channel (64 chunks) and was
-    /// dropped when the channel was full. Paced bytes are released a few at a time, so a link
-    /// task that stalled for a few ms lost bytes of a client that was reading (33,318 bytes
-    /// in the one-hour run at speed 100 of `bench daemon rss`). Now they wait in a backlog.
-    #[test]
-    fn released_bytes_wait_for_a_busy_link_task_instead_of_being_dropped() {
-        let (board, mux) = devices();
-        let spec = |name, sonar, baud| LineSpec {
-            name,
-            carries: Carries {
-                sonar,
-                sensor: !sonar,
-            },
-            settings: crate::transport::LineSettings::n81(baud),
-            tx_queue_bytes: 4096,
-            release_quantum_ns: 1_000_000,
-        };
-        let specs = [spec("sonar", true, 4800), spec("sensor", false, 115_200)];
-        let mut core = Engine::new(FakeModel::default(), board, mux, &specs, false);
-        // A link task that takes one chunk and then stalls: a channel with room for one.
-        let (sonar_tx, _sonar_rx) = mpsc::channel(1);
-        let (sensor_tx, mut sensor_rx) = mpsc::channel(1);
-        let runtime = |line, name, to_link| LineRuntime {
-            cx: LineContext {
-                line,
-                name,
-                counters: Arc::default(),
-                recorder: None,
-            },
-            describe: String::new(),
-            to_link,
-            backlog: bytes::BytesMut::new(),
-            backlog_limit: 4096,
-            last_rx_wall: Instant::now(),
-        };
-        let mut lines = vec![
-            runtime(0, "sonar", sonar_tx),
-            runtime(1, "sensor", sensor_tx),
-        ];
-        let mut stream = BytesMut::new();
-        Frame::new(
-            1,
-            Message::AdcStream {
-                channels: 0b1,
-                period_ms: 10,
-            },
-        )
-        .encode(&mut stream);
-        core.receive(1, &stream).unwrap();
-        let mut delivered = 0;
-        for step in 1..=100u64 {
-            core.advance_to(step * 10_000_000).unwrap();
-            flush_outputs(&mut core, &mut lines, None);
-            if step % 25 == 0 {
-                // The link task catches up now and then.
-                while let Ok(chunk) = sensor_rx.try_recv() {
-                    delivered += chunk.data.len();
-                    flush_outputs(&mut core, &mut lines, None);
-                }
-            }
-        }
-        assert_eq!(lines[1].cx.counters.dropped_tx.load(Ordering::Relaxed), 0);
-        // The ACK and about 100 samples of 14 bytes, all delivered.
-        assert!(delivered > 1300, "{delivered} bytes delivered");
-    }
-
-    /// Regression: the overrun check compared the time reached at the last wake with the
-    /// target now, so a normal 20 ms idle sleep at speed 10 (200 ms simulated) counted as an
-    /// overrun of more than `max_lag` (100 ms); the map re-anchored at the old time on every
-    /// wake and simulated time never advanced without client traffic.
-    #[tokio::test]
-    async fn realtime_at_speed_10_advances_without_a_client() {
-        let (_dir, config) = scratch("rt10", TimeMode::Realtime { speed: 10.0 });
-        let (stop_tx, stop_rx) = watch::channel(false);
-        let daemon = spawn_run(config, RunOptions::default(), stop_rx, |_| {});
-        tokio::time::sleep(Duration::from_secs(1)).await;
-        stop_tx.send(true).unwrap();
-        let summary = daemon.await.unwrap().unwrap();
-        // 10 s in an ideal world; a loaded machine may slip a little (counted overruns).
-        assert!(summary.sim_time_s >= 5.0, "1 s at speed 10: {summary:?}");
-    }
-
-    /// The three stages on their own: after `start` the links exist before anything is
-    /// served; a service added with `spawn_service` runs beside them and is told to stop by
-    /// `finish`; `serve` returns when its shutdown future resolves, having published status.
-    #[tokio::test]
-    async fn start_serve_finish_run_a_service_beside_the_links() {
-        let (_dir, config) = scratch("stages", TimeMode::Lockstep);
-        let run_dir = config.run_dir.clone();
-        let (board, mux) = devices();
-        let mut daemon = Daemon::start(
-            &config,
-            FakeModel::default(),
-            board,
-            mux,
-            RunOptions::default(),
-        )
-        .await
-        .unwrap();
-        let names: Vec<&str> = daemon.links().iter().map(|l| l.name).collect();
-        assert_eq!(names, ["sonar", "sensor"]);
-        assert!(std::fs::symlink_metadata(run_dir.join("sensor")).is_ok());
-        assert_eq!(daemon.status_socket(), run_dir.join("status.sock"));
-        let (told_tx, told_rx) = tokio::sync::oneshot::channel();
-        daemon.spawn_service("test", |mut stop| async move {
-            let _ = stop.wait_for(|stop| *stop).await;
-            let _ = told_tx.send(());
-        });
-        let mut updates = daemon.status_updates();
-        daemon
-            .serve(tokio::time::sleep(STATUS_PERIOD * 2))
-            .await
-            .unwrap();
-        assert!(
-            updates.has_changed().unwrap(),
-            "status published while serving"
-        );
-        assert_eq!(updates.borrow_and_update().links.len(), 2);
-        let summary = daemon.finish().await.unwrap();
-        assert_eq!(
-            summary.sim_time_s, 0.0,
-            "lockstep without a client stays at 0"
-        );
-        tokio::time::timeout(Duration::from_secs(1), told_rx)
-            .await
-            .expect("the service stopped within its budget")
-            .expect("the service was told to stop");
-        for name in ["sonar", "sensor", "status.sock", feed::FEED_SOCKET] {
-            assert!(
-                std::fs::symlink_metadata(run_dir.join(name)).is_err(),
-                "{name} removed"
-            );
-        }
-    }
-
-    /// Realtime counts from `serve`, not from `start`: time the caller spends in between
-    /// (announcing readiness) is neither simulated nor an overrun.
-    #[tokio::test]
-    async fn realtime_starts_counting_when_serving_begins() {
-        let (_dir, config) = scratch("anchor", TimeMode::Realtime { speed: 1.0 });
-        let (board, mux) = devices();
-        let options = RunOptions::default();
-        let mut daemon = Daemon::start(&config, FakeModel::default(), board, mux, options)
-            .await
-            .unwrap();
-        tokio::time::sleep(Duration::from_millis(500)).await;
-        daemon
-            .serve(tokio::time::sleep(Duration::from_millis(100)))
-            .await
-            .unwrap();
-        let summary = daemon.finish().await.unwrap();
-        assert_eq!(summary.overruns, 0, "{summary:?}");
-        assert!(summary.sim_time_s < 0.4, "{summary:?}");
-    }
-
-    #[tokio::test]
-    async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
-        let (tmp, config) = scratch("daemon", TimeMode::Lockstep);
-        let dir = tmp.path();
-        let run_dir = config.run_dir.clone();
-        let record = dir.join("rec");
-        let (stop_tx, stop_rx) = watch::channel(false);
-        let (ready_tx, mut ready_rx) = mpsc::unbounded_channel();
-        let options = RunOptions {
-            record: Some(record.clone()),
-            pid_file: Some(dir.join("pid")),
-            config_toml: "seed = 1\n".into(),
-            ..RunOptions::default()
-        };
-        let daemon = spawn_run(config, options, stop_rx, move |r| {
-            let _ = ready_tx.send(r);
-        });
-        let mut links = Vec::new();
-        while let Readiness::Link { name, path } =
-            ready_rx.recv().await.expect("daemon reports readiness")
-        {
-            links.push((name, path));
-        }
-        assert_eq!(
-            links.iter().map(|l| l.0).collect::<Vec<_>>(),
-            vec!["sonar", "sensor"]
-        );
-        assert!(dir.join("pid").exists());
-
-        let mut sensor = serial::open(
-            &run_dir.join("sensor"),
-            &crate::transport::LineSettings::n81(115_200),
-        )
-        .unwrap();
-        let mut sonar = serial::open(
-            &run_dir.join("sonar"),
-            &crate::transport::LineSettings::n81(4800),
-        )
-        .unwrap();
-        let (mut sbuf, mut sdec) = (BytesMut::new(), LineDecoder::new());
-        let mut sensor_link = (&mut sensor, &mut sbuf, &mut sdec);
-        assert!(matches!(
-            ask(&mut sensor_link, 1, Message::Hello { client_version: 1 }).await,
-            Message::HelloReply { .. }
-        ));
-        let mut select = BytesMut::new();
-        SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
-        sonar.write_all(&select).await.unwrap();
-        // Give the select time to cross its pty before time moves on.
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        let time = ask(&mut sensor_link, 2, Message::TimeAdvance { ticks: 150 }).await;
-        assert!(matches!(time, Message::Time { ticks: 150, .. }), "{time:?}");
-        let (mut nbuf, mut ndec) = (BytesMut::new(), LineDecoder::new());
-        assert!(matches!(
-            read_item(&mut sonar, &mut nbuf, &mut ndec).await,
-            LineItem::Sonar(SonarCommand::Ack(_))
-        ));
-        assert!(matches!(
-            read_item(&mut sonar, &mut nbuf, &mut ndec).await,
-            LineItem::Nmea(_)
-        ));
-
-        tokio::time::sleep(STATUS_PERIOD * 2).await;
-        let status = status::query(&run_dir.join("status.sock"), Duration::from_secs(2))
-            .await
-            .unwrap();
-        assert_eq!(status.sim_time_s, 1.5);
-        assert_eq!(status.time_mode, "lockstep");
-
-        // `replay --into-sonar`: captured sentences through the feed socket replace the
-        // model's; the log's $PEBHS maps each to its transducer (1 is selected, 2 is not).
-        let mut feed = tokio::net::UnixStream::connect(run_dir.join(feed::FEED_SOCKET))
-            .await
-            .unwrap();
-        feed.write_all(
-            b"$SDDBT,8.2,f,2.5,M,1.4,F*0E\r\n$PEBHS,1,2.5,90*71\r\n$SDDBT,9.9,f,3.0,M,1.6,F*02\r\n$PEBHS,2,3.0,90*76\r\n",
-        )
-        .await
-        .unwrap();
-        tokio::time::sleep(Duration::from_millis(200)).await;
-        let time = ask(&mut sensor_link, 3, Message::TimeAdvance { ticks: 50 }).await;
-        assert!(matches!(time, Message::Time { ticks: 200, .. }), "{time:?}");
-        let fed = read_item(&mut sonar, &mut nbuf, &mut ndec).await;
-        let LineItem::Nmea(firmware_protocol::Sentence::Dbt(dbt)) = fed else {
-            panic!("expected the fed DBT, got {fed:?}")
-        };
-        assert_eq!(
-            dbt.metres.map(|m| m.tenths()),
-            Some(25),
-            "transducer 1's logged 2.5 m"
-        );
-        let mut more = [0u8; 64];
-        let late = tokio::time::timeout(Duration::from_millis(300), sonar.read(&mut more)).await;
-        assert!(
-            nbuf.is_empty() && late.is_err(),
-            "transducer 2's 3.0 m was withheld"
-        );
-        drop(feed);
-
-        stop_tx.send(true).unwrap();
-        let summary = tokio::time::timeout(Duration::from_secs(1), daemon)
-            .await
-            .expect("shutdown within 1 s")
-            .unwrap()
-            .unwrap();
-        assert_eq!(summary.sim_time_s, 2.0);
-        let records = summary.records.unwrap();
-        assert!(records.chunks >= 6, "{records:?}");
-        assert!(records.states > 0);
-        for name in ["sonar", "sensor", "status.sock"] {
-            assert!(
-                std::fs::symlink_metadata(run_dir.join(name)).is_err(),
-                "{name} removed"
-            );
-        }
-        assert!(!dir.join("pid").exists());
-    }
-}
+mod tests;

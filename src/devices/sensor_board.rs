@@ -17,15 +17,22 @@
 //! and its reply, and answers an identical request with the stored reply without executing
 //! it again, so a retried TIME_ADVANCE or TAKE_POINT is never applied twice.
 
+use firmware_protocol::Frame;
 use firmware_protocol::error::{FrameError, LinkError, MessageError};
 use firmware_protocol::sensor_link::{
-    self, AdcChannel, AdcSamples, AdcValue, CompassMode, CompassOutput, Counters, ErrorCode,
-    Message, Reading, Readings, StepValues, ThrusterCommand, TimeMode, capability, msg_type,
+    self, AdcChannel, AdcSamples, CompassMode, CompassOutput, Counters, ErrorCode, Message,
+    Readings, ThrusterCommand, capability, msg_type,
 };
-use firmware_protocol::{Frame, HeadingFormat, HeadingWord};
 
 use super::Plant;
 use crate::SimNanos;
+
+mod adc;
+mod compass;
+mod motors;
+mod time;
+
+use self::adc::adc_value;
 
 /// Fixed settings of the board.
 #[derive(Debug, Clone, PartialEq)]
@@ -281,6 +288,52 @@ impl SensorBoard {
     fn execute(&mut self, frame: Frame, now: SimNanos, plant: &mut dyn Plant) -> Option<Output> {
         let seq = frame.seq;
         let kind = frame.message.msg_type();
+        match frame.message {
+            Message::Hello { .. } => self.execute_hello(frame, now, plant),
+            Message::CountersGet => Some(self.reply(seq, Message::Counters(self.counters))),
+            Message::AdcRead { .. } | Message::AdcStream { .. } => {
+                self.execute_adc(frame, now, plant)
+            }
+            Message::CompassMode { .. }
+            | Message::CompassRead
+            | Message::CompassCalibrate { .. }
+            | Message::CompassReset => self.execute_compass(frame, now, plant),
+            Message::ThrusterSet { .. } | Message::ThrusterSetAll { .. } => {
+                self.execute_motors(frame, now, plant)
+            }
+            Message::TimeGet
+            | Message::TimeAdvance { .. }
+            | Message::TimeStep { .. }
+            | Message::TimeMode { .. } => self.execute_time(frame, now, plant),
+            // Replies and pushes travel bridge -> EyeBot only.
+            Message::Ack { .. }
+            | Message::HelloReply { .. }
+            | Message::Counters(_)
+            | Message::AdcValue { .. }
+            | Message::CompassHeading { .. }
+            | Message::CompassRaw { .. }
+            | Message::CalibrationStatus { .. }
+            | Message::Time { .. }
+            | Message::Step { .. }
+            | Message::AdcSamples { .. }
+            | Message::CompassHeadingPush { .. }
+            | Message::CompassRawPush { .. } => {
+                Some(self.nak(seq, kind, ErrorCode::UnknownType, 0))
+            }
+            // Counted (as rejected, in `handle`), never answered: the bridge never NAKs a NAK.
+            Message::Nak { .. } => None,
+        }
+    }
+
+    /// HELLO: a new session.
+    pub(super) fn execute_hello(
+        &mut self,
+        frame: Frame,
+        now: SimNanos,
+        plant: &mut dyn Plant,
+    ) -> Option<Output> {
+        let seq = frame.seq;
+        let kind = frame.message.msg_type();
         let out = match frame.message {
             Message::Hello { client_version } => {
                 if client_version != sensor_link::PROTOCOL_VERSION {
@@ -321,267 +374,10 @@ impl SensorBoard {
                     max_payload: firmware_protocol::frame::MAX_PAYLOAD as u8,
                 }
             }
-            Message::CountersGet => Message::Counters(self.counters),
-            Message::AdcRead { channel } => Message::AdcValue {
-                channel,
-                value: adc_value(plant, channel, now),
-            },
-            Message::AdcStream {
-                channels,
-                period_ms,
-            } => {
-                if channels == 0 {
-                    self.stream = None;
-                } else if period_ms == 0 || self.stream_overloads_line(channels, period_ms) {
-                    return Some(self.nak(seq, kind, ErrorCode::BadValue, 1));
-                } else {
-                    let period_ns = u64::from(period_ms) * 1_000_000;
-                    self.stream = Some(AdcStream {
-                        mask: channels,
-                        period_ns,
-                        next_ns: now + period_ns,
-                    });
-                }
-                Message::Ack { acked_type: kind }
-            }
-            Message::CompassMode { mode, output } => {
-                self.compass_mode = mode;
-                self.compass_output = output;
-                self.next_compass_push_ns = match mode {
-                    CompassMode::Continuous => Some(now + self.settings.compass_period_ns),
-                    CompassMode::Poll => None,
-                };
-                Message::Ack { acked_type: kind }
-            }
-            Message::CompassRead => self.compass_message(plant, now, false),
-            Message::CompassCalibrate { action } => match plant.compass_calibrate(action, now) {
-                Ok(progress) => Message::CalibrationStatus {
-                    state: progress.state,
-                    points: progress.points,
-                },
-                Err(refused) => {
-                    tracing::debug!(%refused, "calibration step refused");
-                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
-                }
-            },
-            Message::CompassReset => {
-                plant.compass_reset(now);
-                self.compass_mode = CompassMode::Poll;
-                self.compass_output = CompassOutput::Binary;
-                self.next_compass_push_ns = None;
-                Message::Ack { acked_type: kind }
-            }
-            Message::ThrusterSet { thruster, command } => {
-                self.thrusters[thruster as usize] = command;
-                self.last_thruster_ns = Some(now);
-                plant.set_thrusters(self.thrusters, now);
-                Message::Ack { acked_type: kind }
-            }
-            Message::ThrusterSetAll { commands } => {
-                self.thrusters = commands;
-                self.last_thruster_ns = Some(now);
-                plant.set_thrusters(self.thrusters, now);
-                Message::Ack { acked_type: kind }
-            }
-            Message::TimeGet => Message::Time {
-                ticks: self.ticks(now),
-                tick_us: (self.settings.tick_ns / 1000) as u32,
-            },
-            Message::TimeAdvance { ticks } => {
-                if !self.settings.lockstep {
-                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
-                }
-                self.pending_advance = Some(frame);
-                return Some(Output::Advance {
-                    to: now + u64::from(ticks) * self.settings.tick_ns,
-                    seq,
-                });
-            }
-            Message::TimeStep {
-                used,
-                stop_on_sonar,
-                ticks,
-                thrusters,
-                readings,
-            } => {
-                if !self.settings.lockstep {
-                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
-                }
-                let open = self.open_step.map_or(0, |o| o.readings.len());
-                if usize::from(used) > open {
-                    return Some(self.nak(seq, kind, ErrorCode::BadValue, 0));
-                }
-                if stop_on_sonar && self.settings.sonar_on_this_line {
-                    return Some(self.nak(seq, kind, ErrorCode::Unsupported, 0));
-                }
-                if self.compass_output == CompassOutput::Raw
-                    && readings.as_slice().contains(&Reading::Compass)
-                {
-                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
-                }
-                self.take_back(plant, used);
-                if let Some(commands) = thrusters {
-                    self.thrusters = commands;
-                    self.last_thruster_ns = Some(now);
-                    plant.set_thrusters(self.thrusters, now);
-                }
-                self.pending_advance = Some(frame);
-                self.pending_readings = readings;
-                return Some(Output::Step {
-                    to: now + u64::from(ticks) * self.settings.tick_ns,
-                    seq,
-                    stop_on_sonar,
-                });
-            }
-            Message::TimeMode { mode } => {
-                let ours = if self.settings.lockstep {
-                    TimeMode::Lockstep
-                } else {
-                    TimeMode::RealTime
-                };
-                if mode != ours {
-                    // The daemon's time mode is chosen when it starts (--time-mode).
-                    return Some(self.nak(seq, kind, ErrorCode::BadState, 0));
-                }
-                Message::Ack { acked_type: kind }
-            }
-            // Replies and pushes travel bridge -> EyeBot only.
-            Message::Ack { .. }
-            | Message::HelloReply { .. }
-            | Message::Counters(_)
-            | Message::AdcValue { .. }
-            | Message::CompassHeading { .. }
-            | Message::CompassRaw { .. }
-            | Message::CalibrationStatus { .. }
-            | Message::Time { .. }
-            | Message::Step { .. }
-            | Message::AdcSamples { .. }
-            | Message::CompassHeadingPush { .. }
-            | Message::CompassRawPush { .. } => {
-                return Some(self.nak(seq, kind, ErrorCode::UnknownType, 0));
-            }
-            // Counted (as rejected, in `handle`), never answered: the bridge never NAKs a NAK.
-            Message::Nak { .. } => return None,
+            _ => return None,
         };
         Some(self.reply(seq, out))
     }
-
-    /// The TIME reply that ends a lockstep advance; call once simulated time reached `now`.
-    pub fn finish_advance(&mut self, seq: u8, now: SimNanos) -> Frame {
-        let message = Message::Time {
-            ticks: self.ticks(now),
-            tick_us: (self.settings.tick_ns / 1000) as u32,
-        };
-        let reply = Frame::new(seq, message);
-        self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
-        if let Some(request) = self.pending_advance.take() {
-            self.remember(request, reply);
-        }
-        reply
-    }
-
-    /// Takes back the last STEP's readings beyond the first `used`: the plant's reading state
-    /// goes back to before them and the first `used` are made again (same values), so the
-    /// bridge is where one ADC_READ/COMPASS_READ per used value would have left it.
-    fn take_back(&mut self, plant: &mut dyn Plant, used: u8) {
-        let Some(open) = self.open_step.take() else {
-            return;
-        };
-        let used = usize::from(used);
-        if used >= open.readings.len() {
-            return;
-        }
-        self.taken_back += (open.readings.len() - used) as u64;
-        plant.readings_restore();
-        for &reading in &open.readings.as_slice()[..used] {
-            self.reading(plant, reading, open.at);
-        }
-    }
-
-    fn reading(&mut self, plant: &mut dyn Plant, reading: Reading, now: SimNanos) -> u16 {
-        match reading {
-            Reading::Adc(channel) => adc_value(plant, channel, now).get(),
-            Reading::Compass => match self.compass_message(plant, now, false) {
-                Message::CompassHeading { word } => word.0,
-                // TIME_STEP refuses compass readings while the output is raw.
-                _ => 0,
-            },
-        }
-    }
-
-    /// The STEP reply that ends a TIME_STEP, once simulated time reached `now`: makes its
-    /// readings (after the plant saved its reading state, for a take-back).
-    pub fn finish_step(
-        &mut self,
-        seq: u8,
-        now: SimNanos,
-        sonar_bytes: u16,
-        plant: &mut dyn Plant,
-    ) -> Frame {
-        let readings = std::mem::take(&mut self.pending_readings);
-        let mut values = [0u16; sensor_link::MAX_READINGS];
-        if !readings.is_empty() {
-            plant.readings_checkpoint();
-            for (slot, &reading) in values.iter_mut().zip(readings.as_slice()) {
-                *slot = self.reading(plant, reading, now);
-            }
-            self.open_step = Some(OpenStep { readings, at: now });
-        }
-        let values = StepValues::new(values.into_iter().take(readings.len()))
-            .unwrap_or_else(|_| unreachable!("at most MAX_READINGS readings"));
-        let reply = Frame::new(
-            seq,
-            Message::Step {
-                ticks: self.ticks(now),
-                sonar_bytes,
-                values,
-            },
-        );
-        self.counters.tx_frames = self.counters.tx_frames.wrapping_add(1);
-        if let Some(request) = self.pending_advance.take() {
-            self.remember(request, reply);
-        }
-        reply
-    }
-
-    /// Whether streaming `channels` every `period_ms` would take more than half the line.
-    fn stream_overloads_line(&self, channels: u8, period_ms: u16) -> bool {
-        let frame_chars = (firmware_protocol::frame::HEADER_LEN
-            + 5
-            + 2 * channels.count_ones() as usize
-            + firmware_protocol::frame::CRC_LEN) as f64;
-        let chars_per_s = frame_chars * 1000.0 / f64::from(period_ms);
-        chars_per_s > 0.5 * self.settings.line_chars_per_s
-    }
-
-    fn compass_message(&mut self, plant: &mut dyn Plant, now: SimNanos, push: bool) -> Message {
-        let sample = plant.compass(now);
-        let heading = sample.heading_deg.min(359);
-        let word = |format| HeadingWord::encode(heading, format).unwrap_or(HeadingWord(0));
-        match (self.compass_output, push) {
-            (CompassOutput::Binary, false) => Message::CompassHeading {
-                word: word(HeadingFormat::Binary),
-            },
-            (CompassOutput::Bcd, false) => Message::CompassHeading {
-                word: word(HeadingFormat::Bcd),
-            },
-            (CompassOutput::Raw, false) => Message::CompassRaw {
-                x: sample.raw_x,
-                y: sample.raw_y,
-            },
-            (CompassOutput::Binary, true) => Message::CompassHeadingPush {
-                word: word(HeadingFormat::Binary),
-            },
-            (CompassOutput::Bcd, true) => Message::CompassHeadingPush {
-                word: word(HeadingFormat::Bcd),
-            },
-            (CompassOutput::Raw, true) => Message::CompassRawPush {
-                x: sample.raw_x,
-                y: sample.raw_y,
-            },
-        }
-    }
-
     /// When [`SensorBoard::poll`] next has something to do.
     pub fn poll_timeout(&self) -> Option<SimNanos> {
         let watchdog = match (self.settings.watchdog_ns, self.last_thruster_ns) {
@@ -640,11 +436,6 @@ impl SensorBoard {
     }
 }
 
-fn adc_value(plant: &mut dyn Plant, channel: AdcChannel, now: SimNanos) -> AdcValue {
-    let raw = plant.adc(channel.get(), now).min(1023);
-    AdcValue::new(raw).unwrap_or_else(|_| unreachable!("clamped to 10 bits"))
-}
-
 /// Message types a sensor board answers, for documentation and tests.
 pub const REQUEST_TYPES: &[u8] = &[
     msg_type::HELLO,
@@ -664,550 +455,4 @@ pub const REQUEST_TYPES: &[u8] = &[
 ];
 
 #[cfg(test)]
-mod tests {
-    use firmware_protocol::sensor_link::{
-        CalibrationAction, CalibrationState, Direction, Thruster,
-    };
-
-    use super::*;
-    use crate::devices::fake::FakePlant;
-
-    const MS: u64 = 1_000_000;
-
-    fn board(lockstep: bool, watchdog_ms: Option<u64>) -> SensorBoard {
-        SensorBoard::new(BoardSettings {
-            tick_ns: 10 * MS,
-            lockstep,
-            compass_period_ns: 400 * MS,
-            line_chars_per_s: 11_520.0,
-            watchdog_ns: watchdog_ms.map(|m| m * MS),
-            sonar_on_this_line: false,
-        })
-    }
-
-    fn sent(out: Option<Output>) -> Frame {
-        match out {
-            Some(Output::Send(frame)) => frame,
-            other => panic!("expected a frame, got {other:?}"),
-        }
-    }
-
-    #[test]
-    fn adc_read_answers_with_the_plant_code_and_the_request_seq() {
-        let mut plant = FakePlant {
-            adc: [0, 0, 0, 0x2AB, 0, 0, 0, 0],
-            ..FakePlant::default()
-        };
-        let mut b = board(false, None);
-        let channel = AdcChannel::new(3).unwrap();
-        let reply = sent(b.handle(Frame::new(7, Message::AdcRead { channel }), 0, &mut plant));
-        assert_eq!(reply.seq, 7);
-        assert_eq!(
-            reply.message,
-            Message::AdcValue {
-                channel,
-                value: AdcValue::new(0x2AB).unwrap()
-            }
-        );
-    }
-
-    #[test]
-    fn adc_stream_pushes_chosen_channels_every_period_until_stopped() {
-        let mut plant = FakePlant {
-            adc: [1, 2, 3, 4, 5, 6, 7, 8],
-            ..FakePlant::default()
-        };
-        let mut b = board(false, None);
-        let ack = sent(b.handle(
-            Frame::new(
-                1,
-                Message::AdcStream {
-                    channels: 0b0000_0101,
-                    period_ms: 10,
-                },
-            ),
-            0,
-            &mut plant,
-        ));
-        assert_eq!(
-            ack.message,
-            Message::Ack {
-                acked_type: msg_type::ADC_STREAM
-            }
-        );
-        let mut out = Vec::new();
-        b.poll(35 * MS, &mut plant, &mut out);
-        let times: Vec<_> = out.iter().map(|(t, _)| *t).collect();
-        assert_eq!(times, vec![10 * MS, 20 * MS, 30 * MS]);
-        let Message::AdcSamples { ticks, samples } = out[0].1.message else {
-            panic!("not samples")
-        };
-        assert_eq!(ticks, 1);
-        assert_eq!(samples.mask(), 0b101);
-        assert_eq!(
-            samples.get(AdcChannel::new(2).unwrap()),
-            Some(AdcValue::new(3).unwrap())
-        );
-        assert_ne!(
-            out[0].1.seq, out[1].1.seq,
-            "pushes carry their own sequence"
-        );
-        b.handle(
-            Frame::new(
-                2,
-                Message::AdcStream {
-                    channels: 0,
-                    period_ms: 0,
-                },
-            ),
-            35 * MS,
-            &mut plant,
-        );
-        assert_eq!(b.poll_timeout(), None);
-    }
-
-    #[test]
-    fn compass_read_answers_at_once_with_the_latest_measurement() {
-        let mut plant = FakePlant {
-            heading_deg: 271,
-            ..FakePlant::default()
-        };
-        let mut b = board(false, None);
-        let reply = sent(b.handle(Frame::new(9, Message::CompassRead), 100 * MS, &mut plant));
-        assert_eq!(reply.seq, 9);
-        assert_eq!(
-            reply.message,
-            Message::CompassHeading {
-                word: HeadingWord::encode(271, HeadingFormat::Binary).unwrap()
-            }
-        );
-        assert_eq!(plant.compass_reads, vec![100 * MS]);
-    }
-
-    /// A retried request (same seq, type and payload) is answered again but not executed
-    /// again: a lost TIME reply must not make the client's OSWait advance time twice.
-    #[test]
-    fn retried_requests_are_not_executed_twice() {
-        let mut plant = FakePlant::default();
-        let mut b = board(true, None);
-        let cal = |seq, action| Frame::new(seq, Message::CompassCalibrate { action });
-        sent(b.handle(cal(1, CalibrationAction::Start), 0, &mut plant));
-        let first = sent(b.handle(cal(2, CalibrationAction::TakePoint), 0, &mut plant));
-        let retry = sent(b.handle(cal(2, CalibrationAction::TakePoint), 0, &mut plant));
-        assert_eq!(first, retry);
-        assert_eq!(
-            plant.calibration_points, 1,
-            "the retry took no second point"
-        );
-        assert_eq!(b.duplicates(), 1);
-        // A new seq is a new request, even with the same payload.
-        sent(b.handle(cal(3, CalibrationAction::TakePoint), 0, &mut plant));
-        assert_eq!(plant.calibration_points, 2);
-
-        let advance = Frame::new(4, Message::TimeAdvance { ticks: 5 });
-        assert!(matches!(
-            b.handle(advance, 0, &mut plant),
-            Some(Output::Advance { .. })
-        ));
-        let time = b.finish_advance(4, 50 * MS);
-        assert_eq!(
-            b.handle(advance, 50 * MS, &mut plant),
-            Some(Output::Send(time)),
-            "no second advance"
-        );
-    }
-
-    #[test]
-    fn hello_starts_a_clean_session() {
-        let mut plant = FakePlant::default();
-        let mut b = board(false, None);
-        let full = ThrusterCommand {
-            duty: 0,
-            direction: Direction::Forward,
-        };
-        sent(b.handle(
-            Frame::new(
-                1,
-                Message::ThrusterSetAll {
-                    commands: [full; 4],
-                },
-            ),
-            0,
-            &mut plant,
-        ));
-        sent(b.handle(
-            Frame::new(
-                2,
-                Message::AdcStream {
-                    channels: 1,
-                    period_ms: 10,
-                },
-            ),
-            0,
-            &mut plant,
-        ));
-        let reply = sent(b.handle(
-            Frame::new(3, Message::Hello { client_version: 1 }),
-            5 * MS,
-            &mut plant,
-        ));
-        assert!(matches!(
-            reply.message,
-            Message::HelloReply {
-                protocol_version: 1,
-                ..
-            }
-        ));
-        assert_eq!(b.thrusters(), [ThrusterCommand::OFF; 4]);
-        assert_eq!(plant.thrusters.last().unwrap().1, [ThrusterCommand::OFF; 4]);
-        assert_eq!(b.poll_timeout(), None, "the stream stopped");
-        let old = sent(b.handle(
-            Frame::new(3, Message::Hello { client_version: 9 }),
-            5 * MS,
-            &mut plant,
-        ));
-        assert!(matches!(
-            old.message,
-            Message::Nak {
-                code: ErrorCode::VersionMismatch,
-                detail: 1,
-                ..
-            }
-        ));
-    }
-
-    #[test]
-    fn a_stream_that_would_fill_the_line_is_refused() {
-        let mut plant = FakePlant::default();
-        let mut slow = SensorBoard::new(BoardSettings {
-            line_chars_per_s: 480.0,
-            ..board(false, None).settings
-        });
-        let nak = sent(slow.handle(
-            Frame::new(
-                1,
-                Message::AdcStream {
-                    channels: 0xFF,
-                    period_ms: 10,
-                },
-            ),
-            0,
-            &mut plant,
-        ));
-        assert!(matches!(
-            nak.message,
-            Message::Nak {
-                code: ErrorCode::BadValue,
-                detail: 1,
-                ..
-            }
-        ));
-    }
-
-    #[test]
-    fn continuous_bcd_compass_pushes_at_its_rate() {
-        let mut plant = FakePlant {
-            heading_deg: 123,
-            ..FakePlant::default()
-        };
-        let mut b = board(false, None);
-        b.handle(
-            Frame::new(
-                1,
-                Message::CompassMode {
-                    mode: CompassMode::Continuous,
-                    output: CompassOutput::Bcd,
-                },
-            ),
-            0,
-            &mut plant,
-        );
-        let mut out = Vec::new();
-        b.poll(1000 * MS, &mut plant, &mut out);
-        assert_eq!(out.len(), 2, "2.5 Hz: pushes at 400 and 800 ms");
-        assert_eq!(
-            out[0].1.message,
-            Message::CompassHeadingPush {
-                word: HeadingWord(0x0123)
-            }
-        );
-    }
-
-    #[test]
-    fn calibration_steps_follow_the_plant_and_bad_steps_are_naked() {
-        let mut plant = FakePlant::default();
-        let mut b = board(false, None);
-        let mut seq = 0u8;
-        let mut cal = |action| {
-            seq += 1;
-            Frame::new(seq, Message::CompassCalibrate { action })
-        };
-        let finish_early = sent(b.handle(cal(CalibrationAction::Finish), 0, &mut plant));
-        assert!(matches!(
-            finish_early.message,
-            Message::Nak {
-                code: ErrorCode::BadState,
-                ..
-            }
-        ));
-        sent(b.handle(cal(CalibrationAction::Start), 0, &mut plant));
-        sent(b.handle(cal(CalibrationAction::TakePoint), 0, &mut plant));
-        let ready = sent(b.handle(cal(CalibrationAction::TakePoint), 0, &mut plant));
-        assert_eq!(
-            ready.message,
-            Message::CalibrationStatus {
-                state: CalibrationState::ReadyToFinish,
-                points: 2
-            }
-        );
-        let done = sent(b.handle(cal(CalibrationAction::Finish), 0, &mut plant));
-        assert_eq!(
-            done.message,
-            Message::CalibrationStatus {
-                state: CalibrationState::Idle,
-                points: 0
-            }
-        );
-    }
-
-    #[test]
-    fn thruster_frames_reach_the_plant_and_the_watchdog_zeroes_them() {
-        let mut plant = FakePlant::default();
-        let mut b = board(false, Some(500));
-        let full = ThrusterCommand {
-            duty: 0,
-            direction: Direction::Forward,
-        };
-        sent(b.handle(
-            Frame::new(
-                1,
-                Message::ThrusterSet {
-                    thruster: Thruster::Stern,
-                    command: full,
-                },
-            ),
-            100 * MS,
-            &mut plant,
-        ));
-        assert_eq!(plant.thrusters.last().unwrap().1[3], full);
-        assert_eq!(b.poll_timeout(), Some(600 * MS));
-        let mut out = Vec::new();
-        b.poll(599 * MS, &mut plant, &mut out);
-        assert_eq!(b.watchdog_trips(), 0);
-        b.poll(600 * MS, &mut plant, &mut out);
-        assert_eq!(b.watchdog_trips(), 1);
-        assert_eq!(
-            plant.thrusters.last().unwrap(),
-            &(600 * MS, [ThrusterCommand::OFF; 4])
-        );
-        assert!(out.is_empty(), "the watchdog sends nothing on the wire");
-    }
-
-    #[test]
-    fn lockstep_advance_is_carried_out_by_the_core_and_answered_with_time() {
-        let mut plant = FakePlant::default();
-        let mut realtime = board(false, None);
-        let refused = sent(realtime.handle(
-            Frame::new(3, Message::TimeAdvance { ticks: 5 }),
-            0,
-            &mut plant,
-        ));
-        assert!(matches!(
-            refused.message,
-            Message::Nak {
-                code: ErrorCode::BadState,
-                ..
-            }
-        ));
-
-        let mut b = board(true, None);
-        let out = b.handle(
-            Frame::new(3, Message::TimeAdvance { ticks: 5 }),
-            20 * MS,
-            &mut plant,
-        );
-        assert_eq!(
-            out,
-            Some(Output::Advance {
-                to: 70 * MS,
-                seq: 3
-            })
-        );
-        let time = b.finish_advance(3, 70 * MS);
-        assert_eq!(time.seq, 3);
-        assert_eq!(
-            time.message,
-            Message::Time {
-                ticks: 7,
-                tick_us: 10_000
-            }
-        );
-    }
-
-    #[test]
-    fn wire_errors_are_counted_and_naked_when_the_header_is_trustworthy() {
-        let mut b = board(false, None);
-        let bad_len = LinkError::Message(MessageError::BadLength {
-            msg_type: msg_type::ADC_READ,
-            seq: 12,
-            expected: 1,
-            found: 3,
-        });
-        let nak = sent(b.handle_error(&bad_len));
-        assert_eq!(nak.seq, 12);
-        assert_eq!(
-            nak.message,
-            Message::Nak {
-                rejected_type: msg_type::ADC_READ,
-                code: ErrorCode::BadLength,
-                detail: 1
-            }
-        );
-        let crc = LinkError::Frame(FrameError::ChecksumMismatch {
-            calculated: 1,
-            found: 2,
-            msg_type: 0x10,
-            seq: 1,
-        });
-        let advisory = sent(b.handle_error(&crc));
-        assert!(matches!(
-            advisory.message,
-            Message::Nak {
-                code: ErrorCode::BadCrc,
-                rejected_type: 0x10,
-                ..
-            }
-        ));
-        assert_eq!(advisory.seq, 1);
-        assert_eq!(b.counters().rx_crc_errors, 1);
-        assert_eq!(b.counters().rx_rejected, 1);
-        assert_eq!(b.counters().tx_naks, 2);
-    }
-
-    /// PROTOCOL.md: the bridge never NAKs a NAK (whole, damaged or mis-sized), and a reply or
-    /// push type sent to it gets UNKNOWN_TYPE whatever its size.
-    #[test]
-    fn naks_are_never_naked_and_reply_types_are_unknown() {
-        let mut b = board(false, None);
-        let nak_len = LinkError::Message(MessageError::BadLength {
-            msg_type: msg_type::NAK,
-            seq: 3,
-            expected: 3,
-            found: 1,
-        });
-        assert!(b.handle_error(&nak_len).is_none());
-        let nak_crc = LinkError::Frame(FrameError::ChecksumMismatch {
-            calculated: 1,
-            found: 2,
-            msg_type: msg_type::NAK,
-            seq: 4,
-        });
-        assert!(b.handle_error(&nak_crc).is_none());
-        let nak = Frame::new(
-            5,
-            Message::Nak {
-                rejected_type: msg_type::HELLO,
-                code: ErrorCode::BadCrc,
-                detail: 0,
-            },
-        );
-        assert!(b.handle(nak, 0, &mut FakePlant::default()).is_none());
-        assert_eq!(b.counters().tx_naks, 0);
-        assert_eq!(b.counters().rx_rejected, 2);
-        for (reply_type, error) in [
-            (
-                msg_type::COUNTERS,
-                MessageError::BadLength {
-                    msg_type: msg_type::COUNTERS,
-                    seq: 6,
-                    expected: 40,
-                    found: 0,
-                },
-            ),
-            (
-                msg_type::ADC_VALUE,
-                MessageError::BadValue {
-                    msg_type: msg_type::ADC_VALUE,
-                    seq: 6,
-                    offset: 0,
-                    value: 0xFF,
-                },
-            ),
-        ] {
-            let out = sent(b.handle_error(&LinkError::Message(error)));
-            assert_eq!(
-                out.message,
-                Message::Nak {
-                    rejected_type: reply_type,
-                    code: ErrorCode::UnknownType,
-                    detail: 0
-                }
-            );
-        }
-    }
-
-    /// PROTOCOL.md 2.4: a frame with a good CRC is "received OK" only when it gets its reply;
-    /// one answered with any NAK (BAD_STATE and VERSION_MISMATCH included), or a NAK sent to
-    /// the bridge, is "rejected". A retry answered from the stored reply counts again.
-    #[test]
-    fn a_nak_counts_the_frame_as_rejected_not_received() {
-        let mut plant = FakePlant::default();
-        let mut b = board(false, None);
-        let counts = |b: &SensorBoard| {
-            let c = b.counters();
-            (c.rx_frames, c.rx_rejected, c.tx_frames, c.tx_naks)
-        };
-        sent(b.handle(Frame::new(1, Message::TimeGet), 0, &mut plant));
-        assert_eq!(counts(&b), (1, 0, 1, 0), "a TIME_GET is received OK");
-        let advance = Frame::new(2, Message::TimeAdvance { ticks: 5 });
-        let nak = sent(b.handle(advance, 0, &mut plant));
-        assert!(matches!(
-            nak.message,
-            Message::Nak {
-                code: ErrorCode::BadState,
-                ..
-            }
-        ));
-        assert_eq!(counts(&b), (1, 1, 2, 1), "BAD_STATE is a rejection");
-        let again = sent(b.handle(advance, 0, &mut plant));
-        assert_eq!(again, nak, "the retry gets the stored NAK");
-        assert_eq!(counts(&b), (1, 2, 3, 2), "and counts as a rejection again");
-        let hello = Frame::new(3, Message::Hello { client_version: 2 });
-        let mismatch = sent(b.handle(hello, 0, &mut plant));
-        assert!(matches!(
-            mismatch.message,
-            Message::Nak {
-                code: ErrorCode::VersionMismatch,
-                detail: 1,
-                ..
-            }
-        ));
-        assert_eq!(counts(&b), (1, 3, 4, 3), "VERSION_MISMATCH is a rejection");
-        let stray_reply = Frame::new(4, Message::Ack { acked_type: 0x10 });
-        sent(b.handle(stray_reply, 0, &mut plant));
-        assert_eq!(counts(&b), (1, 4, 5, 4), "a reply type is a rejection");
-        let stray_nak = Frame::new(
-            5,
-            Message::Nak {
-                rejected_type: 0x10,
-                code: ErrorCode::BadValue,
-                detail: 0,
-            },
-        );
-        assert!(b.handle(stray_nak, 0, &mut plant).is_none());
-        assert_eq!(counts(&b), (1, 5, 5, 4), "a NAK is rejected, not answered");
-        let stream = Frame::new(
-            6,
-            Message::AdcStream {
-                channels: 1,
-                period_ms: 0,
-            },
-        );
-        sent(b.handle(stream, 0, &mut plant));
-        assert_eq!(
-            counts(&b),
-            (1, 6, 6, 5),
-            "BAD_VALUE from the board is a rejection"
-        );
-    }
-}
+mod tests;

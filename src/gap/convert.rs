@@ -24,14 +24,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use bytes::BytesMut;
-use firmware_protocol::compass_word::HeadingFormat;
-use firmware_protocol::line::{LineDecoder, LineItem};
-use firmware_protocol::nmea::Sentence;
-use firmware_protocol::sensor_link::{
-    CompassOutput, Direction as WireDirection, Frame, Message, Reading, Readings,
-};
-use firmware_protocol::{HeadingWord, sensor_link::msg_type};
+use firmware_protocol::sensor_link::Direction as WireDirection;
 use rand::RngExt;
 use rand_distr::StandardNormal;
 
@@ -40,8 +33,9 @@ use crate::gap::GapError;
 use crate::gap::format::{Channel, CommandRow, ExperimentInfo, Initial, Measurement};
 use crate::gap::model::read_ref;
 use crate::physics::VehicleConfig;
-use crate::record::{self, Direction};
+use crate::record;
 use crate::sensors::{AdcBoard, AdcSource, SensorsConfig, rng};
+use crate::transcript::{Event, Transcript};
 
 /// What `convert` needs besides the recording.
 #[derive(Debug, Clone, Default)]
@@ -89,20 +83,6 @@ pub fn percent_from_duty(table: &[f64; 11], duty: u8, direction: WireDirection) 
     }
 }
 
-/// The TIME_STEP exchanges of one link (PROTOCOL.md 2.9): a STEP reply's values count only
-/// once the EyeBot said how many of them it used (the next TIME_STEP's `used`; any other
-/// request: all of them).
-#[derive(Debug, Default)]
-struct StepLink {
-    /// The last request, to tell a retry (same seq and payload, answered from the bridge's
-    /// store, never executed again) from a new request.
-    last_request: Option<Frame>,
-    /// The TIME_STEP waiting for its STEP: seq, `used`, readings.
-    asked: Option<(u8, u8, Readings)>,
-    /// The last STEP's values, in request order: time, reading, value, the heading format then.
-    open: Vec<(f64, Reading, u16, HeadingFormat)>,
-}
-
 /// A recording that cannot be read, as the gap workflow reports it.
 fn recording_error(e: record::ReadError) -> GapError {
     GapError::Data(e.to_string())
@@ -145,219 +125,12 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
     // Decode every link and direction in order.
     let bytes_path = dir.join(record::format::BYTES_FILE);
     let chunks = record::read_bytes(dir).map_err(recording_error)?;
-    let mut notices = Vec::new();
-    let mut decoders: BTreeMap<(String, &'static str), (LineDecoder, BytesMut)> = BTreeMap::new();
-    let mut percent = [0.0; 4];
-    let mut commands: Vec<CommandRow> = vec![CommandRow { t_s: 0.0, percent }];
-    let mut format = HeadingFormat::Binary;
-    let mut tick_us: u32 = 10_000;
-    // A tick count as seconds, rounded once (as the recording's decimal times are).
-    let tick_time = |ticks: u32, tick_us: u32| (u64::from(ticks) * u64::from(tick_us)) as f64 / 1e6;
-    let mut samples: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-    let mut velocity_codes: Vec<(f64, f64)> = Vec::new();
-    let (mut ambiguous_sonar, mut raw_compass, mut link_errors) = (0usize, 0usize, 0usize);
-    let mut steps: BTreeMap<String, StepLink> = BTreeMap::new();
-    let mut unused_readings = 0usize;
-    let adc_name = |ch: u8| -> Option<AdcSource> { *sensors.adc.channels.get(usize::from(ch))? };
-    // The first `used` values of a STEP reply, as the replies they stand for would convert.
-    let commit = |open: &mut Vec<(f64, Reading, u16, HeadingFormat)>,
-                  used: usize,
-                  samples: &mut BTreeMap<String, Vec<(f64, f64)>>,
-                  velocity_codes: &mut Vec<(f64, f64)>|
-     -> usize {
-        let unused = open.len().saturating_sub(used);
-        for (t, reading, value, format) in open.drain(..).take(used) {
-            match reading {
-                Reading::Adc(channel) => push_adc(
-                    samples,
-                    velocity_codes,
-                    adc_name(channel.get()),
-                    t,
-                    f64::from(value),
-                ),
-                Reading::Compass => {
-                    if let Ok(h) = HeadingWord(value).decode(format) {
-                        samples
-                            .entry("compass_deg".into())
-                            .or_default()
-                            .push((t, f64::from(h)));
-                    }
-                }
-            }
-        }
-        unused
-    };
-    for chunk in &chunks {
-        let t = chunk.sim_s - t0;
-        let key = (chunk.link.clone(), chunk.dir.as_str());
-        let (decoder, buf) = decoders.entry(key).or_default();
-        buf.extend_from_slice(&chunk.data);
-        while let Some(item) = decoder.decode(buf) {
-            let frame = match item {
-                LineItem::Frame(f) => f,
-                LineItem::Nmea(Sentence::Echo(e)) if chunk.dir == Direction::Tx => {
-                    if let Some(r) = e.range_m {
-                        samples
-                            .entry(format!("sonar{}_m", e.transducer.get()))
-                            .or_default()
-                            .push((t, f64::from(r.tenths()) / 10.0));
-                    }
-                    continue;
-                }
-                LineItem::Nmea(_) => {
-                    if chunk.dir == Direction::Tx {
-                        ambiguous_sonar += 1;
-                    }
-                    continue;
-                }
-                LineItem::Error(_) => {
-                    link_errors += 1;
-                    continue;
-                }
-                LineItem::Sonar(_) => continue,
-            };
-            let link = steps.entry(chunk.link.clone()).or_default();
-            match (chunk.dir, frame.message) {
-                (Direction::Rx, _) if link.last_request == Some(frame) => {
-                    // A retry: the bridge answers it from its store and executes nothing.
-                }
-                (Direction::Rx, Message::TimeStep { used, readings, .. }) => {
-                    link.last_request = Some(frame);
-                    link.asked = Some((frame.seq, used, readings));
-                }
-                (Direction::Rx, _) => {
-                    link.last_request = Some(frame);
-                    let all = link.open.len();
-                    commit(&mut link.open, all, &mut samples, &mut velocity_codes);
-                }
-                (Direction::Tx, Message::Step { ticks, values, .. }) => {
-                    if let Some((_, used, readings)) = link.asked.take_if(|a| a.0 == frame.seq) {
-                        unused_readings += commit(
-                            &mut link.open,
-                            usize::from(used),
-                            &mut samples,
-                            &mut velocity_codes,
-                        );
-                        let ts = tick_time(ticks, tick_us) - t0;
-                        link.open = readings
-                            .as_slice()
-                            .iter()
-                            .zip(values.as_slice())
-                            .map(|(&r, &v)| (ts, r, v, format))
-                            .collect();
-                    }
-                }
-                (Direction::Tx, Message::Nak { rejected_type, .. })
-                    if rejected_type == msg_type::TIME_STEP =>
-                {
-                    // A rejected TIME_STEP changes nothing.
-                    link.asked = None;
-                }
-                _ => {}
-            }
-            match (chunk.dir, frame.message) {
-                (Direction::Rx, Message::Hello { .. }) => {
-                    percent = [0.0; 4];
-                    format = HeadingFormat::Binary;
-                }
-                (Direction::Rx, Message::ThrusterSet { thruster, command }) => {
-                    let k = thruster as usize;
-                    if let Some(table) = tables.get(k) {
-                        percent[k] = percent_from_duty(table, command.duty, command.direction);
-                    }
-                }
-                (Direction::Rx, Message::ThrusterSetAll { commands: c })
-                | (
-                    Direction::Rx,
-                    Message::TimeStep {
-                        thrusters: Some(c), ..
-                    },
-                ) => {
-                    for k in 0..4 {
-                        percent[k] = percent_from_duty(&tables[k], c[k].duty, c[k].direction);
-                    }
-                }
-                (Direction::Rx, Message::CompassMode { output, .. }) => match output {
-                    CompassOutput::Binary => format = HeadingFormat::Binary,
-                    CompassOutput::Bcd => format = HeadingFormat::Bcd,
-                    CompassOutput::Raw => {}
-                },
-                (Direction::Tx, Message::HelloReply { tick_us: t, .. }) => {
-                    tick_us = t;
-                }
-                (Direction::Tx, Message::AdcValue { channel, value }) => {
-                    push_adc(
-                        &mut samples,
-                        &mut velocity_codes,
-                        adc_name(channel.get()),
-                        t,
-                        f64::from(value.get()),
-                    );
-                }
-                (Direction::Tx, Message::AdcSamples { ticks, samples: s }) => {
-                    let ts = tick_time(ticks, tick_us) - t0;
-                    for (channel, value) in s.iter() {
-                        push_adc(
-                            &mut samples,
-                            &mut velocity_codes,
-                            adc_name(channel.get()),
-                            ts,
-                            f64::from(value.get()),
-                        );
-                    }
-                }
-                (
-                    Direction::Tx,
-                    Message::CompassHeading { word } | Message::CompassHeadingPush { word },
-                ) => {
-                    if let Ok(h) = word.decode(format) {
-                        samples
-                            .entry("compass_deg".into())
-                            .or_default()
-                            .push((t, f64::from(h)));
-                    }
-                }
-                (Direction::Tx, Message::CompassRaw { .. } | Message::CompassRawPush { .. }) => {
-                    raw_compass += 1;
-                }
-                _ => {}
-            }
-            let last = commands.last().map(|c| c.percent);
-            if last != Some(percent) {
-                let t_cmd = t.max(0.0);
-                match commands.last_mut() {
-                    Some(c) if (c.t_s - t_cmd).abs() < 1e-12 => c.percent = percent,
-                    _ => commands.push(CommandRow {
-                        t_s: t_cmd,
-                        percent,
-                    }),
-                }
-            }
-        }
-    }
-    unused_readings += steps.values().map(|link| link.open.len()).sum::<usize>();
-    if unused_readings > 0 {
-        notices.push(format!(
-            "{unused_readings} values of STEP replies left out: the EyeBot took them back \
-             unused, or the recording ended before it said whether it used them"
-        ));
-    }
-    if ambiguous_sonar > 0 {
-        notices.push(format!(
-            "{ambiguous_sonar} sonar depth sentences left out: a plain DBT/DPT does not say which \
-             transducer pinged (enable the $PEBHS echo report to convert sonar ranges)"
-        ));
-    }
-    if raw_compass > 0 {
-        notices.push(format!(
-            "{raw_compass} raw compass frames left out (only heading words are converted)"
-        ));
-    }
-    if link_errors > 0 {
-        notices.push(format!(
-            "{link_errors} undecodable stretches of bytes skipped"
-        ));
-    }
+    let Decoded {
+        mut commands,
+        mut samples,
+        velocity_codes,
+        notices,
+    } = decode(&chunks, t0, &tables, &sensors);
     if let Some(speed) = paddle_speed(&velocity_codes, &sensors) {
         samples.insert("paddle_speed_mps".into(), speed);
     }
@@ -377,36 +150,11 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
             )));
         }
         camera_std = std;
-        let mut cam = rng::stream(opts.seed, "gap-convert-camera");
-        let (mut xs, mut ys) = (Vec::new(), Vec::new());
-        // The thesis's camera: a frame every 200 ms (4.5).
-        let mut next = 0.0;
-        for row in &states {
-            let ts = row.t_s - t0;
-            if ts + 1e-9 < next {
-                continue;
-            }
-            next = ts + 0.2;
-            let (nx, ny): (f64, f64) = (cam.sample(StandardNormal), cam.sample(StandardNormal));
-            xs.push((ts, row.x_m + std * nx));
-            ys.push((ts, row.y_m + std * ny));
-        }
+        let (xs, ys) = camera_track(&states, t0, std, opts.seed);
         samples.insert("x_m".into(), xs);
         samples.insert("y_m".into(), ys);
     }
-    let channels: Vec<Channel> = crate::gap::format::CHANNELS
-        .iter()
-        .filter_map(|name| {
-            let mut s = samples.remove(*name)?;
-            s.retain(|(t, _)| *t >= 0.0 && *t <= duration_s);
-            s.sort_by(|a, b| a.0.total_cmp(&b.0));
-            s.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
-            (!s.is_empty()).then(|| Channel {
-                name: (*name).to_string(),
-                samples: s,
-            })
-        })
-        .collect();
+    let channels = measured_channels(samples, duration_s);
     if channels.is_empty() {
         return Err(GapError::Data(format!(
             "{}: the bridge sent no sensor replies that convert into measured channels",
@@ -444,6 +192,185 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
         },
         notices,
     })
+}
+
+/// What the recording's links said, in the measured-data format's terms.
+struct Decoded {
+    commands: Vec<CommandRow>,
+    samples: BTreeMap<String, Vec<(f64, f64)>>,
+    /// The velocity channel's codes, for the paddle-wheel count.
+    velocity_codes: Vec<(f64, f64)>,
+    notices: Vec<String>,
+}
+
+/// Decodes every link and direction in order through the one transcript decoder; times from
+/// `t0`.
+fn decode(
+    chunks: &[record::ByteChunk],
+    t0: f64,
+    tables: &[[f64; 11]; 4],
+    sensors: &SensorsConfig,
+) -> Decoded {
+    let mut transcript = Transcript::new();
+    let mut commands: Vec<CommandRow> = vec![CommandRow {
+        t_s: 0.0,
+        percent: [0.0; 4],
+    }];
+    let mut samples: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    let mut velocity_codes: Vec<(f64, f64)> = Vec::new();
+    let (mut ambiguous_sonar, mut raw_compass, mut link_errors) = (0usize, 0usize, 0usize);
+    let adc_name = |ch: u8| -> Option<AdcSource> { *sensors.adc.channels.get(usize::from(ch))? };
+    for chunk in chunks {
+        let t = chunk.sim_s - t0;
+        transcript.feed(
+            chunk.sim_s,
+            &chunk.link,
+            chunk.dir,
+            &chunk.data,
+            |event| match event {
+                Event::Thrusters { commands: c, .. } => {
+                    let percent: [f64; 4] = std::array::from_fn(|k| {
+                        c[k].map_or(0.0, |c| percent_from_duty(&tables[k], c.duty, c.direction))
+                    });
+                    add_command(&mut commands, t, percent);
+                }
+                Event::Adc {
+                    t_s,
+                    channel,
+                    value,
+                } => push_adc(
+                    &mut samples,
+                    &mut velocity_codes,
+                    adc_name(channel),
+                    t_s - t0,
+                    f64::from(value),
+                ),
+                Event::Compass { t_s, heading_deg } => samples
+                    .entry("compass_deg".into())
+                    .or_default()
+                    .push((t_s - t0, heading_deg)),
+                Event::Echo {
+                    t_s,
+                    transducer,
+                    range_m,
+                } => {
+                    if let Some(r) = range_m {
+                        samples
+                            .entry(format!("sonar{transducer}_m"))
+                            .or_default()
+                            .push((t_s - t0, r));
+                    }
+                }
+                Event::Depth { .. } => ambiguous_sonar += 1,
+                Event::CompassRaw => raw_compass += 1,
+                Event::Error => link_errors += 1,
+                Event::Item(_) | Event::SonarSelected { .. } => {}
+            },
+        );
+    }
+    let notices = left_out_notices(
+        transcript.step_values_unused(),
+        ambiguous_sonar,
+        raw_compass,
+        link_errors,
+    );
+    Decoded {
+        commands,
+        samples,
+        velocity_codes,
+        notices,
+    }
+}
+
+/// What the conversion left out, one notice per kind that occurred.
+fn left_out_notices(
+    unused_readings: usize,
+    ambiguous_sonar: usize,
+    raw_compass: usize,
+    link_errors: usize,
+) -> Vec<String> {
+    let mut notices = Vec::new();
+    if unused_readings > 0 {
+        notices.push(format!(
+            "{unused_readings} values of STEP replies left out: the EyeBot took them back \
+             unused, or the recording ended before it said whether it used them"
+        ));
+    }
+    if ambiguous_sonar > 0 {
+        notices.push(format!(
+            "{ambiguous_sonar} sonar depth sentences left out: a plain DBT/DPT does not say which \
+             transducer pinged (enable the $PEBHS echo report to convert sonar ranges)"
+        ));
+    }
+    if raw_compass > 0 {
+        notices.push(format!(
+            "{raw_compass} raw compass frames left out (only heading words are converted)"
+        ));
+    }
+    if link_errors > 0 {
+        notices.push(format!(
+            "{link_errors} undecodable stretches of bytes skipped"
+        ));
+    }
+    notices
+}
+
+/// One channel's samples: (time s, value).
+type Samples = Vec<(f64, f64)>;
+
+/// The thesis's overhead camera (4.5): a frame every 200 ms of the ground-truth position plus
+/// seeded Gaussian noise of `std` m; times from `t0`.
+fn camera_track(states: &[record::StateRow], t0: f64, std: f64, seed: u64) -> (Samples, Samples) {
+    let mut cam = rng::stream(seed, "gap-convert-camera");
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    let mut next = 0.0;
+    for row in states {
+        let ts = row.t_s - t0;
+        if ts + 1e-9 < next {
+            continue;
+        }
+        next = ts + 0.2;
+        let (nx, ny): (f64, f64) = (cam.sample(StandardNormal), cam.sample(StandardNormal));
+        xs.push((ts, row.x_m + std * nx));
+        ys.push((ts, row.y_m + std * ny));
+    }
+    (xs, ys)
+}
+
+/// The channels `gap` knows, in its order: samples inside the run, in time order, one per time.
+fn measured_channels(
+    mut samples: BTreeMap<String, Vec<(f64, f64)>>,
+    duration_s: f64,
+) -> Vec<Channel> {
+    crate::gap::format::CHANNELS
+        .iter()
+        .filter_map(|name| {
+            let mut s = samples.remove(*name)?;
+            s.retain(|(t, _)| *t >= 0.0 && *t <= duration_s);
+            s.sort_by(|a, b| a.0.total_cmp(&b.0));
+            s.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
+            (!s.is_empty()).then(|| Channel {
+                name: (*name).to_string(),
+                samples: s,
+            })
+        })
+        .collect()
+}
+
+/// Appends the thruster commands at `t` (from 0) unless they are the last ones again; commands
+/// at the same moment replace each other.
+fn add_command(commands: &mut Vec<CommandRow>, t: f64, percent: [f64; 4]) {
+    if commands.last().map(|c| c.percent) == Some(percent) {
+        return;
+    }
+    let t_cmd = t.max(0.0);
+    match commands.last_mut() {
+        Some(c) if (c.t_s - t_cmd).abs() < 1e-12 => c.percent = percent,
+        _ => commands.push(CommandRow {
+            t_s: t_cmd,
+            percent,
+        }),
+    }
 }
 
 fn push_adc(
@@ -572,10 +499,14 @@ mod tests {
 
     mod recording {
         use super::*;
+        use bytes::BytesMut;
         use firmware_protocol::sensor_link::{
-            AdcChannel, AdcValue, CompassMode, Frame, Thruster, ThrusterCommand,
+            AdcChannel, AdcValue, CompassMode, CompassOutput, Frame, Message, Thruster,
+            ThrusterCommand,
         };
-        use firmware_protocol::{Dbt, EchoReport, HeadingWord, Talker, Transducer};
+        use firmware_protocol::{
+            Dbt, EchoReport, HeadingFormat, HeadingWord, Sentence, Talker, Transducer,
+        };
 
         fn frame(m: Message) -> Vec<u8> {
             let mut b = BytesMut::new();

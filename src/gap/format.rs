@@ -5,10 +5,9 @@
 //! the three files of a directory. Every error names the file, the line and, for CSV cells,
 //! the column. Unknown CSV columns are kept out of the data and reported as notices.
 
-use std::fmt::Write as _;
 use std::path::Path;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use crate::config::{ConfigError, Document};
 use crate::gap::GapError;
@@ -33,7 +32,10 @@ pub const CHANNELS: [&str; 13] = [
 /// Header of `commands.csv`.
 pub const COMMANDS_HEADER: &str = "t_s,port,starboard,bow,stern";
 
-#[derive(Debug, Deserialize)]
+/// The files of a measurement directory.
+pub const FILES: [&str; 3] = ["experiment.toml", "commands.csv", "measured.csv"];
+
+#[derive(Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct RawExperiment {
     name: String,
@@ -57,11 +59,12 @@ fn default_sensors() -> String {
     "sensors/mako-2008.toml".to_string()
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct RawInitial {
     x_m: f64,
     y_m: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
     z_m: Option<f64>,
     heading_deg: f64,
     #[serde(default)]
@@ -72,7 +75,7 @@ struct RawInitial {
     surge_mps: f64,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct RawCamera {
     position_std_m: f64,
@@ -140,6 +143,14 @@ pub struct Measurement {
 impl Measurement {
     /// Reads `experiment.toml`, `commands.csv` and `measured.csv` from `dir`.
     pub fn load(dir: &Path) -> Result<Self, GapError> {
+        if dir.is_dir() && !FILES.iter().any(|name| dir.join(name).exists()) {
+            return Err(GapError::Data(format!(
+                "{}: not a measurement directory: expected {} (docs/gap.md, \"A measurement: a \
+                 directory of three files\"; `eyebot-hil gap convert` makes one from a recording)",
+                dir.display(),
+                FILES.join(", ")
+            )));
+        }
         let read = |name: &str| {
             let path = dir.join(name);
             std::fs::read_to_string(&path).map_err(|source| GapError::Io { path, source })
@@ -197,54 +208,59 @@ impl Measurement {
             let path = dir.join(name);
             std::fs::write(&path, text).map_err(|source| GapError::Io { path, source })
         };
-        write("experiment.toml", self.experiment_toml())?;
-        let mut c = format!("{COMMANDS_HEADER}\n");
-        for row in &self.commands {
-            let _ = writeln!(
-                c,
-                "{},{},{},{},{}",
-                row.t_s, row.percent[0], row.percent[1], row.percent[2], row.percent[3]
-            );
-        }
-        write("commands.csv", c)?;
-        write("measured.csv", self.measured_csv())
+        write("experiment.toml", self.experiment_toml()?)?;
+        write("commands.csv", self.commands_csv()?)?;
+        write("measured.csv", self.measured_csv()?)
     }
 
-    fn experiment_toml(&self) -> String {
+    /// `experiment.toml`, written by the `toml` crate from the same raw types the loader reads.
+    fn experiment_toml(&self) -> Result<String, GapError> {
         let e = &self.experiment;
         let i = &e.initial;
-        let mut s = String::new();
-        let _ = writeln!(s, "name = {:?}", e.name);
-        let _ = writeln!(s, "description = {:?}", e.description);
-        let _ = writeln!(s, "duration_s = {}            # s", e.duration_s);
-        let _ = writeln!(s, "world = {:?}", e.world);
-        let _ = writeln!(s, "sensors = {:?}", e.sensors);
-        let _ = writeln!(s, "\n[initial]");
-        let _ = writeln!(s, "x_m = {}   # m, north", i.x_m);
-        let _ = writeln!(s, "y_m = {}   # m, east", i.y_m);
-        if let Some(z) = i.z_m {
-            let _ = writeln!(s, "z_m = {z}   # m, depth of the centre of mass");
+        let raw = RawExperiment {
+            name: e.name.clone(),
+            description: e.description.clone(),
+            duration_s: e.duration_s,
+            world: e.world.clone(),
+            sensors: e.sensors.clone(),
+            initial: RawInitial {
+                x_m: i.x_m,
+                y_m: i.y_m,
+                z_m: i.z_m,
+                heading_deg: i.heading_deg,
+                roll_deg: i.roll_deg,
+                pitch_deg: i.pitch_deg,
+                surge_mps: i.surge_mps,
+            },
+            camera: Some(RawCamera {
+                position_std_m: e.camera_position_std_m,
+                speed_std_mps: e.camera_speed_std_mps,
+            }),
+        };
+        let body = toml::to_string(&raw)
+            .map_err(|e| GapError::Data(format!("experiment.toml cannot be written: {e}")))?;
+        Ok(format!("{EXPERIMENT_UNITS}{body}"))
+    }
+
+    /// `commands.csv`: one row per command change.
+    fn commands_csv(&self) -> Result<String, GapError> {
+        let mut w = csv_writer();
+        for row in &self.commands {
+            let [port, starboard, bow, stern] = row.percent;
+            w.serialize(CommandCsvRow {
+                t_s: row.t_s,
+                port,
+                starboard,
+                bow,
+                stern,
+            })
+            .map_err(csv_write_error("commands.csv"))?;
         }
-        let _ = writeln!(s, "heading_deg = {}", i.heading_deg);
-        let _ = writeln!(s, "roll_deg = {}", i.roll_deg);
-        let _ = writeln!(s, "pitch_deg = {}", i.pitch_deg);
-        let _ = writeln!(s, "surge_mps = {}", i.surge_mps);
-        let _ = writeln!(s, "\n[camera]");
-        let _ = writeln!(
-            s,
-            "position_std_m = {}   # m, 1 sigma",
-            e.camera_position_std_m
-        );
-        let _ = writeln!(
-            s,
-            "speed_std_mps = {}   # m/s, 1 sigma",
-            e.camera_speed_std_mps
-        );
-        s
+        csv_text(w, "commands.csv")
     }
 
     /// `measured.csv`: one row per distinct sample time, empty cells where a channel has none.
-    fn measured_csv(&self) -> String {
+    fn measured_csv(&self) -> Result<String, GapError> {
         let mut times: Vec<f64> = self
             .channels
             .iter()
@@ -253,27 +269,57 @@ impl Measurement {
         times.sort_by(f64::total_cmp);
         times.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
         let mut cursors = vec![0usize; self.channels.len()];
-        let mut s = String::from("t_s");
-        for c in &self.channels {
-            s.push(',');
-            s.push_str(&c.name);
-        }
-        s.push('\n');
+        let mut w = csv_writer();
+        let header = std::iter::once("t_s").chain(self.channels.iter().map(|c| c.name.as_str()));
+        w.write_record(header)
+            .map_err(csv_write_error("measured.csv"))?;
         for t in times {
-            let _ = write!(s, "{t:.3}");
+            let mut cells = vec![format!("{t:.3}")];
             for (c, k) in self.channels.iter().zip(cursors.iter_mut()) {
-                s.push(',');
-                if let Some((tc, v)) = c.samples.get(*k)
-                    && (tc - t).abs() < 1e-9
-                {
-                    let _ = write!(s, "{v:.6}");
-                    *k += 1;
+                match c.samples.get(*k) {
+                    Some((tc, v)) if (tc - t).abs() < 1e-9 => {
+                        cells.push(format!("{v:.6}"));
+                        *k += 1;
+                    }
+                    _ => cells.push(String::new()),
                 }
             }
-            s.push('\n');
+            w.write_record(&cells)
+                .map_err(csv_write_error("measured.csv"))?;
         }
-        s
+        csv_text(w, "measured.csv")
     }
+}
+
+/// What the numbers of `experiment.toml` are in (the `toml` crate writes no comments).
+const EXPERIMENT_UNITS: &str = "# duration_s: s; initial x_m, y_m (north, east), z_m (depth of the centre of mass): m;\n\
+# angles: deg; surge_mps: m/s; camera noise: 1 sigma, m and m/s\n\n";
+
+/// One `commands.csv` row as written (the header is `COMMANDS_HEADER`).
+#[derive(Debug, Serialize)]
+struct CommandCsvRow {
+    t_s: f64,
+    port: f64,
+    starboard: f64,
+    bow: f64,
+    stern: f64,
+}
+
+fn csv_writer() -> csv::Writer<Vec<u8>> {
+    csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(Vec::new())
+}
+
+fn csv_write_error(file: &'static str) -> impl Fn(csv::Error) -> GapError {
+    move |e| GapError::Data(format!("{file} cannot be written: {e}"))
+}
+
+fn csv_text(w: csv::Writer<Vec<u8>>, file: &'static str) -> Result<String, GapError> {
+    let bytes = w
+        .into_inner()
+        .map_err(|e| GapError::Data(format!("{file} cannot be written: {e}")))?;
+    String::from_utf8(bytes).map_err(|e| GapError::Data(format!("{file} is not UTF-8: {e}")))
 }
 
 fn parse_experiment(origin: &str, text: &str) -> Result<ExperimentInfo, GapError> {
@@ -322,13 +368,28 @@ fn csv_error(origin: &str, line: usize, column: &str, message: impl Into<String>
     }
 }
 
-/// Splits a CSV text into (line number, cells) for non-empty, non-comment lines.
-fn rows(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
-    text.lines().enumerate().filter_map(|(i, l)| {
-        let l = l.trim_end_matches('\r');
-        (!l.trim().is_empty() && !l.starts_with('#'))
-            .then(|| (i + 1, l.split(',').map(str::trim).collect()))
-    })
+/// Reads a CSV text with the `csv` crate: (line number, cells trimmed) for each row that is
+/// not empty and not a `#` comment.
+fn rows(origin: &str, text: &str) -> Result<Vec<(usize, Vec<String>)>, GapError> {
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let mut out = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(|e| {
+            let line = e.position().map_or(0, |p| p.line() as usize);
+            csv_error(origin, line, "", e.to_string())
+        })?;
+        if record.iter().all(str::is_empty) {
+            continue;
+        }
+        let line = record.position().map_or(0, |p| p.line() as usize);
+        out.push((line, record.iter().map(str::to_string).collect()));
+    }
+    Ok(out)
 }
 
 fn number(origin: &str, line: usize, column: &str, cell: &str) -> Result<f64, GapError> {
@@ -347,12 +408,16 @@ fn number(origin: &str, line: usize, column: &str, cell: &str) -> Result<f64, Ga
 }
 
 fn parse_commands(origin: &str, text: &str, duration_s: f64) -> Result<Vec<CommandRow>, GapError> {
-    let mut it = rows(text);
+    let mut it = rows(origin, text)?.into_iter();
     let (hl, header) = it
         .next()
         .ok_or_else(|| csv_error(origin, 1, "", "empty file: expected the header"))?;
     let expected: Vec<&str> = COMMANDS_HEADER.split(',').collect();
-    if header != expected {
+    if header
+        .iter()
+        .map(String::as_str)
+        .ne(expected.iter().copied())
+    {
         return Err(csv_error(
             origin,
             hl,
@@ -373,7 +438,7 @@ fn parse_commands(origin: &str, text: &str, duration_s: f64) -> Result<Vec<Comma
                 format!("expected 5 cells, found {}", cells.len()),
             ));
         }
-        let t_s = number(origin, line, "t_s", cells[0])?;
+        let t_s = number(origin, line, "t_s", &cells[0])?;
         if t_s < 0.0 || t_s > duration_s {
             return Err(csv_error(
                 origin,
@@ -387,7 +452,7 @@ fn parse_commands(origin: &str, text: &str, duration_s: f64) -> Result<Vec<Comma
         }
         let mut percent = [0.0; 4];
         for j in 0..4 {
-            let p = number(origin, line, expected[j + 1], cells[j + 1])?;
+            let p = number(origin, line, expected[j + 1], &cells[j + 1])?;
             if !(-100.0..=100.0).contains(&p) {
                 return Err(csv_error(
                     origin,
@@ -411,15 +476,15 @@ fn parse_measured(
     text: &str,
     notices: &mut Vec<String>,
 ) -> Result<Vec<Channel>, GapError> {
-    let mut it = rows(text);
+    let mut it = rows(origin, text)?.into_iter();
     let (hl, header) = it
         .next()
         .ok_or_else(|| csv_error(origin, 1, "", "empty file: expected the header"))?;
-    if header.first() != Some(&"t_s") {
+    if header.first().map(String::as_str) != Some("t_s") {
         return Err(csv_error(
             origin,
             hl,
-            header.first().copied().unwrap_or(""),
+            header.first().map_or("", String::as_str),
             "the first column must be `t_s`",
         ));
     }
@@ -427,13 +492,13 @@ fn parse_measured(
     let mut slots: Vec<Option<usize>> = vec![None];
     let mut channels: Vec<Channel> = Vec::new();
     for name in &header[1..] {
-        if CHANNELS.contains(name) {
+        if CHANNELS.contains(&name.as_str()) {
             if channels.iter().any(|c| c.name == *name) {
                 return Err(csv_error(origin, hl, name, "column appears twice"));
             }
             slots.push(Some(channels.len()));
             channels.push(Channel {
-                name: (*name).to_string(),
+                name: name.clone(),
                 samples: Vec::new(),
             });
         } else {
@@ -465,7 +530,7 @@ fn parse_measured(
                 ),
             ));
         }
-        let t = number(origin, line, "t_s", cells[0])?;
+        let t = number(origin, line, "t_s", &cells[0])?;
         if t < last_t {
             return Err(csv_error(origin, line, "t_s", "rows must be in time order"));
         }
@@ -475,7 +540,7 @@ fn parse_measured(
             if cell.is_empty() {
                 continue;
             }
-            let v = number(origin, line, header[k], cell)?;
+            let v = number(origin, line, &header[k], cell)?;
             channels[slot].samples.push((t, v));
         }
     }
@@ -560,5 +625,51 @@ mod tests {
         let back = Measurement::load(&dir).unwrap();
         assert_eq!(back.channels, m.channels);
         assert_eq!(back.commands, m.commands);
+    }
+
+    /// A directory with none of the three files is named as not a measurement, with what one
+    /// holds; a missing file of a started one is named.
+    #[test]
+    fn an_empty_directory_says_what_a_measurement_holds() {
+        let scratch = crate::scratch::dir("gap-format-empty");
+        let err = Measurement::load(scratch.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("not a measurement directory")
+                && err.contains("experiment.toml, commands.csv, measured.csv"),
+            "{err}"
+        );
+        std::fs::write(scratch.path().join("experiment.toml"), EXP).unwrap();
+        let err = Measurement::load(scratch.path()).unwrap_err().to_string();
+        assert!(err.contains("commands.csv"), "{err}");
+    }
+
+    /// What `write` makes reads back through `csv::Reader` and `toml` as the same values,
+    /// quoted cells and comments included.
+    #[test]
+    fn written_files_read_back_with_the_crates() {
+        let m = Measurement::from_texts(
+            ("e", EXP),
+            (
+                "c",
+                "# a comment\nt_s,port,starboard,bow,stern\n0, 50 ,\"50\",0,0\n2.5,-12.5,0,0,0\n",
+            ),
+            ("m", "t_s,x_m\n0,1\n"),
+        )
+        .unwrap();
+        assert_eq!(m.commands[0].percent, [50.0, 50.0, 0.0, 0.0]);
+        let text = m.commands_csv().unwrap();
+        let mut r = csv::Reader::from_reader(text.as_bytes());
+        let back: Vec<(f64, f64, f64, f64, f64)> = r.deserialize().map(Result::unwrap).collect();
+        assert_eq!(
+            back,
+            vec![(0.0, 50.0, 50.0, 0.0, 0.0), (2.5, -12.5, 0.0, 0.0, 0.0)]
+        );
+        assert_eq!(
+            r.headers().unwrap().iter().collect::<Vec<_>>().join(","),
+            COMMANDS_HEADER
+        );
+        let raw: RawExperiment = toml::from_str(&m.experiment_toml().unwrap()).unwrap();
+        assert_eq!(raw.duration_s, 10.0);
+        assert_eq!(raw.initial.y_m, 2.0);
     }
 }

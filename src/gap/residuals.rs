@@ -59,11 +59,11 @@ pub struct RegimeStats {
     pub significant: bool,
 }
 
-/// The 95 % point of chi-square with `k` degrees of freedom (Wilson-Hilferty).
+/// The 95 % point of chi-square with `k` degrees of freedom; infinite for `k` = 0 (no
+/// statistic exceeds it).
 pub fn chi2_critical_95(k: usize) -> f64 {
-    let k = k as f64;
-    let a = 2.0 / (9.0 * k);
-    k * (1.0 - a + 1.645 * a.sqrt()).powi(3)
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    ChiSquared::new(k as f64).map_or(f64::INFINITY, |d| d.inverse_cdf(0.95))
 }
 
 /// Ljung-Box Q over `h` lags of `x`.
@@ -271,8 +271,10 @@ mod tests {
 
     #[test]
     fn chi2_critical_matches_tables() {
-        // chi2(0.95; 10) = 18.307 (standard tables).
-        assert!((chi2_critical_95(10) - 18.307).abs() < 0.1);
+        // chi2(0.95; k) from standard tables.
+        for (k, table) in [(1, 3.841), (2, 5.991), (10, 18.307), (30, 43.773)] {
+            assert!((chi2_critical_95(k) - table).abs() < 1e-3, "k = {k}");
+        }
     }
 
     /// White noise exceeds the 95 % critical value about 5 % of the time (the test is

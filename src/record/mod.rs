@@ -114,6 +114,11 @@ impl RecordHandle {
         }
     }
 
+    /// Records one ground-truth row (`state.csv`).
+    pub fn state(&self, row: StateRow) {
+        self.send_or_log(Message::State(row), "state");
+    }
+
     /// Records bytes that crossed `link` at simulated time `sim_s` (`bytes.tsv`).
     pub fn bytes(&self, sim_s: f64, link: &'static str, dir: Direction, data: &[u8]) {
         if !data.is_empty() {
@@ -377,7 +382,7 @@ impl Recorder {
 
     /// Records one ground-truth row.
     pub fn state(&self, row: StateRow) {
-        self.handle.send_or_log(Message::State(row), "state");
+        self.handle.state(row);
     }
 
     /// Flushes and syncs everything, stops the thread and returns what was written.

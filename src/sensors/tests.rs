@@ -23,10 +23,9 @@ fn yaw(deg: f64) -> UnitQuaternion<f64> {
     UnitQuaternion::from_euler_angles(0.0, 0.0, deg.to_radians())
 }
 
+/// The sample standard deviation (n - 1).
 fn std_dev(xs: &[f64]) -> f64 {
-    let n = xs.len() as f64;
-    let m = xs.iter().sum::<f64>() / n;
-    (xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    statrs::statistics::Statistics::std_dev(xs)
 }
 
 #[test]

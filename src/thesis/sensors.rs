@@ -132,10 +132,9 @@ fn sonar_detection_rows(
         .collect()
 }
 
+/// The sample standard deviation (n - 1).
 fn std_dev(xs: &[f64]) -> f64 {
-    let n = xs.len() as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    statrs::statistics::Statistics::std_dev(xs)
 }
 
 /// Thesis table 4.1: 50 samples at each of -90, -45, 0, 45, 90 deg per axis.

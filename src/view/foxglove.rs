@@ -24,7 +24,7 @@
 //! - `/links` `foxglove.Log`: every decoded link message, at its time.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use foxglove::messages::{
     Color, CubePrimitive, CylinderPrimitive, FrameTransform, Log, Pose, Quaternion, SceneEntity,
@@ -37,6 +37,7 @@ use serde::Serialize;
 use super::frame::Sample;
 use super::scene::{Scene, SceneObstacle};
 use super::wire::{LinkMessage, Readings};
+use crate::daemon::observer::Watchers;
 
 /// The topics, in the order they are created.
 pub const TOPICS: [&str; 7] = [
@@ -441,47 +442,6 @@ fn entity(t: f64, frame: &str, id: &str, frame_locked: bool) -> SceneEntity {
     }
 }
 
-/// Counts what watches the view (open pages, connected Foxglove clients): link bytes are
-/// decoded for the view only while it is above zero.
-#[derive(Debug, Clone, Default)]
-pub struct Watchers(Arc<AtomicUsize>);
-
-impl Watchers {
-    pub fn any(&self) -> bool {
-        self.0.load(Ordering::Relaxed) > 0
-    }
-
-    pub fn count(&self) -> usize {
-        self.0.load(Ordering::Relaxed)
-    }
-
-    pub fn join(&self) {
-        self.0.fetch_add(1, Ordering::Relaxed);
-    }
-
-    pub fn leave(&self) {
-        let _ = self
-            .0
-            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| n.checked_sub(1));
-    }
-
-    /// Counts one watcher until the guard is dropped.
-    pub fn guard(&self) -> WatchGuard {
-        self.join();
-        WatchGuard(self.clone())
-    }
-}
-
-/// One watcher, for as long as it lives.
-#[derive(Debug)]
-pub struct WatchGuard(Watchers);
-
-impl Drop for WatchGuard {
-    fn drop(&mut self) {
-        self.0.leave();
-    }
-}
-
 /// Counts Foxglove clients as watchers and has the scene sent again when one subscribes.
 struct Listener {
     watchers: Watchers,
@@ -687,19 +647,5 @@ mod tests {
         assert!(close(beam_axis(0.0, 0.0), [1.0, 0.0, 0.0]));
         assert!(close(beam_axis(90.0, 0.0), [0.0, 1.0, 0.0]));
         assert!(close(beam_axis(0.0, -90.0), [0.0, 0.0, 1.0]));
-    }
-
-    #[test]
-    fn watchers_count_guards_and_never_go_below_zero() {
-        let w = Watchers::default();
-        assert!(!w.any());
-        let a = w.guard();
-        let b = w.guard();
-        assert_eq!(w.count(), 2);
-        drop(a);
-        drop(b);
-        assert!(!w.any());
-        w.leave();
-        assert_eq!(w.count(), 0);
     }
 }

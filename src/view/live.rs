@@ -9,10 +9,10 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use tokio::sync::watch;
 
-use super::foxglove::{LiveFoxglove, Watchers};
+use super::foxglove::LiveFoxglove;
 use super::frame::{Frame, HISTORY_S, Sample, StatusView};
-use super::tap::TapReceiver;
 use super::wire::{LinkMessage, WireWatch};
+use crate::daemon::observer::{TapReceiver, Watchers};
 use crate::daemon::status::StatusSnapshot;
 
 /// One published update: the frame as JSON (serialised once for every page) and the

@@ -4,15 +4,17 @@
 //! (`eyebot-hil view RECORD_DIR`).
 //!
 //! What flows where:
-//! - the daemon's loop hands the view link bytes and the true state through a [`tap::Tap`]
-//!   (bounded, `try_send`, latest-wins: the simulation never waits for a page);
+//! - the daemon's loop hands its observer link bytes and the true state through a tap
+//!   ([`crate::daemon::observer`]: bounded, `try_send`, latest-wins: the simulation never
+//!   waits for a page); the CLI connects the view to it, the daemon knows nothing of the view;
 //! - [`live`] decodes the wire ([`wire::WireWatch`]) and publishes one [`frame::Frame`] per
 //!   state update (20 Hz) through a `watch`; each page's event stream reads the newest;
 //! - [`recording`] decodes a recording once and answers "what was it like at time t";
 //! - [`server`] serves the embedded page (`page.html`: HTML, CSS and JavaScript drawing on a
 //!   canvas, no build step, nothing fetched from elsewhere) with axum on the daemon's tokio
 //!   runtime, behind a random token, `Host` and `Origin` checks; controls are POST only and
-//!   go back to the loop as [`tap::ControlRequest`]s, which the recording keeps as events.
+//!   go back to the loop as [`ControlRequest`](crate::daemon::observer::ControlRequest)s,
+//!   which the recording keeps as events.
 
 pub mod foxglove;
 pub mod frame;
@@ -20,12 +22,11 @@ pub mod live;
 pub mod recording;
 pub mod scene;
 pub mod server;
-pub mod tap;
 pub mod wire;
 
 use std::net::SocketAddr;
 
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 
 pub use self::scene::Scene;
 use self::server::{Guard, Source};
@@ -133,25 +134,13 @@ impl Bound {
     }
 }
 
-/// The daemon's half of a live view: what [`crate::daemon::Daemon`] keeps.
-#[derive(Debug)]
-pub struct DaemonSide {
-    pub tap: tap::Tap,
-    pub controls: mpsc::Receiver<tap::ControlRequest>,
-}
-
-/// Controls that may wait for the loop before the page is told the bridge is busy.
-pub const CONTROL_QUEUE: usize = 8;
-
 /// A service to run beside the links: given the daemon's stop signal, the future to spawn.
 pub type LiveService = Box<
     dyn FnOnce(watch::Receiver<bool>) -> std::pin::Pin<Box<dyn Future<Output = ()> + Send>> + Send,
 >;
 
-/// A live view, started: the daemon's side, the service to spawn beside the links, and
-/// where to look.
+/// A live view, started: the service to spawn beside the links, and where to look.
 pub struct Started {
-    pub side: DaemonSide,
     pub service: LiveService,
     /// The page's URL (it carries the token).
     pub page_url: Option<String>,
@@ -159,14 +148,18 @@ pub struct Started {
     pub foxglove_url: Option<String>,
 }
 
-/// Binds the page and starts the Foxglove server as `options` ask; returns the daemon's side
-/// and the service that decodes the tap and serves both (given the daemon's status updates
+/// Binds the page and starts the Foxglove server as `options` ask; returns the service that
+/// decodes the daemon's `observation` and serves both (given the daemon's status updates
 /// and, when spawned, its stop signal).
 pub async fn start_live(
     options: ViewOptions,
+    observation: crate::daemon::observer::Observation,
     status: watch::Receiver<crate::daemon::status::StatusSnapshot>,
 ) -> Result<Started, ViewError> {
-    let (tap, tap_rx) = tap::tap();
+    let crate::daemon::observer::Observation {
+        tap: tap_rx,
+        controls: controls_tx,
+    } = observation;
     let bound = match options.addr {
         Some(addr) => Some(bind(addr, options.public).await?),
         None => None,
@@ -187,7 +180,6 @@ pub async fn start_live(
     let page_url = bound.as_ref().map(|b| b.url().to_string());
     let foxglove_url = fox.as_ref().map(|(addr, f)| f.url(*addr));
     let fox = fox.map(|(_, f)| f);
-    let (controls_tx, controls) = mpsc::channel(CONTROL_QUEUE);
     let scene = options.scene;
     let service = move |stop: watch::Receiver<bool>| {
         let (shared, live) = live::service(tap_rx, status, fox, stop.clone());
@@ -206,7 +198,6 @@ pub async fn start_live(
         fut
     };
     Ok(Started {
-        side: DaemonSide { tap, controls },
         service: Box::new(service),
         page_url,
         foxglove_url,

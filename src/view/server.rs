@@ -27,8 +27,8 @@ use tokio::sync::{mpsc, oneshot, watch};
 use super::live::LiveShared;
 use super::recording::RecordingView;
 use super::scene::Scene;
-use super::tap::{Control, ControlRequest};
 use super::wire::LinkMessage;
+use crate::daemon::observer::{Control, ControlRequest};
 
 /// The page, embedded: plain HTML, CSS and JavaScript, nothing fetched from elsewhere.
 pub const PAGE: &str = include_str!("page.html");
@@ -230,7 +230,7 @@ async fn stream(State(app): State<AppState>) -> Response {
         history: Option<String>,
         last_seq: Option<u64>,
         /// The page counts as watching (the link bytes are decoded) while its stream lives.
-        _watching: super::foxglove::WatchGuard,
+        _watching: crate::daemon::observer::WatchGuard,
     }
     let client = Client {
         _watching: shared.watchers.guard(),

@@ -1,22 +1,21 @@
 //! What the page shows of the links: the bytes that crossed them, decoded.
 //!
 //! [`WireWatch`] takes the same chunks a recording's `bytes.tsv` holds (time, link,
-//! direction, bytes), decodes each link and direction on its own with the protocol crate's
-//! [`LineDecoder`], keeps the last [`MESSAGES_KEPT`] messages, and tracks what the page
-//! plots from the wire: the thruster commands the EyeBot sent, the ADC values and compass
-//! headings the bridge answered, and each transducer's latest echo. A live run and a
-//! recording go through the same code, so the page shows the same thing for both.
+//! direction, bytes), decodes them with the one transcript decoder ([`Transcript`], which
+//! `gap convert` uses too), keeps the last [`MESSAGES_KEPT`] messages, and tracks what the
+//! page plots from the wire: the thruster commands the EyeBot sent (also inside TIME_STEP),
+//! the ADC values and compass headings the bridge answered (also as STEP values), and each
+//! transducer's latest echo. A live run and a recording go through the same code, so the page
+//! shows the same thing for both.
 
 use std::collections::{BTreeMap, VecDeque};
 
-use bytes::BytesMut;
-use firmware_protocol::compass_word::HeadingFormat;
-use firmware_protocol::sensor_link::{CompassOutput, Direction as Spin, Message};
-use firmware_protocol::sonar_link::SonarCommand;
-use firmware_protocol::{LineDecoder, LineItem, Sentence};
+use firmware_protocol::LineItem;
+use firmware_protocol::sensor_link::{Direction as Spin, ThrusterCommand};
 use serde::Serialize;
 
 use crate::record::Direction;
+use crate::transcript::{Event, Transcript};
 
 /// How many decoded messages the page is given (the newest).
 pub const MESSAGES_KEPT: usize = 200;
@@ -81,28 +80,21 @@ pub struct WireCounts {
 }
 
 /// Decodes the links as chunks arrive.
+#[derive(Debug)]
 pub struct WireWatch {
-    decoders: BTreeMap<(String, &'static str), (LineDecoder, BytesMut)>,
-    heading_format: HeadingFormat,
+    transcript: Transcript,
     readings: Readings,
     recent: VecDeque<LinkMessage>,
     seq: u64,
-    /// After a gap, what a decoder skips before its first message is not counted or shown
-    /// as an error; `synced` holds those that have found one since.
-    after_gap: bool,
-    synced: std::collections::BTreeSet<(String, &'static str)>,
 }
 
 impl Default for WireWatch {
     fn default() -> Self {
         Self {
-            decoders: BTreeMap::new(),
-            heading_format: HeadingFormat::Binary,
+            transcript: Transcript::new(),
             readings: Readings::default(),
             recent: VecDeque::with_capacity(MESSAGES_KEPT),
             seq: 0,
-            after_gap: false,
-            synced: std::collections::BTreeSet::new(),
         }
     }
 }
@@ -131,12 +123,7 @@ impl WireWatch {
     /// skips to find a message start as an error, and what the wire had said is forgotten
     /// until it says it again.
     pub fn gap(&mut self) {
-        for (decoder, buf) in self.decoders.values_mut() {
-            *decoder = LineDecoder::default();
-            buf.clear();
-        }
-        self.after_gap = true;
-        self.synced.clear();
+        self.transcript.gap();
         let r = &mut self.readings;
         r.thrusters = [None; 4];
         r.adc = [None; 8];
@@ -155,135 +142,97 @@ impl WireWatch {
         data: &[u8],
         mut each: impl FnMut(&LinkMessage),
     ) {
-        let counts = self.readings.links.entry(link.to_string()).or_default();
+        let Self {
+            transcript,
+            readings: r,
+            recent,
+            seq,
+        } = self;
+        let counts = r.links.entry(link.to_string()).or_default();
         match dir {
             Direction::Rx => counts.bytes_rx += data.len() as u64,
             Direction::Tx => counts.bytes_tx += data.len() as u64,
         }
-        let key = (link.to_string(), dir.as_str());
-        let (mut decoder, mut buf) = self.decoders.remove(&key).unwrap_or_default();
-        buf.extend_from_slice(data);
-        while let Some(item) = decoder.decode(&mut buf) {
-            if self.after_gap && !self.synced.contains(&key) {
-                if matches!(item, LineItem::Error(_)) {
-                    continue;
+        transcript.feed(t_s, link, dir, data, |event| match event {
+            Event::Item(item) => {
+                let counts = r.links.entry(link.to_string()).or_default();
+                match (item, dir) {
+                    (LineItem::Error(_), _) => counts.errors += 1,
+                    (_, Direction::Rx) => counts.messages_rx += 1,
+                    (_, Direction::Tx) => counts.messages_tx += 1,
                 }
-                self.synced.insert(key.clone());
-            }
-            let counts = self.readings.links.entry(link.to_string()).or_default();
-            match (&item, dir) {
-                (LineItem::Error(_), _) => counts.errors += 1,
-                (_, Direction::Rx) => counts.messages_rx += 1,
-                (_, Direction::Tx) => counts.messages_tx += 1,
-            }
-            let message = self.apply(t_s, dir, item);
-            let message = LinkMessage {
-                seq: self.seq,
-                t_s,
-                link: link.to_string(),
-                dir: dir.as_str(),
-                kind: message.0,
-                text: message.1,
-            };
-            self.seq += 1;
-            each(&message);
-            if self.recent.len() == MESSAGES_KEPT {
-                self.recent.pop_front();
-            }
-            self.recent.push_back(message);
-        }
-        self.decoders.insert(key, (decoder, buf));
-    }
-
-    /// Updates the readings with one item; returns its kind and text.
-    fn apply(&mut self, t_s: f64, dir: Direction, item: LineItem) -> (String, String) {
-        // One `Debug` rendering per message: the kind is its leading variant name.
-        let (text, kind) = match &item {
-            LineItem::Frame(f) => {
-                let text = format!("#{} {:?}", f.seq, f.message);
-                let kind = variant(text.split_once(' ').map_or("", |(_, m)| m));
-                (text, kind)
-            }
-            LineItem::Sonar(c) => {
-                let text = format!("{c:?}");
-                let kind = variant(&text);
-                (text, kind)
-            }
-            LineItem::Nmea(s) => {
-                let text = format!("{s:?}");
-                let kind = variant(&text);
-                (text, kind)
-            }
-            LineItem::Error(e) => (e.to_string(), "Error".to_string()),
-        };
-        let r = &mut self.readings;
-        match (dir, item) {
-            (_, LineItem::Error(_)) => r.errors += 1,
-            (Direction::Rx, LineItem::Frame(f)) => match f.message {
-                Message::Hello { .. } => {
-                    r.thrusters = [None; 4];
-                    self.heading_format = HeadingFormat::Binary;
-                }
-                Message::ThrusterSet { thruster, command } => {
-                    if let Some(slot) = r.thrusters.get_mut(thruster as usize) {
-                        *slot = Some(seen(command));
-                    }
-                }
-                Message::ThrusterSetAll { commands } => {
-                    r.thrusters = commands.map(|c| Some(seen(c)));
-                }
-                Message::CompassMode { output, .. } => match output {
-                    CompassOutput::Binary => self.heading_format = HeadingFormat::Binary,
-                    CompassOutput::Bcd => self.heading_format = HeadingFormat::Bcd,
-                    CompassOutput::Raw => {}
-                },
-                _ => {}
-            },
-            (Direction::Tx, LineItem::Frame(f)) => match f.message {
-                Message::AdcValue { channel, value } => {
-                    if let Some(slot) = r.adc.get_mut(usize::from(channel.get())) {
-                        *slot = Some(value.get());
-                    }
-                }
-                Message::AdcSamples { samples, .. } => {
-                    for (channel, value) in samples.iter() {
-                        if let Some(slot) = r.adc.get_mut(usize::from(channel.get())) {
-                            *slot = Some(value.get());
-                        }
-                    }
-                }
-                Message::CompassHeading { word } | Message::CompassHeadingPush { word } => {
-                    if let Ok(h) = word.decode(self.heading_format) {
-                        r.compass_deg = Some(f64::from(h));
-                    }
-                }
-                _ => {}
-            },
-            (Direction::Tx, LineItem::Sonar(SonarCommand::Ack(t))) => r.selected = Some(t.get()),
-            (Direction::Tx, LineItem::Nmea(sentence)) => {
-                // A plain depth sentence does not name its transducer: it is the selected one.
-                let (transducer, range) = match sentence {
-                    Sentence::Echo(e) => (Some(e.transducer.get()), e.range_m),
-                    Sentence::Dbt(d) => (r.selected, d.metres),
-                    Sentence::Dpt(d) => (r.selected, d.depth_m),
+                let (kind, text) = describe(item);
+                let message = LinkMessage {
+                    seq: *seq,
+                    t_s,
+                    link: link.to_string(),
+                    dir: dir.as_str(),
+                    kind,
+                    text,
                 };
-                let slot = transducer
-                    .and_then(|t| usize::from(t).checked_sub(1))
-                    .and_then(|i| r.echoes.get_mut(i));
-                if let Some(slot) = slot {
-                    *slot = Some(EchoSeen {
-                        t_s,
-                        range_m: range.map(|m| f64::from(m.tenths()) / 10.0),
-                    });
+                *seq += 1;
+                each(&message);
+                if recent.len() == MESSAGES_KEPT {
+                    recent.pop_front();
+                }
+                recent.push_back(message);
+            }
+            Event::Error => r.errors += 1,
+            Event::Thrusters { commands, .. } => r.thrusters = commands.map(|c| c.map(seen)),
+            Event::Adc { channel, value, .. } => {
+                if let Some(slot) = r.adc.get_mut(usize::from(channel)) {
+                    *slot = Some(value);
                 }
             }
-            _ => {}
-        }
-        (kind, text)
+            Event::Compass { heading_deg, .. } => r.compass_deg = Some(heading_deg),
+            Event::SonarSelected { transducer } => r.selected = Some(transducer),
+            Event::Echo {
+                t_s,
+                transducer,
+                range_m,
+            } => echo(r, Some(transducer), t_s, range_m),
+            // A plain depth sentence does not name its transducer: it is the selected one.
+            Event::Depth {
+                t_s,
+                selected,
+                range_m,
+            } => echo(r, selected, t_s, range_m),
+            Event::CompassRaw => {}
+        });
     }
 }
 
-fn seen(command: firmware_protocol::sensor_link::ThrusterCommand) -> ThrusterSeen {
+fn echo(r: &mut Readings, transducer: Option<u8>, t_s: f64, range_m: Option<f64>) {
+    let slot = transducer
+        .and_then(|t| usize::from(t).checked_sub(1))
+        .and_then(|i| r.echoes.get_mut(i));
+    if let Some(slot) = slot {
+        *slot = Some(EchoSeen { t_s, range_m });
+    }
+}
+
+/// An item's kind and text: one `Debug` rendering per message, the kind is its leading
+/// variant name.
+fn describe(item: &LineItem) -> (String, String) {
+    match item {
+        LineItem::Frame(f) => {
+            let text = format!("#{} {:?}", f.seq, f.message);
+            let kind = variant(text.split_once(' ').map_or("", |(_, m)| m));
+            (kind, text)
+        }
+        LineItem::Sonar(c) => {
+            let text = format!("{c:?}");
+            (variant(&text), text)
+        }
+        LineItem::Nmea(s) => {
+            let text = format!("{s:?}");
+            (variant(&text), text)
+        }
+        LineItem::Error(e) => ("Error".to_string(), e.to_string()),
+    }
+}
+
+fn seen(command: ThrusterCommand) -> ThrusterSeen {
     ThrusterSeen {
         duty: command.duty,
         reverse: command.direction == Spin::Reverse,
@@ -303,7 +252,7 @@ fn variant(debug: &str) -> String {
 mod tests {
     use bytes::BytesMut;
     use firmware_protocol::Frame;
-    use firmware_protocol::sensor_link::ThrusterCommand;
+    use firmware_protocol::sensor_link::{Message, ThrusterCommand};
 
     use super::*;
 
@@ -420,5 +369,90 @@ mod tests {
         let mut w = WireWatch::new();
         let fresh = kinds(&mut w, &tail);
         assert!(fresh.contains(&"Error".to_string()), "{fresh:?}");
+    }
+    /// The thrusters of a TIME_STEP show at once; the ADC values and heading of its STEP show
+    /// once the EyeBot said it used them (the next TIME_STEP's `used`, counted when its STEP
+    /// comes, or any other request); values taken back never show.
+    #[test]
+    fn time_step_thrusters_and_used_step_values_show() {
+        use firmware_protocol::sensor_link::{AdcChannel, Reading, Readings, StepValues};
+        let adc = |c: u8| Reading::Adc(AdcChannel::new(c).unwrap());
+        let command = ThrusterCommand {
+            duty: 0x40,
+            direction: Spin::Reverse,
+        };
+        let time_step = |seq: u8, used: u8, thrusters| {
+            frame(
+                seq,
+                Message::TimeStep {
+                    used,
+                    stop_on_sonar: false,
+                    ticks: 1,
+                    thrusters,
+                    readings: Readings::new([adc(0), adc(3), Reading::Compass]).unwrap(),
+                },
+            )
+        };
+        let word = |deg: u16| {
+            firmware_protocol::HeadingWord::encode(deg, firmware_protocol::HeadingFormat::Binary)
+                .unwrap()
+                .0
+        };
+        let step = |seq: u8, values: [u16; 3]| {
+            frame(
+                seq,
+                Message::Step {
+                    ticks: 7,
+                    sonar_bytes: 0,
+                    values: StepValues::new(values).unwrap(),
+                },
+            )
+        };
+        let mut w = WireWatch::new();
+        w.feed(
+            0.0,
+            "sensor",
+            Direction::Rx,
+            &time_step(1, 0, Some([command; 4])),
+            |_| {},
+        );
+        assert_eq!(
+            w.readings().thrusters[2].map(|t| (t.duty, t.reverse)),
+            Some((0x40, true))
+        );
+        w.feed(
+            0.0,
+            "sensor",
+            Direction::Tx,
+            &step(1, [100, 200, word(90)]),
+            |_| {},
+        );
+        assert_eq!(w.readings().adc, [None; 8], "not used yet");
+        w.feed(0.0, "sensor", Direction::Rx, &time_step(2, 2, None), |_| {});
+        assert_eq!(
+            w.readings().adc,
+            [None; 8],
+            "a TIME_STEP may still be refused"
+        );
+        w.feed(
+            0.0,
+            "sensor",
+            Direction::Tx,
+            &step(2, [101, 201, word(45)]),
+            |_| {},
+        );
+        let r = w.readings();
+        assert_eq!((r.adc[0], r.adc[3]), (Some(100), Some(200)));
+        assert_eq!(r.compass_deg, None, "the heading was taken back");
+        w.feed(
+            0.0,
+            "sensor",
+            Direction::Rx,
+            &frame(3, Message::TimeGet),
+            |_| {},
+        );
+        let r = w.readings();
+        assert_eq!((r.adc[0], r.adc[3]), (Some(101), Some(201)));
+        assert_eq!(r.compass_deg, Some(45.0));
     }
 }

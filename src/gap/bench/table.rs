@@ -4,17 +4,10 @@
 use crate::gap::bench::{CalibrationGap, CaseResult, Source};
 use crate::gap::effects;
 
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
+/// The median (of an even count: the mean of the middle two); `None` for none.
+fn median(v: Vec<f64>) -> Option<f64> {
+    use statrs::statistics::{Data, Median};
+    (!v.is_empty()).then(|| Data::new(v).median())
 }
 
 fn pct(num: usize, den: usize) -> String {
@@ -198,6 +191,68 @@ pub fn independent_table(results: &[CaseResult], calibration: Option<&Calibratio
     s
 }
 
+/// One line of the per-case CSV that `gap-bench --out` writes after the table. A list is
+/// one cell, its values joined by `;` (an interval as `low:high`); an empty cell is "none".
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CaseRow {
+    pub index: usize,
+    pub effect: String,
+    pub seed: u64,
+    pub size_sigma: Option<f64>,
+    pub named: Option<String>,
+    pub truth: String,
+    pub fitted: String,
+    pub ci95: String,
+    pub parameter_error: Option<f64>,
+    pub ci_covers: Option<bool>,
+    pub held_out_reduction_pct: Option<f64>,
+    pub held_out_truth_reduction_pct: Option<f64>,
+    pub held_out_raw_reduction_pct: Option<f64>,
+    pub held_out_grew: Option<bool>,
+    pub seconds: f64,
+}
+
+fn joined(values: impl Iterator<Item = String>) -> String {
+    values.collect::<Vec<_>>().join(";")
+}
+
+impl From<&CaseResult> for CaseRow {
+    fn from(r: &CaseResult) -> Self {
+        Self {
+            index: r.index,
+            effect: r.label.clone(),
+            seed: r.seed,
+            size_sigma: r.size_sigma,
+            named: r.named.clone(),
+            truth: joined(r.truth.iter().map(f64::to_string)),
+            fitted: joined(r.fitted.iter().map(f64::to_string)),
+            ci95: joined(r.ci95.iter().map(|[lo, hi]| format!("{lo}:{hi}"))),
+            parameter_error: r.parameter_error,
+            ci_covers: r.ci_covers,
+            held_out_reduction_pct: r.held_out_reduction_pct,
+            held_out_truth_reduction_pct: r.held_out_truth_reduction_pct,
+            held_out_raw_reduction_pct: r.held_out_raw_reduction_pct,
+            held_out_grew: r.held_out_grew,
+            seconds: r.seconds,
+        }
+    }
+}
+
+/// The per-case CSV (header and one row per case), written by the `csv` crate so that any
+/// CSV reader reads it back.
+pub fn cases_csv(results: &[CaseResult]) -> Result<String, csv::Error> {
+    let mut w = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(Vec::new());
+    for r in results {
+        w.serialize(CaseRow::from(r))?;
+    }
+    let bytes = w
+        .into_inner()
+        .map_err(|e| csv::Error::from(e.into_error()))?;
+    Ok(String::from_utf8_lossy(&bytes).into_owned())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,5 +298,39 @@ mod tests {
         assert!(group.contains("| 3.0 % |"), "{group}");
         let overall = t.lines().find(|l| l.starts_with("| overall |")).unwrap();
         assert!(overall.contains("| 4 |"), "{overall}");
+    }
+
+    /// The per-case CSV reads back through `csv::Reader` as the rows that were written,
+    /// lists, intervals and empty values included (it once wrote Rust's `Some(x)` and `[a, b]`).
+    #[test]
+    fn the_per_case_csv_round_trips_through_a_csv_reader() {
+        let case = |index: usize, named: Option<&str>| CaseResult {
+            index,
+            effect: Some("sway_drag".into()),
+            expected: Some("sway_drag".into()),
+            label: "sway, drag \"quoted\"".into(),
+            seed: 7,
+            truth: vec![0.25, -1.5],
+            size_sigma: named.map(|_| 4.2),
+            named: named.map(str::to_string),
+            fitted: vec![0.26, -1.4],
+            ci95: vec![[0.2, 0.3], [-1.7, -1.1]],
+            parameter_error: Some(0.06),
+            ci_covers: Some(true),
+            held_out_reduction_pct: None,
+            held_out_truth_reduction_pct: Some(12.5),
+            held_out_raw_reduction_pct: None,
+            held_out_grew: Some(false),
+            seconds: 17.25,
+        };
+        let results = [case(0, Some("sway_drag")), case(1, None)];
+        let text = cases_csv(&results).unwrap();
+        assert!(!text.contains("Some("), "{text}");
+        let mut reader = csv::Reader::from_reader(text.as_bytes());
+        let back: Vec<CaseRow> = reader.deserialize().collect::<Result<_, _>>().unwrap();
+        let want: Vec<CaseRow> = results.iter().map(CaseRow::from).collect();
+        assert_eq!(back, want);
+        assert_eq!(back[1].named, None);
+        assert_eq!(back[0].ci95, "0.2:0.3;-1.7:-1.1");
     }
 }

@@ -1,29 +1,106 @@
-//! The daemon's side of a live view: what the simulation loop hands over, without ever
-//! waiting for it.
+//! What the daemon offers whoever watches a run (the CLI connects the live view and Foxglove
+//! to it): the bytes that cross the links and the vehicle's state, handed over without ever
+//! waiting, and a control channel coming back.
 //!
-//! While a page or a Foxglove client watches ([`Watchers`]), the loop copies each chunk of
-//! bytes that crosses a link into a bounded channel with `try_send` (a full channel drops the
-//! chunk and counts it); while none does, it only counts the chunk as skipped, so nobody pays
-//! for decoding what nobody sees. Every [`VIEW_PERIOD`] it puts
-//! the vehicle's true state into a latest-wins `watch`. Controls come back the other way as
-//! [`ControlRequest`]s, each answered once the loop has applied or refused it.
+//! [`Daemon::observe`](super::Daemon::observe) returns the watcher's end, an [`Observation`].
+//! While something watches ([`Watchers`]), the loop copies each chunk of bytes that crosses a
+//! link into a bounded channel with `try_send` (a full channel drops the chunk and counts it);
+//! while nothing does, it only counts the chunk as skipped, so nobody pays for decoding what
+//! nobody sees. Every [`OBSERVER_PERIOD`] it puts the vehicle's true state into a
+//! latest-wins `watch`. Controls come back the other way as [`ControlRequest`]s, each
+//! answered once the loop has applied or refused it.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use bytes::Bytes;
 use serde::{Deserialize, Serialize};
 use tokio::sync::{mpsc, oneshot, watch};
 
-pub use super::foxglove::Watchers;
 use crate::record::{Direction, StateRow};
 
-/// How often the loop publishes the vehicle's state to a view (20 Hz).
-pub const VIEW_PERIOD: Duration = Duration::from_millis(50);
+/// How often the loop publishes the vehicle's state to an observer (20 Hz).
+pub const OBSERVER_PERIOD: Duration = Duration::from_millis(50);
 
-/// Chunks of link bytes that may wait for the view before new ones are dropped.
+/// Chunks of link bytes that may wait for the observer before new ones are dropped.
 pub const TAP_CHUNKS: usize = 1024;
+
+/// Controls that may wait for the loop before the watcher is told the bridge is busy.
+pub const CONTROL_QUEUE: usize = 8;
+
+/// Counts what watches the run (open pages, connected Foxglove clients): the loop hands link
+/// bytes over only while it is above zero.
+#[derive(Debug, Clone, Default)]
+pub struct Watchers(Arc<AtomicUsize>);
+
+impl Watchers {
+    pub fn any(&self) -> bool {
+        self.0.load(Ordering::Relaxed) > 0
+    }
+
+    pub fn count(&self) -> usize {
+        self.0.load(Ordering::Relaxed)
+    }
+
+    pub fn join(&self) {
+        self.0.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub fn leave(&self) {
+        let _ = self
+            .0
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| n.checked_sub(1));
+    }
+
+    /// Counts one watcher until the guard is dropped.
+    pub fn guard(&self) -> WatchGuard {
+        self.join();
+        WatchGuard(self.clone())
+    }
+}
+
+/// One watcher, for as long as it lives.
+#[derive(Debug)]
+pub struct WatchGuard(Watchers);
+
+impl Drop for WatchGuard {
+    fn drop(&mut self) {
+        self.0.leave();
+    }
+}
+
+/// The watcher's end of the observer: the tap and where to send controls.
+#[derive(Debug)]
+pub struct Observation {
+    pub tap: TapReceiver,
+    pub controls: mpsc::Sender<ControlRequest>,
+}
+
+/// The loop's end of the observer.
+#[derive(Debug)]
+pub(super) struct ObserverEnd {
+    pub tap: Tap,
+    pub controls: mpsc::Receiver<ControlRequest>,
+    pub next_state: tokio::time::Instant,
+}
+
+/// A connected pair of ends.
+pub(super) fn observer() -> (ObserverEnd, Observation) {
+    let (tap, tap_rx) = tap();
+    let (controls_tx, controls) = mpsc::channel(CONTROL_QUEUE);
+    (
+        ObserverEnd {
+            tap,
+            controls,
+            next_state: tokio::time::Instant::now(),
+        },
+        Observation {
+            tap: tap_rx,
+            controls: controls_tx,
+        },
+    )
+}
 
 /// Bytes that crossed a link.
 #[derive(Debug, Clone)]
@@ -54,11 +131,11 @@ pub struct Settings {
     pub current_mps: Option<[f64; 2]>,
 }
 
-/// Held by the view.
+/// Held by the watcher.
 #[derive(Debug)]
 pub struct TapReceiver {
     pub chunks: mpsc::Receiver<TapChunk>,
-    /// Chunks the loop dropped because the view had not taken the earlier ones.
+    /// Chunks the loop dropped because the watcher had not taken the earlier ones.
     pub dropped: Arc<AtomicU64>,
     /// Chunks the loop did not hand over because nothing watched.
     pub skipped: Arc<AtomicU64>,
@@ -97,8 +174,8 @@ pub fn tap() -> (Tap, TapReceiver) {
 }
 
 impl Tap {
-    /// Offers a chunk; drops and counts it when the view is behind, skips and counts it when
-    /// nothing watches. Never waits.
+    /// Offers a chunk; drops and counts it when the watcher is behind, skips and counts it
+    /// when nothing watches. Never waits.
     pub fn bytes(&self, t_s: f64, link: &'static str, dir: Direction, data: Bytes) {
         if data.is_empty() {
             return;
@@ -118,7 +195,7 @@ impl Tap {
         }
     }
 
-    /// Publishes the latest state (the view reads whichever is newest).
+    /// Publishes the latest state (the watcher reads whichever is newest).
     pub fn state(&self, row: StateRow) {
         self.state.send_replace(row);
     }
@@ -199,4 +276,23 @@ impl Control {
 pub struct ControlRequest {
     pub control: Control,
     pub reply: oneshot::Sender<Result<String, String>>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn watchers_count_guards_and_never_go_below_zero() {
+        let w = Watchers::default();
+        assert!(!w.any());
+        let a = w.guard();
+        let b = w.guard();
+        assert_eq!(w.count(), 2);
+        drop(a);
+        drop(b);
+        assert!(!w.any());
+        w.leave();
+        assert_eq!(w.count(), 0);
+    }
 }
