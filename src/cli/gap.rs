@@ -373,14 +373,14 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
     }
     for u in &c.unidentified {
         outln!(
-            "not identified by the baseline runs, left as the model gives it: {} ({})",
+            "not identified by the baseline runs (its value is what the fit left: read it as \"this channel disagrees\"): {} ({})",
             u.effect,
             u.why
         );
     }
     if !c.spread_unidentified.is_empty() {
         outln!(
-            "no between-run spread (the spread runs do not identify them): {}",
+            "spread runs whose fits ended on a bound or unbounded (the spread holds their model error): {}",
             c.spread_unidentified.join(", ")
         );
     }

@@ -105,7 +105,7 @@ pub struct RunGap {
     pub channels: Vec<(String, f64, f64)>,
 }
 
-/// An effect calibration leaves out because the data do not identify it.
+/// An effect whose calibrated value the data do not identify.
 #[derive(Debug, Clone, Serialize)]
 pub struct Unidentified {
     pub effect: String,
@@ -125,11 +125,10 @@ pub struct Calibration {
     pub spread_from: Vec<String>,
     /// Parameters left out because none of their channels is measured.
     pub not_fitted: Vec<String>,
-    /// Effects the baseline runs do not identify, left as the model gives them, with why.
+    /// Effects the baseline runs do not identify, with why (their values stay as fitted).
     pub unidentified: Vec<Unidentified>,
-    /// Effects whose between-run spread the spread runs do not identify (their per-run fits
-    /// ended on a bound or were unbounded): no spread is kept for them, and a later fit of
-    /// theirs that ends on a bound is not named anyway.
+    /// Effects whose per-run fits on the spread runs ended on a bound or were unbounded: their
+    /// spread says more of the runs' model error than of the effect.
     pub spread_unidentified: Vec<String>,
     /// The factor the fitted change was shrunk by so that the model re-simulates every
     /// baseline run to its end (1: not shrunk; 0: the model as given).
@@ -234,7 +233,7 @@ fn apparent_spread(
     if runs.len() < 2 {
         return Ok((Vec::new(), Vec::new()));
     }
-    let mut tried: Vec<&'static Effect> = Vec::new();
+    let mut on_bound: Vec<&'static Effect> = Vec::new();
     let n = runs.len() as f64;
     let pull = if fitted_on { n / (n - 1.0) } else { 1.0 };
     let mut apparent: Vec<(&'static Effect, Vec<Vec<f64>>)> = Vec::new();
@@ -249,16 +248,14 @@ fn apparent_spread(
             if !r.testable || e.kind != effects::Kind::Mean {
                 continue;
             }
-            if !tried.iter().any(|t| t.name == e.name) {
-                tried.push(e);
-            }
-            // A fit that ends on a bound or leaves a parameter unbounded measures no spread.
+            // A fit that ends on a bound or leaves a parameter unbounded is named: its spread
+            // says more of the data than of the effect.
             let bounded = r
                 .ci95
                 .iter()
                 .all(|(_, [a, b])| a.is_finite() && b.is_finite());
-            if !r.guards.inside_bounds || !bounded {
-                continue;
+            if (!r.guards.inside_bounds || !bounded) && !on_bound.iter().any(|t| t.name == e.name) {
+                on_bound.push(e);
             }
             let values: Vec<f64> = r.parameters.iter().map(|(_, v)| *v).collect();
             match apparent.iter_mut().find(|(a, _)| a.name == e.name) {
@@ -267,15 +264,7 @@ fn apparent_spread(
             }
         }
     }
-    let unidentified = tried
-        .iter()
-        .filter(|t| {
-            !apparent
-                .iter()
-                .any(|(a, per_run)| a.name == t.name && per_run.len() >= 2)
-        })
-        .map(|t| t.name.to_string())
-        .collect();
+    let unidentified = on_bound.iter().map(|t| t.name.to_string()).collect();
     let spread = apparent
         .into_iter()
         .filter(|(_, per_run)| per_run.len() >= 2)
@@ -541,42 +530,19 @@ pub fn calibrate(
             not_fitted.push(e.name.to_string());
         }
     }
-    let (mut x, mut fit, mut evaluations) =
+    let (mut x, fit, evaluations) =
         joint_fit(&prepared, &setups, &chosen, starts(&chosen), 2, progress)?;
-    // Parameters the data do not identify are left as the model gives them, and the rest is
-    // fitted again without them: an interval that is infinite or wider than the parameter's
-    // physical range, or a sensor parameter driven onto its bound (a sensor effect taking a
-    // disagreement its own signature does not explain).
-    let mut unidentified = Vec::new();
-    for _ in 0..2 {
-        let dropped = unidentified_effects(&chosen, &x, &fit);
-        if dropped.is_empty() {
-            break;
-        }
-        let mut kept = Vec::new();
-        let mut restart = Vec::new();
-        let mut k = 0;
-        for e in &chosen {
-            let n = e.parameters.len();
-            match dropped.iter().find(|(d, _)| d.name == e.name) {
-                Some((_, why)) => unidentified.push(Unidentified {
-                    effect: e.name.to_string(),
-                    why: why.clone(),
-                }),
-                None => {
-                    kept.push(*e);
-                    restart.extend((0..n).map(|j| x[k + j]));
-                }
-            }
-            k += n;
-        }
-        chosen = kept;
-        let start = DVector::from_vec(restart);
-        let refit = joint_fit(&prepared, &setups, &chosen, vec![start], 1, progress)?;
-        x = refit.0;
-        fit = refit.1;
-        evaluations += refit.2;
-    }
+    // Parameters the data do not identify are named: an interval that is infinite or wider
+    // than the parameter's physical range, or a sensor parameter driven onto its bound (a
+    // sensor effect taking a disagreement its own signature does not explain). Their values
+    // stay in the model, as the fit left them: read them as "this channel disagrees".
+    let unidentified: Vec<Unidentified> = unidentified_effects(&chosen, &x, &fit)
+        .into_iter()
+        .map(|(e, why)| Unidentified {
+            effect: e.name.to_string(),
+            why,
+        })
+        .collect();
     // A model that diverges on its own runs is never written: the fitted change is shrunk
     // towards the model as given until every baseline run re-simulates to its end.
     let mut shrunk = 1.0;
@@ -645,12 +611,7 @@ pub fn calibrate(
                 Split::DEFAULT,
                 &[],
             )?;
-            // Only a level with its own signature (the local variance follows the stern
-            // duty) inside its bounds: a dynamics residual never becomes noise.
-            if let Some(c) = fit::fit_emi(&s, emi)
-                && c.guards.inside_bounds
-                && c.signature_pass
-            {
+            if let Some(c) = fit::fit_emi(&s, emi) {
                 levels.push((c.parameters[0].1, c.ci95[0].1));
             }
         }
