@@ -74,15 +74,19 @@ mod tests {
 
     /// Every unit test that needs a directory takes a scratch one: no other file in `src`
     /// makes its own under the system's temporary directory, where a failing test would leave
-    /// it behind. The one exception is not a test: `gap-bench` (the independent and bridge
-    /// sources) writes its generated runs under the temporary directory and removes them
-    /// when it ends.
+    /// it behind. The exceptions are not tests: `gap-bench` (the independent and bridge
+    /// sources) writes its generated runs, and the independent model's program built into
+    /// the binary, under the temporary directory and removes them when it ends.
     #[test]
     fn no_unit_test_makes_its_own_temporary_directory() {
         assert_eq!(
             sources_containing(
                 "temp_dir()",
-                &["src/scratch.rs", "src/gap/bench/calibrated.rs"]
+                &[
+                    "src/scratch.rs",
+                    "src/gap/bench/calibrated.rs",
+                    "src/gap/bench/independent.rs"
+                ]
             ),
             Vec::<String>::new()
         );

@@ -292,7 +292,7 @@ fn starts(chosen: &[&'static Effect]) -> Vec<DVector<f64>> {
     let mut out = vec![DVector::zeros(dims)];
     let mut k = 0;
     for e in chosen {
-        if let Fitted::JointTwoStarts(start) = e.calibration {
+        if let Fitted::JointTwoStarts(_, start) = e.calibration {
             let mut x = DVector::zeros(dims);
             x[k] = start / e.scales[0];
             out.push(x);
@@ -520,10 +520,15 @@ pub fn calibrate(
         .collect();
     let mut chosen: Vec<&'static Effect> = Vec::new();
     let mut not_fitted = Vec::new();
-    for e in effects::LIBRARY
+    let mut joint: Vec<(u8, &'static Effect)> = effects::LIBRARY
         .iter()
-        .filter(|e| matches!(e.calibration, Fitted::Joint | Fitted::JointTwoStarts(_)))
-    {
+        .filter_map(|e| match e.calibration {
+            Fitted::Joint(k) | Fitted::JointTwoStarts(k, _) => Some((k, e)),
+            _ => None,
+        })
+        .collect();
+    joint.sort_by_key(|(k, _)| *k);
+    for (_, e) in joint {
         if e.channels.iter().any(|c| measured.contains(c)) {
             chosen.push(e);
         } else {

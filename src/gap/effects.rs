@@ -114,11 +114,13 @@ pub struct Effect {
 pub enum Calibration {
     /// Left to `gap`, to be found as new.
     No,
-    /// Fitted jointly with the other calibrated effects on the baseline runs' residuals.
-    Joint,
-    /// Fitted jointly, and the joint fit also starts from this value of its first parameter
-    /// (an effect that trades off against another, so that one start can stop short).
-    JointTwoStarts(f64),
+    /// Fitted jointly with the other calibrated effects on the baseline runs' residuals, at
+    /// this place in the joint fit's parameter vector (a bounded fit of twenty-odd parameters
+    /// from two starts can end elsewhere when its columns are permuted, so the order is kept).
+    Joint(u8),
+    /// As `Joint`, and the joint fit also starts from this value of its first parameter (an
+    /// effect that trades off against another, so that one start can stop short).
+    JointTwoStarts(u8, f64),
     /// A noise level (a variance effect): fitted on each baseline run of the jointly
     /// calibrated model, its mean over the runs enters the model.
     NoiseLevel,
@@ -183,7 +185,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: false,
         summary: &[Behaviour::Turn],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(3),
         positive: false,
         parameter_error_target: true,
         hidden: Some(Hiding {
@@ -223,7 +225,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: false,
         summary: &[Behaviour::Turn],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(2),
         positive: false,
         parameter_error_target: true,
         hidden: None,
@@ -240,7 +242,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| scale_damping(&mut c.vehicle, 0, 1.0 + at(p, 0), 1.0 + at(p, 1)),
         moves_anchors: false,
         summary: &[Behaviour::Speed],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(4),
         positive: false,
         parameter_error_target: true,
         hidden: None,
@@ -259,7 +261,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: false,
         summary: &[Behaviour::Speed],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(5),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -286,7 +288,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: false,
         summary: &[Behaviour::Speed],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(6),
         positive: true,
         parameter_error_target: false,
         hidden: Some(Hiding {
@@ -341,7 +343,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: true,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(11),
         positive: false,
         parameter_error_target: true,
         hidden: Some(Hiding {
@@ -476,7 +478,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: false,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(20),
         positive: false,
         parameter_error_target: true,
         hidden: Some(Hiding {
@@ -532,7 +534,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: false,
         summary: &[Behaviour::Speed, Behaviour::Turn],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(0),
         positive: false,
         parameter_error_target: true,
         hidden: Some(Hiding {
@@ -569,7 +571,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: false,
         summary: &[Behaviour::Speed, Behaviour::Turn],
-        calibration: Calibration::JointTwoStarts(0.3),
+        calibration: Calibration::JointTwoStarts(1, 0.3),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -587,7 +589,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.sensors.compass.errors.bias += at(p, 0),
         moves_anchors: true,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(10),
         positive: false,
         parameter_error_target: false,
         hidden: Some(Hiding {
@@ -610,7 +612,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.sensors.depth.errors.bias += at(p, 0),
         moves_anchors: true,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(12),
         positive: false,
         parameter_error_target: false,
         hidden: Some(Hiding {
@@ -636,7 +638,7 @@ pub const LIBRARY: [Effect; 27] = [
         },
         moves_anchors: true,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(13),
         positive: false,
         parameter_error_target: false,
         hidden: Some(Hiding {
@@ -664,7 +666,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.analog.accel_offset_lsb[0] += at(p, 0),
         moves_anchors: false,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(14),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -681,7 +683,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.analog.accel_offset_lsb[1] += at(p, 0),
         moves_anchors: false,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(15),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -698,7 +700,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.analog.accel_offset_lsb[2] += at(p, 0),
         moves_anchors: false,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(16),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -715,7 +717,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.analog.accel_gain_scale[0] += at(p, 0),
         moves_anchors: false,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(17),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -732,7 +734,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.analog.accel_gain_scale[1] += at(p, 0),
         moves_anchors: false,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(18),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -749,7 +751,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.analog.accel_gain_scale[2] += at(p, 0),
         moves_anchors: false,
         summary: &[],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(19),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -767,7 +769,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| scale_damping(&mut c.vehicle, 5, 1.0 + at(p, 0), 1.0 + at(p, 0)),
         moves_anchors: false,
         summary: &[Behaviour::Turn],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(7),
         positive: false,
         parameter_error_target: false,
         hidden: Some(Hiding {
@@ -795,7 +797,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| scale_damping(&mut c.vehicle, 5, 1.0, 1.0 + at(p, 0)),
         moves_anchors: false,
         summary: &[Behaviour::Turn],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(8),
         positive: false,
         parameter_error_target: false,
         hidden: None,
@@ -814,7 +816,7 @@ pub const LIBRARY: [Effect; 27] = [
         extend: |p, c| c.vehicle.damping_sway_yaw[1] += at(p, 0),
         moves_anchors: false,
         summary: &[Behaviour::Turn],
-        calibration: Calibration::Joint,
+        calibration: Calibration::Joint(9),
         positive: false,
         parameter_error_target: false,
         hidden: Some(Hiding {

@@ -41,14 +41,20 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
     }
 }
 
+/// How far (m; deg) the data must put a run's start from its stated `[initial]` before the
+/// estimate replaces it.
+pub const START_GATE_M: f64 = 0.1;
+pub const START_GATE_DEG: f64 = 5.0;
+
 /// Runs the model from the measurement's initial state under its commands. `noise_seed`
 /// `None` switches the thrust fluctuation off (the mean prediction).
 ///
 /// **The initial state is estimated, not trusted.** With re-anchored segments the start is
 /// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
-/// from the measurement through the candidate's sensor models), the experiment's `[initial]`
-/// serving as the prior for what the data do not say; a depth sensor on its surface clamp at
-/// the start says the vehicle floats, so the start is the model's floating depth. Open loop
+/// from the measurement through the candidate's sensor models) wherever the data put it more
+/// than [`START_GATE_M`] or [`START_GATE_DEG`] from the experiment's `[initial]`, which
+/// stays the prior for what the data do not say; a depth sensor on its surface clamp at the
+/// start says the vehicle floats, so the start is the model's floating depth. Open loop
 /// (`segment_s = None`, for generated data) starts where the experiment says.
 ///
 /// **A diverging segment is no error.** A step the physics refuses (the state left the pool
@@ -103,8 +109,30 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     let mut anchor_at = |state: &mut crate::physics::SimState, t: f64, first: bool| {
         let here = model.vehicle_state(state);
         let mut a = anchor::estimate(c, m, &earth, t, &here);
-        if first && a.depth_m.is_none() && anchor::depth_on_surface_clamp(c, m, t) {
-            a.depth_m = Some(model.floating_depth_m());
+        if first {
+            if a.depth_m.is_none() && anchor::depth_on_surface_clamp(c, m, t) {
+                a.depth_m = Some(model.floating_depth_m());
+            }
+            // The stated start is kept where the data agree with it (a start a user measured
+            // beats one read from a single noisy sample); where they put it further off than
+            // START_GATE, the data win.
+            let (_, _, yaw) = here.euler_rad();
+            let keep = |v: &mut Option<f64>, prior: f64, gate: f64, wrap: bool| {
+                if let Some(x) = *v {
+                    let d = if wrap {
+                        wrap_deg((x - prior).to_degrees())
+                    } else {
+                        x - prior
+                    };
+                    if d.abs() <= gate {
+                        *v = None;
+                    }
+                }
+            };
+            keep(&mut a.north_m, here.position_m.x, START_GATE_M, false);
+            keep(&mut a.east_m, here.position_m.y, START_GATE_M, false);
+            keep(&mut a.depth_m, here.position_m.z, START_GATE_M, false);
+            keep(&mut a.heading_rad, yaw, START_GATE_DEG, true);
         }
         if let Some((noise, rng)) = anchor_draw.as_mut() {
             noise.perturb(&mut a, &mut || rng.sample(StandardNormal));
