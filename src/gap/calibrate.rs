@@ -151,7 +151,10 @@ fn prepare<'a>(model: &GapModel, run: &'a Run) -> Result<Prepared<'a>, GapError>
 
 /// Per-channel chi-square per independent sample of `c` on a prepared run.
 fn channel_chi2(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Option<Vec<(usize, f64)>> {
-    let run = resim::simulate(c, &p.run.m, None).ok()?;
+    // A run that diverges is no chi-square: its evaluation fails, as a fit's does.
+    let run = resim::simulate(c, &p.run.m, None)
+        .ok()
+        .filter(|r| r.divergences.is_empty())?;
     let r = setup.residuals(c, &run);
     let mut out = Vec::new();
     for i in setup.modelled() {
@@ -362,7 +365,11 @@ fn joint_fit(
         let mut out = Vec::new();
         for ((p, s), w) in prepared.iter().zip(setups).zip(weights) {
             let c = applied(&p.base, chosen, x);
-            let run = resim::simulate(&c, &p.run.m, None).ok()?;
+            // A trial point under which a run diverges is a failed evaluation: the
+            // bounded fit steps back from it.
+            let run = resim::simulate(&c, &p.run.m, None)
+                .ok()
+                .filter(|r| r.divergences.is_empty())?;
             let r = s.residuals(&c, &run);
             out.extend(r.values.iter().zip(&r.owner).map(|(v, o)| v * w[*o]));
         }

@@ -254,7 +254,11 @@ impl Setup<'_> {
         let mut c = self.base.clone();
         effects::apply(effect, params, &mut c);
         if self.resimulates(effect) {
-            let run = resim::simulate(&c, self.m, None).ok()?;
+            // A trial point under which the run diverges is a failed evaluation: the bounded
+            // fit steps back from it.
+            let run = resim::simulate(&c, self.m, None)
+                .ok()
+                .filter(|r| r.divergences.is_empty())?;
             Some(self.residuals(&c, &run))
         } else {
             Some(self.residuals(&c, &self.clean))

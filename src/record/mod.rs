@@ -270,15 +270,22 @@ impl Files {
     }
 }
 
-/// [`RecordError::NotEmpty`] when `dir` holds any entry (hidden ones too).
+/// [`RecordError::NotEmpty`] when `dir` holds any entry (hidden ones too) but a named pipe:
+/// a FIFO a reader made for one of the recording's files (`mkfifo DIR/bytes.tsv`, to follow
+/// the bytes live) holds nothing that writing could lose.
 fn refuse_non_empty(dir: &Path) -> Result<(), RecordError> {
+    use std::os::unix::fs::FileTypeExt;
     let io_err = |source| RecordError::Io {
         path: dir.to_path_buf(),
         source,
     };
     let mut names = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io_err)? {
-        names.push(entry.map_err(io_err)?.file_name());
+        let entry = entry.map_err(io_err)?;
+        if entry.file_type().map_err(io_err)?.is_fifo() {
+            continue;
+        }
+        names.push(entry.file_name());
     }
     names.sort();
     let Some(first) = names.first() else {
