@@ -531,8 +531,8 @@ mod tests {
     }
 
     /// A config comment says what a value is and why, like a code comment; where a number
-    /// came from in the project's history belongs in git. No file under `configs/` cites an
-    /// issue (`pool.toml` said "issue 3 default").
+    /// came from in the project's history belongs in git. No file under `configs/` cites a
+    /// tracker entry or a work period as a value's reason.
     #[test]
     fn config_comments_cite_no_work_history() {
         fn walk(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
