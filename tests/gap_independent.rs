@@ -104,6 +104,30 @@ fn names(a: &Analysis) -> Vec<&str> {
     a.accepted.iter().map(|e| e.name.as_str()).collect()
 }
 
+/// What a failed naming assertion prints: what was named, the verdict and round 1's leaders.
+fn explain(a: &Analysis) -> String {
+    let round1: Vec<String> = a
+        .rounds
+        .first()
+        .map(|r| r.as_slice())
+        .unwrap_or_default()
+        .iter()
+        .take(4)
+        .map(|c| {
+            format!(
+                "{} (dBIC {:.1}, held-out gain {:?}, signature {}, {:?})",
+                c.name, c.delta_bic, c.heldout_gain, c.signature_pass, c.parameters
+            )
+        })
+        .collect();
+    format!(
+        "named {:?}, verdict {:?}; round 1: {}",
+        names(a),
+        a.verdict,
+        round1.join("; ")
+    )
+}
+
 /// Calibration on two baseline runs more than halves the gap on a third run it never saw.
 #[test]
 fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
@@ -175,12 +199,7 @@ fn a_null_run_after_calibration_names_nothing() {
 #[test]
 fn a_hidden_water_current_is_named_first() {
     let a = discover("current-7305", 7305, "water_current", Some("0.04,-0.03"));
-    assert_eq!(
-        names(&a).first(),
-        Some(&"water_current"),
-        "named {:?}",
-        names(&a)
-    );
+    assert_eq!(names(&a).first(), Some(&"water_current"), "{}", explain(&a));
     let p = &a.accepted[0].parameters;
     assert!((p[0].1 - 0.04).abs() < 0.01, "current {p:?}");
 }
@@ -189,12 +208,7 @@ fn a_hidden_water_current_is_named_first() {
 #[test]
 fn a_hidden_thrust_loss_is_named_first() {
     let a = discover("thrust-7306", 7306, "thrust_gain", Some("-0.2"));
-    assert_eq!(
-        names(&a).first(),
-        Some(&"thrust_gain"),
-        "named {:?}",
-        names(&a)
-    );
+    assert_eq!(names(&a).first(), Some(&"thrust_gain"), "{}", explain(&a));
     assert!(a.accepted[0].parameters[0].1 < 0.0);
 }
 
@@ -204,12 +218,7 @@ fn a_hidden_thrust_loss_is_named_first() {
 #[test]
 fn a_hidden_depth_emi_is_named_after_calibration() {
     let a = discover("emi-7307", 7307, "depth_emi", Some("0.09"));
-    assert_eq!(
-        names(&a).first(),
-        Some(&"depth_pwm_emi"),
-        "verdict {:?}",
-        a.verdict
-    );
+    assert_eq!(names(&a).first(), Some(&"depth_pwm_emi"), "{}", explain(&a));
 }
 
 /// The analysis of a copy of `dir` whose `experiment.toml` states another start: `edit`
@@ -295,7 +304,8 @@ fn two_hidden_effects_are_both_named() {
     let named = names(&a);
     assert!(
         named.contains(&"water_current") && named.contains(&"compass_offset"),
-        "named {named:?}"
+        "{}",
+        explain(&a)
     );
     assert_eq!(a.shares_pct.len(), a.accepted.len());
     let total: f64 = a.shares_pct.iter().sum();

@@ -122,16 +122,75 @@ pub fn invert_compass(
     yaw.rem_euclid(std::f64::consts::TAU)
 }
 
-/// True when the depth channel's sample nearest `t_s` sits on the ADC's surface clamp (the
-/// sensor at or above the surface: the reading says only "at most this deep").
+/// True when the depth channel at a run's start `t_s` (read as [`Read::StartMedian`]) sits on
+/// the ADC's surface clamp (the sensor at or above the surface: the reading says only "at
+/// most this deep").
 pub fn depth_on_surface_clamp(c: &Configs, m: &Measurement, t_s: f64) -> bool {
     m.channel("depth_adc")
-        .and_then(|ch| nearest(ch, t_s, 0.25))
+        .and_then(|ch| first_median(ch, t_s, false))
         .is_some_and(|(_, code)| code <= c.sensors.adc.offset_lsb + SURFACE_CLAMP_LSB)
 }
 
 /// Codes within this many LSB of the ADC offset are the depth sensor's surface clamp.
 const SURFACE_CLAMP_LSB: f64 = 2.0;
+
+/// How the samples an anchor is read from are chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Read {
+    /// The sample nearest the anchor's time (a segment start: the previous segment's state
+    /// bridges what one sample misses).
+    Nearest,
+    /// The median of the first [`START_SAMPLES`] samples within [`START_WINDOW_S`] after the
+    /// anchor's time (a run's start: nothing before it to fall back on, and the first reading
+    /// of a sensor is the one most often wrong, such as a compass read before its first full
+    /// conversion).
+    StartMedian,
+}
+
+/// A run's start is read from the median of this many samples per channel ...
+pub const START_SAMPLES: usize = 3;
+/// ... taken within this long after the start.
+pub const START_WINDOW_S: f64 = 1.5;
+
+impl Read {
+    fn pick(self, ch: &Channel, t_s: f64, window_s: f64, wrap: bool) -> Option<(f64, f64)> {
+        match self {
+            Read::Nearest => nearest(ch, t_s, window_s),
+            Read::StartMedian => first_median(ch, t_s, wrap),
+        }
+    }
+}
+
+/// The median of the first [`START_SAMPLES`] samples of `ch` in `t_s ..= t_s +
+/// START_WINDOW_S` (with `wrap`, of angles in degrees: the sample with the least summed
+/// wrapped distance to the others); with fewer samples there, the first one.
+fn first_median(ch: &Channel, t_s: f64, wrap: bool) -> Option<(f64, f64)> {
+    let i = ch.samples.partition_point(|(t, _)| *t < t_s);
+    let first: Vec<(f64, f64)> = ch.samples[i..]
+        .iter()
+        .take_while(|(t, _)| *t <= t_s + START_WINDOW_S)
+        .take(START_SAMPLES)
+        .copied()
+        .collect();
+    if first.len() < START_SAMPLES {
+        return first.first().copied();
+    }
+    let distance = |a: f64, b: f64| {
+        if wrap {
+            wrap_deg(a - b).abs()
+        } else {
+            (a - b).abs()
+        }
+    };
+    first
+        .iter()
+        .map(|&(t, v)| {
+            let spread: f64 = first.iter().map(|&(_, w)| distance(v, w)).sum();
+            (spread, (t, v))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, sample)| sample)
+}
 
 /// The anchor at `t_s` for a state that the previous segment ended in.
 pub fn estimate(
@@ -140,11 +199,15 @@ pub fn estimate(
     earth_ned_ut: &Vector3<f64>,
     t_s: f64,
     state: &VehicleState,
+    read: Read,
 ) -> Anchor {
     let mut anchor = Anchor::default();
     let velocity_ned = state.attitude * state.velocity_body_mps;
     if let (Some(x), Some(y)) = (m.channel("x_m"), m.channel("y_m"))
-        && let (Some((tx, vx)), Some((ty, vy))) = (nearest(x, t_s, 0.25), nearest(y, t_s, 0.25))
+        && let (Some((tx, vx)), Some((ty, vy))) = (
+            read.pick(x, t_s, 0.25, false),
+            read.pick(y, t_s, 0.25, false),
+        )
     {
         anchor.north_m = Some(vx + velocity_ned.x * (t_s - tx));
         anchor.east_m = Some(vy + velocity_ned.y * (t_s - ty));
@@ -152,14 +215,14 @@ pub fn estimate(
     if let Some(ch) = m.channel("compass_deg") {
         // The reading of a conversion finished at `tc` describes the heading at `tc - latency`.
         let latency = c.sensors.compass.errors.latency_s;
-        if let Some((tc, reading)) = nearest(ch, t_s, 0.5) {
+        if let Some((tc, reading)) = read.pick(ch, t_s, 0.5, true) {
             let yaw = invert_compass(c, earth_ned_ut, state, reading);
             let rate = state.angular_velocity_body_radps.z;
             anchor.heading_rad = Some(yaw + rate * (t_s - (tc - latency)));
         }
     }
     if let Some(ch) = m.channel("depth_adc")
-        && let Some((td, code)) = nearest(ch, t_s, 0.25)
+        && let Some((td, code)) = read.pick(ch, t_s, 0.25, false)
     {
         let d = &c.sensors.depth;
         let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
@@ -232,5 +295,41 @@ mod tests {
                 "heading {yaw} deg read {reading:.3} deg, inverted to {back:.3} deg"
             );
         }
+    }
+
+    /// A run's start read from one wrong first sample (a compass read before its first full
+    /// conversion, 90 deg off) takes the heading of the samples after it; a segment start
+    /// takes the nearest sample as it is. Around north the median wraps: 359, 2 and 1 deg give
+    /// 1 deg, not 2 or 359.
+    #[test]
+    fn a_start_is_read_from_the_median_of_the_first_samples() {
+        let ch = |name: &str, samples: &[(f64, f64)]| Channel {
+            name: name.to_string(),
+            samples: samples.to_vec(),
+        };
+        let compass = ch("compass_deg", &[(0.1, 277.0), (0.5, 188.0), (0.9, 189.0)]);
+        assert_eq!(
+            Read::StartMedian.pick(&compass, 0.0, 0.5, true),
+            Some((0.9, 189.0))
+        );
+        assert_eq!(
+            Read::Nearest.pick(&compass, 0.0, 0.5, true),
+            Some((0.1, 277.0))
+        );
+        let north = ch("compass_deg", &[(0.1, 359.0), (0.5, 2.0), (0.9, 1.0)]);
+        assert_eq!(
+            Read::StartMedian.pick(&north, 0.0, 0.5, true),
+            Some((0.9, 1.0))
+        );
+        // Fewer samples than START_SAMPLES within the window: the first one.
+        let sparse = ch("x_m", &[(0.2, 4.0), (3.0, 9.0)]);
+        assert_eq!(
+            Read::StartMedian.pick(&sparse, 0.0, 0.25, false),
+            Some((0.2, 4.0))
+        );
+        assert_eq!(
+            Read::StartMedian.pick(&ch("x_m", &[]), 0.0, 0.25, false),
+            None
+        );
     }
 }

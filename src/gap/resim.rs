@@ -51,7 +51,8 @@ pub const START_GATE_DEG: f64 = 5.0;
 ///
 /// **The initial state is estimated, not trusted.** With re-anchored segments the start is
 /// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
-/// from the measurement through the candidate's sensor models) wherever the data put it more
+/// from the measurement through the candidate's sensor models, each read as the median of the
+/// channel's first samples, [`anchor::Read::StartMedian`]) wherever the data put it more
 /// than [`START_GATE_M`] or [`START_GATE_DEG`] from the experiment's `[initial]`, which
 /// stays the prior for what the data do not say; a depth sensor on its surface clamp at the
 /// start says the vehicle floats, so the start is the model's floating depth. Open loop
@@ -108,7 +109,12 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     });
     let mut anchor_at = |state: &mut crate::physics::SimState, t: f64, first: bool| {
         let here = model.vehicle_state(state);
-        let mut a = anchor::estimate(c, m, &earth, t, &here);
+        let read = if first {
+            anchor::Read::StartMedian
+        } else {
+            anchor::Read::Nearest
+        };
+        let mut a = anchor::estimate(c, m, &earth, t, &here, read);
         if first {
             if a.depth_m.is_none() && anchor::depth_on_surface_clamp(c, m, t) {
                 a.depth_m = Some(model.floating_depth_m());

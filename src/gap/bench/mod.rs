@@ -173,6 +173,12 @@ impl CaseResult {
     pub fn correct(&self) -> bool {
         self.effect.is_some() && self.named == self.expected
     }
+
+    /// A hidden effect's case whose first name is another effect: worse than no name, as it
+    /// sends the user after the wrong cause.
+    pub fn wrong(&self) -> bool {
+        self.effect.is_some() && self.named.is_some() && self.named != self.expected
+    }
 }
 
 /// How the calibration of the independent source did on a null run it was not fitted to.

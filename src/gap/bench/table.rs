@@ -45,10 +45,11 @@ fn simulator_row(label: &str, cases: &[&CaseResult]) -> String {
     );
     let secs = median(cases.iter().map(|c| c.seconds).collect());
     format!(
-        "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
         cases.len(),
         pct(hidden.iter().filter(|c| c.correct()).count(), hidden.len()),
         pct(big.iter().filter(|c| c.correct()).count(), big.len()),
+        pct(hidden.iter().filter(|c| c.wrong()).count(), hidden.len()),
         pct(
             nulls.iter().filter(|c| c.named.is_some()).count(),
             nulls.len()
@@ -89,8 +90,8 @@ fn labels(results: &[CaseResult]) -> Vec<&str> {
 /// overall.
 pub fn simulator_table(results: &[CaseResult]) -> String {
     let mut s = String::from(
-        "| effect | cases | correct name | correct name >= 3 sigma | false alarm | median param error | CI95 covers truth | held-out reduction (data) | held-out reduction (vs truth) | s/case |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+        "| effect | cases | correct name | correct name >= 3 sigma | wrong name | false alarm | median param error | CI95 covers truth | held-out reduction (data) | held-out reduction (vs truth) | s/case |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for n in labels(results) {
         let cases: Vec<&CaseResult> = results.iter().filter(|r| r.label == n).collect();
@@ -145,10 +146,11 @@ fn independent_row(label: &str, cases: &[&CaseResult]) -> String {
     let size = median(hidden.iter().filter_map(|c| c.size_sigma).collect());
     let secs = median(cases.iter().map(|c| c.seconds).collect());
     format!(
-        "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
         cases.len(),
         pct(hidden.iter().filter(|c| c.correct()).count(), hidden.len()),
         pct(big.iter().filter(|c| c.correct()).count(), big.len()),
+        pct(hidden.iter().filter(|c| c.wrong()).count(), hidden.len()),
         pct(
             nulls.iter().filter(|c| c.named.is_some()).count(),
             nulls.len()
@@ -163,7 +165,8 @@ fn independent_row(label: &str, cases: &[&CaseResult]) -> String {
 
 /// The independent source's table: the calibration's gap on a null run it was not fitted
 /// to, then per effect (the independent model's names), nulls and overall. "correct name"
-/// for an effect the library has no counterpart for is no name at all; "size" is the
+/// for an effect the library has no counterpart for is no name at all; "wrong name" counts
+/// hidden-effect cases whose first name is another effect (worse than none); "size" is the
 /// post-hoc size in sigma of the right candidate in round 1; the held-out reduction is
 /// against the calibrated model's known disagreement, then against the noise floor alone;
 /// "fit grew held-out gap" counts,
@@ -177,8 +180,8 @@ pub fn independent_table(results: &[CaseResult], calibration: Option<&Calibratio
         ));
     }
     s.push_str(
-        "| effect | cases | correct name | correct name >= 3 sigma | false alarm | median held-out reduction | same, noise floor only | fit grew held-out gap | median size (sigma) | s/case |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+        "| effect | cases | correct name | correct name >= 3 sigma | wrong name | false alarm | median held-out reduction | same, noise floor only | fit grew held-out gap | median size (sigma) | s/case |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for n in labels(results) {
         let cases: Vec<&CaseResult> = results.iter().filter(|r| r.label == n).collect();
@@ -295,6 +298,7 @@ mod tests {
             .find(|l| l.starts_with("| gains, offsets and current |"))
             .expect("the group row");
         assert!(group.contains("| 2 | 100 % (2/2) |"), "{group}");
+        assert!(group.contains("| 0 % (0/2) |"), "no wrong name: {group}");
         assert!(group.contains("| 3.0 % |"), "{group}");
         let overall = t.lines().find(|l| l.starts_with("| overall |")).unwrap();
         assert!(overall.contains("| 4 |"), "{overall}");
