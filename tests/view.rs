@@ -535,18 +535,18 @@ fn a_time_step_run_shows_the_same_thrusters_and_readings_everywhere() {
                 && r["compass_deg"].as_f64() == Some(want_compass)
         },
     );
-    let thrust_text = browser.eval("document.getElementById('v-thrust').textContent");
+    // The page draws on its next animation frame, after the frame object is in: wait for the
+    // text to follow, and fail naming what it shows.
     let want_cmd = format!("cmd +{duty:02x} -{duty:02x} +ff +ff");
-    assert!(
-        thrust_text.as_str().is_some_and(|t| t.contains(&want_cmd)),
-        "{thrust_text} lacks `{want_cmd}`; readings {shown}"
-    );
-    let adc_text = browser.eval("document.getElementById('v-adc').textContent");
-    assert!(
-        adc_text
-            .as_str()
-            .is_some_and(|t| t.starts_with(&format!("{} - {}", last[0], last[1]))),
-        "{adc_text}"
+    let want_adc_text = format!("{} - {}", last[0], last[1]);
+    browser.wait_eval(
+        &format!("the page's text to show `{want_cmd}` and ADC `{want_adc_text}` (readings {shown})"),
+        WAIT,
+        "[document.getElementById('v-thrust').textContent, document.getElementById('v-adc').textContent]",
+        |t| {
+            t[0].as_str().is_some_and(|t| t.contains(&want_cmd))
+                && t[1].as_str().is_some_and(|t| t.starts_with(&want_adc_text))
+        },
     );
     let shot = artefact("time-step.png");
     std::fs::write(&shot, browser.screenshot()).expect("write the screenshot");

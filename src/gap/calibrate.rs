@@ -285,6 +285,14 @@ fn apparent_spread(
     Ok((spread, unidentified))
 }
 
+/// The parameter scales and bounds of `chosen`, in the joint fit's parameter order.
+fn scales_and_bounds(chosen: &[&'static Effect]) -> (Vec<f64>, Vec<(f64, f64)>) {
+    chosen
+        .iter()
+        .flat_map(|e| e.scales.iter().copied().zip(e.bounds.iter().copied()))
+        .unzip()
+}
+
 /// Where the joint fit starts: the model as given, and one more start per effect with a
 /// second start ([`Fitted::JointTwoStarts`]). The thrust curve's scale (`thrust_gain`)
 /// and shape (`thrust_curve`) trade off against each other, and from the linear curve alone
@@ -333,14 +341,7 @@ fn joint_fit(
     passes: usize,
     progress: &mut dyn FnMut(&str),
 ) -> Result<(DVector<f64>, lsq::Fit, usize), GapError> {
-    let scales: Vec<f64> = chosen
-        .iter()
-        .flat_map(|e| e.scales.iter().copied())
-        .collect();
-    let bounds_raw: Vec<(f64, f64)> = chosen
-        .iter()
-        .flat_map(|e| e.bounds.iter().copied())
-        .collect();
+    let (scales, bounds_raw) = scales_and_bounds(chosen);
     let bounds = Bounds::scaled(&bounds_raw, &scales);
     let dims = scales.len();
     // Channel weights, one per (run, channel), from the residual at the current point.
@@ -566,14 +567,7 @@ pub fn calibrate(
         x.fill(0.0);
         shrunk = 0.0;
     }
-    let scales: Vec<f64> = chosen
-        .iter()
-        .flat_map(|e| e.scales.iter().copied())
-        .collect();
-    let bounds_raw: Vec<(f64, f64)> = chosen
-        .iter()
-        .flat_map(|e| e.bounds.iter().copied())
-        .collect();
+    let (scales, bounds_raw) = scales_and_bounds(&chosen);
     let dims = scales.len();
     // Intervals: residual variance beyond the (weighted) floor inflates them, as in `fit`.
     let n = fit.residuals.len() as f64;

@@ -454,33 +454,12 @@ mod tests {
     /// Null data as `gap-bench` makes it: the shipped model on the benchmark's manoeuvre,
     /// generated with `seed`, analysed against that same model.
     fn null_verdict(seed: u64) -> (Verdict, Vec<String>) {
-        let text = Embedded.read(bench::MODEL).unwrap();
-        let model =
-            GapModel::from_text(&Embedded.describe(bench::MODEL), &text, ".".into()).unwrap();
-        let sched_text = Embedded.read(bench::SCHEDULE).unwrap();
-        let schedule = bench::training(
-            &Experiment::from_document(&Document::new(
-                Embedded.describe(bench::SCHEDULE),
-                &sched_text,
-            ))
-            .unwrap(),
-        );
-        let info = generate::setup(&model, &schedule, bench::CAMERA_STD_M);
-        let dir = std::path::Path::new(".");
-        let c = model.configs(&info, dir).unwrap();
-        let m = generate::generate(
-            &c,
-            &schedule,
-            &info.world,
-            &info.sensors,
-            bench::CAMERA_STD_M,
-            seed,
-        )
-        .unwrap();
+        let (model, _, m) = manoeuvre(seed);
         let options = crate::gap::Options {
             shooting: crate::gap::anchor::Shooting::OPEN_LOOP,
             ..crate::gap::Options::default()
         };
+        let dir = std::path::Path::new(".");
         let a = analyse_with(&model, &m, dir, options, &mut |_, _| {}).unwrap();
         (
             a.verdict,
@@ -500,11 +479,12 @@ mod tests {
         }
     }
 
-    /// The benchmark's manoeuvre, generated with the shipped model, and that model's
-    /// configurations.
+    /// The shipped model, its configurations and the benchmark's manoeuvre generated with
+    /// them.
     fn manoeuvre(
         seed: u64,
     ) -> (
+        GapModel,
         crate::gap::effects::Configs,
         crate::gap::format::Measurement,
     ) {
@@ -530,7 +510,7 @@ mod tests {
             seed,
         )
         .unwrap();
-        (c, m)
+        (model, c, m)
     }
 
     /// Regression (a diverging re-simulation killed the analysis: "distance of the CG outside
@@ -540,7 +520,7 @@ mod tests {
     /// segment start and runs to the end.
     #[test]
     fn a_diverging_segment_is_recorded_and_the_run_goes_on() {
-        let (mut c, m) = manoeuvre(5);
+        let (_, mut c, m) = manoeuvre(5);
         c.vehicle.thruster_common.forward_max_n *= 1e4;
         for shooting in [Shooting::DEFAULT, Shooting::OPEN_LOOP] {
             c.shooting = shooting;
@@ -585,7 +565,7 @@ mod tests {
     /// start the true one gives, within the anchors' own noise.
     #[test]
     fn a_wrong_initial_state_is_estimated_from_the_data() {
-        let (mut c, m) = manoeuvre(6);
+        let (_, mut c, m) = manoeuvre(6);
         c.shooting = Shooting::DEFAULT;
         let truth = super::simulate(&c, &m, None).unwrap();
         let mut wrong = m.clone();

@@ -22,13 +22,45 @@ fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
     v.map_or("-".to_string(), f)
 }
 
+/// A row's cases split: hidden-effect cases, nulls, and the hidden ones at >= 3 sigma.
+struct Split<'a> {
+    hidden: Vec<&'a CaseResult>,
+    nulls: Vec<&'a CaseResult>,
+    big: Vec<&'a CaseResult>,
+}
+
+impl<'a> Split<'a> {
+    fn of(cases: &[&'a CaseResult]) -> Self {
+        let (hidden, nulls): (Vec<&CaseResult>, Vec<&CaseResult>) =
+            cases.iter().partition(|c| c.effect.is_some());
+        let big = hidden
+            .iter()
+            .copied()
+            .filter(|c| c.size_sigma.is_some_and(|s| s >= 3.0))
+            .collect();
+        Self { hidden, nulls, big }
+    }
+
+    /// The naming columns every source shows: correct name, at >= 3 sigma, wrong name,
+    /// false alarm.
+    fn naming(&self) -> String {
+        let (hidden, big, nulls) = (&self.hidden, &self.big, &self.nulls);
+        format!(
+            "{} | {} | {} | {}",
+            pct(hidden.iter().filter(|c| c.correct()).count(), hidden.len()),
+            pct(big.iter().filter(|c| c.correct()).count(), big.len()),
+            pct(hidden.iter().filter(|c| c.wrong()).count(), hidden.len()),
+            pct(
+                nulls.iter().filter(|c| c.named.is_some()).count(),
+                nulls.len()
+            ),
+        )
+    }
+}
+
 fn simulator_row(label: &str, cases: &[&CaseResult]) -> String {
-    let hidden: Vec<&&CaseResult> = cases.iter().filter(|c| c.effect.is_some()).collect();
-    let nulls: Vec<&&CaseResult> = cases.iter().filter(|c| c.effect.is_none()).collect();
-    let big: Vec<&&&CaseResult> = hidden
-        .iter()
-        .filter(|c| c.size_sigma.is_some_and(|s| s >= 3.0))
-        .collect();
+    let split = Split::of(cases);
+    let hidden = &split.hidden;
     let perr = median(hidden.iter().filter_map(|c| c.parameter_error).collect());
     let cover: Vec<bool> = hidden.iter().filter_map(|c| c.ci_covers).collect();
     let held = median(
@@ -45,15 +77,9 @@ fn simulator_row(label: &str, cases: &[&CaseResult]) -> String {
     );
     let secs = median(cases.iter().map(|c| c.seconds).collect());
     format!(
-        "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        "| {label} | {} | {} | {} | {} | {} | {} | {} |",
         cases.len(),
-        pct(hidden.iter().filter(|c| c.correct()).count(), hidden.len()),
-        pct(big.iter().filter(|c| c.correct()).count(), big.len()),
-        pct(hidden.iter().filter(|c| c.wrong()).count(), hidden.len()),
-        pct(
-            nulls.iter().filter(|c| c.named.is_some()).count(),
-            nulls.len()
-        ),
+        split.naming(),
         opt(perr, |v| format!("{:.1} %", 100.0 * v)),
         pct(cover.iter().filter(|c| **c).count(), cover.len()),
         opt(held, |v| format!("{v:.0} %")),
@@ -120,12 +146,7 @@ pub fn simulator_table(results: &[CaseResult]) -> String {
 
 /// One row of the independent source's table.
 fn independent_row(label: &str, cases: &[&CaseResult]) -> String {
-    let hidden: Vec<&&CaseResult> = cases.iter().filter(|c| c.effect.is_some()).collect();
-    let nulls: Vec<&&CaseResult> = cases.iter().filter(|c| c.effect.is_none()).collect();
-    let big: Vec<&&&CaseResult> = hidden
-        .iter()
-        .filter(|c| c.size_sigma.is_some_and(|s| s >= 3.0))
-        .collect();
+    let split = Split::of(cases);
     let held = median(
         cases
             .iter()
@@ -143,18 +164,12 @@ fn independent_row(label: &str, cases: &[&CaseResult]) -> String {
         .filter(|c| c.held_out_grew == Some(true))
         .count();
     let named = cases.iter().filter(|c| c.named.is_some()).count();
-    let size = median(hidden.iter().filter_map(|c| c.size_sigma).collect());
+    let size = median(split.hidden.iter().filter_map(|c| c.size_sigma).collect());
     let secs = median(cases.iter().map(|c| c.seconds).collect());
     format!(
-        "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        "| {label} | {} | {} | {} | {} | {} | {} | {} |",
         cases.len(),
-        pct(hidden.iter().filter(|c| c.correct()).count(), hidden.len()),
-        pct(big.iter().filter(|c| c.correct()).count(), big.len()),
-        pct(hidden.iter().filter(|c| c.wrong()).count(), hidden.len()),
-        pct(
-            nulls.iter().filter(|c| c.named.is_some()).count(),
-            nulls.len()
-        ),
+        split.naming(),
         opt(held, |v| format!("{v:.0} %")),
         opt(held_raw, |v| format!("{v:.0} %")),
         pct(grew, named),
