@@ -50,9 +50,9 @@ fn a_hidden_current_reaches_the_daemon_and_the_measurement_names_the_model_files
         .expect("the bridge hides a current");
     let null_dir = tmp.path().join("null");
     let hidden_dir = tmp.path().join("current");
-    bridge.case(4242, None, &null_dir).expect("a null case");
+    bridge.case(4242, &[], &null_dir).expect("a null case");
     bridge
-        .case(4242, Some((current, &[0.08, 0.0])), &hidden_dir)
+        .case(4242, &[(current, &[0.08, 0.0])], &hidden_dir)
         .expect("a case with a current");
     let null = Measurement::load(&null_dir).expect("null measurement");
     let hidden = Measurement::load(&hidden_dir).expect("current measurement");

@@ -72,6 +72,10 @@ pub struct CampaignArgs {
     /// stated start; absent: the model's nominal vehicle.
     #[arg(long, value_name = "K")]
     pub structure_seed: Option<u64>,
+    /// Independent and bridge sources: this many further cases with two hidden effects at
+    /// once (two distinct effects drawn from `--effects`), scored on both being named.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub pairs: usize,
     /// Bridge source: a directory with host builds of the C examples (`make -C
     /// firmware-protocol/c OUT=DIR`); default: built with `make` into a scratch directory.
     #[arg(long, value_name = "DIR")]
@@ -136,6 +140,11 @@ fn check_flags_fit_source(args: &CampaignArgs) -> Result<(), CliError> {
             "--structure-seed",
             "--source independent",
         ),
+        (
+            args.pairs > 0 && args.source == SourceArg::Simulator,
+            "--pairs",
+            "--source independent or bridge",
+        ),
     ];
     match misplaced.iter().find(|(bad, _, _)| *bad) {
         Some((_, flag, expected)) => Err(CliError::Usage(format!(
@@ -168,6 +177,7 @@ fn options(
         hidden: Vec::new(),
         independent_path: PathBuf::new(),
         structure_seed: args.structure_seed,
+        pairs: args.pairs,
         bridge: bench::bridge::BridgeOptions {
             exe: None,
             programs: args.programs.clone(),

@@ -363,13 +363,11 @@ impl Truth for Bridge {
         self.record(program, seed, &[], out)
     }
 
-    fn case(
-        &self,
-        seed: u64,
-        hidden: Option<(&Hidden, &[f64])>,
-        out: &Path,
-    ) -> Result<(), GapError> {
-        let edits = hidden.map_or(Vec::new(), |(h, size)| edits_for(h.name, size));
+    fn case(&self, seed: u64, hidden: &[(&Hidden, &[f64])], out: &Path) -> Result<(), GapError> {
+        let edits: Vec<_> = hidden
+            .iter()
+            .flat_map(|(h, size)| edits_for(h.name, size))
+            .collect();
         self.record(CASE_PROGRAM, seed, &edits, out)
     }
 }

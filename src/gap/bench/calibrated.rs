@@ -79,14 +79,9 @@ pub trait Truth {
     fn spread_runs(&self) -> usize {
         0
     }
-    /// Writes one case as a measurement directory `out`: `hidden` with its physical size,
-    /// or a null run.
-    fn case(
-        &self,
-        seed: u64,
-        hidden: Option<(&Hidden, &[f64])>,
-        out: &Path,
-    ) -> Result<(), GapError>;
+    /// Writes one case as a measurement directory `out`: the `hidden` effects (none, one or
+    /// two) with their physical sizes.
+    fn case(&self, seed: u64, hidden: &[(&Hidden, &[f64])], out: &Path) -> Result<(), GapError>;
 }
 
 /// A scratch directory removed when dropped, unless it is one the user asked to keep.
@@ -141,10 +136,25 @@ impl Drop for Scratch {
 /// One planned case: its draws, fixed whichever shard runs it.
 struct Planned {
     index: usize,
-    hidden: Option<&'static Hidden>,
+    /// The hidden effects with their physical sizes in the source's unit: none (a null), one,
+    /// or two (a pair case).
+    hidden: Vec<(&'static Hidden, Vec<f64>)>,
     seed: u64,
-    /// Physical size in the source's unit (empty for a null).
-    size: Vec<f64>,
+}
+
+impl Planned {
+    /// The case's table row and directory label.
+    fn label(&self) -> String {
+        match self.hidden.as_slice() {
+            [] => "null".to_string(),
+            [(h, _)] => h.name.to_string(),
+            more => more
+                .iter()
+                .map(|(h, _)| h.name)
+                .collect::<Vec<_>>()
+                .join("+"),
+        }
+    }
 }
 
 /// The physical size of a case: `factor` times the default, with `sign`.
@@ -224,9 +234,8 @@ fn plan(opts: &BenchOptions, truth: &dyn Truth) -> Result<Plan, GapError> {
     let mut rng = crate::sensors::rng::stream(opts.seed, opts.source.rng_stream());
     let mut draw_seed = || rng.random_range(1_000..1_000_000_000u64);
     let baseline_seeds: Vec<u64> = (0..=BASELINE_RUNS).map(|_| draw_seed()).collect();
-    let mut plan = Vec::new();
-    for h in &opts.hidden {
-        let default = defaults
+    let default_of = |h: &Hidden| {
+        defaults
             .iter()
             .find(|(n, _)| n == h.name)
             .map(|(_, v)| v.clone())
@@ -236,16 +245,23 @@ fn plan(opts: &BenchOptions, truth: &dyn Truth) -> Result<Plan, GapError> {
                     opts.source.name(),
                     h.name
                 ))
-            })?;
+            })
+    };
+    // A size drawn as the module doc says.
+    let sized = |rng: &mut crate::sensors::rng::SensorRng, h: &'static Hidden| {
+        let factor = rng.random_range(SIZE_FACTOR.0..SIZE_FACTOR.1);
+        let positive = !h.signed || rng.random::<bool>();
+        default_of(h).map(|d| (h, physical_size(h, &d, factor, positive)))
+    };
+    let mut plan = Vec::new();
+    for h in &opts.hidden {
         for _ in 0..opts.cases {
             let seed = rng.random_range(1_000..1_000_000_000u64);
-            let factor = rng.random_range(SIZE_FACTOR.0..SIZE_FACTOR.1);
-            let positive = !h.signed || rng.random::<bool>();
+            let hidden = vec![sized(&mut rng, h)?];
             plan.push(Planned {
                 index: plan.len(),
-                hidden: Some(*h),
+                hidden,
                 seed,
-                size: physical_size(h, &default, factor, positive),
             });
         }
     }
@@ -253,9 +269,29 @@ fn plan(opts: &BenchOptions, truth: &dyn Truth) -> Result<Plan, GapError> {
         let seed = rng.random_range(1_000..1_000_000_000u64);
         plan.push(Planned {
             index: plan.len(),
-            hidden: None,
+            hidden: Vec::new(),
             seed,
-            size: Vec::new(),
+        });
+    }
+    if opts.pairs > 0 && opts.hidden.len() < 2 {
+        return Err(GapError::Data(format!(
+            "--pairs {} needs at least two effects to draw from; --effects gives {}",
+            opts.pairs,
+            opts.hidden.len()
+        )));
+    }
+    for _ in 0..opts.pairs {
+        let seed = rng.random_range(1_000..1_000_000_000u64);
+        let a = rng.random_range(0..opts.hidden.len());
+        let b = (a + rng.random_range(1..opts.hidden.len())) % opts.hidden.len();
+        let hidden = vec![
+            sized(&mut rng, opts.hidden[a])?,
+            sized(&mut rng, opts.hidden[b])?,
+        ];
+        plan.push(Planned {
+            index: plan.len(),
+            hidden,
+            seed,
         });
     }
     // Drawn after the plan, so a source without spread runs keeps its cases.
@@ -286,7 +322,7 @@ fn calibrate_on(
     let mut spread_from = Vec::new();
     for (i, seed) in plan.spread_seeds.iter().enumerate() {
         let dir = scratch.0.join(format!("spread-{i}"));
-        truth.case(*seed, None, &dir)?;
+        truth.case(*seed, &[], &dir)?;
         spread_from.push(Run::load(&dir)?);
     }
     let model_text = Embedded.read(MODEL)?;
@@ -370,9 +406,11 @@ pub fn run(
 
     let mut out = Vec::new();
     for p in plan.cases.into_iter().filter(|p| shard.contains(p.index)) {
-        let label = p.hidden.map_or("null", |h| h.name);
+        let label = p.label();
         let dir = scratch.0.join(format!("case-{}-{label}", p.index));
-        truth.case(p.seed, p.hidden.map(|h| (h, p.size.as_slice())), &dir)?;
+        let hidden: Vec<(&Hidden, &[f64])> =
+            p.hidden.iter().map(|(h, s)| (*h, s.as_slice())).collect();
+        truth.case(p.seed, &hidden, &dir)?;
         let m = Measurement::load(&dir)?;
         let t0 = Instant::now();
         let a = crate::gap::analyse_with(&model, &m, &dir, Options::default(), &mut |_, _| {})?;
@@ -381,8 +419,12 @@ pub fn run(
 
         let first = a.accepted.first();
         let named = first.map(|w| w.name.clone());
-        let expected = p.hidden.and_then(|h| h.library);
-        let truth = p.hidden.map_or(Vec::new(), |h| library_truth(h, &p.size));
+        // A pair case is scored on both names; its truth, size and fit are the first
+        // effect's.
+        let main = p.hidden.first();
+        let expected = main.and_then(|(h, _)| h.library);
+        let expected_second = p.hidden.get(1).and_then(|(h, _)| h.library);
+        let truth = main.map_or(Vec::new(), |(h, size)| library_truth(h, size));
         // The right candidate's interval in round 1, accepted or not.
         let size_sigma = expected.and_then(|name| {
             let c = a.rounds.first()?.iter().find(|c| c.name == name)?;
@@ -391,9 +433,15 @@ pub fn run(
         });
         out.push(CaseResult {
             index: p.index,
-            effect: p.hidden.map(|h| h.name.to_string()),
+            effect: main.map(|_| label.clone()),
             expected: expected.map(str::to_string),
-            label: label.to_string(),
+            expected_second: expected_second.map(str::to_string),
+            named_all: a.accepted.iter().map(|w| w.name.clone()).collect(),
+            label: if p.hidden.len() > 1 {
+                crate::gap::bench::table::PAIRS_ROW.to_string()
+            } else {
+                label.clone()
+            },
             seed: p.seed,
             truth,
             size_sigma,
@@ -412,7 +460,7 @@ pub fn run(
             held_out_grew: Some(first.is_some() && a.heldout_gap_after > a.heldout_gap_before),
             seconds,
         });
-        progress(out.len(), total, label, out.last());
+        progress(out.len(), total, &label, out.last());
     }
     Ok(Outcome {
         results: out,

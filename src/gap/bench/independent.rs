@@ -124,7 +124,7 @@ fn generate(
     program: &Path,
     seed: u64,
     structure_seed: Option<u64>,
-    hidden: Option<(&str, &[f64])>,
+    hidden: &[(&str, &[f64])],
     out: &Path,
 ) -> Result<(), GapError> {
     let mut args: Vec<String> = [
@@ -148,17 +148,24 @@ fn generate(
             "random".to_string(),
         ]);
     }
-    match hidden {
-        None => args.extend(["--hidden".to_string(), "none".to_string()]),
-        Some((name, size)) => {
-            let size: Vec<String> = size.iter().map(|v| format!("{v}")).collect();
-            args.extend([
-                "--hidden".to_string(),
-                name.to_string(),
-                "--size".to_string(),
-                size.join(","),
-            ]);
-        }
+    if hidden.is_empty() {
+        args.extend(["--hidden".to_string(), "none".to_string()]);
+    } else {
+        // Two effects: `--hidden A+B --size 'SA;SB'`, a size's components joined by commas.
+        let names: Vec<&str> = hidden.iter().map(|(name, _)| *name).collect();
+        let sizes: Vec<String> = hidden
+            .iter()
+            .map(|(_, size)| {
+                let parts: Vec<String> = size.iter().map(|v| format!("{v}")).collect();
+                parts.join(",")
+            })
+            .collect();
+        args.extend([
+            "--hidden".to_string(),
+            names.join("+"),
+            "--size".to_string(),
+            sizes.join(";"),
+        ]);
     }
     python(program, &args).map(|_| ())
 }
@@ -192,21 +199,11 @@ impl Truth for Independent<'_> {
     }
 
     fn baseline(&self, _index: usize, seed: u64, out: &Path) -> Result<(), GapError> {
-        generate(self.program, seed, self.structure_seed, None, out)
+        generate(self.program, seed, self.structure_seed, &[], out)
     }
 
-    fn case(
-        &self,
-        seed: u64,
-        hidden: Option<(&Hidden, &[f64])>,
-        out: &Path,
-    ) -> Result<(), GapError> {
-        generate(
-            self.program,
-            seed,
-            self.structure_seed,
-            hidden.map(|(h, s)| (h.name, s)),
-            out,
-        )
+    fn case(&self, seed: u64, hidden: &[(&Hidden, &[f64])], out: &Path) -> Result<(), GapError> {
+        let named: Vec<(&str, &[f64])> = hidden.iter().map(|(h, s)| (h.name, *s)).collect();
+        generate(self.program, seed, self.structure_seed, &named, out)
     }
 }

@@ -84,6 +84,9 @@ pub struct BenchOptions {
     /// Independent source: draw the vehicle's structure from the model's family with this
     /// seed (`--structure-seed` of the model), and start every run away from its stated start.
     pub structure_seed: Option<u64>,
+    /// Calibrated sources: cases with two hidden effects at once (two distinct effects of
+    /// `hidden`, each sized as a one-effect case), after the one-effect and null cases.
+    pub pairs: usize,
     /// The bridge source's set-up: where the C examples and this program are.
     pub bridge: bridge::BridgeOptions,
     /// Calibrated sources: keep the calibrated model, the baseline runs and every case's
@@ -100,6 +103,7 @@ impl BenchOptions {
             cases: self.cases,
             seed: self.seed,
             structure_seed: self.structure_seed,
+            pairs: self.pairs,
             effects: match self.source {
                 Source::Simulator => self.effects.iter().map(|e| e.name.to_string()).collect(),
                 Source::Independent | Source::Bridge => {
@@ -120,6 +124,9 @@ pub struct OptionsKey {
     /// The independent model's structure seed (`None`: its nominal vehicle).
     #[serde(default)]
     pub structure_seed: Option<u64>,
+    /// Cases with two hidden effects.
+    #[serde(default)]
+    pub pairs: usize,
 }
 
 /// One case and how the workflow did on it.
@@ -144,6 +151,12 @@ pub struct CaseResult {
     pub size_sigma: Option<f64>,
     /// The first effect the workflow named, if any.
     pub named: Option<String>,
+    /// A two-effect case: the second hidden effect's right answer (the library effect).
+    #[serde(default)]
+    pub expected_second: Option<String>,
+    /// Every effect the workflow named, in order.
+    #[serde(default)]
+    pub named_all: Vec<String>,
     pub fitted: Vec<f64>,
     pub ci95: Vec<[f64; 2]>,
     /// |fitted - truth| / |truth| (Euclidean over the parameters), when named correctly.
@@ -171,13 +184,31 @@ impl CaseResult {
     /// The first name is right: the expected effect, or no name where the library has
     /// nothing to offer for a hidden effect.
     pub fn correct(&self) -> bool {
-        self.effect.is_some() && self.named == self.expected
+        match &self.expected_second {
+            Some(second) => {
+                let named =
+                    |e: &Option<String>| e.as_ref().is_some_and(|e| self.named_all.contains(e));
+                named(&self.expected) && named(&Some(second.clone()))
+            }
+            None => self.effect.is_some() && self.named == self.expected,
+        }
     }
 
-    /// A hidden effect's case whose first name is another effect: worse than no name, as it
-    /// sends the user after the wrong cause.
+    /// A hidden effect's case whose first name is another effect (a two-effect case: any
+    /// name that is neither): worse than no name, as it sends the user after the wrong cause.
     pub fn wrong(&self) -> bool {
-        self.effect.is_some() && self.named.is_some() && self.named != self.expected
+        match &self.expected_second {
+            Some(second) => self
+                .named_all
+                .iter()
+                .any(|n| Some(n) != self.expected.as_ref() && n != second),
+            None => self.effect.is_some() && self.named.is_some() && self.named != self.expected,
+        }
+    }
+
+    /// A case with two hidden effects.
+    pub fn is_pair(&self) -> bool {
+        self.expected_second.is_some()
     }
 }
 
@@ -298,14 +329,15 @@ pub fn truth_sha256(opts: &BenchOptions) -> Result<Option<String>, GapError> {
 }
 
 /// Cases in the whole benchmark (every shard): per effect and for the nulls, plus the
-/// sonar nulls when a sonar-only effect runs (simulator source).
+/// sonar nulls when a sonar-only effect runs (simulator source) or the two-effect cases
+/// (calibrated sources).
 pub fn case_count(opts: &BenchOptions) -> usize {
     match opts.source {
         Source::Simulator => {
             let sonar = opts.effects.iter().any(|e| sonar_only(e));
             opts.cases * (opts.effects.len() + 1 + usize::from(sonar))
         }
-        Source::Independent | Source::Bridge => opts.cases * (opts.hidden.len() + 1),
+        Source::Independent | Source::Bridge => opts.cases * (opts.hidden.len() + 1) + opts.pairs,
     }
 }
 

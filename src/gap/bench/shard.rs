@@ -379,6 +379,7 @@ mod tests {
             seed,
             effects: vec!["depth_offset".into()],
             structure_seed: None,
+            pairs: 0,
         }
     }
 

@@ -539,6 +539,7 @@ pub fn run(
             let seconds = t0.elapsed().as_secs_f64();
             let first = a.accepted.first();
             let named = first.map(|w| w.name.clone());
+            let named_all: Vec<String> = a.accepted.iter().map(|w| w.name.clone()).collect();
             let fitted: Vec<f64> = first
                 .map(|w| w.parameters.iter().map(|(_, v)| *v).collect())
                 .unwrap_or_default();
@@ -621,6 +622,8 @@ pub fn run(
                 truth,
                 size_sigma: Some(size),
                 named,
+                expected_second: None,
+                named_all,
                 fitted,
                 ci95,
                 parameter_error,

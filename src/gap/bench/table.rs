@@ -179,7 +179,8 @@ fn independent_row(label: &str, cases: &[&CaseResult]) -> String {
 }
 
 /// The independent source's table: the calibration's gap on a null run it was not fitted
-/// to, then per effect (the independent model's names), nulls and overall. "correct name"
+/// to, then per effect (the independent model's names), nulls, overall and the two-effect
+/// cases' row ([`PAIRS_ROW`]). "correct name"
 /// for an effect the library has no counterpart for is no name at all; "wrong name" counts
 /// hidden-effect cases whose first name is another effect (worse than none); "size" is the
 /// post-hoc size in sigma of the right candidate in round 1; the held-out reduction is
@@ -198,16 +199,27 @@ pub fn independent_table(results: &[CaseResult], calibration: Option<&Calibratio
         "| effect | cases | correct name | correct name >= 3 sigma | wrong name | false alarm | median held-out reduction | same, noise floor only | fit grew held-out gap | median size (sigma) | s/case |\n\
          |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
+    let (pairs, single): (Vec<&CaseResult>, Vec<&CaseResult>) =
+        results.iter().partition(|r| r.is_pair());
     for n in labels(results) {
-        let cases: Vec<&CaseResult> = results.iter().filter(|r| r.label == n).collect();
-        s.push_str(&independent_row(n, &cases));
+        let cases: Vec<&CaseResult> = single.iter().copied().filter(|r| r.label == n).collect();
+        if !cases.is_empty() {
+            s.push_str(&independent_row(n, &cases));
+            s.push('\n');
+        }
+    }
+    s.push_str(&independent_row("overall", &single));
+    s.push('\n');
+    if !pairs.is_empty() {
+        s.push_str(&independent_row(PAIRS_ROW, &pairs));
         s.push('\n');
     }
-    let all: Vec<&CaseResult> = results.iter().collect();
-    s.push_str(&independent_row("overall", &all));
-    s.push('\n');
     s
 }
+
+/// The row of the cases with two hidden effects, below "overall": "correct name" there is
+/// both effects named, "wrong name" any other name among those accepted.
+pub const PAIRS_ROW: &str = "two effects (both named)";
 
 /// One line of the per-case CSV that `gap-bench --out` writes after the table. A list is
 /// one cell, its values joined by `;` (an interval as `low:high`); an empty cell is "none".
@@ -218,6 +230,10 @@ pub struct CaseRow {
     pub seed: u64,
     pub size_sigma: Option<f64>,
     pub named: Option<String>,
+    /// Two-effect cases: the second effect's right answer.
+    pub expected_second: Option<String>,
+    /// Every effect named, in order.
+    pub named_all: String,
     pub truth: String,
     pub fitted: String,
     pub ci95: String,
@@ -242,6 +258,8 @@ impl From<&CaseResult> for CaseRow {
             seed: r.seed,
             size_sigma: r.size_sigma,
             named: r.named.clone(),
+            expected_second: r.expected_second.clone(),
+            named_all: r.named_all.join(";"),
             truth: joined(r.truth.iter().map(f64::to_string)),
             fitted: joined(r.fitted.iter().map(f64::to_string)),
             ci95: joined(r.ci95.iter().map(|[lo, hi]| format!("{lo}:{hi}"))),
@@ -285,6 +303,8 @@ mod tests {
             truth: vec![1.0],
             size_sigma: Some(5.0),
             named: effect.map(str::to_string),
+            expected_second: None,
+            named_all: effect.map(str::to_string).into_iter().collect(),
             fitted: vec![1.0],
             ci95: vec![[0.0, 2.0]],
             parameter_error: error,
@@ -332,6 +352,8 @@ mod tests {
             truth: vec![0.25, -1.5],
             size_sigma: named.map(|_| 4.2),
             named: named.map(str::to_string),
+            expected_second: None,
+            named_all: named.map(str::to_string).into_iter().collect(),
             fitted: vec![0.26, -1.4],
             ci95: vec![[0.2, 0.3], [-1.7, -1.1]],
             parameter_error: Some(0.06),
@@ -351,5 +373,47 @@ mod tests {
         assert_eq!(back, want);
         assert_eq!(back[1].named, None);
         assert_eq!(back[0].ci95, "0.2:0.3;-1.7:-1.1");
+    }
+
+    /// A two-effect case is right when both effects are named, in any order, and wrong when
+    /// anything else is named beside them; pair cases get their own row below "overall",
+    /// which they do not enter.
+    #[test]
+    fn two_effect_cases_are_scored_on_both_names() {
+        let pair = |named: &[&str]| {
+            let mut c = case(Some("water_current"), None);
+            c.label = PAIRS_ROW.to_string();
+            c.effect = Some("water_current+compass_offset".into());
+            c.expected_second = Some("compass_offset".into());
+            c.named_all = named.iter().map(|n| n.to_string()).collect();
+            c.named = c.named_all.first().cloned();
+            c
+        };
+        let both = pair(&["compass_offset", "water_current"]);
+        assert!(both.correct() && !both.wrong());
+        let one = pair(&["water_current"]);
+        assert!(!one.correct() && !one.wrong());
+        let other = pair(&["water_current", "compass_offset", "thrust_gain"]);
+        assert!(other.correct() && other.wrong());
+        let none = pair(&[]);
+        assert!(!none.correct() && !none.wrong());
+        let single = case(Some("water_current"), None);
+        let results = [single, both, one, other, none];
+        let t = independent_table(&results, None);
+        let overall = t.lines().find(|l| l.starts_with("| overall |")).unwrap();
+        assert!(
+            overall.starts_with("| overall | 1 | 100 % (1/1) |"),
+            "{overall}"
+        );
+        let row = t
+            .lines()
+            .find(|l| l.starts_with(&format!("| {PAIRS_ROW} |")))
+            .expect("the two-effect row");
+        assert!(
+            row.starts_with(&format!("| {PAIRS_ROW} | 4 | 50 % (2/4) |")),
+            "{row}"
+        );
+        assert!(row.contains("| 25 % (1/4) |"), "one wrong name: {row}");
+        assert_eq!(t.matches(PAIRS_ROW).count(), 1, "{t}");
     }
 }
