@@ -204,6 +204,31 @@ fn a_hidden_water_current_is_named_first() {
     assert!((p[0].1 - 0.04).abs() < 0.01, "current {p:?}");
 }
 
+/// `gap-bench --pairs` hands the independent model two effects whose first size is negative
+/// (`-0.3;8`), which an option parser reads as an option unless it is given as `--size=V`
+/// (a campaign's shard once died on it). The run is written, both effects named in it.
+#[test]
+fn a_two_effect_case_with_a_negative_first_size_is_written() {
+    use eyebot_hil::gap::bench::calibrated::Truth;
+    use eyebot_hil::gap::bench::independent::{Independent, by_name};
+    require_tool("python3", "python3");
+    let scratch = TempDir::new("gap-pair-size");
+    let program = root().join("pty-tests/independent/mako_independent.py");
+    let truth = Independent::new(&program, None).expect("the independent model exists");
+    let gain = by_name("thrust_gain").expect("an independent effect");
+    let offset = by_name("compass_offset").expect("an independent effect");
+    let out = scratch.path().join("pair");
+    truth
+        .case(7310, &[(gain, &[-0.3]), (offset, &[8.0])], &out)
+        .expect("the independent model takes both sizes");
+    let m = Measurement::load(&out).expect("the run loads");
+    assert!(
+        m.experiment.name.contains("thrust_gain+compass_offset"),
+        "{}",
+        m.experiment.name
+    );
+}
+
 /// A thrust loss of 20 % on every motor (a weak battery) is named first, as a loss.
 #[test]
 fn a_hidden_thrust_loss_is_named_first() {

@@ -261,17 +261,30 @@ fn print(source: Source, outcome: &Outcome, out_file: Option<&PathBuf>) -> Resul
     Ok(())
 }
 
-/// What the log of a campaign without a terminal says about a finished case.
+/// What the log of a campaign without a terminal says about a finished case: right, a
+/// false alarm, wrong (another effect named) or missed (nothing, or one of two, named).
 fn verdict(r: &CaseResult) -> String {
-    let named = r.named.as_deref().unwrap_or("nothing");
+    let named = if r.named_all.is_empty() {
+        r.named.clone().unwrap_or_else(|| "nothing".to_string())
+    } else {
+        r.named_all.join("+")
+    };
+    let expected = [&r.expected, &r.expected_second]
+        .iter()
+        .filter_map(|e| e.as_deref())
+        .collect::<Vec<_>>()
+        .join("+");
+    let expected = if expected.is_empty() {
+        "nothing"
+    } else {
+        &expected
+    };
     match &r.effect {
         None if r.named.is_none() => "null, nothing named: right".to_string(),
         None => format!("null, named {named}: false alarm"),
-        Some(_) if r.correct() => format!("named {named}: right"),
-        Some(_) => format!(
-            "named {named}, expected {}: wrong",
-            r.expected.as_deref().unwrap_or("nothing")
-        ),
+        Some(_) if r.correct() && !r.wrong() => format!("named {named}: right"),
+        Some(_) if r.wrong() => format!("named {named}, expected {expected}: wrong"),
+        Some(_) => format!("named {named}, expected {expected}: missed"),
     }
 }
 
@@ -349,7 +362,7 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
                 Some(r) => eprintln!(
                     "gap-bench: shard {shard}: {done}/{total}: case {} {}: {}, {:.1} s",
                     r.index,
-                    r.label,
+                    r.effect.as_deref().unwrap_or(&r.label),
                     verdict(r),
                     r.seconds
                 ),

@@ -160,11 +160,11 @@ fn generate(
                 parts.join(",")
             })
             .collect();
+        // `--size=V`, not `--size V`: a value such as `-0.03;8` would read as an option.
         args.extend([
             "--hidden".to_string(),
             names.join("+"),
-            "--size".to_string(),
-            sizes.join(";"),
+            format!("--size={}", sizes.join(";")),
         ]);
     }
     python(program, &args).map(|_| ())
