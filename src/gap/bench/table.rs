@@ -226,10 +226,13 @@ pub const PAIRS_ROW: &str = "two effects (both named)";
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CaseRow {
     pub index: usize,
+    /// The source's name of the hidden effect (`A+B` for two), or the null row's label.
     pub effect: String,
     pub seed: u64,
     pub size_sigma: Option<f64>,
     pub named: Option<String>,
+    /// The right answer (the library effect; a two-effect case: the first one's).
+    pub expected: Option<String>,
     /// Two-effect cases: the second effect's right answer.
     pub expected_second: Option<String>,
     /// Every effect named, in order.
@@ -254,10 +257,11 @@ impl From<&CaseResult> for CaseRow {
     fn from(r: &CaseResult) -> Self {
         Self {
             index: r.index,
-            effect: r.label.clone(),
+            effect: r.effect.clone().unwrap_or_else(|| r.label.clone()),
             seed: r.seed,
             size_sigma: r.size_sigma,
             named: r.named.clone(),
+            expected: r.expected.clone(),
             expected_second: r.expected_second.clone(),
             named_all: r.named_all.join(";"),
             truth: joined(r.truth.iter().map(f64::to_string)),
@@ -345,7 +349,7 @@ mod tests {
     fn the_per_case_csv_round_trips_through_a_csv_reader() {
         let case = |index: usize, named: Option<&str>| CaseResult {
             index,
-            effect: Some("sway_drag".into()),
+            effect: Some("sway, drag \"quoted\"".into()),
             expected: Some("sway_drag".into()),
             label: "sway, drag \"quoted\"".into(),
             seed: 7,
@@ -373,6 +377,8 @@ mod tests {
         assert_eq!(back, want);
         assert_eq!(back[1].named, None);
         assert_eq!(back[0].ci95, "0.2:0.3;-1.7:-1.1");
+        assert_eq!(back[0].effect, "sway, drag \"quoted\"");
+        assert_eq!(back[0].expected.as_deref(), Some("sway_drag"));
     }
 
     /// A two-effect case is right when both effects are named, in any order, and wrong when
