@@ -169,7 +169,7 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         errln!("notice: {n}");
     }
     let model = GapModel::load(model_path)?;
-    let total = (gap::fit::MAX_EFFECTS * effects::LIBRARY.len()) as u64;
+    let total = (gap::fit::MAX_EFFECTS * effects::candidates().count()) as u64;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
     } else {
@@ -437,7 +437,7 @@ fn run_summary(
 ) -> Result<(), CliError> {
     let s = gap::summary::Summary::load(file)?;
     let model = GapModel::load(model_path)?;
-    let total = (gap::fit::MAX_EFFECTS * effects::LIBRARY.len()) as u64;
+    let total = (gap::fit::MAX_EFFECTS * effects::candidates().count()) as u64;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
     } else {

@@ -200,7 +200,7 @@ fn options(
     match source {
         Source::Simulator => {
             opts.effects = if names.is_empty() {
-                effects::LIBRARY.iter().collect::<Vec<&'static Effect>>()
+                effects::candidates().collect::<Vec<&'static Effect>>()
             } else {
                 names
                     .iter()

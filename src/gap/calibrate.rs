@@ -531,7 +531,9 @@ pub fn calibrate(
     let mut joint: Vec<(u8, &'static Effect)> = effects::LIBRARY
         .iter()
         .filter_map(|e| match e.calibration {
-            Fitted::Joint(k) | Fitted::JointTwoStarts(k, _) => Some((k, e)),
+            Fitted::Joint(k) | Fitted::JointTwoStarts(k, _) | Fitted::Discrepancy(k) => {
+                Some((k, e))
+            }
             _ => None,
         })
         .collect();

@@ -124,6 +124,24 @@ pub enum Calibration {
     /// A noise level (a variance effect): fitted on each baseline run of the jointly
     /// calibrated model, its mean over the runs enters the model.
     NoiseLevel,
+    /// A structural term of the base model, fitted jointly as `Joint` at this place and never
+    /// a candidate `gap` names: the parametric model discrepancy of the calibration (the
+    /// vehicle's own coefficients a different hull has differently), so that what a vehicle
+    /// of another structure does differently lands here and not in the named effects' values.
+    Discrepancy(u8),
+}
+
+impl Effect {
+    /// True for an effect `gap` may name as new (every effect but the calibration's
+    /// discrepancy terms).
+    pub fn candidate(&self) -> bool {
+        !matches!(self.calibration, Calibration::Discrepancy(_))
+    }
+}
+
+/// The effects `gap` may name, in library order.
+pub fn candidates() -> impl Iterator<Item = &'static Effect> {
+    LIBRARY.iter().filter(|e| e.candidate())
 }
 
 /// How the bridge and the independent model hide an effect.
@@ -167,7 +185,7 @@ const ALL_THRUSTERS: [&str; 9] = [
 ];
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 27] = [
+pub const LIBRARY: [Effect; 32] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -825,6 +843,97 @@ pub const LIBRARY: [Effect; 27] = [
             independent: "sway_yaw_coupling",
             factor: false,
         }),
+    },
+    Effect {
+        name: "sway_damping",
+        parameters: &["scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
+        signature: "the hull slides sideways in turns more or less than modelled: track \
+                    curvature and heading rate off together while turning under way",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 1, 1.0 + at(p, 0), 1.0 + at(p, 0)),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(21),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "sway_added_mass",
+        parameters: &["added_kg"],
+        scales: &[5.0],
+        bounds: &[(-30.0, 100.0)],
+        signature: "sideways slip lags or leads after each turn command",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            c.vehicle.added_mass[1] = (c.vehicle.added_mass[1] + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(22),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "yaw_added_inertia",
+        parameters: &["added_kgm2"],
+        scales: &[0.5],
+        bounds: &[(-2.5, 10.0)],
+        signature: "turn rate builds up and dies away faster or slower than modelled; steady \
+                    spins match",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            c.vehicle.added_mass[5] = (c.vehicle.added_mass[5] + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(23),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "sway_from_yaw",
+        parameters: &["y_r_n_s"],
+        scales: &[1.0],
+        bounds: &[(-20.0, 20.0)],
+        signature: "a turn pushes the hull sideways: track drifts out of or into spot turns",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| c.vehicle.damping_sway_yaw[0] += at(p, 0),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(24),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "heave_damping",
+        parameters: &["scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
+        signature: "depth changes faster or slower than modelled for the same vertical thrust",
+        channels: &["depth_adc", "accel_z_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 2, 1.0 + at(p, 0), 1.0 + at(p, 0)),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Discrepancy(25),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
     },
 ];
 /// Looks an effect up by name.

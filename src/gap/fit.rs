@@ -721,8 +721,7 @@ pub fn fit_candidates(
         .iter()
         .map(|&i| setup.m.channels[i].name.as_str())
         .collect();
-    let todo: Vec<&'static Effect> = effects::LIBRARY
-        .iter()
+    let todo: Vec<&'static Effect> = effects::candidates()
         .filter(|e| !skip.contains(&e.name))
         .collect();
     let one = |effect: &'static Effect| -> Candidate {

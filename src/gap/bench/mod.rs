@@ -354,14 +354,15 @@ pub fn run_part(
 
 /// The library effect named `name`, as an error naming the option otherwise.
 pub fn library_effect(name: &str) -> Result<&'static Effect, GapError> {
-    effects::by_name(name).ok_or_else(|| {
-        GapError::Data(format!(
-            "--effects: unknown effect `{name}`; known: {}",
-            effects::LIBRARY
-                .iter()
-                .map(|e| e.name)
-                .collect::<Vec<_>>()
-                .join(", ")
-        ))
-    })
+    effects::by_name(name)
+        .filter(|e| e.candidate())
+        .ok_or_else(|| {
+            GapError::Data(format!(
+                "--effects: unknown effect `{name}`; known: {}",
+                effects::candidates()
+                    .map(|e| e.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
 }

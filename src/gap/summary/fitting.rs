@@ -394,7 +394,7 @@ pub fn analyse(
                 return Ok(None);
             };
             let mut results = Vec::new();
-            for effect in effects::LIBRARY.iter() {
+            for effect in effects::candidates() {
                 progress(round, effect.name);
                 if skip_model.contains(&effect.name)
                     || priors.iter().any(|p| p.effect.name == effect.name)
