@@ -185,7 +185,7 @@ const ALL_THRUSTERS: [&str; 9] = [
 ];
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 32] = [
+pub const LIBRARY: [Effect; 34] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -931,6 +931,46 @@ pub const LIBRARY: [Effect; 32] = [
         moves_anchors: false,
         summary: &[],
         calibration: Calibration::Discrepancy(25),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "net_buoyancy",
+        parameters: &["extra_n"],
+        scales: &[0.5],
+        bounds: &[(-10.0, 10.0)],
+        signature: "the vehicle rises or sinks between depth commands more than modelled: a \
+                    depth drift of one sign whenever the vertical thrusters are idle",
+        channels: &["depth_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            let weight_per_m3 = c.world.water_density_kgpm3 * c.world.gravity_mps2;
+            let v = &mut c.vehicle.displaced_volume_m3;
+            *v = (*v + at(p, 0) / weight_per_m3).max(1e-4);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Discrepancy(26),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "depth_port_position",
+        parameters: &["forward_m"],
+        scales: &[0.1],
+        bounds: &[(-0.7, 0.7)],
+        signature: "depth readings follow the pitch: a port away from the centre of mass reads \
+                    deeper when its end dips",
+        channels: &["depth_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.sensors.depth.position_body_m[0] += at(p, 0),
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Discrepancy(27),
         positive: false,
         parameter_error_target: false,
         hidden: None,
