@@ -16,7 +16,7 @@ use std::sync::OnceLock;
 use eyebot_hil::gap::calibrate::{self, Calibration, Run};
 use eyebot_hil::gap::format::Measurement;
 use eyebot_hil::gap::model::GapModel;
-use eyebot_hil::gap::{self, Analysis, Verdict};
+use eyebot_hil::gap::{self, Analysis, Verdict, effects};
 use eyebot_test_support::TempDir;
 use eyebot_test_support::tools::require_tool;
 
@@ -159,6 +159,19 @@ fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
         "thrust at half range x{half:.3} (gain {gain:.3}, curve {curve:.3})"
     );
     assert!(!c.spread.is_empty(), "two baseline runs give a spread");
+    // The model discrepancy: every discrepancy term of the library is calibrated, so the
+    // independent hull's sway, yaw inertia, heave and buoyancy have a place of their own.
+    for e in effects::LIBRARY
+        .iter()
+        .filter(|e| matches!(e.calibration, effects::Calibration::Discrepancy(_)))
+    {
+        assert!(
+            c.parameters.iter().any(|p| p.effect == e.name),
+            "discrepancy term {} not calibrated; calibrated: {:?}",
+            e.name,
+            c.parameters.iter().map(|p| &p.effect).collect::<Vec<_>>()
+        );
+    }
     // The calibrated model's known disagreement: every measured channel, each still above the
     // noise floor (the independent model's form is not the model's).
     assert_eq!(c.discrepancy.len(), r.channels.len(), "{:?}", c.discrepancy);
@@ -176,6 +189,16 @@ fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
 fn a_null_run_after_calibration_names_nothing() {
     let a = discover("null-7304", 7304, "none", None);
     assert!(a.accepted.is_empty(), "null run named {:?}", names(&a));
+    // The calibration's discrepancy terms are never candidates.
+    for c in a.rounds.iter().flatten() {
+        let e = effects::by_name(&c.name).expect("a library effect");
+        assert!(
+            e.candidate(),
+            "{} is a discrepancy term, not a candidate",
+            c.name
+        );
+    }
+    assert!(!a.rounds.is_empty());
     assert!(
         a.raw.heldout_before > 0.5,
         "against the noise floor alone the held-out gap is {}",
