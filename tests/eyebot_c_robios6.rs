@@ -1,9 +1,10 @@
 //! RoBIOS 6 programs written for other robots (`tests/robios6/`: a SubSim-style PSD wall
 //! follower, a servo/encoder driver with line sensors on input latch 0, a camera and radio
-//! demo, a program of two files that includes `"include/eyebot.h"`) build unchanged with the
-//! documented make line for the host and the 68k; the devices Mako has not got fail as
-//! RoBIOS does; the wall follower follows the pool wall in `check` on the sonar, host and
-//! qemu-m68k byte for byte; the latch script reaches `OSReadInLatch`.
+//! demo, RoBIOS 6.3 demo calls in the style of the EyeBot M5's standard demos, a program of
+//! two files that includes `"include/eyebot.h"`) build unchanged with the documented make
+//! line for the host and the 68k; the devices Mako has not got fail as RoBIOS does; the
+//! wall follower follows the pool wall in `check` on the sonar, host and qemu-m68k byte for
+//! byte; the latch script reaches `OSReadInLatch`; the M5-style demo runs in `check`.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -34,6 +35,7 @@ fn build(target: Target) -> PathBuf {
         program("cam_radio.c"),
         program("missing_devices.c"),
         program("image_ops.c"),
+        program("m5_demos.c"),
     ];
     let refs: Vec<&Path> = singles.iter().map(PathBuf::as_path).collect();
     let sources = format!(
@@ -96,6 +98,7 @@ fn robios6_programs_build_unchanged_for_the_host_and_the_68k() {
             "cam_radio",
             "missing_devices",
             "image_ops",
+            "m5_demos",
             "multi",
         ] {
             assert!(
@@ -407,5 +410,62 @@ null -1
         let o = run(target, &out.join("image_ops"), &[]);
         assert!(o.status.success(), "{target:?}: {}", text(&o));
         assert_eq!(String::from_utf8_lossy(&o.stdout), expected, "{target:?}");
+    }
+}
+
+/// RoBIOS 6.3's demo calls (`m5_demos.c`: `AUCaptureMic()`, a `tone` array played note by
+/// note with `AUTone`, `CAMInit(WIDE)` and `CAMInit(NORMAL)` checked against `NOCAM`,
+/// `INITERROR` and `COLCAM`, `CAMSet(FPS0_9375, 0, 0)` and the rates down to `FPS0_46875`,
+/// `VWInit(VW, 1)`) run on the host in `check`: each note starts when the last has sounded
+/// out (120 ms = 12 ticks), and every device Mako has not got answers its failure value.
+#[test]
+fn robios63_demo_calls_run_on_mako_without_its_devices() {
+    let host = build(Target::Host);
+    let dir = TempDir::new("robios6-m5-demos");
+    let out = dir.join("out");
+    let o = check(
+        &workspace_root().join("tests/fixtures/robios6_m5_demos.toml"),
+        &out,
+        &[host.join("m5_demos").to_str().expect("utf-8 path")],
+    );
+    eprintln!("{}", text(&o));
+    assert!(o.status.success(), "{}", text(&o));
+    let printed = std::fs::read_to_string(out.join("program.out")).expect("program.out");
+    assert_eq!(
+        printed,
+        "\
+Demos 6.3
+fanfare: 4 notes
+Micro: -1
+wide: No Camera
+CAMSet slow -1
+normal: No Camera
+rates refused 3
+no VW driver
+done
+"
+    );
+    let log = std::fs::read_to_string(out.join("program.err")).expect("program.err");
+    let tones: Vec<&str> = log
+        .lines()
+        .filter(|l| l.starts_with("eyebot: sound: tone "))
+        .collect();
+    assert_eq!(
+        tones,
+        [
+            "eyebot: sound: tone 523 Hz for 120 ms at t 0.00 s",
+            "eyebot: sound: tone 659 Hz for 120 ms at t 0.12 s",
+            "eyebot: sound: tone 784 Hz for 120 ms at t 0.24 s",
+            "eyebot: sound: tone 1047 Hz for 240 ms at t 0.36 s",
+        ],
+        "{log}"
+    );
+    for said in [
+        "eyebot: AUCaptureMic: the bridge has no microphone input; returns -1",
+        "eyebot: CAMInit: Mako's EyeBot has no camera",
+        "eyebot: CAMSet: Mako's EyeBot has no camera",
+        "eyebot: VWInit: Mako has no differential drive",
+    ] {
+        assert!(log.contains(said), "{said}: {log}");
     }
 }

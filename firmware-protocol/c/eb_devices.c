@@ -363,8 +363,7 @@ int AUCheckRecord(void) {
     once("AUCheckRecord", NO_MIC, "-1");
     return -1;
 }
-int AUCaptureMic(int mode) {
-    (void)mode;
+int AUCaptureMic(void) {
     once("AUCaptureMic", NO_MIC, "-1");
     return -1;
 }

@@ -266,6 +266,12 @@ int LCDPixel(int x, int y, int value);
 int LCDLine(int x1, int y1, int x2, int y2, int value);
 int LCDArea(int x1, int y1, int x2, int y2, int value);
 /* ---- Sound: to the log (stderr, with the program time) --------------------------------------- */
+/* A note of a tune: a program keeps its tune as an array of these, ended by {0, 0}, and plays
+ * the notes one by one with AUTone(freq, len). */
+typedef struct {
+    int freq; /* Hz */
+    int len;  /* ms */
+} tone;
 int AUBeep(void);
 int AUTone(int freq, int msec);  /* returns at once */
 int AUCheckTone(void);           /* 1 when the last tone has finished */
@@ -312,6 +318,7 @@ int KEYWait(int excode);     /* waits for the key(s) in excode; returns the key 
 #define SERVO15 0x080F
 #define SERVO16 0x0810
 #define VW_DRIVE 0x0901
+#define VW 0x0902 /* the v-omega driver by its other name: VWInit(VW, 1) */
 #define BUMP_FRONT 0x0A01
 #define BUMP_BACK 0x0A02
 #define BUMP_LEFT 0x0A03
@@ -354,11 +361,23 @@ typedef struct {
 typedef BYTE image[imagerows][imagecolumns];
 typedef BYTE colimage[imagerows][imagecolumns][3];
 
-/* CAMInit's mode, and its results when there is no camera, or it did not start. */
+/* CAMInit's modes (NORMAL, or WIDE for the wide view), and its results when there is no
+ * camera, or it did not start (a program tests == NOCAM first, then >= INITERROR). */
 #define NORMAL 0
+#define WIDE 1
 #define NOCAM 255
 #define INITERROR 254
-/* CAMMode modes; CAMSet frame rates. */
+/* Otherwise CAMInit returns the camera's version: a greyscale camera's is below COLCAM, a
+ * colour camera's COLCAM or more (and below INITERROR). */
+#define COLCAM 16
+/* How long a program waits (OSWait) before it calls CAMInit again after INITERROR, in
+ * OSWait's ticks of 1/100 s (not ms): 100, one second. RoBIOS's own value is not known
+ * (the value is ours); at one second a retry loop that prints each failed attempt, as
+ * RoBIOS 6.3's demos do, shows about a line a second, and a camera that never starts costs
+ * a second per attempt. On Mako CAMInit returns NOCAM, so no program waits for it. */
+#define CAMWAIT 100
+/* CAMMode modes; CAMSet frame rates. A frame-rate index grows as the rate falls (a program
+ * steps to the next slower rate with ++). */
 #define AUTOBRIGHTNESS 1
 #define NOAUTOBRIGHTNESS 0
 #define FPS60 0
@@ -367,6 +386,8 @@ typedef BYTE colimage[imagerows][imagecolumns][3];
 #define FPS7_5 3
 #define FPS3_75 4
 #define FPS1_875 5
+#define FPS0_9375 6
+#define FPS0_46875 7
 
 /* IRTVInit code types and modes. */
 #define SPACE_CODE 1
@@ -456,7 +477,7 @@ int CAMGetColFrame(colimage *buf, int convert);
 int CAMGetFrameMono(BYTE *buf);
 int CAMGetFrameRGB(BYTE *buf);
 int CAMGetFrameBayer(BYTE *buf);
-int CAMSet(int para1, int para2, int para3);
+int CAMSet(int para1, int para2, int para3);             /* RoBIOS: 0 when set; here -1 */
 int CAMGet(int *para1, int *para2, int *para3);
 int CAMMode(int mode);
 
@@ -487,7 +508,7 @@ int AUPlaySample(BYTE *sample);                          /* logged like AUTone; 
 int AUCheckSample(void);                                 /* 1: finished */
 int AURecordSample(BYTE *buf, long len, long freq);      /* -1: no microphone input */
 int AUCheckRecord(void);
-int AUCaptureMic(int mode);                              /* -1 */
+int AUCaptureMic(void);                                  /* RoBIOS: mic level; here -1 */
 
 /* ---- Basic image processing (eb_image.c): 0 on success, -1 for a NULL image ---------------- */
 int IPLaplace(image *src, image *dest);

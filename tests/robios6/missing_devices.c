@@ -101,7 +101,7 @@ int main(void)
            r[8]);
     r[0] = AURecordSample(buf, 16, 8000);
     r[1] = AUCheckRecord();
-    r[2] = AUCaptureMic(0);
+    r[2] = AUCaptureMic();
     printf("mic %d %d %d buf %d\n", r[0], r[1], r[2], buf[0]);
     r[0] = PSDStart(0x40, TRUE);
     r[1] = PSDGet(0x40);
