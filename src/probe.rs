@@ -1,19 +1,21 @@
 //! An EyeBot-side client of the bridge, for people, scripts and tests (`eyebot-hil probe`),
 //! in the spirit of gpsd's gpspipe and gpsmon.
 //!
-//! [`SensorClient`] speaks the sensor link as PROTOCOL.md section 2.2 tells an EyeBot to: one
-//! request outstanding, a fresh sequence number per request, a 100 ms reply timeout and up to
-//! three retries of the identical frame. Pushes that arrive while it waits are kept for
-//! [`SensorClient::next_push`]. [`SonarClient`] selects transducers and reads sentences.
+//! Both clients are I/O shells (tokio-serial, deadlines) over the protocol crate's sans-IO
+//! [`EyeBotClient`], which keeps the sequence counter, decodes, tells replies from pushes and
+//! counts wire errors. [`SensorClient`] speaks the sensor link as PROTOCOL.md section 2.2 tells
+//! an EyeBot to: one request outstanding, a fresh sequence number per request, a 100 ms reply
+//! timeout and up to three retries of the identical frame. Pushes that arrive while it waits
+//! are kept for [`SensorClient::next_push`]. [`SonarClient`] selects transducers and reads
+//! sentences.
 
-use std::collections::VecDeque;
 use std::path::Path;
 use std::time::Duration;
 
 use bytes::BytesMut;
 use firmware_protocol::sensor_link::{self, Message};
 use firmware_protocol::sonar_link::SonarCommand;
-use firmware_protocol::{Frame, LineDecoder, LineItem, Sentence, Transducer};
+use firmware_protocol::{EyeBotClient, Frame, Incoming, LinkError, Sentence, Transducer};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_serial::SerialStream;
 
@@ -75,36 +77,23 @@ impl Default for RetryPolicy {
     }
 }
 
-/// A sensor-link client over a serial device or pty.
+/// A sensor-link client over a serial device or pty: an I/O shell over
+/// [`EyeBotClient`], which keeps the seq, decodes and queues pushes.
 pub struct SensorClient {
-    port: SerialStream,
-    path: String,
-    seq: u8,
-    decoder: LineDecoder,
-    buf: BytesMut,
-    pushes: VecDeque<Frame>,
+    port: Port,
     policy: RetryPolicy,
-    /// Wire errors seen in what the bridge sent (should stay 0).
-    pub errors: u64,
 }
 
 impl SensorClient {
     /// Opens the sensor link at `path` and flushes stale input.
     pub fn open(path: &Path, line: &LineSettings) -> Result<Self, ProbeError> {
-        let port = serial::open(path, line)?;
-        let _ = tokio_serial::SerialPort::clear(&port, tokio_serial::ClearBuffer::Input);
+        // A fresh process must not repeat its predecessor's last (seq, request): the bridge
+        // answers an identical request from its stored reply (PROTOCOL.md 2.2). Starting
+        // after the process id makes back-to-back `probe` runs differ.
+        let first_seq = (std::process::id() as u8).wrapping_add(1);
         Ok(Self {
-            port,
-            path: path.display().to_string(),
-            // A fresh process must not repeat its predecessor's last (seq, request): the bridge
-            // answers an identical request from its stored reply (PROTOCOL.md 2.2). Starting
-            // from the process id makes back-to-back `probe` runs differ.
-            seq: std::process::id() as u8,
-            decoder: LineDecoder::new(),
-            buf: BytesMut::new(),
-            pushes: VecDeque::new(),
+            port: Port::open(path, line, EyeBotClient::with_first_seq(first_seq))?,
             policy: RetryPolicy::default(),
-            errors: 0,
         })
     }
 
@@ -112,26 +101,9 @@ impl SensorClient {
         self.policy = policy;
     }
 
-    async fn read_frame(
-        &mut self,
-        deadline: tokio::time::Instant,
-    ) -> Result<Option<Frame>, ProbeError> {
-        loop {
-            while let Some(item) = self.decoder.decode(&mut self.buf) {
-                match item {
-                    LineItem::Frame(frame) => return Ok(Some(frame)),
-                    LineItem::Error(e) => {
-                        self.errors += 1;
-                        tracing::warn!(path = %self.path, error = %e, "bad bytes from the bridge");
-                    }
-                    // NMEA or sonar commands on a shared line are not ours.
-                    LineItem::Nmea(_) | LineItem::Sonar(_) => {}
-                }
-            }
-            if !read_more(&mut self.port, &mut self.buf, deadline, &self.path).await? {
-                return Ok(None);
-            }
-        }
+    /// Wire errors seen in what the bridge sent (should stay 0).
+    pub fn errors(&self) -> u64 {
+        self.port.client.errors()
     }
 
     /// Sends `message` and waits for its reply (same seq), retrying the identical frame.
@@ -142,41 +114,34 @@ impl SensorClient {
         message: Message,
         extra: Duration,
     ) -> Result<Message, ProbeError> {
-        self.seq = self.seq.wrapping_add(1);
-        let seq = self.seq;
         let mut wire = BytesMut::new();
-        Frame::new(seq, message).encode(&mut wire);
+        let seq = self.port.client.encode_request(message, &mut wire);
         let timeout = self.policy.timeout + extra;
         for _attempt in 0..=self.policy.retries {
-            self.port
-                .write_all(&wire)
-                .await
-                .map_err(|source| ProbeError::Io {
-                    path: self.path.clone(),
-                    source,
-                })?;
+            self.port.write(&wire).await?;
             let deadline = tokio::time::Instant::now() + timeout;
-            while let Some(frame) = self.read_frame(deadline).await? {
-                if frame.message.msg_type() >= 0xC0 {
-                    self.pushes.push_back(frame);
-                    continue;
+            loop {
+                match self.port.client.take_reply(seq) {
+                    Some(Ok(Message::Nak { code, detail, .. })) => {
+                        return Err(ProbeError::Refused {
+                            path: self.port.path.clone(),
+                            what,
+                            code,
+                            detail,
+                        });
+                    }
+                    Some(Ok(reply)) => return Ok(reply),
+                    Some(Err(error)) => self.port.warn(&error),
+                    None => {
+                        if !self.port.read_more(deadline).await? {
+                            break;
+                        }
+                    }
                 }
-                if frame.seq != seq {
-                    continue; // a late reply to an earlier, retried request
-                }
-                return match frame.message {
-                    Message::Nak { code, detail, .. } => Err(ProbeError::Refused {
-                        path: self.path.clone(),
-                        what,
-                        code,
-                        detail,
-                    }),
-                    reply => Ok(reply),
-                };
             }
         }
         Err(ProbeError::NoReply {
-            path: self.path.clone(),
+            path: self.port.path.clone(),
             what,
             attempts: self.policy.retries + 1,
             timeout,
@@ -185,25 +150,24 @@ impl SensorClient {
 
     /// The next push (ADC samples, compass), waiting up to `timeout`.
     pub async fn next_push(&mut self, timeout: Duration) -> Result<Option<Frame>, ProbeError> {
-        if let Some(frame) = self.pushes.pop_front() {
-            return Ok(Some(frame));
-        }
         let deadline = tokio::time::Instant::now() + timeout;
-        while let Some(frame) = self.read_frame(deadline).await? {
-            if frame.message.msg_type() >= 0xC0 {
-                return Ok(Some(frame));
+        loop {
+            match self.port.client.take_push() {
+                Some(Ok(frame)) => return Ok(Some(frame)),
+                Some(Err(error)) => self.port.warn(&error),
+                None => {
+                    if !self.port.read_more(deadline).await? {
+                        return Ok(None);
+                    }
+                }
             }
         }
-        Ok(None)
     }
 }
 
 /// A sonar-link client: selects transducers and reads what the multiplexer forwards.
 pub struct SonarClient {
-    port: SerialStream,
-    path: String,
-    decoder: LineDecoder,
-    buf: BytesMut,
+    port: Port,
 }
 
 /// What the multiplexer sent.
@@ -217,21 +181,63 @@ pub enum SonarItem {
 
 impl SonarClient {
     pub fn open(path: &Path, line: &LineSettings) -> Result<Self, ProbeError> {
-        let port = serial::open(path, line)?;
-        let _ = tokio_serial::SerialPort::clear(&port, tokio_serial::ClearBuffer::Input);
         Ok(Self {
-            port,
-            path: path.display().to_string(),
-            decoder: LineDecoder::new(),
-            buf: BytesMut::new(),
+            port: Port::open(path, line, EyeBotClient::new())?,
         })
     }
 
     pub async fn select(&mut self, transducer: Transducer) -> Result<(), ProbeError> {
         let mut wire = BytesMut::new();
         SonarCommand::Select(transducer).encode(&mut wire);
+        self.port.write(&wire).await
+    }
+
+    /// The next item within `timeout`, with the raw text of sentences.
+    pub async fn next(&mut self, timeout: Duration) -> Result<Option<SonarItem>, ProbeError> {
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            if let Some((item, bytes)) = self.port.client.next_incoming_with_bytes() {
+                return Ok(Some(match item {
+                    Incoming::Sonar(SonarCommand::Ack(t)) => SonarItem::Ack(t.get()),
+                    Incoming::Sonar(_) => SonarItem::Nak,
+                    Incoming::Nmea(sentence) => SonarItem::Sentence {
+                        sentence,
+                        raw: String::from_utf8_lossy(&bytes).trim_end().to_string(),
+                    },
+                    Incoming::Error(e) => SonarItem::Error(e.to_string()),
+                    Incoming::Reply(_) | Incoming::Push(_) => continue,
+                }));
+            }
+            if !self.port.read_more(deadline).await? {
+                return Ok(None);
+            }
+        }
+    }
+}
+
+/// The I/O both clients share: the open port, its path for errors, and the sans-IO client
+/// that what it reads is handed to.
+struct Port {
+    port: SerialStream,
+    path: String,
+    client: EyeBotClient,
+}
+
+impl Port {
+    /// Opens `path` and flushes stale input.
+    fn open(path: &Path, line: &LineSettings, client: EyeBotClient) -> Result<Self, ProbeError> {
+        let port = serial::open(path, line)?;
+        let _ = tokio_serial::SerialPort::clear(&port, tokio_serial::ClearBuffer::Input);
+        Ok(Self {
+            port,
+            path: path.display().to_string(),
+            client,
+        })
+    }
+
+    async fn write(&mut self, bytes: &[u8]) -> Result<(), ProbeError> {
         self.port
-            .write_all(&wire)
+            .write_all(bytes)
             .await
             .map_err(|source| ProbeError::Io {
                 path: self.path.clone(),
@@ -239,53 +245,28 @@ impl SonarClient {
             })
     }
 
-    /// The next item within `timeout`, with the raw text of sentences.
-    pub async fn next(&mut self, timeout: Duration) -> Result<Option<SonarItem>, ProbeError> {
-        let deadline = tokio::time::Instant::now() + timeout;
-        loop {
-            let before = self.buf.clone();
-            if let Some(item) = self.decoder.decode(&mut self.buf) {
-                let used = before.len() - self.buf.len();
-                let raw = String::from_utf8_lossy(&before[..used])
-                    .trim_end()
-                    .to_string();
-                return Ok(Some(match item {
-                    LineItem::Sonar(SonarCommand::Ack(t)) => SonarItem::Ack(t.get()),
-                    LineItem::Sonar(_) => SonarItem::Nak,
-                    LineItem::Nmea(sentence) => SonarItem::Sentence { sentence, raw },
-                    LineItem::Error(e) => SonarItem::Error(e.to_string()),
-                    LineItem::Frame(_) => continue,
-                }));
+    /// Hands what the port has to the client before `deadline`: `Ok(false)` when the
+    /// deadline passed first.
+    async fn read_more(&mut self, deadline: tokio::time::Instant) -> Result<bool, ProbeError> {
+        let mut chunk = [0u8; 512];
+        match tokio::time::timeout_at(deadline, self.port.read(&mut chunk)).await {
+            Err(_) => Ok(false),
+            Ok(Ok(0)) => Err(ProbeError::Closed {
+                path: self.path.clone(),
+            }),
+            Ok(Ok(n)) => {
+                self.client.receive(&chunk[..n]);
+                Ok(true)
             }
-            if !read_more(&mut self.port, &mut self.buf, deadline, &self.path).await? {
-                return Ok(None);
-            }
+            Ok(Err(source)) => Err(ProbeError::Io {
+                path: self.path.clone(),
+                source,
+            }),
         }
     }
-}
 
-/// Reads what the port has into `buf` before `deadline`: `Ok(false)` when the deadline
-/// passed first. Shared by both clients.
-async fn read_more(
-    port: &mut SerialStream,
-    buf: &mut BytesMut,
-    deadline: tokio::time::Instant,
-    path: &str,
-) -> Result<bool, ProbeError> {
-    let mut chunk = [0u8; 512];
-    match tokio::time::timeout_at(deadline, port.read(&mut chunk)).await {
-        Err(_) => Ok(false),
-        Ok(Ok(0)) => Err(ProbeError::Closed {
-            path: path.to_string(),
-        }),
-        Ok(Ok(n)) => {
-            buf.extend_from_slice(&chunk[..n]);
-            Ok(true)
-        }
-        Ok(Err(source)) => Err(ProbeError::Io {
-            path: path.to_string(),
-            source,
-        }),
+    fn warn(&self, error: &LinkError) {
+        tracing::warn!(path = %self.path, error = %error, "bad bytes from the bridge");
     }
 }
 

@@ -221,7 +221,8 @@ impl Rig {
         assert_eq!(sensor_link.errors, 0, "{sensor_link:?}");
         assert_eq!(sensor_link.frames_rx, n, "{sensor_link:?}");
         assert_eq!(
-            self.sensor.errors, 0,
+            self.sensor.errors(),
+            0,
             "the bridge sent only well-formed frames"
         );
         if let UnderTest::InProcess(mut daemon) = self.under_test {

@@ -1,5 +1,6 @@
 //! A bare EyeBot-side client for tests that speak the wire protocols byte by byte: writes
-//! exactly the bytes given, and decodes what comes back with the protocol's own decoder.
+//! exactly the bytes given, and decodes and classifies what comes back with the protocol's own
+//! client core, [`EyeBotClient`] (a blocking I/O shell over it, as `probe` is an async one).
 //!
 //! Unlike `probe`'s clients it never retries, never reframes and never hides an unexpected
 //! item, so a test sees every byte the bridge sent, in order.
@@ -12,13 +13,12 @@ use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
 use firmware_protocol::sensor_link::{Counters, Message};
-use firmware_protocol::{Frame, LineDecoder, LineItem};
+use firmware_protocol::{EyeBotClient, Frame, Incoming, LineItem};
 
 /// One end of a link, opened as a plain C program would (raw file, blocking writes).
 pub struct Wire {
     file: File,
-    decoder: LineDecoder,
-    buf: BytesMut,
+    client: EyeBotClient,
     /// Every byte read so far, in order.
     pub received: Vec<u8>,
 }
@@ -30,8 +30,7 @@ impl Wire {
     pub fn open(path: &Path) -> Self {
         Self {
             file: eyebot_test_support::clients::open_raw(path),
-            decoder: LineDecoder::new(),
-            buf: BytesMut::new(),
+            client: EyeBotClient::new(),
             received: Vec::new(),
         }
     }
@@ -43,7 +42,9 @@ impl Wire {
 
     /// Encodes and writes a request frame.
     pub fn request(&mut self, seq: u8, message: Message) {
-        self.send(&frame_bytes(seq, message));
+        let mut b = BytesMut::new();
+        self.client.encode_request_as(seq, message, &mut b);
+        self.send(&b);
     }
 
     /// Reads what arrives within `wait` (polling); `false` if nothing did.
@@ -58,7 +59,7 @@ impl Wire {
                 let mut chunk = [0u8; 4096];
                 match (&self.file).read(&mut chunk) {
                     Ok(n) if n > 0 => {
-                        self.buf.extend_from_slice(&chunk[..n]);
+                        self.client.receive(&chunk[..n]);
                         self.received.extend_from_slice(&chunk[..n]);
                         true
                     }
@@ -71,9 +72,14 @@ impl Wire {
 
     /// The next decoded item, waiting at most `timeout` for it.
     pub fn next_item(&mut self, timeout: Duration) -> Option<LineItem> {
+        self.next_incoming(timeout).map(LineItem::from)
+    }
+
+    /// The next decoded item, classified (reply, push, ...), waiting at most `timeout`.
+    pub fn next_incoming(&mut self, timeout: Duration) -> Option<Incoming> {
         let deadline = Instant::now() + timeout;
         loop {
-            if let Some(item) = self.decoder.decode(&mut self.buf) {
+            if let Some(item) = self.client.next_incoming() {
                 return Some(item);
             }
             let left = deadline.saturating_duration_since(Instant::now());
@@ -99,13 +105,22 @@ impl Wire {
     /// The next frame that is not a push (types `0xC0` and up), within [`REPLY_WAIT`]; it must
     /// carry `seq`. `what` names the request in a failure.
     pub fn reply(&mut self, seq: u8, what: &str) -> Message {
+        self.reply_and_pushes(seq, what).0
+    }
+
+    /// Like [`reply`](Self::reply), with the pushes that came before the reply, in order.
+    pub fn reply_and_pushes(&mut self, seq: u8, what: &str) -> (Message, Vec<Frame>) {
+        let mut pushes = Vec::new();
         loop {
-            let frame = self.next_frame(what, REPLY_WAIT);
-            if frame.message.msg_type() >= 0xC0 {
-                continue;
+            match self.next_incoming(REPLY_WAIT) {
+                Some(Incoming::Push(frame)) => pushes.push(frame),
+                Some(Incoming::Nmea(_)) => {}
+                Some(Incoming::Reply(frame)) => {
+                    assert_eq!(frame.seq, seq, "{what}: reply seq");
+                    return (frame.message, pushes);
+                }
+                other => panic!("{what}: expected a frame, got {other:?}"),
             }
-            assert_eq!(frame.seq, seq, "{what}: reply seq");
-            return frame.message;
         }
     }
 

@@ -465,21 +465,9 @@ fn spec_list_after(prefix: &str) -> Vec<u64> {
 /// Advances `ticks` and returns the pushes sent during the advance, then checks the TIME.
 fn advance(s: &mut Wire, seq: u8, ticks: u32) -> Vec<Frame> {
     s.request(seq, Message::TimeAdvance { ticks });
-    let mut pushes = Vec::new();
-    loop {
-        let frame = s.next_frame("advance", WAIT);
-        if frame.message.msg_type() >= 0xC0 {
-            pushes.push(frame);
-            continue;
-        }
-        assert_eq!(frame.seq, seq);
-        assert!(
-            matches!(frame.message, Message::Time { .. }),
-            "{:?}",
-            frame.message
-        );
-        return pushes;
-    }
+    let (reply, pushes) = s.reply_and_pushes(seq, "advance");
+    assert!(matches!(reply, Message::Time { .. }), "{reply:?}");
+    pushes
 }
 
 /// Lockstep timing rules, exact in simulated time: the ADC stream's sample ticks for a period

@@ -12,6 +12,7 @@ use crate::config::{ConfigSource, DEFAULT_CONFIG, Document, Embedded};
 use crate::devices::multiplexer::{DepthSentence, InvalidEcho, Multiplexer, MultiplexerSettings};
 use crate::devices::sensor_board::{BoardSettings, SensorBoard};
 use crate::engine::fake::FakeModel;
+use crate::probe::{RetryPolicy, SensorClient};
 use crate::transport::serial;
 
 fn config(run_dir: &Path) -> DaemonConfig {
@@ -89,23 +90,23 @@ fn spawn_run(
     })
 }
 
-/// Sends `message` as frame `seq` on the sensor link and returns the reply to it.
-async fn ask(
-    (port, buf, decoder): &mut (
-        &mut tokio_serial::SerialStream,
-        &mut BytesMut,
-        &mut LineDecoder,
-    ),
-    seq: u8,
-    message: Message,
-) -> Message {
-    let mut frame = BytesMut::new();
-    Frame::new(seq, message).encode(&mut frame);
-    port.write_all(&frame).await.unwrap();
-    match read_item(port, buf, decoder).await {
-        LineItem::Frame(reply) if reply.seq == seq => reply.message,
-        other => panic!("expected the reply to frame {seq}, got {other:?}"),
-    }
+/// A sensor-link client that waits 5 s for each reply, without retries.
+fn sensor_client(path: &Path) -> SensorClient {
+    let mut client = SensorClient::open(path, &crate::transport::LineSettings::n81(115_200))
+        .expect("open the sensor link");
+    client.set_policy(RetryPolicy {
+        timeout: Duration::from_secs(5),
+        retries: 0,
+    });
+    client
+}
+
+/// Sends `message` on the sensor link and returns the reply to it.
+async fn ask(sensor: &mut SensorClient, message: Message) -> Message {
+    sensor
+        .request("test request", message, Duration::ZERO)
+        .await
+        .expect("the reply within 5 s")
 }
 
 /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
@@ -295,20 +296,14 @@ async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
     );
     assert!(dir.join("pid").exists());
 
-    let mut sensor = serial::open(
-        &run_dir.join("sensor"),
-        &crate::transport::LineSettings::n81(115_200),
-    )
-    .unwrap();
+    let mut sensor = sensor_client(&run_dir.join("sensor"));
     let mut sonar = serial::open(
         &run_dir.join("sonar"),
         &crate::transport::LineSettings::n81(4800),
     )
     .unwrap();
-    let (mut sbuf, mut sdec) = (BytesMut::new(), LineDecoder::new());
-    let mut sensor_link = (&mut sensor, &mut sbuf, &mut sdec);
     assert!(matches!(
-        ask(&mut sensor_link, 1, Message::Hello { client_version: 1 }).await,
+        ask(&mut sensor, Message::Hello { client_version: 1 }).await,
         Message::HelloReply { .. }
     ));
     let mut select = BytesMut::new();
@@ -316,7 +311,7 @@ async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
     sonar.write_all(&select).await.unwrap();
     // Give the select time to cross its pty before time moves on.
     tokio::time::sleep(Duration::from_millis(100)).await;
-    let time = ask(&mut sensor_link, 2, Message::TimeAdvance { ticks: 150 }).await;
+    let time = ask(&mut sensor, Message::TimeAdvance { ticks: 150 }).await;
     assert!(matches!(time, Message::Time { ticks: 150, .. }), "{time:?}");
     let (mut nbuf, mut ndec) = (BytesMut::new(), LineDecoder::new());
     assert!(matches!(
@@ -346,7 +341,7 @@ async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
     .await
     .unwrap();
     tokio::time::sleep(Duration::from_millis(200)).await;
-    let time = ask(&mut sensor_link, 3, Message::TimeAdvance { ticks: 50 }).await;
+    let time = ask(&mut sensor, Message::TimeAdvance { ticks: 50 }).await;
     assert!(matches!(time, Message::Time { ticks: 200, .. }), "{time:?}");
     let fed = read_item(&mut sonar, &mut nbuf, &mut ndec).await;
     let LineItem::Nmea(firmware_protocol::Sentence::Dbt(dbt)) = fed else {

@@ -400,7 +400,6 @@ pub const MAX_CURRENT_MPS: f64 = 2.0;
 
 #[cfg(test)]
 mod tests {
-    use firmware_protocol::Frame;
     use firmware_protocol::sensor_link::{AdcChannel, Message, Reading, Readings};
 
     use super::*;
@@ -473,17 +472,15 @@ mod tests {
 
     /// Sends `message` on the sensor line and returns the reply (pushes skipped).
     fn ask(core: &mut Engine<MakoPlant>, seq: u8, message: Message) -> Message {
+        let mut client = firmware_protocol::EyeBotClient::new();
         let mut buf = bytes::BytesMut::new();
-        Frame::new(seq, message).encode(&mut buf);
+        client.encode_request_as(seq, message, &mut buf);
         core.receive(1, &buf).unwrap();
-        let out = core.take_output(1).expect("a lockstep reply at once");
-        firmware_protocol::LineDecoder::decode_all(&out)
-            .into_iter()
-            .find_map(|item| match item {
-                firmware_protocol::LineItem::Frame(f) if f.seq == seq => Some(f.message),
-                _ => None,
-            })
-            .expect("the reply to the request")
+        client.receive(&core.take_output(1).expect("a lockstep reply at once"));
+        match client.take_reply(seq) {
+            Some(Ok(reply)) => reply,
+            other => panic!("the reply to the request: {other:?}"),
+        }
     }
 
     fn adc(core: &mut Engine<MakoPlant>, seq: u8, channel: u8) -> u16 {
