@@ -83,6 +83,9 @@ pub struct EyeBotClient {
     pushes: VecDeque<Frame>,
     errors: u64,
     stale_replies: u64,
+    /// Whether a whole item has been decoded yet.
+    started: bool,
+    joined_tail: usize,
 }
 
 impl EyeBotClient {
@@ -129,24 +132,47 @@ impl EyeBotClient {
     /// The next item on the line in arrival order, or `None` until more bytes are received.
     /// Pushes queued by [`take_reply`](Self::take_reply) are not among them: they wait for
     /// [`take_push`](Self::take_push).
+    ///
+    /// Bytes skipped before the first whole item are the tail of a message the line was
+    /// already sending when the client joined it (a sonar line carries sentences all the
+    /// time): they are counted in [`joined_tail`](Self::joined_tail), not as a wire error.
     pub fn next_incoming(&mut self) -> Option<Incoming> {
-        let item = Incoming::from(self.decoder.decode(&mut self.buf)?);
-        if matches!(item, Incoming::Error(_)) {
-            self.errors += 1;
+        loop {
+            let item = Incoming::from(self.decoder.decode(&mut self.buf)?);
+            if let Some(item) = self.classify(item) {
+                return Some(item);
+            }
         }
-        Some(item)
+    }
+
+    /// Counts `item`; `None` for the tail of a message joined in the middle.
+    fn classify(&mut self, item: Incoming) -> Option<Incoming> {
+        match item {
+            Incoming::Error(LinkError::Skipped { count }) if !self.started => {
+                self.joined_tail += count;
+                None
+            }
+            Incoming::Error(_) => {
+                self.errors += 1;
+                Some(item)
+            }
+            _ => {
+                self.started = true;
+                Some(item)
+            }
+        }
     }
 
     /// Like [`next_incoming`](Self::next_incoming), with the bytes the item was decoded from
     /// (the text of a sentence, for a person to read).
     pub fn next_incoming_with_bytes(&mut self) -> Option<(Incoming, BytesMut)> {
-        let d = self.decoder.decode_slice(&self.buf);
-        let bytes = self.buf.split_to(d.consumed);
-        let item = Incoming::from(d.item?);
-        if matches!(item, Incoming::Error(_)) {
-            self.errors += 1;
+        loop {
+            let d = self.decoder.decode_slice(&self.buf);
+            let bytes = self.buf.split_to(d.consumed);
+            if let Some(item) = self.classify(Incoming::from(d.item?)) {
+                return Some((item, bytes));
+            }
         }
-        Some((item, bytes))
     }
 
     /// The reply to the request `seq`, once it has been received: `Some(Ok(message))`, a NAK
@@ -192,6 +218,11 @@ impl EyeBotClient {
     /// Replies skipped because no request with their seq was awaited.
     pub fn stale_replies(&self) -> u64 {
         self.stale_replies
+    }
+
+    /// Bytes skipped before the first whole item: the tail of a message joined mid-way.
+    pub fn joined_tail(&self) -> usize {
+        self.joined_tail
     }
 }
 

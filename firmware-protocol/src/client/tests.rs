@@ -174,7 +174,8 @@ fn wire_errors_are_counted_returned_and_decoding_goes_on() {
     let mut bad = bytes_of(2, time(1));
     let last = bad.len() - 1;
     bad[last] ^= 0xFF;
-    client.receive(&[&b"zz"[..], &bad, &bytes_of(2, time(3))].concat());
+    let first = bytes_of(1, time(0));
+    client.receive(&[&first[..], &b"zz"[..], &bad, &bytes_of(2, time(3))].concat());
     let mut errors = Vec::new();
     let reply = loop {
         match client.take_reply(2) {
@@ -195,6 +196,38 @@ fn wire_errors_are_counted_returned_and_decoding_goes_on() {
         "{errors:?}"
     );
     assert_eq!(client.errors(), errors.len() as u64);
+    assert_eq!(client.joined_tail(), 0);
+}
+
+/// A client that opens a line in the middle of a message (a sonar line sends sentences all
+/// the time) first reads that message's tail: it is counted apart, not as a wire error, and
+/// the same bytes after the first whole item are one.
+#[test]
+fn the_tail_of_a_message_joined_mid_way_is_no_wire_error() {
+    let sentence = dbt();
+    let tail = &sentence[sentence.len() - 6..];
+    let mut client = EyeBotClient::new();
+    client.receive(&[tail, &sentence[..], tail].concat());
+    let (item, _) = client.next_incoming_with_bytes().expect("the sentence");
+    assert!(matches!(item, Incoming::Nmea(_)), "{item:?}");
+    assert_eq!(
+        (client.joined_tail(), client.errors()),
+        (4, 0),
+        "CR LF are not counted"
+    );
+    let mut more = client.clone();
+    assert_eq!(
+        more.next_incoming_with_bytes(),
+        None,
+        "a tail still waits for its end"
+    );
+    client.receive(&sentence);
+    assert!(matches!(
+        client.next_incoming(),
+        Some(Incoming::Error(LinkError::Skipped { count: 4 }))
+    ));
+    assert!(matches!(client.next_incoming(), Some(Incoming::Nmea(_))));
+    assert_eq!((client.joined_tail(), client.errors()), (4, 1));
 }
 
 #[test]
