@@ -1,0 +1,832 @@
+//! The library's entries, one value per effect: every effect `gap` can name and every
+//! discrepancy term calibration fits ([`Effect`] says what each field means). Adding an
+//! effect is adding an entry here, its row in `docs/gap/effects.md` and, when the benchmarks
+//! hide it, its name in the independent model.
+
+use super::{Behaviour, Calibration, Effect, Hiding, Kind};
+use crate::gap::edit::{Change, File::*, edit};
+use crate::physics::VehicleConfig;
+use crate::physics::state::{PORT, STARBOARD};
+
+/// Parameter `i` of `params`, 0 ("no change") where it is missing.
+fn at(params: &[f64], i: usize) -> f64 {
+    params.get(i).copied().unwrap_or(0.0)
+}
+
+/// Where a change common to every thruster shows: the track, speed, heading, depth and every
+/// accelerometer axis.
+const ALL_THRUSTERS: [&str; 9] = [
+    "x_m",
+    "y_m",
+    "surge_mps",
+    "paddle_speed_mps",
+    "compass_deg",
+    "depth_adc",
+    "accel_x_adc",
+    "accel_y_adc",
+    "accel_z_adc",
+];
+
+/// The library. Its order is the order candidates are fitted and reported in.
+pub const LIBRARY: [Effect; 34] = [
+    Effect {
+        name: "thruster_imbalance",
+        parameters: &["differential_gain"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "yaw bias that grows with thrust: heading and track curve the same way at every heading",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            c.vehicle.thrusters[PORT].gain =
+                (c.vehicle.thrusters[PORT].gain * (1.0 + at(p, 0) / 2.0)).clamp(0.1, 2.0);
+            c.vehicle.thrusters[STARBOARD].gain =
+                (c.vehicle.thrusters[STARBOARD].gain * (1.0 - at(p, 0) / 2.0)).clamp(0.1, 2.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint(3),
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[0.08],
+            bridge: |p| {
+                vec![
+                    edit(
+                        Vehicle,
+                        "thruster[0].gain",
+                        Change::Scale(1.0 + at(p, 0) / 2.0),
+                    ),
+                    edit(
+                        Vehicle,
+                        "thruster[1].gain",
+                        Change::Scale(1.0 - at(p, 0) / 2.0),
+                    ),
+                ]
+            },
+            independent: "thruster_imbalance",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "reverse_thrust_asymmetry",
+        parameters: &["reverse_ratio_scale"],
+        scales: &[0.1],
+        bounds: &[(-1.0, 2.0)],
+        signature: "track and heading disagree only while a horizontal thruster runs in reverse",
+        channels: &["x_m", "y_m", "compass_deg", "accel_x_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            for i in [PORT, STARBOARD] {
+                let t = &mut c.vehicle.thrusters[i];
+                t.reverse_ratio = (t.reverse_ratio * (1.0 + at(p, 0))).clamp(0.0, 1.0);
+            }
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint(2),
+        positive: false,
+        parameter_error_target: true,
+        hidden: None,
+    },
+    Effect {
+        name: "drag_mismatch",
+        parameters: &["surge_linear_scale", "surge_quadratic_scale"],
+        scales: &[0.2, 0.2],
+        bounds: &[(-0.9, 5.0), (-0.9, 5.0)],
+        signature: "speed error that grows with speed; along-track position error",
+        channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps", "accel_x_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 0, 1.0 + at(p, 0), 1.0 + at(p, 1)),
+        moves_anchors: false,
+        summary: &[Behaviour::Speed],
+        calibration: Calibration::Joint(4),
+        positive: false,
+        parameter_error_target: true,
+        hidden: None,
+    },
+    Effect {
+        name: "added_mass",
+        parameters: &["surge_added_kg"],
+        scales: &[5.0],
+        bounds: &[(-30.0, 100.0)],
+        signature: "along-track error only after thrust steps (acceleration), none at steady speed",
+        channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps", "accel_x_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            c.vehicle.added_mass[0] = (c.vehicle.added_mass[0] + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed],
+        calibration: Calibration::Joint(5),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "thruster_lag",
+        parameters: &["lag_s"],
+        scales: &[0.2],
+        bounds: &[(-1.0, 2.0)],
+        signature: "error right after command changes, decaying with a time constant",
+        channels: &[
+            "x_m",
+            "y_m",
+            "compass_deg",
+            "accel_x_adc",
+            "accel_y_adc",
+            "depth_adc",
+        ],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            let lag = &mut c.vehicle.thruster_common.lag_s;
+            *lag = (*lag + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed],
+        calibration: Calibration::Joint(6),
+        positive: true,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.25],
+            bridge: |p| vec![edit(Vehicle, "thrusters.lag_s", Change::Add(at(p, 0)))],
+            independent: "thruster_lag",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "water_current",
+        parameters: &["north_mps", "east_mps"],
+        scales: &[0.01, 0.01],
+        bounds: &[(-0.3, 0.3), (-0.3, 0.3)],
+        signature: "drift fixed to the world, independent of heading",
+        channels: &["x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            c.world.current_mps.x += at(p, 0);
+            c.world.current_mps.y += at(p, 1);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed, Behaviour::Turn],
+        calibration: Calibration::No,
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[0.02, -0.015],
+            bridge: |p| {
+                vec![
+                    edit(World, "water.current_mps[0]", Change::Add(at(p, 0))),
+                    edit(World, "water.current_mps[1]", Change::Add(at(p, 1))),
+                ]
+            },
+            independent: "water_current",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "compass_hard_iron",
+        parameters: &["x_ut", "y_ut"],
+        scales: &[1.0, 1.0],
+        bounds: &[(-50.0, 50.0), (-50.0, 50.0)],
+        signature: "compass error once per turn (first harmonic of heading)",
+        channels: &["compass_deg", "x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| {
+            c.sensors.compass.hard_iron_ut[0] += at(p, 0);
+            c.sensors.compass.hard_iron_ut[1] += at(p, 1);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Joint(11),
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[3.0, 2.0],
+            bridge: |p| {
+                vec![
+                    edit(Sensors, "compass.hard_iron_ut[0]", Change::Add(at(p, 0))),
+                    edit(Sensors, "compass.hard_iron_ut[1]", Change::Add(at(p, 1))),
+                ]
+            },
+            independent: "compass_hard_iron",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "compass_soft_iron",
+        parameters: &["diagonal_difference", "off_diagonal"],
+        scales: &[0.02, 0.02],
+        bounds: &[(-0.3, 0.3), (-0.3, 0.3)],
+        signature: "compass error twice per turn (second harmonic of heading)",
+        channels: &["compass_deg", "x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| {
+            let s = &mut c.sensors.compass.soft_iron;
+            s[0][0] += at(p, 0) / 2.0;
+            s[1][1] -= at(p, 0) / 2.0;
+            s[0][1] += at(p, 1);
+            s[1][0] += at(p, 1);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::No,
+        positive: false,
+        parameter_error_target: true,
+        hidden: None,
+    },
+    Effect {
+        name: "compass_tilt",
+        parameters: &["inclination_deg"],
+        scales: &[2.0],
+        bounds: &[(-45.0, 45.0)],
+        signature: "compass error only while tilted, depending on heading",
+        channels: &["compass_deg", "x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| {
+            let i = &mut c.sensors.compass.inclination_deg;
+            *i = (*i + at(p, 0)).clamp(-90.0, 90.0);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::No,
+        positive: true,
+        parameter_error_target: true,
+        hidden: None,
+    },
+    Effect {
+        name: "sensor_latency",
+        parameters: &["compass_latency_s"],
+        scales: &[0.1],
+        bounds: &[(-1.0, 2.0)],
+        signature: "compass error proportional to the turn rate",
+        channels: &["compass_deg", "x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| {
+            let l = &mut c.sensors.compass.errors.latency_s;
+            *l = (*l + at(p, 0)).max(0.0);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::No,
+        positive: true,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.4],
+            bridge: |p| {
+                vec![edit(
+                    Sensors,
+                    "compass.errors.latency_s",
+                    Change::Add(at(p, 0)),
+                )]
+            },
+            independent: "compass_latency",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "depth_pwm_emi",
+        parameters: &["emi_v_rms_full_duty"],
+        scales: &[0.05],
+        bounds: &[(0.0, 1.0)],
+        signature: "depth variance grows with the stern motor's duty",
+        channels: &["depth_adc"],
+        kind: Kind::Variance,
+        physics: false,
+        extend: |p, c| {
+            let e = &mut c.sensors.depth.emi_v_rms_full_duty;
+            *e = (*e + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::NoiseLevel,
+        positive: true,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.03],
+            bridge: |p| {
+                vec![edit(
+                    Sensors,
+                    "depth.emi_v_rms_full_duty",
+                    Change::Add(at(p, 0)),
+                )]
+            },
+            independent: "depth_emi",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "velocity_sensor_scale",
+        parameters: &["scale_factor"],
+        scales: &[0.1],
+        bounds: &[(-0.9, 5.0)],
+        signature: "paddle speed off by a constant factor at every speed",
+        channels: &["paddle_speed_mps"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| {
+            let s = &mut c.sensors.velocity.firmware_scale;
+            *s = (*s * (1.0 + at(p, 0))).max(0.01);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint(20),
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[0.25],
+            bridge: |p| {
+                vec![edit(
+                    Sensors,
+                    "velocity.pulses_per_metre",
+                    Change::Scale(1.0 + at(p, 0)),
+                )]
+            },
+            independent: "velocity_sensor_scale",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "sonar_incidence_dropout",
+        parameters: &["max_incidence_deg"],
+        scales: &[5.0],
+        bounds: &[(-90.0, 90.0)],
+        signature: "sonar readings missing when the wall is seen obliquely",
+        channels: &["sonar1_m", "sonar2_m", "sonar3_m", "sonar4_m"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| {
+            let m = &mut c.sensors.sonar.max_incidence_deg;
+            *m = (*m + at(p, 0)).clamp(0.0, 90.0);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::No,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    // SubSim's lumped thrust constant was wrong by a factor (thesis 5.1, 5.4), which no
+    // per-motor difference can express. `forward_max_n` is shared by all four thrusters, so
+    // the vertical pair (depth, heave force) and every thrust step (surge acceleration) show
+    // it as much as the track does.
+    Effect {
+        name: "thrust_gain",
+        parameters: &["gain_scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
+        signature: "every motor stronger or weaker alike, the vertical pair too: speed, turn rate, \
+                    acceleration at thrust steps and depth response off in proportion to thrust",
+        channels: &ALL_THRUSTERS,
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            let f = &mut c.vehicle.thruster_common.forward_max_n;
+            *f = (*f * (1.0 + at(p, 0))).max(1e-3);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed, Behaviour::Turn],
+        calibration: Calibration::Joint(0),
+        positive: false,
+        parameter_error_target: true,
+        hidden: Some(Hiding {
+            bridge_size: &[-0.2],
+            bridge: |p| {
+                vec![edit(
+                    Vehicle,
+                    "thrusters.forward_max_n",
+                    Change::Scale(1.0 + at(p, 0)),
+                )]
+            },
+            independent: "thrust_gain",
+            factor: false,
+        }),
+    },
+    // The static curve's shape: thrust ~ ((on - deadband) / (1 - deadband))^exponent. A
+    // propeller's thrust grows with rpm|rpm|, and rpm less than linearly with duty, so the
+    // exponent of a real motor is rarely the model's 1: a depth hold near half power, a cruise
+    // leg and a full-power spin are then off in different proportions, which no common gain
+    // can express.
+    Effect {
+        name: "thrust_curve",
+        parameters: &["exponent_scale"],
+        scales: &[0.2],
+        bounds: &[(-0.5, 2.0)],
+        signature: "thrust off in a proportion that changes with the command: part-power legs and \
+                    depth holds disagree more or less than full-power spins and dives",
+        channels: &ALL_THRUSTERS,
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            let e = &mut c.vehicle.thruster_common.exponent;
+            *e = (*e * (1.0 + at(p, 0))).max(0.1);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Speed, Behaviour::Turn],
+        calibration: Calibration::JointTwoStarts(1, 0.3),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "compass_offset",
+        parameters: &["offset_deg"],
+        scales: &[1.0],
+        bounds: &[(-30.0, 30.0)],
+        signature: "compass reads a constant angle off at every heading: the track runs at that \
+                    angle to the heading the compass reports, and the surface heading is off",
+        channels: &["compass_deg", "x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.sensors.compass.errors.bias += at(p, 0),
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Joint(10),
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[6.0],
+            bridge: |p| vec![edit(Sensors, "compass.errors.bias", Change::Add(at(p, 0)))],
+            independent: "compass_offset",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "depth_offset",
+        parameters: &["offset_m"],
+        scales: &[0.02],
+        bounds: &[(-0.5, 0.5)],
+        signature: "depth reads a constant distance off: visible where the vehicle floats at the \
+                    surface, whose depth the buoyancy fixes",
+        channels: &["depth_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.sensors.depth.errors.bias += at(p, 0),
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Joint(12),
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.08],
+            bridge: |p| vec![edit(Sensors, "depth.errors.bias", Change::Add(at(p, 0)))],
+            independent: "depth_offset",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "depth_gain",
+        parameters: &["scale_factor"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "depth changes read too large or too small in proportion: dives and climbs \
+                    off by a constant factor",
+        channels: &["depth_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| {
+            let g = &mut c.sensors.depth.volts_per_m;
+            *g = (*g * (1.0 + at(p, 0))).max(1e-3);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Joint(13),
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[0.1],
+            bridge: |p| {
+                vec![edit(
+                    Sensors,
+                    "depth.volts_per_m",
+                    Change::Scale(1.0 + at(p, 0)),
+                )]
+            },
+            independent: "depth_gain",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "accel_x_offset",
+        parameters: &["offset_lsb"],
+        scales: &[2.0],
+        bounds: &[(-200.0, 200.0)],
+        signature: "surge accelerometer code off by a constant at every speed and thrust",
+        channels: &["accel_x_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.analog.accel_offset_lsb[0] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint(14),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "accel_y_offset",
+        parameters: &["offset_lsb"],
+        scales: &[2.0],
+        bounds: &[(-200.0, 200.0)],
+        signature: "sway accelerometer code off by a constant in straight runs and turns alike",
+        channels: &["accel_y_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.analog.accel_offset_lsb[1] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint(15),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "accel_z_offset",
+        parameters: &["offset_lsb"],
+        scales: &[2.0],
+        bounds: &[(-200.0, 200.0)],
+        signature: "heave accelerometer code off by a constant (the 1 g reading shifted)",
+        channels: &["accel_z_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.analog.accel_offset_lsb[2] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint(16),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "accel_x_gain",
+        parameters: &["scale_factor"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "surge accelerometer swings too large or small around its zero-g code",
+        channels: &["accel_x_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.analog.accel_gain_scale[0] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint(17),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "accel_y_gain",
+        parameters: &["scale_factor"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "sway accelerometer swings too large or small around its zero-g code",
+        channels: &["accel_y_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.analog.accel_gain_scale[1] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint(18),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "accel_z_gain",
+        parameters: &["scale_factor"],
+        scales: &[0.05],
+        bounds: &[(-0.5, 0.5)],
+        signature: "heave accelerometer's 1 g reading too far from or near its zero-g code",
+        channels: &["accel_z_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.analog.accel_gain_scale[2] += at(p, 0),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Joint(19),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "yaw_damping",
+        parameters: &["scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
+        signature: "turn rate off for a given thrust couple: spins too fast or slow, heading \
+                    overshoots or lags after a turn command",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 5, 1.0 + at(p, 0), 1.0 + at(p, 0)),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint(7),
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[1.5],
+            bridge: |p| {
+                vec![
+                    edit(Vehicle, "damping.linear[5]", Change::Scale(at(p, 0))),
+                    edit(Vehicle, "damping.quadratic[5]", Change::Scale(at(p, 0))),
+                ]
+            },
+            independent: "yaw_damping",
+            factor: true,
+        }),
+    },
+    Effect {
+        name: "yaw_damping_quadratic",
+        parameters: &["scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
+        signature: "fast spins too fast or slow while gentle turns match: the part of the yaw \
+                    damping that grows with the turn rate is off",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 5, 1.0, 1.0 + at(p, 0)),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint(8),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "sway_yaw_coupling",
+        parameters: &["n_v_nm_per_mps"],
+        scales: &[2.0],
+        bounds: &[(-30.0, 30.0)],
+        signature: "turns made while moving are tighter or wider than spot turns predict: the \
+                    hull's sway in a turn adds a yaw moment, so heading and track disagree only \
+                    when turn and speed come together",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| c.vehicle.damping_sway_yaw[1] += at(p, 0),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Joint(9),
+        positive: false,
+        parameter_error_target: false,
+        hidden: Some(Hiding {
+            bridge_size: &[5.0],
+            bridge: |p| vec![edit(Vehicle, "damping.sway_yaw[1]", Change::Add(at(p, 0)))],
+            independent: "sway_yaw_coupling",
+            factor: false,
+        }),
+    },
+    Effect {
+        name: "sway_damping",
+        parameters: &["scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
+        signature: "the hull slides sideways in turns more or less than modelled: track \
+                    curvature and heading rate off together while turning under way",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 1, 1.0 + at(p, 0), 1.0 + at(p, 0)),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(21),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "sway_added_mass",
+        parameters: &["added_kg"],
+        scales: &[5.0],
+        bounds: &[(-30.0, 100.0)],
+        signature: "sideways slip lags or leads after each turn command",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            c.vehicle.added_mass[1] = (c.vehicle.added_mass[1] + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(22),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "yaw_added_inertia",
+        parameters: &["added_kgm2"],
+        scales: &[0.5],
+        bounds: &[(-2.5, 10.0)],
+        signature: "turn rate builds up and dies away faster or slower than modelled; steady \
+                    spins match",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            c.vehicle.added_mass[5] = (c.vehicle.added_mass[5] + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(23),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "sway_from_yaw",
+        parameters: &["y_r_n_s"],
+        scales: &[1.0],
+        bounds: &[(-20.0, 20.0)],
+        signature: "a turn pushes the hull sideways: track drifts out of or into spot turns",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| c.vehicle.damping_sway_yaw[0] += at(p, 0),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(24),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "heave_damping",
+        parameters: &["scale"],
+        scales: &[0.2],
+        bounds: &[(-0.9, 5.0)],
+        signature: "depth changes faster or slower than modelled for the same vertical thrust",
+        channels: &["depth_adc", "accel_z_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| scale_damping(&mut c.vehicle, 2, 1.0 + at(p, 0), 1.0 + at(p, 0)),
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Discrepancy(25),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "net_buoyancy",
+        parameters: &["extra_n"],
+        scales: &[0.5],
+        bounds: &[(-10.0, 10.0)],
+        signature: "the vehicle rises or sinks between depth commands more than modelled: a \
+                    depth drift of one sign whenever the vertical thrusters are idle",
+        channels: &["depth_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            let weight_per_m3 = c.world.water_density_kgpm3 * c.world.gravity_mps2;
+            let v = &mut c.vehicle.displaced_volume_m3;
+            *v = (*v + at(p, 0) / weight_per_m3).max(1e-4);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Discrepancy(26),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "depth_port_position",
+        parameters: &["forward_m"],
+        scales: &[0.1],
+        bounds: &[(-0.7, 0.7)],
+        signature: "depth readings follow the pitch: a port away from the centre of mass reads \
+                    deeper when its end dips",
+        channels: &["depth_adc"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| c.sensors.depth.position_body_m[0] += at(p, 0),
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Discrepancy(27),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+];
+
+/// Scales `axis`'s linear and quadratic damping by `linear` and `quadratic` (each kept >= 0),
+/// leaving a little linear damping when both would vanish: every axis stays damped, as the
+/// vehicle configuration requires.
+fn scale_damping(v: &mut VehicleConfig, axis: usize, linear: f64, quadratic: f64) {
+    v.damping_linear[axis] = (v.damping_linear[axis] * linear).max(0.0);
+    v.damping_quadratic[axis] = (v.damping_quadratic[axis] * quadratic).max(0.0);
+    if v.damping_linear[axis] + v.damping_quadratic[axis] <= 0.0 {
+        v.damping_linear[axis] = 1e-3;
+    }
+}
