@@ -3,6 +3,9 @@
 //!
 //! Test code (`#[cfg(test)] mod ... { }` and `tests.rs` files) may compose layers and is not
 //! checked; comments are not checked.
+//!
+//! The same document's "Tests" section names every test, benchmark and fuzz-target file by its
+//! path; a file it does not name fails here too.
 
 use std::path::{Path, PathBuf};
 
@@ -205,4 +208,111 @@ fn the_check_finds_a_back_edge_and_skips_tests_and_comments() {
         found[0].starts_with("src/engine/mod.rs:8: `crate::view`"),
         "{found:?}"
     );
+}
+
+/// The folders whose `*.rs` files cargo builds as test binaries, benchmarks or fuzz targets
+/// (their top level only: a subfolder such as `tests/support/` is a module or a crate).
+const TEST_DIRS: &[&str] = &[
+    "tests",
+    "benches",
+    "fuzz/fuzz_targets",
+    "pty-tests/tests",
+    "pty-tests/benches",
+    "firmware-protocol/tests",
+    "firmware-protocol/benches",
+    "firmware-protocol/fuzz/fuzz_targets",
+];
+
+/// The `## Tests` section of the architecture document `doc`, up to the next `## ` heading.
+fn tests_section(doc: &str) -> &str {
+    let start = doc
+        .find("\n## Tests\n")
+        .expect("docs/ARCHITECTURE.md has a `## Tests` section");
+    let rest = &doc[start + 1..];
+    match rest[1..].find("\n## ") {
+        Some(end) => &rest[..end + 1],
+        None => rest,
+    }
+}
+
+/// Whether `text` names `path` whole: not as the tail of a longer path
+/// (`tests/fuzz_corpora.rs` inside `firmware-protocol/tests/fuzz_corpora.rs`) and not as the
+/// head of a longer name.
+fn names_path(text: &str, path: &str) -> bool {
+    text.match_indices(path).any(|(at, _)| {
+        let before = text[..at].chars().next_back();
+        let after = text[at + path.len()..].chars().next();
+        !before.is_some_and(|c| c.is_alphanumeric() || "/_-.".contains(c))
+            && !after.is_some_and(|c| c.is_alphanumeric() || c == '_')
+    })
+}
+
+/// The `*.rs` files at the top of each of `dirs` under `root` that `text` does not name, as
+/// paths relative to `root` (`tests/gap_slurm.rs`).
+fn unnamed_test_files(root: &Path, dirs: &[&str], text: &str) -> Vec<String> {
+    let mut missing = Vec::new();
+    for dir in dirs {
+        let entries = std::fs::read_dir(root.join(dir))
+            .unwrap_or_else(|e| panic!("{}: {e}", root.join(dir).display()));
+        let mut files: Vec<String> = entries
+            .map(|entry| entry.expect("a directory entry").path())
+            .filter(|path| path.is_file() && path.extension().is_some_and(|e| e == "rs"))
+            .map(|path| {
+                let name = path.file_name().expect("a file name").to_string_lossy();
+                format!("{dir}/{name}")
+            })
+            .collect();
+        assert!(
+            !files.is_empty(),
+            "no `*.rs` file in {dir}: if the folder moved, update TEST_DIRS in tests/layers.rs"
+        );
+        files.sort();
+        missing.extend(files.into_iter().filter(|file| !names_path(text, file)));
+    }
+    missing
+}
+
+#[test]
+fn every_test_file_is_named_in_the_architecture() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let doc_path = root.join("docs/ARCHITECTURE.md");
+    let doc = std::fs::read_to_string(&doc_path)
+        .unwrap_or_else(|e| panic!("{}: {e}", doc_path.display()));
+    let missing = unnamed_test_files(root, TEST_DIRS, tests_section(&doc));
+    assert!(
+        missing.is_empty(),
+        "not named in the \"Tests\" section of docs/ARCHITECTURE.md:\n  {}\n\
+         add a row for each to its crate's table there: | `PATH` | what it checks |",
+        missing.join("\n  ")
+    );
+}
+
+/// The name check reports a file the text does not name, wants each path whole, and lists
+/// only the `*.rs` files at the top of each folder.
+#[test]
+fn the_name_check_wants_each_path_whole() {
+    let dir = eyebot_test_support::TempDir::new("layers-names");
+    for file in [
+        "tests/named.rs",
+        "tests/fuzz_corpora.rs",
+        "tests/gap.rs",
+        "tests/unnamed.rs",
+        "tests/data.txt",
+        "tests/common/mod.rs",
+        "crate/tests/fuzz_corpora.rs",
+    ] {
+        let path = dir.path().join(file);
+        std::fs::create_dir_all(path.parent().expect("a parent")).expect("mkdir");
+        std::fs::write(&path, "").expect("write");
+    }
+    let text = "| `tests/named.rs` | ... |\n| `crate/tests/fuzz_corpora.rs` | ... |\n\
+                | `tests/gap.rsx` | ... |\n";
+    let missing = unnamed_test_files(dir.path(), &["tests", "crate/tests"], text);
+    assert_eq!(
+        missing,
+        ["tests/fuzz_corpora.rs", "tests/gap.rs", "tests/unnamed.rs"]
+    );
+    let doc = "# A\n\n## Tests\n\n`tests/in.rs`\n\n## Known limits\n\n`tests/out.rs`\n";
+    assert!(names_path(tests_section(doc), "tests/in.rs"));
+    assert!(!names_path(tests_section(doc), "tests/out.rs"));
 }
