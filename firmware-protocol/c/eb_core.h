@@ -19,6 +19,11 @@ long eb_now_ticks(void);
  * real time sleeps on the host clock. Returns at once when `tick` has passed. Ends the
  * program when EYEBOT_STOP_S is reached. */
 void eb_time_until(long tick);
+/* Called by every polling RoBIOS call (input, sensor, clock): in lockstep, lets one tick
+ * pass after EYEBOT_POLLS_PER_TICK of them without a wait (opens the session). */
+void eb_poll(void);
+/* OSCheckInRS232 without counting as a poll: for the library's own reads. */
+int eb_check_in(int port);
 /* Real time only: sleeps n ticks measured from now (OSWait's plain relative wait). */
 void eb_time_sleep(long n);
 

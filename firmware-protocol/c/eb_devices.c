@@ -348,7 +348,7 @@ int IRTVSetControlBit(int bit) {
 /* ---- sound samples and the microphone ------------------------------------------------------ */
 int AUPlaySample(BYTE *sample) {
     fprintf(stderr, "eyebot: sound: sample %s at t %.2f s\n", sample ? "played" : "(NULL) not played",
-            OSGetCount() / 100.0);
+            eb_now_ticks() / 100.0);
     return sample ? 0 : -1;
 }
 int AUCheckSample(void) { return 1; }

@@ -7,7 +7,8 @@
  * which in lockstep is the bridge's simulated time. Timers fire at their tick and threads
  * switch only at defined points, so the same program and seed give the same bytes on any
  * host and under qemu-m68k:
- *   - time passes only in OSWait/OSSleep (and the key calls built on them); a wait is cut
+ *   - time passes only in OSWait/OSSleep (and the key calls built on them, and the one
+ *     tick a long run of polling calls is given in lockstep: eb_poll); a wait is cut
  *     at every tick a timer is due, the bridge is advanced to that tick, and the due timers
  *     run in the order they were attached;
  *   - threads (ucontext, one at a time) switch in OSWait/OSSleep, OSYield, OSReschedule, a
@@ -511,6 +512,7 @@ BYTE OSReadInLatch(int latchnr) {
     int i;
     if (latch_count < 0) latch_load();
     if (latchnr < 0 || latchnr >= LATCHES) return 0;
+    eb_poll();
     if (latch_count == 0) return LATCH_IDLE;
     now = eb_now_ticks();
     for (i = 0; i < latch_count; i++) {

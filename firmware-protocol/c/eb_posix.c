@@ -27,6 +27,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "eb_core.h"
 #include "eb_port.h"
 #include "eyebot.h"
 
@@ -357,18 +358,19 @@ static void no_key_left(const char *call, int excode) {
                  "eyebot: %s(0x%X) waits for a key but the key script is empty: set "
                  "EYEBOT_KEYS, e.g. EYEBOT_KEYS=4 to press KEY4 at once, or 1,4@60 "
                  "(docs/eyebot.md); program stopped at t %.2f s",
-                 call, (unsigned)excode, OSGetCount() / 100.0);
+                 call, (unsigned)excode, eb_now_ticks() / 100.0);
     else
         snprintf(text, sizeof text,
                  "eyebot: %s(0x%X) waits for a key but the key script (EYEBOT_KEYS) is used "
                  "up; program stopped at t %.2f s",
-                 call, (unsigned)excode, OSGetCount() / 100.0);
+                 call, (unsigned)excode, eb_now_ticks() / 100.0);
     eb_exit(5, text);
 }
 
 int KEYRead(void) {
     if (key_count < 0) keys_load();
-    if (key_next < key_count && OSGetCount() >= key_due_ticks[key_next]) return key_codes[key_next++];
+    eb_poll();
+    if (key_next < key_count && eb_now_ticks() >= key_due_ticks[key_next]) return key_codes[key_next++];
     return NOKEY;
 }
 
@@ -378,7 +380,7 @@ static int key_wait(const char *call, int excode) {
         long now;
         int key;
         if (key_next >= key_count) no_key_left(call, excode);
-        now = OSGetCount();
+        now = eb_now_ticks();
         if (now < key_due_ticks[key_next]) {
             OSWait((int)(key_due_ticks[key_next] - now));
             continue;
@@ -396,15 +398,18 @@ int KEYGet(void) { return key_wait("KEYGet", ANYKEY); }
 static long tone_end_ticks;
 
 int AUTone(int freq, int msec) {
-    long now = OSGetCount();
+    long now = eb_now_ticks();
     fprintf(stderr, "eyebot: sound: tone %d Hz for %d ms at t %.2f s\n", freq, msec, now / 100.0);
     tone_end_ticks = now + (msec > 0 ? (msec + 9) / 10 : 0);
     return 0;
 }
 
 int AUBeep(void) {
-    fprintf(stderr, "eyebot: sound: beep at t %.2f s\n", OSGetCount() / 100.0);
+    fprintf(stderr, "eyebot: sound: beep at t %.2f s\n", eb_now_ticks() / 100.0);
     return 0;
 }
 
-int AUCheckTone(void) { return OSGetCount() >= tone_end_ticks; }
+int AUCheckTone(void) {
+    eb_poll();
+    return eb_now_ticks() >= tone_end_ticks;
+}

@@ -143,7 +143,7 @@ static void handle_line(void) {
 /* Reads what the sonar line has brought and moves the measuring on; never waits. */
 static void psd_poll(void) {
     if (P.port == 0) return;
-    while (OSCheckInRS232(P.port) > 0) {
+    while (eb_check_in(P.port) > 0) {
         char c;
         if (OSRecvRS232(&c, P.port) != 0) break;
         if (c == '\r') continue;
@@ -187,7 +187,7 @@ PSDHandle PSDInit(DeviceSemantics semantics) {
     }
     if (P.port == 0) {
         int port = eb_sonar_port();
-        if (OSCheckInRS232(port) < 0 && OSInitRS232(SER4800, NONE, port) != 0) {
+        if (eb_check_in(port) < 0 && OSInitRS232(SER4800, NONE, port) != 0) {
             char text[160];
             snprintf(text, sizeof text,
                      "PSDInit: the sonar line SERIAL%d (EYEBOT_SONAR_PORT) does not open; "

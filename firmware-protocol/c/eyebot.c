@@ -99,6 +99,8 @@ static struct {
     uint32_t tick_us;      /* the bridge's tick */
     uint32_t now_bridge;   /* lockstep: the bridge's time in its ticks, from its last TIME */
     int serial_written;    /* lockstep: bytes went out on a serial port since the last advance */
+    long polls;            /* lockstep: polling calls since time last passed */
+    long polls_per_tick;   /* EYEBOT_POLLS_PER_TICK: polls that let one tick pass, 0 = never */
     uint16_t capabilities;
     long timeout_ms;
     int retries;
@@ -342,6 +344,7 @@ static void session_open(void) {
     S.retries = (int)config_long("EYEBOT_RETRIES", 3);
     S.shared_port = (int)config_long("EYEBOT_SHARED_PORT", 0);
     S.recv_timeout_ticks = config_long("EYEBOT_RECV_TIMEOUT_TICKS", 100);
+    S.polls_per_tick = config_long("EYEBOT_POLLS_PER_TICK", 1000);
     stop_s = config_long("EYEBOT_STOP_S", 0);
     S.stop_ticks = stop_s > 0 ? (uint32_t)stop_s * 100U : 0;
     S.compass_latest = -1;
@@ -576,6 +579,7 @@ static void advance(uint32_t program_ticks) {
     uint8_t p[4];
     uint32_t n = to_bridge_ticks(program_ticks);
     int r;
+    S.polls = 0;
     serial_sync();
     if (R.enabled) {
         step(n, 0);
@@ -663,7 +667,25 @@ int OSSleep(int n) {
 }
 #endif
 
-int OSGetCount(void) { return (int)eb_now_ticks(); }
+/* In lockstep simulated time passes only when the program waits, so a loop that polls
+ * (KEYRead, OSGetCount, AUCheckTone, a latch, a sensor) and never waits would stop it for
+ * ever, where on an EyeBot every call costs CPU time. Every EYEBOT_POLLS_PER_TICK polling
+ * calls without time passing in between let one tick pass, as OSWait(1) does (timers run,
+ * other threads get their turn). Not inside a timer function, which must not wait. */
+void eb_poll(void) {
+#ifndef EYEBOT_BACKEND_ROBIOS
+    ensure_session();
+    if (S.mode != MODE_LOCKSTEP || S.polls_per_tick <= 0 || eb_in_timer()) return;
+    if (++S.polls < S.polls_per_tick) return;
+    S.polls = 0;
+    OSWait(1);
+#endif
+}
+
+int OSGetCount(void) {
+    eb_poll();
+    return (int)eb_now_ticks();
+}
 
 int eb_sonar_port(void) {
     ensure_session();
@@ -696,10 +718,15 @@ int OSSendRS232(char *chr, int port) {
     return OSSendCharRS232(*chr, port);
 }
 
-int OSCheckInRS232(int port) {
+int eb_check_in(int port) {
     if (!valid_port(port) || !ring[port].open) return -1;
     poll_serial();
     return (int)ring[port].len;
+}
+
+int OSCheckInRS232(int port) {
+    eb_poll();
+    return eb_check_in(port);
 }
 
 int OSRecvRS232(char *buf, int port) {
@@ -777,7 +804,7 @@ int OSGetAD(int channel) {
     uint16_t v;
     int r;
     if (channel < 0 || channel > 7) return -1;
-    ensure_session();
+    eb_poll();
     if (S.mode == MODE_LOCKSTEP && buffered_reading((uint8_t)channel, &v)) return (int)(v & 0x3FF);
     p[0] = (uint8_t)channel;
     r = request(T_ADC_READ, p, 1, 0);
@@ -834,7 +861,7 @@ static int decode_heading(void) {
 int COMPASSGet(void) {
     int r;
     uint16_t word;
-    ensure_session();
+    eb_poll();
     if (S.compass_cycle && S.compass_fresh) {
         S.compass_fresh = 0;
         return S.compass_latest;

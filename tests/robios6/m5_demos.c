@@ -15,7 +15,7 @@ int play(tone *tune)
 
   for (n = 0; tune[n].freq != 0 && tune[n].len != 0; n++)
   { AUTone(tune[n].freq, tune[n].len);
-    while (!AUCheckTone()) OSWait(1);  /* let the note sound out */
+    while (!AUCheckTone());  /* let the note sound out */
   }
   return n;
 }
