@@ -1,0 +1,76 @@
+use super::*;
+use nalgebra::DMatrix;
+
+fn fixture(case: &str) -> Run {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("pty-tests/fixtures/gap")
+        .join(case);
+    Run::load(&dir).expect("fixture loads")
+}
+
+fn model() -> GapModel {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/models/mako.toml");
+    GapModel::load(&path).expect("model loads")
+}
+
+fn refused(baseline: &[Run], spread_from: &[Run]) -> String {
+    match calibrate(&model(), baseline, &[], spread_from, &mut |_| {}) {
+        Err(GapError::Data(msg)) => msg,
+        Err(e) => panic!("expected a data error, got {e}"),
+        Ok(_) => panic!("calibration accepted spread runs it cannot use"),
+    }
+}
+
+/// A spread needs two or more runs the calibration was not fitted to; the error names
+/// the flag, the run and what was expected, before any fitting starts.
+#[test]
+fn spread_runs_it_cannot_use_are_refused_naming_the_run() {
+    let base = [fixture("null")];
+    let one = refused(&base, &[fixture("drag-mismatch")]);
+    assert!(one.contains("--spread-from"), "{one}");
+    assert!(one.contains("drag-mismatch"), "{one}");
+    assert!(one.contains("two or more"), "{one}");
+    let overlap = refused(&base, &[fixture("drag-mismatch"), fixture("null")]);
+    assert!(overlap.contains("--spread-from"), "{overlap}");
+    assert!(overlap.contains("null"), "{overlap}");
+    assert!(overlap.contains("not fitted to"), "{overlap}");
+}
+
+/// A sensor effect the joint fit drove onto its bound, and any effect the data do not
+/// bound, are left out of the calibration with the reason; a physics effect on its bound
+/// with a finite interval stays (the dynamics take the disagreement, not a sensor).
+#[test]
+fn unidentified_and_bound_sensor_effects_are_named() {
+    let by = |n: &str| effects::by_name(n).unwrap();
+    let chosen = [
+        by("depth_gain"),
+        by("thrust_gain"),
+        by("compass_offset"),
+        by("yaw_damping"),
+    ];
+    // In units of each typical size: depth_gain on its upper bound 0.5, thrust_gain
+    // inside, compass_offset unmoved by the data, yaw_damping on its lower bound -0.9.
+    let x = DVector::from_vec(vec![0.5 / 0.05, 0.1 / 0.2, 0.0, -0.9 / 0.2]);
+    let mut j = DMatrix::zeros(8, 4);
+    for r in 0..8 {
+        j[(r, 0)] = 3.0 + r as f64;
+        j[(r, 1)] = 5.0 - r as f64 * 0.5;
+        j[(r, 3)] = 2.0 + (r % 3) as f64;
+    }
+    let fit = lsq::Fit {
+        x: x.clone(),
+        residuals: DVector::from_element(8, 0.1),
+        jacobian: Some(j),
+        evaluations: 0,
+        at_bound: true,
+        termination: levenberg_marquardt::TerminationReason::Converged {
+            ftol: true,
+            xtol: true,
+        },
+    };
+    let out = unidentified_effects(&chosen, &x, &fit);
+    let names: Vec<&str> = out.iter().map(|(e, _)| e.name).collect();
+    assert_eq!(names, vec!["depth_gain", "compass_offset"], "{out:?}");
+    assert!(out[0].1.contains("bound"), "{}", out[0].1);
+    assert!(out[1].1.contains("do not bound"), "{}", out[1].1);
+}
