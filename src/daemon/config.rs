@@ -232,42 +232,8 @@ impl DaemonConfig {
         base_dir: Option<&std::path::Path>,
     ) -> Result<Self, ConfigError> {
         let raw: RawDaemon = doc.parse()?;
-        let file_speed = doc.check_range(
-            "run.speed",
-            raw.run.speed,
-            *SPEED_RANGE.start(),
-            *SPEED_RANGE.end(),
-            "x real time",
-        )?;
-        let speed = match overrides.speed {
-            Some(speed) if !(speed.is_finite() && SPEED_RANGE.contains(&speed)) => {
-                return Err(ConfigError::Override {
-                    option: "--speed".into(),
-                    key: "run.speed".into(),
-                    message: format!(
-                        "{speed:?} is outside the allowed range {}..={} x real time",
-                        SPEED_RANGE.start(),
-                        SPEED_RANGE.end()
-                    ),
-                });
-            }
-            Some(speed) => speed,
-            None => file_speed,
-        };
-        let file_mode = match raw.run.time_mode.as_str() {
-            "realtime" => TimeModeName::Realtime,
-            "lockstep" => TimeModeName::Lockstep,
-            other => {
-                return Err(doc.invalid(
-                    "run.time_mode",
-                    format!("`{other}` is not a time mode; expected `realtime` or `lockstep`"),
-                ));
-            }
-        };
-        let time_mode = match overrides.time_mode.unwrap_or(file_mode) {
-            TimeModeName::Realtime => TimeMode::Realtime { speed },
-            TimeModeName::Lockstep => TimeMode::Lockstep,
-        };
+        let speed = resolve_speed(doc, &raw.run, overrides)?;
+        let time_mode = resolve_time_mode(doc, &raw.run, overrides, speed)?;
         let max_lag_ms =
             doc.check_range("run.max_lag_ms", raw.run.max_lag_ms, 1.0, 10_000.0, "ms")?;
         let release_quantum_ms = doc.check_range(
@@ -277,34 +243,8 @@ impl DaemonConfig {
             10.0,
             "ms",
         )?;
-        let cpu_latency_us = match raw.run.cpu_latency_us {
-            None => None,
-            Some(us) => Some(
-                u32::try_from(us)
-                    .ok()
-                    .filter(|us| *us <= 1_000_000)
-                    .ok_or_else(|| {
-                        doc.invalid(
-                            "run.cpu_latency_us",
-                            format!("{us} is out of range; expected 0 to 1000000 µs"),
-                        )
-                    })?,
-            ),
-        };
-        let rt_priority = match raw.run.rt_priority {
-            None => None,
-            Some(p) => Some(
-                i32::try_from(p)
-                    .ok()
-                    .filter(|p| (1..=99).contains(p))
-                    .ok_or_else(|| {
-                        doc.invalid(
-                            "run.rt_priority",
-                            format!("{p} is out of range; expected a SCHED_FIFO priority 1 to 99"),
-                        )
-                    })?,
-            ),
-        };
+        let cpu_latency_us = resolve_cpu_latency_us(doc, raw.run.cpu_latency_us)?;
+        let rt_priority = resolve_rt_priority(doc, raw.run.rt_priority)?;
         // (key, value, min, max, unit); the first out of range is reported.
         let [state_record_hz, watchdog_s, tick_s] = [
             (
@@ -335,36 +275,7 @@ impl DaemonConfig {
             return Err(doc.invalid("run.run_dir", "must not be empty"));
         }
         let m = &raw.devices.multiplexer;
-        let sentence = match m.sentence.as_str() {
-            "DBT" => DepthSentence::Dbt,
-            "DPT" => DepthSentence::Dpt {
-                offset_m: doc.check_range(
-                    "devices.multiplexer.dpt_offset_m",
-                    m.dpt_offset_m,
-                    -99.0,
-                    99.0,
-                    "m",
-                )?,
-            },
-            other => {
-                return Err(doc.invalid(
-                    "devices.multiplexer.sentence",
-                    format!("`{other}` is not a depth sentence; expected `DBT` or `DPT`"),
-                ));
-            }
-        };
-        let talker = Talker::new(&m.talker)
-            .map_err(|e| doc.invalid("devices.multiplexer.talker", e.to_string()))?;
-        let invalid_echo = match m.invalid_echo.as_str() {
-            "omit" => InvalidEcho::Omit,
-            "empty" => InvalidEcho::EmptyFields,
-            other => {
-                return Err(doc.invalid(
-                    "devices.multiplexer.invalid_echo",
-                    format!("`{other}` is not a policy; expected `omit` or `empty`"),
-                ));
-            }
-        };
+        let multiplexer = resolve_multiplexer(doc, m)?;
         let compass_period_s = doc.check_range(
             "devices.compass.continuous_period_s",
             raw.devices.compass.continuous_period_s,
@@ -372,38 +283,10 @@ impl DaemonConfig {
             10.0,
             "s",
         )?;
-        for (i, axis) in ["x", "y", "z"].iter().enumerate() {
-            doc.check_range(
-                "start.position_m",
-                raw.start.position_m[i],
-                -1000.0,
-                1000.0,
-                &format!("m ({axis})"),
-            )?;
-        }
-        let heading_deg = doc.check_range(
-            "start.heading_deg",
-            raw.start.heading_deg,
-            -360.0,
-            360.0,
-            "deg",
-        )?;
+        let start = resolve_start(doc, &raw.start)?;
         let sonar = resolve_link(doc, "sonar", raw.links.sonar, false)?;
         let sensor = resolve_link(doc, "sensor", raw.links.sensor, true)?;
-        // Two links on one path: the second would replace the first's symlink or device,
-        // leaving that link unreachable. (`shared` is the one way for them to share a line.)
-        let same = match (&sonar.endpoint, &sensor.endpoint) {
-            (Endpoint::Pty { link: a }, Endpoint::Pty { link: b }) => a == b,
-            (Endpoint::Serial { device: a }, Endpoint::Serial { device: b }) => a == b,
-            (Endpoint::Tcp { addr: a }, Endpoint::Tcp { addr: b }) => a == b,
-            _ => false,
-        };
-        if same {
-            return Err(doc.invalid(
-                "links.sensor.path",
-                "is the same as `links.sonar.path`; two links cannot share a path (use `endpoint = \"shared\"` for one line carrying both)",
-            ));
-        }
+        check_links_distinct(doc, &sonar, &sensor)?;
         Ok(Self {
             vehicle: raw.vehicle,
             world: raw.world,
@@ -419,22 +302,14 @@ impl DaemonConfig {
                 .clone()
                 .unwrap_or_else(|| PathBuf::from(raw.run.run_dir)),
             state_record_hz,
-            start: Start {
-                position_m: nalgebra::Vector3::from(raw.start.position_m),
-                heading_deg,
-            },
+            start,
             start_line: doc.line_of("start.position_m"),
             origin: doc.origin().to_string(),
             sonar,
             sensor,
             watchdog: (watchdog_s > 0.0).then(|| Duration::from_secs_f64(watchdog_s)),
             tick: Duration::from_secs_f64(tick_s),
-            multiplexer: MultiplexerSettings {
-                sentence,
-                talker,
-                invalid_echo,
-                proprietary: m.proprietary,
-            },
+            multiplexer,
             compass_period: Duration::from_secs_f64(compass_period_s),
             sonar_replay: m
                 .replay
@@ -446,6 +321,186 @@ impl DaemonConfig {
                 }),
         })
     }
+}
+
+/// The realtime speed factor: `run.speed`, checked, unless `--speed` overrides it (checked
+/// against the same range, after the file's value).
+fn resolve_speed(
+    doc: &Document<'_>,
+    run: &RawRun,
+    overrides: &Overrides,
+) -> Result<f64, ConfigError> {
+    let file_speed = doc.check_range(
+        "run.speed",
+        run.speed,
+        *SPEED_RANGE.start(),
+        *SPEED_RANGE.end(),
+        "x real time",
+    )?;
+    match overrides.speed {
+        Some(speed) if !(speed.is_finite() && SPEED_RANGE.contains(&speed)) => {
+            Err(ConfigError::Override {
+                option: "--speed".into(),
+                key: "run.speed".into(),
+                message: format!(
+                    "{speed:?} is outside the allowed range {}..={} x real time",
+                    SPEED_RANGE.start(),
+                    SPEED_RANGE.end()
+                ),
+            })
+        }
+        Some(speed) => Ok(speed),
+        None => Ok(file_speed),
+    }
+}
+
+/// The time mode: `run.time_mode` (which must name one even when `--time-mode` overrides
+/// it), realtime at `speed`.
+fn resolve_time_mode(
+    doc: &Document<'_>,
+    run: &RawRun,
+    overrides: &Overrides,
+    speed: f64,
+) -> Result<TimeMode, ConfigError> {
+    let file_mode = match run.time_mode.as_str() {
+        "realtime" => TimeModeName::Realtime,
+        "lockstep" => TimeModeName::Lockstep,
+        other => {
+            return Err(doc.invalid(
+                "run.time_mode",
+                format!("`{other}` is not a time mode; expected `realtime` or `lockstep`"),
+            ));
+        }
+    };
+    Ok(match overrides.time_mode.unwrap_or(file_mode) {
+        TimeModeName::Realtime => TimeMode::Realtime { speed },
+        TimeModeName::Lockstep => TimeMode::Lockstep,
+    })
+}
+
+/// Checks the optional `run.cpu_latency_us`: 0 to 1000000 µs.
+fn resolve_cpu_latency_us(
+    doc: &Document<'_>,
+    raw: Option<i64>,
+) -> Result<Option<u32>, ConfigError> {
+    Ok(match raw {
+        None => None,
+        Some(us) => Some(
+            u32::try_from(us)
+                .ok()
+                .filter(|us| *us <= 1_000_000)
+                .ok_or_else(|| {
+                    doc.invalid(
+                        "run.cpu_latency_us",
+                        format!("{us} is out of range; expected 0 to 1000000 µs"),
+                    )
+                })?,
+        ),
+    })
+}
+
+/// Checks the optional `run.rt_priority`: a `SCHED_FIFO` priority, 1 to 99.
+fn resolve_rt_priority(doc: &Document<'_>, raw: Option<i64>) -> Result<Option<i32>, ConfigError> {
+    Ok(match raw {
+        None => None,
+        Some(p) => Some(
+            i32::try_from(p)
+                .ok()
+                .filter(|p| (1..=99).contains(p))
+                .ok_or_else(|| {
+                    doc.invalid(
+                        "run.rt_priority",
+                        format!("{p} is out of range; expected a SCHED_FIFO priority 1 to 99"),
+                    )
+                })?,
+        ),
+    })
+}
+
+/// Resolves the PICAXE master's sentence settings (`devices.multiplexer`): the depth
+/// sentence (with its offset for DPT), the talker and the invalid-echo policy.
+fn resolve_multiplexer(
+    doc: &Document<'_>,
+    m: &RawMultiplexer,
+) -> Result<MultiplexerSettings, ConfigError> {
+    let sentence = match m.sentence.as_str() {
+        "DBT" => DepthSentence::Dbt,
+        "DPT" => DepthSentence::Dpt {
+            offset_m: doc.check_range(
+                "devices.multiplexer.dpt_offset_m",
+                m.dpt_offset_m,
+                -99.0,
+                99.0,
+                "m",
+            )?,
+        },
+        other => {
+            return Err(doc.invalid(
+                "devices.multiplexer.sentence",
+                format!("`{other}` is not a depth sentence; expected `DBT` or `DPT`"),
+            ));
+        }
+    };
+    let talker = Talker::new(&m.talker)
+        .map_err(|e| doc.invalid("devices.multiplexer.talker", e.to_string()))?;
+    let invalid_echo = match m.invalid_echo.as_str() {
+        "omit" => InvalidEcho::Omit,
+        "empty" => InvalidEcho::EmptyFields,
+        other => {
+            return Err(doc.invalid(
+                "devices.multiplexer.invalid_echo",
+                format!("`{other}` is not a policy; expected `omit` or `empty`"),
+            ));
+        }
+    };
+    Ok(MultiplexerSettings {
+        sentence,
+        talker,
+        invalid_echo,
+        proprietary: m.proprietary,
+    })
+}
+
+/// Checks the `[start]` table: each axis of the position, then the heading. Whether the
+/// position lies inside the pool is checked once the world is loaded.
+fn resolve_start(doc: &Document<'_>, raw: &RawStart) -> Result<Start, ConfigError> {
+    for (i, axis) in ["x", "y", "z"].iter().enumerate() {
+        doc.check_range(
+            "start.position_m",
+            raw.position_m[i],
+            -1000.0,
+            1000.0,
+            &format!("m ({axis})"),
+        )?;
+    }
+    let heading_deg =
+        doc.check_range("start.heading_deg", raw.heading_deg, -360.0, 360.0, "deg")?;
+    Ok(Start {
+        position_m: nalgebra::Vector3::from(raw.position_m),
+        heading_deg,
+    })
+}
+
+/// Refuses two links on one path: the second would replace the first's symlink or device,
+/// leaving that link unreachable. (`shared` is the one way for them to share a line.)
+fn check_links_distinct(
+    doc: &Document<'_>,
+    sonar: &LinkConfig,
+    sensor: &LinkConfig,
+) -> Result<(), ConfigError> {
+    let same = match (&sonar.endpoint, &sensor.endpoint) {
+        (Endpoint::Pty { link: a }, Endpoint::Pty { link: b }) => a == b,
+        (Endpoint::Serial { device: a }, Endpoint::Serial { device: b }) => a == b,
+        (Endpoint::Tcp { addr: a }, Endpoint::Tcp { addr: b }) => a == b,
+        _ => false,
+    };
+    if same {
+        return Err(doc.invalid(
+            "links.sensor.path",
+            "is the same as `links.sonar.path`; two links cannot share a path (use `endpoint = \"shared\"` for one line carrying both)",
+        ));
+    }
+    Ok(())
 }
 
 /// Whether `link`, joined to a directory, names a path inside it: a relative path of plain

@@ -487,6 +487,82 @@ pub fn calibrate(
     spread_from: &[Run],
     progress: &mut dyn FnMut(&str),
 ) -> Result<Calibration, GapError> {
+    check_runs(baseline, spread_from)?;
+    progress("noise floors");
+    let prepared: Vec<Prepared<'_>> = baseline
+        .iter()
+        .map(|r| prepare(model, r))
+        .collect::<Result<_, _>>()?;
+    let setups: Vec<Setup<'_>> = prepared
+        .iter()
+        .map(Prepared::setup)
+        .collect::<Result<_, _>>()?;
+    let measured: Vec<&str> = setups
+        .iter()
+        .flat_map(|s| {
+            s.modelled()
+                .into_iter()
+                .map(|i| s.m.channels[i].name.as_str())
+        })
+        .collect();
+    let (chosen, not_fitted) = choose_effects(&measured);
+    let (mut x, fit, evaluations) =
+        joint_fit(&prepared, &setups, &chosen, starts(&chosen), 2, progress)?;
+    // Parameters the data do not identify are named: an interval that is infinite or wider
+    // than the parameter's physical range, or a sensor parameter driven onto its bound (a
+    // sensor effect taking a disagreement its own signature does not explain). Their values
+    // stay in the model, as the fit left them: read them as "this channel disagrees".
+    let unidentified: Vec<Unidentified> = unidentified_effects(&chosen, &x, &fit)
+        .into_iter()
+        .map(|(e, why)| Unidentified {
+            effect: e.name.to_string(),
+            why,
+        })
+        .collect();
+    let shrunk = shrink_until_stable(&prepared, &chosen, &mut x);
+    let mut out = fitted_parameters(model, &chosen, &x, &fit);
+    fit_noise_levels(&prepared, &chosen, &x, &measured, &mut out, progress)?;
+    let (apparent, spread_unidentified) =
+        between_run_spread(model, &prepared, spread_from, &chosen, &x, progress)?;
+    let spread = record_spread(apparent, &mut out.model);
+
+    progress("scoring");
+    let runs = score_runs(model, baseline, validate, &chosen, &x)?;
+    progress("discrepancy");
+    let known: Vec<&Run> = if validate.is_empty() {
+        baseline.iter().collect()
+    } else {
+        validate.iter().collect()
+    };
+    let mut calibrated = out.model;
+    let discrepancy = discrepancy(&calibrated, &known)?;
+    calibrated.discrepancy = discrepancy.iter().cloned().collect();
+    Ok(Calibration {
+        parameters: out.parameters,
+        runs,
+        evaluations,
+        spread,
+        spread_from: if spread_from.is_empty() {
+            baseline
+        } else {
+            spread_from
+        }
+        .iter()
+        .map(|r| r.dir.display().to_string())
+        .collect(),
+        not_fitted,
+        unidentified,
+        spread_unidentified,
+        shrunk,
+        discrepancy,
+        model: calibrated,
+    })
+}
+
+/// Refuses run lists calibration cannot use: no baseline run, a single spread run (no
+/// spread), or a spread run that is also a baseline run (the spread must come from runs the
+/// calibration was not fitted to).
+fn check_runs(baseline: &[Run], spread_from: &[Run]) -> Result<(), GapError> {
     if baseline.is_empty() {
         return Err(GapError::Data(
             "calibration needs at least one baseline run (--measured DIR)".into(),
@@ -509,23 +585,12 @@ pub fn calibrate(
             r.dir.display()
         )));
     }
-    progress("noise floors");
-    let prepared: Vec<Prepared<'_>> = baseline
-        .iter()
-        .map(|r| prepare(model, r))
-        .collect::<Result<_, _>>()?;
-    let setups: Vec<Setup<'_>> = prepared
-        .iter()
-        .map(Prepared::setup)
-        .collect::<Result<_, _>>()?;
-    let measured: Vec<&str> = setups
-        .iter()
-        .flat_map(|s| {
-            s.modelled()
-                .into_iter()
-                .map(|i| s.m.channels[i].name.as_str())
-        })
-        .collect();
+    Ok(())
+}
+
+/// The jointly calibrated effects in their calibration order, split into those with a
+/// `measured` channel (fitted) and the names of those without (not fitted).
+fn choose_effects(measured: &[&str]) -> (Vec<&'static Effect>, Vec<String>) {
     let mut chosen: Vec<&'static Effect> = Vec::new();
     let mut not_fitted = Vec::new();
     let mut joint: Vec<(u8, &'static Effect)> = effects::LIBRARY
@@ -545,40 +610,53 @@ pub fn calibrate(
             not_fitted.push(e.name.to_string());
         }
     }
-    let (mut x, fit, evaluations) =
-        joint_fit(&prepared, &setups, &chosen, starts(&chosen), 2, progress)?;
-    // Parameters the data do not identify are named: an interval that is infinite or wider
-    // than the parameter's physical range, or a sensor parameter driven onto its bound (a
-    // sensor effect taking a disagreement its own signature does not explain). Their values
-    // stay in the model, as the fit left them: read them as "this channel disagrees".
-    let unidentified: Vec<Unidentified> = unidentified_effects(&chosen, &x, &fit)
-        .into_iter()
-        .map(|(e, why)| Unidentified {
-            effect: e.name.to_string(),
-            why,
-        })
-        .collect();
-    // A model that diverges on its own runs is never written: the fitted change is shrunk
-    // towards the model as given until every baseline run re-simulates to its end.
+    (chosen, not_fitted)
+}
+
+/// A model that diverges on its own runs is never written: halves the fitted change `x`
+/// towards the model as given until every baseline run re-simulates to its end (or drops it
+/// altogether), and returns the factor it was shrunk by.
+fn shrink_until_stable(
+    prepared: &[Prepared<'_>],
+    chosen: &[&'static Effect],
+    x: &mut DVector<f64>,
+) -> f64 {
     let mut shrunk = 1.0;
-    while shrunk > 1e-3 && diverges(&prepared, &chosen, &x) {
-        x *= 0.5;
+    while shrunk > 1e-3 && diverges(prepared, chosen, x) {
+        *x *= 0.5;
         shrunk *= 0.5;
     }
     if shrunk <= 1e-3 {
         x.fill(0.0);
         shrunk = 0.0;
     }
-    let (scales, bounds_raw) = scales_and_bounds(&chosen);
+    shrunk
+}
+
+/// The calibrated parameters so far and the model carrying them.
+struct Calibrated {
+    parameters: Vec<Parameter>,
+    model: GapModel,
+}
+
+/// The jointly fitted parameters at `x` with their intervals (widened by the residual
+/// variance beyond the weighted floor, as in `fit`), and `model` with them as calibration
+/// entries.
+fn fitted_parameters(
+    model: &GapModel,
+    chosen: &[&'static Effect],
+    x: &DVector<f64>,
+    fit: &lsq::Fit,
+) -> Calibrated {
+    let (scales, bounds_raw) = scales_and_bounds(chosen);
     let dims = scales.len();
-    // Intervals: residual variance beyond the (weighted) floor inflates them, as in `fit`.
     let n = fit.residuals.len() as f64;
     let variance_factor = (fit.chi2() / (n - dims as f64).max(1.0)).max(1.0);
-    let ci = lsq::intervals(&x, fit.covariance().as_ref(), &scales, variance_factor);
+    let ci = lsq::intervals(x, fit.covariance().as_ref(), &scales, variance_factor);
     let mut parameters = Vec::new();
     let mut calibrated = model.clone();
     let mut k = 0;
-    for e in &chosen {
+    for e in chosen {
         let n = e.parameters.len();
         let values: Vec<f64> = (0..n).map(|j| x[k + j] * scales[k + j]).collect();
         let cis: Vec<[f64; 2]> = (0..n).map(|j| ci[k + j]).collect();
@@ -601,20 +679,33 @@ pub fn calibrate(
         });
         k += n;
     }
+    Calibrated {
+        parameters,
+        model: calibrated,
+    }
+}
 
-    // Noise levels (the motor noise on the depth channel: a variance, not a mean), fitted on
-    // each baseline run of the calibrated model, their mean over the runs. Without them a
-    // vehicle whose depth jitters with the stern duty, whatever the cause, would report that
-    // jitter as new in every later run.
+/// Noise levels (the motor noise on the depth channel: a variance, not a mean), fitted on
+/// each baseline run of the calibrated model, their mean over the runs added to `out`.
+/// Without them a vehicle whose depth jitters with the stern duty, whatever the cause, would
+/// report that jitter as new in every later run.
+fn fit_noise_levels(
+    prepared: &[Prepared<'_>],
+    chosen: &[&'static Effect],
+    x: &DVector<f64>,
+    measured: &[&str],
+    out: &mut Calibrated,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(), GapError> {
     for emi in effects::LIBRARY.iter().filter(|e| {
         e.calibration == Fitted::NoiseLevel && measured.iter().any(|c| e.channels.contains(c))
     }) {
         progress("noise levels");
         let mut levels = Vec::new();
-        for p in &prepared {
+        for p in prepared {
             let s = fit::setup(
                 &p.run.m,
-                applied(&p.base, &chosen, &x),
+                applied(&p.base, chosen, x),
                 &p.floors,
                 Split::DEFAULT,
                 &[],
@@ -626,14 +717,14 @@ pub fn calibrate(
         if let Some(level) = mean_level(&levels)
             && level.0 > 0.0
         {
-            parameters.push(Parameter {
+            out.parameters.push(Parameter {
                 effect: emi.name.to_string(),
                 parameter: emi.parameters[0].to_string(),
                 value: level.0,
                 ci95: level.1,
                 at_bound: false,
             });
-            calibrated.calibration.push(EnabledEffect {
+            out.model.calibration.push(EnabledEffect {
                 effect: emi,
                 values: vec![level.0],
                 ci95: vec![level.1],
@@ -641,21 +732,35 @@ pub fn calibrate(
             });
         }
     }
+    Ok(())
+}
 
-    // Between-run spread: every candidate fitted on each run of the calibrated model, on
-    // the `spread_from` runs when given, else on the baseline runs.
+/// Between-run spread: every candidate fitted on each run of the calibrated model, on
+/// the `spread_from` runs when given, else on the baseline runs (`prepared`).
+fn between_run_spread(
+    model: &GapModel,
+    prepared: &[Prepared<'_>],
+    spread_from: &[Run],
+    chosen: &[&'static Effect],
+    x: &DVector<f64>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Spread, Vec<String>), GapError> {
     let spread_prepared: Vec<Prepared<'_>> = spread_from
         .iter()
         .map(|r| prepare(model, r))
         .collect::<Result<_, _>>()?;
     let (spread_runs, fitted_on) = if spread_prepared.is_empty() {
-        (&prepared, true)
+        (prepared, true)
     } else {
-        (&spread_prepared, false)
+        (spread_prepared.as_slice(), false)
     };
+    apparent_spread(spread_runs, fitted_on, chosen, x, progress)
+}
+
+/// Records each effect's between-run spread in `calibrated` (replacing any it had) and
+/// returns it as parameters, one per effect parameter.
+fn record_spread(apparent: Spread, calibrated: &mut GapModel) -> Vec<Parameter> {
     let mut spread = Vec::new();
-    let (apparent, spread_unidentified) =
-        apparent_spread(spread_runs, fitted_on, &chosen, &x, progress)?;
     for (e, values) in apparent {
         for (j, v) in values.iter().enumerate() {
             spread.push(Parameter {
@@ -674,14 +779,24 @@ pub fn calibrate(
             delta_bic: None,
         });
     }
+    spread
+}
 
-    progress("scoring");
+/// The gap of every baseline run (fitted) and validation run, before and after applying the
+/// calibration `x` of `chosen`, overall and per channel.
+fn score_runs(
+    model: &GapModel,
+    baseline: &[Run],
+    validate: &[Run],
+    chosen: &[&'static Effect],
+    x: &DVector<f64>,
+) -> Result<Vec<RunGap>, GapError> {
     let mut runs = Vec::new();
     for (fitted, list) in [(true, baseline), (false, validate)] {
         for r in list {
             let p = prepare(model, r)?;
             let s = p.setup()?;
-            let after_c = applied(&p.base, &chosen, &x);
+            let after_c = applied(&p.base, chosen, x);
             let before = channel_chi2(&p, &s, &p.base).unwrap_or_default();
             let after = channel_chi2(&p, &s, &after_c).unwrap_or_default();
             let (gb, ga) = (excess(&before), excess(&after));
@@ -701,34 +816,7 @@ pub fn calibrate(
             });
         }
     }
-    progress("discrepancy");
-    let known: Vec<&Run> = if validate.is_empty() {
-        baseline.iter().collect()
-    } else {
-        validate.iter().collect()
-    };
-    let discrepancy = discrepancy(&calibrated, &known)?;
-    calibrated.discrepancy = discrepancy.iter().cloned().collect();
-    Ok(Calibration {
-        parameters,
-        runs,
-        evaluations,
-        spread,
-        spread_from: if spread_from.is_empty() {
-            baseline
-        } else {
-            spread_from
-        }
-        .iter()
-        .map(|r| r.dir.display().to_string())
-        .collect(),
-        not_fitted,
-        unidentified,
-        spread_unidentified,
-        shrunk,
-        discrepancy,
-        model: calibrated,
-    })
+    Ok(runs)
 }
 
 #[cfg(test)]

@@ -90,7 +90,23 @@ pub fn json(a: &Analysis) -> Value {
 pub fn markdown(a: &Analysis, m: &Measurement) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Reality gap: {}\n", m.experiment.name);
-    let verdict = match (a.verdict, a.accepted.first()) {
+    write_verdict(&mut s, a, m);
+    write_gap_before(&mut s, a);
+    for (i, round) in a.rounds.iter().enumerate() {
+        let _ = writeln!(s, "\n## Candidates, round {}\n", i + 1);
+        s.push_str(&crate::gap::candidate::round_table(round));
+    }
+    write_gap_before_after(&mut s, a, m);
+    let _ = writeln!(
+        s,
+        "\n![trajectories](trajectories.svg)\n![residuals](residuals.svg)\n![ranking](ranking.svg)"
+    );
+    s
+}
+
+/// The verdict in words: the named effect, or why none is named.
+fn verdict_text(a: &Analysis) -> String {
+    match (a.verdict, a.accepted.first()) {
         (_, Some(w)) => format!("missing effect: **{}**", w.name),
         (crate::gap::Verdict::Unexplained, None) if a.fitted.discrepancy.is_empty() => {
             "**unexplained**: the model disagrees with the data beyond its noise floor and no \
@@ -110,7 +126,14 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
             )
         }
         _ => "no significant missing effect".to_string(),
-    };
+    }
+}
+
+/// The verdict paragraph with the naming rules, then one bullet per channel left unexplained
+/// after the fit, per diverged re-simulation segment, per measurement notice and for the
+/// channels not re-simulated.
+fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
+    let verdict = verdict_text(a);
     let _ = writeln!(
         s,
         "Verdict: {verdict}.\n\nAn effect is named only when its parameters lie inside their \
@@ -166,6 +189,11 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
     if !a.unmodelled.is_empty() {
         let _ = writeln!(s, "- not re-simulated: {}", a.unmodelled.join(", "));
     }
+}
+
+/// The "where the gap is" section: the per-channel table before the fit, then for each
+/// significant channel its strongest correlations, regimes and windows.
+fn write_gap_before(s: &mut String, a: &Analysis) {
     let _ = writeln!(s, "\n## Where the gap is (before)\n");
     let _ = writeln!(
         s,
@@ -205,10 +233,11 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
             .collect();
         let _ = writeln!(s, "- significant windows: {}", w.join(", "));
     }
-    for (i, round) in a.rounds.iter().enumerate() {
-        let _ = writeln!(s, "\n## Candidates, round {}\n", i + 1);
-        s.push_str(&crate::gap::candidate::round_table(round));
-    }
+}
+
+/// The "before and after" section: RMS and fit % per channel, track distance, the gap's
+/// reduction overall and on the held-out blocks, and the known disagreement if any.
+fn write_gap_before_after(s: &mut String, a: &Analysis, m: &Measurement) {
     let _ = writeln!(s, "\n## The gap, before and after\n");
     let _ = writeln!(
         s,
@@ -264,11 +293,6 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
             a.raw.heldout_reduction_pct()
         );
     }
-    let _ = writeln!(
-        s,
-        "\n![trajectories](trajectories.svg)\n![residuals](residuals.svg)\n![ranking](ranking.svg)"
-    );
-    s
 }
 
 /// NRMSE fit % = 100 (1 - RMS / std(measured)).
@@ -301,158 +325,167 @@ fn plot_err(path: &Path, e: impl std::fmt::Display) -> GapError {
 
 /// Writes trajectories.svg, residuals.svg and ranking.svg into `out`.
 pub fn plots(a: &Analysis, m: &Measurement, out: &Path) -> Result<(), GapError> {
-    // Trajectories over the pool.
-    let path = out.join("trajectories.svg");
-    {
-        let root = SVGBackend::new(&path, (800, 500)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| plot_err(&path, e))?;
-        let pool = a.configs_before.world.pool_m;
-        let mut chart = ChartBuilder::on(&root)
-            .caption("track over the pool (east vs north)", ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(45)
-            .build_cartesian_2d(0.0..pool.y, 0.0..pool.x)
-            .map_err(|e| plot_err(&path, e))?;
+    plot_trajectories(a, m, &out.join("trajectories.svg"))?;
+    plot_residuals(a, m, &out.join("residuals.svg"))?;
+    plot_ranking(a, &out.join("ranking.svg"))?;
+    Ok(())
+}
+
+/// The track over the pool (east vs north): the measured positions, the model's and the
+/// model's with the fitted effects.
+fn plot_trajectories(a: &Analysis, m: &Measurement, path: &Path) -> Result<(), GapError> {
+    let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
+    let pool = a.configs_before.world.pool_m;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("track over the pool (east vs north)", ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(0.0..pool.y, 0.0..pool.x)
+        .map_err(|e| plot_err(path, e))?;
+    chart
+        .configure_mesh()
+        .x_desc("east (m)")
+        .y_desc("north (m)")
+        .draw()
+        .map_err(|e| plot_err(path, e))?;
+    if let (Some(x), Some(y)) = (m.channel("x_m"), m.channel("y_m")) {
         chart
-            .configure_mesh()
-            .x_desc("east (m)")
-            .y_desc("north (m)")
-            .draw()
-            .map_err(|e| plot_err(&path, e))?;
-        if let (Some(x), Some(y)) = (m.channel("x_m"), m.channel("y_m")) {
-            chart
-                .draw_series(
-                    x.samples
-                        .iter()
-                        .zip(&y.samples)
-                        .map(|((_, a), (_, b))| Circle::new((*b, *a), 1, BLACK.filled())),
-                )
-                .map_err(|e| plot_err(&path, e))?
-                .label("measured")
-                .legend(|(x, y)| Circle::new((x, y), 3, BLACK.filled()));
-        }
-        for (run, colour, label) in [
-            (&a.clean_before, RED, "model"),
-            (&a.clean_after, BLUE, "model + fitted effects"),
-        ] {
-            chart
-                .draw_series(LineSeries::new(
-                    run.states
-                        .iter()
-                        .step_by(10)
-                        .map(|s| (s.position_m.y, s.position_m.x)),
-                    colour,
-                ))
-                .map_err(|e| plot_err(&path, e))?
-                .label(label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], colour));
-        }
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE)
-            .draw()
-            .map_err(|e| plot_err(&path, e))?;
-        root.present().map_err(|e| plot_err(&path, e))?;
-    }
-    // Normalised residuals over time, before and after.
-    let path = out.join("residuals.svg");
-    {
-        let modelled: Vec<usize> = (0..m.channels.len())
-            .filter(|&i| a.floors[i].is_some())
-            .collect();
-        let rows = modelled.len().max(1);
-        let root = SVGBackend::new(&path, (900, 160 * rows as u32)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| plot_err(&path, e))?;
-        let areas = root.split_evenly((rows, 1));
-        for (area, &i) in areas.iter().zip(&modelled) {
-            let ch = &m.channels[i];
-            let Some(floor) = &a.floors[i] else { continue };
-            let series = |c: &crate::gap::effects::Configs, run: &resim::Run| -> Vec<(f64, f64)> {
-                resim::predict(c, run, ch, 0.0)
-                    .map(|p| {
-                        resim::residuals(ch, &p)
-                            .iter()
-                            .zip(&floor.sigma)
-                            .zip(&ch.samples)
-                            .map(|((r, s), (t, _))| (*t, (r / s).clamp(-20.0, 20.0)))
-                            .collect()
-                    })
-                    .unwrap_or_default()
-            };
-            let b = series(&a.configs_before, &a.clean_before);
-            let af = series(&a.configs_after, &a.clean_after);
-            let t1 = m.experiment.duration_s;
-            let mut chart = ChartBuilder::on(area)
-                .caption(
-                    format!("{}: residual / noise floor", ch.name),
-                    ("sans-serif", 14),
-                )
-                .margin(5)
-                .x_label_area_size(25)
-                .y_label_area_size(40)
-                .build_cartesian_2d(0.0..t1, -20.0..20.0)
-                .map_err(|e| plot_err(&path, e))?;
-            chart
-                .configure_mesh()
-                .x_desc("t (s)")
-                .draw()
-                .map_err(|e| plot_err(&path, e))?;
-            chart
-                .draw_series(b.iter().map(|p| Circle::new(*p, 1, RED.filled())))
-                .map_err(|e| plot_err(&path, e))?;
-            chart
-                .draw_series(af.iter().map(|p| Circle::new(*p, 1, BLUE.filled())))
-                .map_err(|e| plot_err(&path, e))?;
-        }
-        root.present().map_err(|e| plot_err(&path, e))?;
-    }
-    // Candidate ranking (first round).
-    let path = out.join("ranking.svg");
-    {
-        let round: Vec<&crate::gap::candidate::Candidate> = a
-            .rounds
-            .first()
-            .map(|r| r.iter().filter(|c| c.delta_bic.is_finite()).collect())
-            .unwrap_or_default();
-        let root = SVGBackend::new(&path, (800, 400)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| plot_err(&path, e))?;
-        let n = round.len().max(1);
-        let sym = |v: f64| v.signum() * (1.0 + v.abs()).log10();
-        let hi = round.iter().map(|c| sym(c.delta_bic)).fold(2.0, f64::max);
-        let lo = round.iter().map(|c| sym(c.delta_bic)).fold(-1.0, f64::min);
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "candidates, round 1: sign(dBIC) log10(1 + |dBIC|); line = margin",
-                ("sans-serif", 16),
+            .draw_series(
+                x.samples
+                    .iter()
+                    .zip(&y.samples)
+                    .map(|((_, a), (_, b))| Circle::new((*b, *a), 1, BLACK.filled())),
             )
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(160)
-            .build_cartesian_2d(lo..hi, 0..n)
-            .map_err(|e| plot_err(&path, e))?;
-        let names: Vec<String> = round.iter().map(|c| c.name.clone()).collect();
-        chart
-            .configure_mesh()
-            .y_label_formatter(&|i| names.get(*i).cloned().unwrap_or_default())
-            .y_labels(n)
-            .draw()
-            .map_err(|e| plot_err(&path, e))?;
-        chart
-            .draw_series(round.iter().enumerate().map(|(i, c)| {
-                let colour = if c.guards.all() { GREEN } else { RED };
-                Rectangle::new([(0.0, i), (sym(c.delta_bic), i + 1)], colour.filled())
-            }))
-            .map_err(|e| plot_err(&path, e))?;
+            .map_err(|e| plot_err(path, e))?
+            .label("measured")
+            .legend(|(x, y)| Circle::new((x, y), 3, BLACK.filled()));
+    }
+    for (run, colour, label) in [
+        (&a.clean_before, RED, "model"),
+        (&a.clean_after, BLUE, "model + fitted effects"),
+    ] {
         chart
             .draw_series(LineSeries::new(
-                [(sym(fit::BIC_MARGIN), 0), (sym(fit::BIC_MARGIN), n)],
-                BLACK,
+                run.states
+                    .iter()
+                    .step_by(10)
+                    .map(|s| (s.position_m.y, s.position_m.x)),
+                colour,
             ))
-            .map_err(|e| plot_err(&path, e))?;
-        root.present().map_err(|e| plot_err(&path, e))?;
+            .map_err(|e| plot_err(path, e))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], colour));
     }
+    chart
+        .configure_series_labels()
+        .border_style(BLACK)
+        .background_style(WHITE)
+        .draw()
+        .map_err(|e| plot_err(path, e))?;
+    root.present().map_err(|e| plot_err(path, e))?;
+    Ok(())
+}
+
+/// The normalised residuals (residual / noise floor) over time, one panel per modelled
+/// channel, before and after the fit.
+fn plot_residuals(a: &Analysis, m: &Measurement, path: &Path) -> Result<(), GapError> {
+    let modelled: Vec<usize> = (0..m.channels.len())
+        .filter(|&i| a.floors[i].is_some())
+        .collect();
+    let rows = modelled.len().max(1);
+    let root = SVGBackend::new(path, (900, 160 * rows as u32)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
+    let areas = root.split_evenly((rows, 1));
+    for (area, &i) in areas.iter().zip(&modelled) {
+        let ch = &m.channels[i];
+        let Some(floor) = &a.floors[i] else { continue };
+        let series = |c: &crate::gap::effects::Configs, run: &resim::Run| -> Vec<(f64, f64)> {
+            resim::predict(c, run, ch, 0.0)
+                .map(|p| {
+                    resim::residuals(ch, &p)
+                        .iter()
+                        .zip(&floor.sigma)
+                        .zip(&ch.samples)
+                        .map(|((r, s), (t, _))| (*t, (r / s).clamp(-20.0, 20.0)))
+                        .collect()
+                })
+                .unwrap_or_default()
+        };
+        let b = series(&a.configs_before, &a.clean_before);
+        let af = series(&a.configs_after, &a.clean_after);
+        let t1 = m.experiment.duration_s;
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                format!("{}: residual / noise floor", ch.name),
+                ("sans-serif", 14),
+            )
+            .margin(5)
+            .x_label_area_size(25)
+            .y_label_area_size(40)
+            .build_cartesian_2d(0.0..t1, -20.0..20.0)
+            .map_err(|e| plot_err(path, e))?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .draw()
+            .map_err(|e| plot_err(path, e))?;
+        chart
+            .draw_series(b.iter().map(|p| Circle::new(*p, 1, RED.filled())))
+            .map_err(|e| plot_err(path, e))?;
+        chart
+            .draw_series(af.iter().map(|p| Circle::new(*p, 1, BLUE.filled())))
+            .map_err(|e| plot_err(path, e))?;
+    }
+    root.present().map_err(|e| plot_err(path, e))?;
+    Ok(())
+}
+
+/// The first round's candidates ranked by their signed log delta BIC, green where every guard
+/// passes, with the acceptance margin as a line.
+fn plot_ranking(a: &Analysis, path: &Path) -> Result<(), GapError> {
+    let round: Vec<&crate::gap::candidate::Candidate> = a
+        .rounds
+        .first()
+        .map(|r| r.iter().filter(|c| c.delta_bic.is_finite()).collect())
+        .unwrap_or_default();
+    let root = SVGBackend::new(path, (800, 400)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
+    let n = round.len().max(1);
+    let sym = |v: f64| v.signum() * (1.0 + v.abs()).log10();
+    let hi = round.iter().map(|c| sym(c.delta_bic)).fold(2.0, f64::max);
+    let lo = round.iter().map(|c| sym(c.delta_bic)).fold(-1.0, f64::min);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "candidates, round 1: sign(dBIC) log10(1 + |dBIC|); line = margin",
+            ("sans-serif", 16),
+        )
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(160)
+        .build_cartesian_2d(lo..hi, 0..n)
+        .map_err(|e| plot_err(path, e))?;
+    let names: Vec<String> = round.iter().map(|c| c.name.clone()).collect();
+    chart
+        .configure_mesh()
+        .y_label_formatter(&|i| names.get(*i).cloned().unwrap_or_default())
+        .y_labels(n)
+        .draw()
+        .map_err(|e| plot_err(path, e))?;
+    chart
+        .draw_series(round.iter().enumerate().map(|(i, c)| {
+            let colour = if c.guards.all() { GREEN } else { RED };
+            Rectangle::new([(0.0, i), (sym(c.delta_bic), i + 1)], colour.filled())
+        }))
+        .map_err(|e| plot_err(path, e))?;
+    chart
+        .draw_series(LineSeries::new(
+            [(sym(fit::BIC_MARGIN), 0), (sym(fit::BIC_MARGIN), n)],
+            BLACK,
+        ))
+        .map_err(|e| plot_err(path, e))?;
+    root.present().map_err(|e| plot_err(path, e))?;
     Ok(())
 }
 

@@ -193,19 +193,64 @@ fn check3(
 }
 
 fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig, ConfigError> {
-    let length = doc.check_range("body.length_m", raw.body.length_m, 0.1, 10.0, "m")?;
-    let width = doc.check_range("body.width_m", raw.body.width_m, 0.1, 10.0, "m")?;
-    let height = doc.check_range("body.height_m", raw.body.height_m, 0.1, 10.0, "m")?;
-    let half = Vector3::new(length, width, height) / 2.0;
+    let half = resolve_half_extents(doc, &raw.body)?;
+    let masses = resolve_mass_distribution(doc, &raw.masses, &half)?;
+    let cg = masses.cg;
+    let (volume, cb) = resolve_buoyancy(doc, &raw.hydrostatics, &cg)?;
+    let added_mass = resolve_added_mass(doc, &raw.added_mass)?;
+    let damping = resolve_damping(doc, &raw.damping)?;
+    let thruster_common = resolve_thruster_common(doc, &raw.thrusters)?;
+    let thrusters = resolve_thrusters(doc, &raw.thruster, &cg)?;
 
-    // Centre of mass and inertia from the mass distribution (parallel-axis theorem).
-    if raw.masses.is_empty() {
+    Ok(VehicleConfig {
+        mass_kg: masses.total_kg,
+        inertia_kgm2: masses.inertia_kgm2,
+        cg_from_box_centre_m: cg,
+        half_extents_m: half,
+        displaced_volume_m3: volume,
+        cb_m: cb,
+        added_mass,
+        damping_linear: damping.linear,
+        damping_quadratic: damping.quadratic,
+        damping_sway_yaw: damping.sway_yaw,
+        thruster_common,
+        thrusters,
+    })
+}
+
+/// Checks the body's bounding box and returns its half extents, the hull collider and the
+/// limit every mass component's centre must stay within.
+fn resolve_half_extents(doc: &Document<'_>, body: &RawBody) -> Result<Vector3<f64>, ConfigError> {
+    let length = doc.check_range("body.length_m", body.length_m, 0.1, 10.0, "m")?;
+    let width = doc.check_range("body.width_m", body.width_m, 0.1, 10.0, "m")?;
+    let height = doc.check_range("body.height_m", body.height_m, 0.1, 10.0, "m")?;
+    Ok(Vector3::new(length, width, height) / 2.0)
+}
+
+/// Total mass, centre of mass and inertia tensor of the `[[mass]]` components.
+struct MassProperties {
+    total_kg: f64,
+    /// Centre of mass relative to the centre of the bounding box.
+    cg: Vector3<f64>,
+    /// Inertia about the centre of mass, body axes.
+    inertia_kgm2: Matrix3<f64>,
+}
+
+/// Checks the `[[mass]]` components and combines them into the vehicle's centre of mass and
+/// inertia tensor (each component's own inertia moved to the centre of mass by the
+/// parallel-axis theorem).
+fn resolve_mass_distribution(
+    doc: &Document<'_>,
+    masses: &[RawMass],
+    half: &Vector3<f64>,
+) -> Result<MassProperties, ConfigError> {
+    if masses.is_empty() {
         return Err(doc.invalid("mass", "at least one [[mass]] component is required"));
     }
     let mut total = 0.0;
     let mut moment = Vector3::zeros();
-    let mut parts = Vec::with_capacity(raw.masses.len());
-    for (i, m) in raw.masses.iter().enumerate() {
+    let mut parts = Vec::with_capacity(masses.len());
+    for (i, m) in masses.iter().enumerate() {
         let key = format!("mass.{i}");
         let mass = doc.check_range(&format!("{key}.mass_kg"), m.mass_kg, 0.0, 1000.0, "kg")?;
         let c = check3(doc, &format!("{key}.centre_m"), m.centre_m, -5.0, 5.0, "m")?;
@@ -221,24 +266,9 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
                 ));
             }
         }
-        // Inertia of the component about its own centre, body axes.
-        let own = match m.shape {
-            RawMassShape::Point => Matrix3::zeros(),
-            RawMassShape::Box => Matrix3::from_diagonal(&Vector3::new(
-                mass * (s.y * s.y + s.z * s.z) / 12.0,
-                mass * (s.x * s.x + s.z * s.z) / 12.0,
-                mass * (s.x * s.x + s.y * s.y) / 12.0,
-            )),
-            RawMassShape::CylinderX => {
-                let r = s.y / 2.0;
-                let l = s.x;
-                let across = mass * (3.0 * r * r + l * l) / 12.0;
-                Matrix3::from_diagonal(&Vector3::new(mass * r * r / 2.0, across, across))
-            }
-        };
         total += mass;
         moment += c * mass;
-        parts.push((mass, c, own));
+        parts.push((mass, c, component_inertia(m.shape, mass, &s)));
     }
     if total <= 0.0 {
         return Err(doc.invalid("mass", "the components' masses sum to zero"));
@@ -249,10 +279,41 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
         let d = c - cg;
         inertia += own + (Matrix3::identity() * d.dot(&d) - d * d.transpose()) * *mass;
     }
+    Ok(MassProperties {
+        total_kg: total,
+        cg,
+        inertia_kgm2: inertia,
+    })
+}
 
+/// Inertia of one mass component about its own centre, body axes, from its shape and size.
+fn component_inertia(shape: RawMassShape, mass: f64, s: &Vector3<f64>) -> Matrix3<f64> {
+    match shape {
+        RawMassShape::Point => Matrix3::zeros(),
+        RawMassShape::Box => Matrix3::from_diagonal(&Vector3::new(
+            mass * (s.y * s.y + s.z * s.z) / 12.0,
+            mass * (s.x * s.x + s.z * s.z) / 12.0,
+            mass * (s.x * s.x + s.y * s.y) / 12.0,
+        )),
+        RawMassShape::CylinderX => {
+            let r = s.y / 2.0;
+            let l = s.x;
+            let across = mass * (3.0 * r * r + l * l) / 12.0;
+            Matrix3::from_diagonal(&Vector3::new(mass * r * r / 2.0, across, across))
+        }
+    }
+}
+
+/// Checks the hydrostatics and returns the displaced volume and the centre of buoyancy
+/// relative to the centre of mass `cg`, which must lie above it so the vehicle rights itself.
+fn resolve_buoyancy(
+    doc: &Document<'_>,
+    h: &RawHydrostatics,
+    cg: &Vector3<f64>,
+) -> Result<(f64, Vector3<f64>), ConfigError> {
     let volume = doc.check_range(
         "hydrostatics.displaced_volume_m3",
-        raw.hydrostatics.displaced_volume_m3,
+        h.displaced_volume_m3,
         1e-4,
         10.0,
         "m^3",
@@ -260,7 +321,7 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
     let cb_box = check3(
         doc,
         "hydrostatics.centre_of_buoyancy_m",
-        raw.hydrostatics.centre_of_buoyancy_m,
+        h.centre_of_buoyancy_m,
         -5.0,
         5.0,
         "m",
@@ -276,29 +337,43 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
             ),
         ));
     }
+    Ok((volume, cb))
+}
 
-    let am = &raw.added_mass;
-    let added_mass = [
+/// Checks the diagonal added mass: surge, sway, heave (kg), roll, pitch, yaw (kg m^2).
+fn resolve_added_mass(doc: &Document<'_>, am: &RawAddedMass) -> Result<[f64; 6], ConfigError> {
+    Ok([
         doc.check_range("added_mass.surge_kg", am.surge_kg, 0.0, 1000.0, "kg")?,
         doc.check_range("added_mass.sway_kg", am.sway_kg, 0.0, 1000.0, "kg")?,
         doc.check_range("added_mass.heave_kg", am.heave_kg, 0.0, 1000.0, "kg")?,
         doc.check_range("added_mass.roll_kgm2", am.roll_kgm2, 0.0, 100.0, "kg m^2")?,
         doc.check_range("added_mass.pitch_kgm2", am.pitch_kgm2, 0.0, 100.0, "kg m^2")?,
         doc.check_range("added_mass.yaw_kgm2", am.yaw_kgm2, 0.0, 100.0, "kg m^2")?,
-    ];
+    ])
+}
+
+/// The checked damping coefficients of the `[damping]` table.
+struct Damping {
+    linear: [f64; 6],
+    quadratic: [f64; 6],
+    sway_yaw: [f64; 2],
+}
+
+/// Checks the damping coefficients, axis by axis, and that every axis is damped at all.
+fn resolve_damping(doc: &Document<'_>, raw: &RawDamping) -> Result<Damping, ConfigError> {
     let mut damping_linear = [0.0; 6];
     let mut damping_quadratic = [0.0; 6];
     for i in 0..6 {
         damping_linear[i] = doc.check_range(
             &format!("damping.linear.{i}"),
-            raw.damping.linear[i],
+            raw.linear[i],
             0.0,
             1e4,
             "N/(m/s) or N m/(rad/s)",
         )?;
         damping_quadratic[i] = doc.check_range(
             &format!("damping.quadratic.{i}"),
-            raw.damping.quadratic[i],
+            raw.quadratic[i],
             0.0,
             1e4,
             "N/(m/s)^2 or N m/(rad/s)^2",
@@ -307,14 +382,14 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
     let damping_sway_yaw = [
         doc.check_range(
             "damping.sway_yaw.0",
-            raw.damping.sway_yaw[0],
+            raw.sway_yaw[0],
             -1e3,
             1e3,
             "N/(rad/s)",
         )?,
         doc.check_range(
             "damping.sway_yaw.1",
-            raw.damping.sway_yaw[1],
+            raw.sway_yaw[1],
             -1e3,
             1e3,
             "N m/(m/s)",
@@ -330,9 +405,19 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
             "every axis needs some damping (linear or quadratic)",
         ));
     }
+    Ok(Damping {
+        linear: damping_linear,
+        quadratic: damping_quadratic,
+        sway_yaw: damping_sway_yaw,
+    })
+}
 
-    let t = &raw.thrusters;
-    let thruster_common = ThrusterCommon {
+/// Checks the `[thrusters]` settings common to all four motors.
+fn resolve_thruster_common(
+    doc: &Document<'_>,
+    t: &RawThrusters,
+) -> Result<ThrusterCommon, ConfigError> {
+    Ok(ThrusterCommon {
         forward_max_n: doc.check_range(
             "thrusters.forward_max_n",
             t.forward_max_n,
@@ -357,98 +442,35 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
             60.0,
             "s",
         )?,
-    };
+    })
+}
 
-    if raw.thruster.len() != 4 {
+/// Resolves the four `[[thruster]]` tables, in [`THRUSTER_NAMES`] order, with positions
+/// relative to the centre of mass `cg`, and checks the layout the thesis describes (2.2.1):
+/// horizontal port/starboard, vertical bow/stern.
+fn resolve_thrusters(
+    doc: &Document<'_>,
+    raw: &[RawThruster],
+    cg: &Vector3<f64>,
+) -> Result<[ThrusterConfig; 4], ConfigError> {
+    if raw.len() != 4 {
         return Err(doc.invalid(
             "thruster",
             format!(
                 "expected exactly four [[thruster]] tables ({}), found {}",
                 THRUSTER_NAMES.join(", "),
-                raw.thruster.len()
+                raw.len()
             ),
         ));
     }
     let mut thrusters = Vec::with_capacity(4);
-    for (i, th) in raw.thruster.iter().enumerate() {
-        let key = format!("thruster.{i}");
-        if th.name != THRUSTER_NAMES[i] {
-            return Err(doc.invalid(
-                &format!("{key}.name"),
-                format!(
-                    "thruster {i} must be `{}` (order: {}), found `{}`",
-                    THRUSTER_NAMES[i],
-                    THRUSTER_NAMES.join(", "),
-                    th.name
-                ),
-            ));
-        }
-        let pos = check3(
-            doc,
-            &format!("{key}.position_m"),
-            th.position_m,
-            -5.0,
-            5.0,
-            "m",
-        )?;
-        let dir = check3(
-            doc,
-            &format!("{key}.direction"),
-            th.direction,
-            -1.0,
-            1.0,
-            "",
-        )?;
-        let norm = dir.norm();
-        if (norm - 1.0).abs() > 1e-6 {
-            return Err(doc.invalid(
-                &format!("{key}.direction"),
-                format!("must be a unit vector (its length is {norm})"),
-            ));
-        }
-        let gain = doc.check_range(&format!("{key}.gain"), th.gain, 0.1, 2.0, "")?;
-        let reverse_ratio = doc.check_range(
-            &format!("{key}.reverse_ratio"),
-            th.reverse_ratio,
-            0.0,
-            1.0,
-            "",
-        )?;
-        if th.hdt_duty.len() != 11 {
-            return Err(doc.invalid(
-                &format!("{key}.hdt_duty"),
-                format!(
-                    "expected 11 duties (MOTORDrive 0, 10, ..., 100 %), found {}",
-                    th.hdt_duty.len()
-                ),
-            ));
-        }
-        let mut hdt_duty = [0.0; 11];
-        for (j, d) in th.hdt_duty.iter().enumerate() {
-            hdt_duty[j] =
-                doc.check_range(&format!("{key}.hdt_duty.{j}"), *d, 0.0, 255.0, "duty")?;
-        }
-        // Inverted logic: a larger command must never give a larger duty (less thrust).
-        if hdt_duty.windows(2).any(|w| w[1] > w[0]) {
-            return Err(doc.invalid(
-                &format!("{key}.hdt_duty"),
-                "duties must not increase with the command (duty 0 = full thrust)",
-            ));
-        }
-        thrusters.push(ThrusterConfig {
-            name: th.name.clone(),
-            position_cg_m: pos - cg,
-            direction: dir,
-            gain,
-            reverse_ratio,
-            hdt_duty,
-        });
+    for (i, th) in raw.iter().enumerate() {
+        thrusters.push(resolve_thruster(doc, i, th, cg)?);
     }
     let thrusters: [ThrusterConfig; 4] = match thrusters.try_into() {
         Ok(t) => t,
         Err(_) => return Err(doc.invalid("thruster", "expected four thrusters")),
     };
-    // The layout the thesis describes (2.2.1): horizontal port/starboard, vertical bow/stern.
     let horizontal = |i: usize| thrusters[i].direction.z.abs() < 1e-6;
     let vertical = |i: usize| thrusters[i].direction.z.abs() > 1.0 - 1e-6;
     if !(horizontal(PORT) && horizontal(STARBOARD) && vertical(BOW) && vertical(STERN)) {
@@ -457,21 +479,98 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
             "port and starboard must push horizontally, bow and stern vertically (thesis 2.2.1)",
         ));
     }
+    Ok(thrusters)
+}
 
-    Ok(VehicleConfig {
-        mass_kg: total,
-        inertia_kgm2: inertia,
-        cg_from_box_centre_m: cg,
-        half_extents_m: half,
-        displaced_volume_m3: volume,
-        cb_m: cb,
-        added_mass,
-        damping_linear,
-        damping_quadratic,
-        damping_sway_yaw,
-        thruster_common,
-        thrusters,
+/// Checks thruster table `i` (its name, position, unit direction, gain, reverse ratio and HDT
+/// duty table) and resolves its position relative to the centre of mass `cg`.
+fn resolve_thruster(
+    doc: &Document<'_>,
+    i: usize,
+    th: &RawThruster,
+    cg: &Vector3<f64>,
+) -> Result<ThrusterConfig, ConfigError> {
+    let key = format!("thruster.{i}");
+    if th.name != THRUSTER_NAMES[i] {
+        return Err(doc.invalid(
+            &format!("{key}.name"),
+            format!(
+                "thruster {i} must be `{}` (order: {}), found `{}`",
+                THRUSTER_NAMES[i],
+                THRUSTER_NAMES.join(", "),
+                th.name
+            ),
+        ));
+    }
+    let pos = check3(
+        doc,
+        &format!("{key}.position_m"),
+        th.position_m,
+        -5.0,
+        5.0,
+        "m",
+    )?;
+    let dir = check3(
+        doc,
+        &format!("{key}.direction"),
+        th.direction,
+        -1.0,
+        1.0,
+        "",
+    )?;
+    let norm = dir.norm();
+    if (norm - 1.0).abs() > 1e-6 {
+        return Err(doc.invalid(
+            &format!("{key}.direction"),
+            format!("must be a unit vector (its length is {norm})"),
+        ));
+    }
+    let gain = doc.check_range(&format!("{key}.gain"), th.gain, 0.1, 2.0, "")?;
+    let reverse_ratio = doc.check_range(
+        &format!("{key}.reverse_ratio"),
+        th.reverse_ratio,
+        0.0,
+        1.0,
+        "",
+    )?;
+    let hdt_duty = resolve_hdt_duty(doc, &key, &th.hdt_duty)?;
+    Ok(ThrusterConfig {
+        name: th.name.clone(),
+        position_cg_m: pos - cg,
+        direction: dir,
+        gain,
+        reverse_ratio,
+        hdt_duty,
     })
+}
+
+/// Checks a thruster's HDT balancing table: eleven duties that never increase with the
+/// command (inverted logic: a larger command must never give a larger duty, i.e. less thrust).
+fn resolve_hdt_duty(
+    doc: &Document<'_>,
+    key: &str,
+    duties: &[f64],
+) -> Result<[f64; 11], ConfigError> {
+    if duties.len() != 11 {
+        return Err(doc.invalid(
+            &format!("{key}.hdt_duty"),
+            format!(
+                "expected 11 duties (MOTORDrive 0, 10, ..., 100 %), found {}",
+                duties.len()
+            ),
+        ));
+    }
+    let mut hdt_duty = [0.0; 11];
+    for (j, d) in duties.iter().enumerate() {
+        hdt_duty[j] = doc.check_range(&format!("{key}.hdt_duty.{j}"), *d, 0.0, 255.0, "duty")?;
+    }
+    if hdt_duty.windows(2).any(|w| w[1] > w[0]) {
+        return Err(doc.invalid(
+            &format!("{key}.hdt_duty"),
+            "duties must not increase with the command (duty 0 = full thrust)",
+        ));
+    }
+    Ok(hdt_duty)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -631,84 +730,13 @@ impl WorldConfig {
         );
         let step_s =
             doc.check_range("simulation.step_s", raw.simulation.step_s, 1e-4, 0.02, "s")?;
-        let mut obstacles = Vec::with_capacity(raw.obstacles.len());
-        for (i, o) in raw.obstacles.into_iter().enumerate() {
-            let key = format!("obstacle.{i}");
-            obstacles.push(match o {
-                RawObstacle::Box {
-                    centre_m,
-                    half_extents_m,
-                    yaw_deg,
-                } => Obstacle::Box {
-                    centre_m: check3(doc, &format!("{key}.centre_m"), centre_m, -1e3, 1e3, "m")?,
-                    half_extents_m: check3(
-                        doc,
-                        &format!("{key}.half_extents_m"),
-                        half_extents_m,
-                        0.01,
-                        1e3,
-                        "m",
-                    )?,
-                    yaw_rad: doc
-                        .check_range(&format!("{key}.yaw_deg"), yaw_deg, -360.0, 360.0, "deg")?
-                        .to_radians(),
-                },
-                RawObstacle::VerticalCylinder {
-                    centre_m,
-                    radius_m,
-                    height_m,
-                } => Obstacle::VerticalCylinder {
-                    centre_m: check3(doc, &format!("{key}.centre_m"), centre_m, -1e3, 1e3, "m")?,
-                    radius_m: doc.check_range(
-                        &format!("{key}.radius_m"),
-                        radius_m,
-                        0.01,
-                        100.0,
-                        "m",
-                    )?,
-                    height_m: doc.check_range(
-                        &format!("{key}.height_m"),
-                        height_m,
-                        0.01,
-                        100.0,
-                        "m",
-                    )?,
-                },
-            });
-        }
+        let obstacles = resolve_obstacles(doc, raw.obstacles)?;
         let wf = raw.wall_following;
         let start_m = check3(doc, "wall_following.start_m", wf.start_m, 0.0, 1e3, "m")?;
         if let Some(why) = outside_pool(&pool_m, &start_m) {
             return Err(doc.invalid("wall_following.start_m", why));
         }
-        let mut starts = Vec::with_capacity(raw.starts.len() + 1);
-        for (name, st) in &raw.starts {
-            let key = format!("starts.{name}.position_m");
-            let position_m = check3(doc, &key, st.position_m, -1e3, 1e3, "m")?;
-            if let Some(why) = outside_pool(&pool_m, &position_m) {
-                return Err(doc.invalid(&key, why));
-            }
-            let heading_deg = doc.check_range(
-                &format!("starts.{name}.heading_deg"),
-                st.heading_deg,
-                -360.0,
-                360.0,
-                "deg",
-            )?;
-            starts.push(CourseStart {
-                name: name.clone(),
-                position_m,
-                heading_deg,
-            });
-        }
-        if !raw.starts.contains_key("wall_following") {
-            starts.push(CourseStart {
-                name: "wall_following".into(),
-                position_m: start_m,
-                heading_deg: wf.heading_deg,
-            });
-            starts.sort_by(|a, b| a.name.cmp(&b.name));
-        }
+        let starts = resolve_starts(doc, &pool_m, &raw.starts, start_m, wf.heading_deg)?;
         Ok(WorldConfig {
             pool_m,
             water_density_kgpm3: doc.check_range(
@@ -785,6 +813,96 @@ impl WorldConfig {
     pub fn outside_pool(&self, position_m: &Vector3<f64>) -> Option<String> {
         outside_pool(&self.pool_m, position_m)
     }
+}
+
+/// Checks the `[[obstacle]]` tables, in file order.
+fn resolve_obstacles(
+    doc: &Document<'_>,
+    raw: Vec<RawObstacle>,
+) -> Result<Vec<Obstacle>, ConfigError> {
+    let mut obstacles = Vec::with_capacity(raw.len());
+    for (i, o) in raw.into_iter().enumerate() {
+        obstacles.push(resolve_obstacle(doc, &format!("obstacle.{i}"), o)?);
+    }
+    Ok(obstacles)
+}
+
+/// Checks one obstacle table (`key` is `obstacle.N`); a box's yaw becomes radians.
+fn resolve_obstacle(
+    doc: &Document<'_>,
+    key: &str,
+    o: RawObstacle,
+) -> Result<Obstacle, ConfigError> {
+    Ok(match o {
+        RawObstacle::Box {
+            centre_m,
+            half_extents_m,
+            yaw_deg,
+        } => Obstacle::Box {
+            centre_m: check3(doc, &format!("{key}.centre_m"), centre_m, -1e3, 1e3, "m")?,
+            half_extents_m: check3(
+                doc,
+                &format!("{key}.half_extents_m"),
+                half_extents_m,
+                0.01,
+                1e3,
+                "m",
+            )?,
+            yaw_rad: doc
+                .check_range(&format!("{key}.yaw_deg"), yaw_deg, -360.0, 360.0, "deg")?
+                .to_radians(),
+        },
+        RawObstacle::VerticalCylinder {
+            centre_m,
+            radius_m,
+            height_m,
+        } => Obstacle::VerticalCylinder {
+            centre_m: check3(doc, &format!("{key}.centre_m"), centre_m, -1e3, 1e3, "m")?,
+            radius_m: doc.check_range(&format!("{key}.radius_m"), radius_m, 0.01, 100.0, "m")?,
+            height_m: doc.check_range(&format!("{key}.height_m"), height_m, 0.01, 100.0, "m")?,
+        },
+    })
+}
+
+/// Checks the named `[starts.NAME]` course starts (each inside the pool) and returns them in
+/// name order, with the wall-following start (`wall_start_m`, `wall_heading_deg`) added as
+/// `wall_following` unless the file names a start so itself.
+fn resolve_starts(
+    doc: &Document<'_>,
+    pool_m: &Vector3<f64>,
+    raw: &std::collections::BTreeMap<String, RawCourseStart>,
+    wall_start_m: Vector3<f64>,
+    wall_heading_deg: f64,
+) -> Result<Vec<CourseStart>, ConfigError> {
+    let mut starts = Vec::with_capacity(raw.len() + 1);
+    for (name, st) in raw {
+        let key = format!("starts.{name}.position_m");
+        let position_m = check3(doc, &key, st.position_m, -1e3, 1e3, "m")?;
+        if let Some(why) = outside_pool(pool_m, &position_m) {
+            return Err(doc.invalid(&key, why));
+        }
+        let heading_deg = doc.check_range(
+            &format!("starts.{name}.heading_deg"),
+            st.heading_deg,
+            -360.0,
+            360.0,
+            "deg",
+        )?;
+        starts.push(CourseStart {
+            name: name.clone(),
+            position_m,
+            heading_deg,
+        });
+    }
+    if !raw.contains_key("wall_following") {
+        starts.push(CourseStart {
+            name: "wall_following".into(),
+            position_m: wall_start_m,
+            heading_deg: wall_heading_deg,
+        });
+        starts.sort_by(|a, b| a.name.cmp(&b.name));
+    }
+    Ok(starts)
 }
 
 fn outside_pool(pool_m: &Vector3<f64>, p: &Vector3<f64>) -> Option<String> {

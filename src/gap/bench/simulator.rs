@@ -400,7 +400,6 @@ pub fn run(
 ) -> Result<Vec<CaseResult>, GapError> {
     let model_text = Embedded.read(MODEL)?;
     let model = GapModel::from_text(&Embedded.describe(MODEL), &model_text, ".".into())?;
-    let exp_dir = std::path::Path::new(".");
     let mut rng = crate::sensors::rng::stream(opts.seed, "gap-bench");
     let (main, world, sensors) = Scene::new(
         &model,
@@ -415,26 +414,81 @@ pub fn run(
     } else {
         None
     };
+    let kinds = case_kinds(opts, &main, sonar_scene.as_ref());
+    let plan = plan_cases(kinds, opts.cases, &mut rng);
+    let env = CaseEnv {
+        model: &model,
+        world: &world,
+        sensors: &sensors,
+    };
+    let total = shard.count(plan.len());
+    let mut done = 0;
+    let mut out = Vec::new();
+    for case in plan {
+        if !shard.contains(case.index) {
+            continue;
+        }
+        let label = case_label(case.kind, case.scene);
+        out.push(run_case(&env, case)?);
+        done += 1;
+        progress(done, total, label, out.last());
+    }
+    Ok(out)
+}
 
+/// What each case is: an effect hidden in its scene (a sonar-only effect on the sonar
+/// wall-sweep when there is one), then the null cases on the main scene and on the sonar
+/// scene if any.
+fn case_kinds<'a>(
+    opts: &BenchOptions,
+    main: &'a Scene,
+    sonar_scene: Option<&'a Scene>,
+) -> Vec<(Option<&'static Effect>, &'a Scene)> {
     let mut kinds: Vec<(Option<&'static Effect>, &Scene)> = opts
         .effects
         .iter()
         .map(|e| {
-            let scene = match &sonar_scene {
+            let scene = match sonar_scene {
                 Some(s) if sonar_only(e) => s,
-                _ => &main,
+                _ => main,
             };
             (Some(*e), scene)
         })
         .collect();
-    kinds.push((None, &main));
-    if let Some(s) = &sonar_scene {
+    kinds.push((None, main));
+    if let Some(s) = sonar_scene {
         kinds.push((None, s));
     }
-    // Every case's draws, in the fixed case order, whichever shard runs it.
+    kinds
+}
+
+/// One case's draws, fixed before any case runs.
+struct PlannedCase<'a> {
+    /// Position in the fixed case order (the shards split by it).
+    index: usize,
+    /// The hidden effect; `None` for a null case.
+    kind: Option<&'static Effect>,
+    scene: &'a Scene,
+    /// Seed of the training measurement.
+    seed: u64,
+    /// Seed of the held-out measurement.
+    hold_seed: u64,
+    /// Direction of the truth in parameter space (empty for a null case).
+    dir: Vec<f64>,
+    /// The size aimed at, in noise-floor units (0 for a null case).
+    target: f64,
+}
+
+/// Every case's draws, in the fixed case order, whichever shard runs it: `cases` cases per
+/// kind, each drawing its seeds, then (with an effect) its direction and target size.
+fn plan_cases<'a>(
+    kinds: Vec<(Option<&'static Effect>, &'a Scene)>,
+    cases: usize,
+    rng: &mut crate::sensors::rng::SensorRng,
+) -> Vec<PlannedCase<'a>> {
     let mut plan = Vec::new();
     for (kind, scene) in kinds {
-        for _ in 0..opts.cases {
+        for _ in 0..cases {
             let seed: u64 = rng.random();
             let hold_seed: u64 = rng.random();
             let (mut dir, mut target) = (Vec::new(), 0.0);
@@ -451,194 +505,279 @@ pub fn run(
                 };
                 target = rng.random_range(SIZE_RANGE.0..SIZE_RANGE.1);
             }
-            plan.push((plan.len(), kind, scene, seed, hold_seed, dir, target));
-        }
-    }
-    let total = shard.count(plan.len());
-    let mut done = 0;
-    let mut out = Vec::new();
-    for (index, kind, scene, seed, hold_seed, dir, target) in plan {
-        if !shard.contains(index) {
-            continue;
-        }
-        let base = &scene.base;
-        {
-            let mut truth_cfg = base.clone();
-            let mut truth = Vec::new();
-            let mut size = 0.0;
-            if let Some(effect) = kind {
-                let k = effect.parameters.len();
-                if scene.sonar && k == 1 {
-                    // The cut stays inside its physical range 0..90 deg (apply clamps it,
-                    // which would make the truth's parameter a lie).
-                    let cut = base.sensors.sonar.max_incidence_deg;
-                    let max_abs = if dir[0] < 0.0 { cut - 0.5 } else { 89.5 - cut };
-                    truth = vec![sonar_calibration(scene, effect, dir[0], max_abs, target)?];
-                } else {
-                    // One-point calibration: the size of one typical step along `dir`.
-                    let unit: Vec<f64> =
-                        dir.iter().zip(effect.scales).map(|(d, s)| d * s).collect();
-                    let s1 = size_sigma(
-                        base,
-                        effect,
-                        &unit,
-                        &scene.probe,
-                        &scene.floors,
-                        &scene.base_run,
-                    )?;
-                    let factor = if s1 > 0.0 { target / s1 } else { 1.0 };
-                    truth = unit.iter().map(|u| u * factor).collect();
-                    // A truth outside the effect's physical bounds is not a case `gap` may
-                    // name (its fit would end on the bound): shrink it along its direction
-                    // to at most 80 % of the way to a bound; the measured size says how big
-                    // the case then is.
-                    let reach = truth
-                        .iter()
-                        .zip(effect.bounds)
-                        .map(|(v, (lo, hi))| {
-                            let edge = if *v < 0.0 { -lo } else { *hi };
-                            if v.abs() > 0.0 && edge > 0.0 {
-                                v.abs() / (0.8 * edge)
-                            } else {
-                                0.0
-                            }
-                        })
-                        .fold(0.0, f64::max);
-                    if reach > 1.0 {
-                        for v in &mut truth {
-                            *v /= reach;
-                        }
-                    }
-                }
-                size = size_sigma(
-                    base,
-                    effect,
-                    &truth,
-                    &scene.probe,
-                    &scene.floors,
-                    &scene.base_run,
-                )?;
-                effects::apply(effect, &truth, &mut truth_cfg);
-            }
-            let m = generate::generate_with(
-                &truth_cfg,
-                &scene.train,
-                &world,
-                &sensors,
-                CAMERA_STD_M,
+            plan.push(PlannedCase {
+                index: plan.len(),
+                kind,
+                scene,
                 seed,
-                scene.sonar,
-            )?;
-            let t0 = Instant::now();
-            // Generated cases are open-loop schedules of the model's own form: replayed whole.
-            let options = crate::gap::Options {
-                shooting: crate::gap::anchor::Shooting::OPEN_LOOP,
-                ..crate::gap::Options::default()
-            };
-            let a = crate::gap::analyse_with(&model, &m, exp_dir, options, &mut |_, _| {})?;
-            let seconds = t0.elapsed().as_secs_f64();
-            let first = a.accepted.first();
-            let named = first.map(|w| w.name.clone());
-            let named_all: Vec<String> = a.accepted.iter().map(|w| w.name.clone()).collect();
-            let fitted: Vec<f64> = first
-                .map(|w| w.parameters.iter().map(|(_, v)| *v).collect())
-                .unwrap_or_default();
-            let ci95: Vec<[f64; 2]> = first
-                .map(|w| w.ci95.iter().map(|(_, c)| *c).collect())
-                .unwrap_or_default();
-            let correct = kind.is_some() && named.as_deref() == kind.map(|e| e.name);
-            let (parameter_error, ci_covers) = if correct {
-                let norm = truth.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let err = truth
-                    .iter()
-                    .zip(&fitted)
-                    .map(|(t, f)| (t - f).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
-                let covers = truth
-                    .iter()
-                    .zip(&ci95)
-                    .all(|(t, c)| c[0] <= *t && *t <= c[1]);
-                ((norm > 0.0).then(|| err / norm), Some(covers))
-            } else {
-                (None, None)
-            };
-            let mut held_out_truth_reduction_pct = None;
-            let held_out_reduction_pct = match kind {
-                None => None,
-                Some(effect) => {
-                    let h = generate::generate_with(
-                        &truth_cfg,
-                        &scene.hold,
-                        &world,
-                        &sensors,
-                        CAMERA_STD_M,
-                        hold_seed,
-                        scene.sonar,
-                    )?;
-                    let (before, after, tb, ta) = if scene.sonar && sonar_only(effect) {
-                        // The all-channel excess does not cover the sonar: the data figure is the sonar -2 ln L over the truth's on the held-out
-                        // data, the truth figure the KL distance of the echo probabilities.
-                        let d_truth = sonar_deviance(&truth_cfg, &h)?;
-                        (
-                            sonar_deviance(base, &h)? - d_truth,
-                            sonar_deviance(&a.configs_after, &h)? - d_truth,
-                            sonar_truth_gap(base, &truth_cfg, &h)?,
-                            sonar_truth_gap(&a.configs_after, &truth_cfg, &h)?,
-                        )
-                    } else {
-                        let hb = resim::simulate(base, &h, None)?;
-                        let hf = resim::noise_floor(base, &h, &hb)?;
-                        // The fitted model's own floor: a fitted noise source (depth EMI)
-                        // is judged by the spread it predicts.
-                        let ha = resim::simulate(&a.configs_after, &h, None)?;
-                        let hfa = resim::noise_floor(&a.configs_after, &h, &ha)?;
-                        (
-                            excess(base, &h, &hf)?,
-                            excess(&a.configs_after, &h, &hfa)?,
-                            truth_gap(base, &truth_cfg, &h, &hf)?,
-                            truth_gap(&a.configs_after, &truth_cfg, &h, &hf)?,
-                        )
-                    };
-                    held_out_truth_reduction_pct = (tb > 0.0).then(|| 100.0 * (1.0 - ta / tb));
-                    Some(if before > 0.0 {
-                        100.0 * (1.0 - after / before)
-                    } else {
-                        0.0
-                    })
-                }
-            };
-            let label = match kind {
-                Some(e) => e.name,
-                None if scene.sonar => "null (sonar)",
-                None => "null",
-            };
-            out.push(CaseResult {
-                index,
-                effect: kind.map(|e| e.name.to_string()),
-                expected: kind.map(|e| e.name.to_string()),
-                label: label.to_string(),
-                seed,
-                truth,
-                size_sigma: Some(size),
-                named,
-                expected_second: None,
-                named_all,
-                fitted,
-                ci95,
-                parameter_error,
-                ci_covers,
-                held_out_reduction_pct,
-                held_out_truth_reduction_pct,
-                held_out_raw_reduction_pct: None,
-                held_out_grew: None,
-                seconds,
+                hold_seed,
+                dir,
+                target,
             });
-            done += 1;
-            progress(done, total, label, out.last());
         }
     }
-    Ok(out)
+    plan
+}
+
+/// The row a case is counted in: its effect's name, or the null row of its scene.
+fn case_label(kind: Option<&'static Effect>, scene: &Scene) -> &'static str {
+    match kind {
+        Some(e) => e.name,
+        None if scene.sonar => "null (sonar)",
+        None => "null",
+    }
+}
+
+/// What every case shares: the model analysed and the world and sensor files the generated
+/// measurements name.
+struct CaseEnv<'a> {
+    model: &'a GapModel,
+    world: &'a str,
+    sensors: &'a str,
+}
+
+/// Runs one case: hides the truth in a generated measurement, runs the whole workflow on it
+/// and scores what it names, and how well, against the truth.
+fn run_case(env: &CaseEnv<'_>, case: PlannedCase<'_>) -> Result<CaseResult, GapError> {
+    let PlannedCase {
+        index,
+        kind,
+        scene,
+        seed,
+        hold_seed,
+        dir,
+        target,
+    } = case;
+    let base = &scene.base;
+    let mut truth_cfg = base.clone();
+    let mut truth = Vec::new();
+    let mut size = 0.0;
+    if let Some(effect) = kind {
+        truth = calibrated_truth(scene, effect, &dir, target)?;
+        size = size_sigma(
+            base,
+            effect,
+            &truth,
+            &scene.probe,
+            &scene.floors,
+            &scene.base_run,
+        )?;
+        effects::apply(effect, &truth, &mut truth_cfg);
+    }
+    let m = generate::generate_with(
+        &truth_cfg,
+        &scene.train,
+        env.world,
+        env.sensors,
+        CAMERA_STD_M,
+        seed,
+        scene.sonar,
+    )?;
+    let t0 = Instant::now();
+    // Generated cases are open-loop schedules of the model's own form: replayed whole.
+    let options = crate::gap::Options {
+        shooting: crate::gap::anchor::Shooting::OPEN_LOOP,
+        ..crate::gap::Options::default()
+    };
+    let exp_dir = std::path::Path::new(".");
+    let a = crate::gap::analyse_with(env.model, &m, exp_dir, options, &mut |_, _| {})?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let first = a.accepted.first();
+    let named = first.map(|w| w.name.clone());
+    let named_all: Vec<String> = a.accepted.iter().map(|w| w.name.clone()).collect();
+    let fitted: Vec<f64> = first
+        .map(|w| w.parameters.iter().map(|(_, v)| *v).collect())
+        .unwrap_or_default();
+    let ci95: Vec<[f64; 2]> = first
+        .map(|w| w.ci95.iter().map(|(_, c)| *c).collect())
+        .unwrap_or_default();
+    let correct = kind.is_some() && named.as_deref() == kind.map(|e| e.name);
+    let (parameter_error, ci_covers) = if correct {
+        parameter_accuracy(&truth, &fitted, &ci95)
+    } else {
+        (None, None)
+    };
+    let (held_out_reduction_pct, held_out_truth_reduction_pct) = match kind {
+        None => (None, None),
+        Some(effect) => {
+            let held = HeldOut {
+                env,
+                scene,
+                effect,
+                truth_cfg: &truth_cfg,
+                fitted: &a.configs_after,
+                seed: hold_seed,
+            };
+            held.reductions()?
+        }
+    };
+    let label = case_label(kind, scene);
+    Ok(CaseResult {
+        index,
+        effect: kind.map(|e| e.name.to_string()),
+        expected: kind.map(|e| e.name.to_string()),
+        label: label.to_string(),
+        seed,
+        truth,
+        size_sigma: Some(size),
+        named,
+        expected_second: None,
+        named_all,
+        fitted,
+        ci95,
+        parameter_error,
+        ci_covers,
+        held_out_reduction_pct,
+        held_out_truth_reduction_pct,
+        held_out_raw_reduction_pct: None,
+        held_out_grew: None,
+        seconds,
+    })
+}
+
+/// The truth's parameters for a case of `effect` along `dir` aimed at size `target`: by
+/// bisection for a sonar-only one-parameter case, else by one-point calibration.
+fn calibrated_truth(
+    scene: &Scene,
+    effect: &Effect,
+    dir: &[f64],
+    target: f64,
+) -> Result<Vec<f64>, GapError> {
+    let k = effect.parameters.len();
+    if scene.sonar && k == 1 {
+        // The cut stays inside its physical range 0..90 deg (apply clamps it,
+        // which would make the truth's parameter a lie).
+        let cut = scene.base.sensors.sonar.max_incidence_deg;
+        let max_abs = if dir[0] < 0.0 { cut - 0.5 } else { 89.5 - cut };
+        Ok(vec![sonar_calibration(
+            scene, effect, dir[0], max_abs, target,
+        )?])
+    } else {
+        one_point_truth(scene, effect, dir, target)
+    }
+}
+
+/// One-point calibration: the size of one typical step along `dir`, scaled linearly to
+/// `target`. A truth outside the effect's physical bounds is not a case `gap` may name (its
+/// fit would end on the bound): it is shrunk along its direction to at most 80 % of the way to
+/// a bound; the measured size says how big the case then is.
+fn one_point_truth(
+    scene: &Scene,
+    effect: &Effect,
+    dir: &[f64],
+    target: f64,
+) -> Result<Vec<f64>, GapError> {
+    let unit: Vec<f64> = dir.iter().zip(effect.scales).map(|(d, s)| d * s).collect();
+    let s1 = size_sigma(
+        &scene.base,
+        effect,
+        &unit,
+        &scene.probe,
+        &scene.floors,
+        &scene.base_run,
+    )?;
+    let factor = if s1 > 0.0 { target / s1 } else { 1.0 };
+    let mut truth: Vec<f64> = unit.iter().map(|u| u * factor).collect();
+    let reach = truth
+        .iter()
+        .zip(effect.bounds)
+        .map(|(v, (lo, hi))| {
+            let edge = if *v < 0.0 { -lo } else { *hi };
+            if v.abs() > 0.0 && edge > 0.0 {
+                v.abs() / (0.8 * edge)
+            } else {
+                0.0
+            }
+        })
+        .fold(0.0, f64::max);
+    if reach > 1.0 {
+        for v in &mut truth {
+            *v /= reach;
+        }
+    }
+    Ok(truth)
+}
+
+/// How far the fitted parameters lie from the truth, relative to its length (`None` for a
+/// zero truth), and whether every 95 % interval covers the truth's value.
+fn parameter_accuracy(
+    truth: &[f64],
+    fitted: &[f64],
+    ci95: &[[f64; 2]],
+) -> (Option<f64>, Option<bool>) {
+    let norm = truth.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let err = truth
+        .iter()
+        .zip(fitted)
+        .map(|(t, f)| (t - f).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let covers = truth
+        .iter()
+        .zip(ci95)
+        .all(|(t, c)| c[0] <= *t && *t <= c[1]);
+    ((norm > 0.0).then(|| err / norm), Some(covers))
+}
+
+/// The held-out scoring of one case with a hidden effect: a second measurement of the same
+/// truth the fit never saw.
+struct HeldOut<'a> {
+    env: &'a CaseEnv<'a>,
+    scene: &'a Scene,
+    effect: &'static Effect,
+    truth_cfg: &'a Configs,
+    /// The configs of the model with the fitted effects.
+    fitted: &'a Configs,
+    seed: u64,
+}
+
+impl HeldOut<'_> {
+    /// The held-out reductions (%), from the shipped model to the fitted one: of the data
+    /// figure, and of the distance to the truth (`None` when the shipped model has none).
+    fn reductions(&self) -> Result<(Option<f64>, Option<f64>), GapError> {
+        let (scene, truth_cfg) = (self.scene, self.truth_cfg);
+        let base = &scene.base;
+        let h = generate::generate_with(
+            truth_cfg,
+            &scene.hold,
+            self.env.world,
+            self.env.sensors,
+            CAMERA_STD_M,
+            self.seed,
+            scene.sonar,
+        )?;
+        let (before, after, tb, ta) = if scene.sonar && sonar_only(self.effect) {
+            // The all-channel excess does not cover the sonar: the data figure is the sonar -2 ln L over the truth's on the held-out
+            // data, the truth figure the KL distance of the echo probabilities.
+            let d_truth = sonar_deviance(truth_cfg, &h)?;
+            (
+                sonar_deviance(base, &h)? - d_truth,
+                sonar_deviance(self.fitted, &h)? - d_truth,
+                sonar_truth_gap(base, truth_cfg, &h)?,
+                sonar_truth_gap(self.fitted, truth_cfg, &h)?,
+            )
+        } else {
+            let hb = resim::simulate(base, &h, None)?;
+            let hf = resim::noise_floor(base, &h, &hb)?;
+            // The fitted model's own floor: a fitted noise source (depth EMI)
+            // is judged by the spread it predicts.
+            let ha = resim::simulate(self.fitted, &h, None)?;
+            let hfa = resim::noise_floor(self.fitted, &h, &ha)?;
+            (
+                excess(base, &h, &hf)?,
+                excess(self.fitted, &h, &hfa)?,
+                truth_gap(base, truth_cfg, &h, &hf)?,
+                truth_gap(self.fitted, truth_cfg, &h, &hf)?,
+            )
+        };
+        let held_out_truth_reduction_pct = (tb > 0.0).then(|| 100.0 * (1.0 - ta / tb));
+        let held_out_reduction_pct = Some(if before > 0.0 {
+            100.0 * (1.0 - after / before)
+        } else {
+            0.0
+        });
+        Ok((held_out_reduction_pct, held_out_truth_reduction_pct))
+    }
 }
 
 #[cfg(test)]

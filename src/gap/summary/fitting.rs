@@ -323,24 +323,7 @@ pub fn analyse(
     s: &Summary,
     progress: &mut dyn FnMut(usize, &str),
 ) -> Result<SummaryAnalysis, GapError> {
-    let info = crate::gap::format::ExperimentInfo {
-        name: s.name.clone(),
-        description: s.description.clone(),
-        duration_s: 0.0,
-        world: crate::physics::DEFAULT_WORLD.to_string(),
-        sensors: "sensors/mako-2008.toml".to_string(),
-        initial: crate::gap::format::Initial {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: None,
-            heading_deg: 0.0,
-            roll_deg: 0.0,
-            pitch_deg: 0.0,
-            surge_mps: 0.0,
-        },
-        camera_position_std_m: 0.0,
-        camera_speed_std_mps: 0.0,
-    };
+    let info = summary_experiment(s);
     let start = model.configs(&info, &model.base)?;
     let mean0 = predict(&start, s, None)?;
     if let Some((o, _)) = s.observations.iter().zip(&mean0).find(|(_, v)| v.is_none()) {
@@ -351,21 +334,7 @@ pub fn analyse(
             o.experiment_ref
         )));
     }
-    // The model's own spread.
-    let mut runs = Vec::new();
-    for seed in 1..=ENSEMBLE {
-        runs.push(predict(&start, s, Some(seed))?);
-    }
-    let sigma_model: Vec<f64> = (0..s.observations.len())
-        .map(|i| {
-            let v: Vec<f64> = runs.iter().filter_map(|r| r[i]).collect();
-            if v.len() < 2 {
-                return 0.0;
-            }
-            let m = v.iter().sum::<f64>() / v.len() as f64;
-            (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
-        })
-        .collect();
+    let sigma_model = model_spread(&start, s)?;
     let sigma: Vec<f64> = s
         .observations
         .iter()
@@ -428,11 +397,60 @@ pub fn analyse(
     )?;
     let priors = priors.into_inner();
     let configs = with(&priors);
-    // The fitted model: the model's own effects, then the accepted ones with their final
-    // (jointly refitted) values and intervals.
+    let fitted = fitted_model(model, &priors, &accepted);
+    let mean1 = predict(&configs, s, None)?;
+    let observations = observation_results(s, &sigma_model, &sigma, &mean0, &mean1);
+    Ok(conclude(observations, rounds, accepted, fitted))
+}
+
+/// The stand-in experiment the model's configurations are built for: the summary's name and
+/// description in the default pool, starting at rest at the origin.
+fn summary_experiment(s: &Summary) -> crate::gap::format::ExperimentInfo {
+    crate::gap::format::ExperimentInfo {
+        name: s.name.clone(),
+        description: s.description.clone(),
+        duration_s: 0.0,
+        world: crate::physics::DEFAULT_WORLD.to_string(),
+        sensors: "sensors/mako-2008.toml".to_string(),
+        initial: crate::gap::format::Initial {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: None,
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            surge_mps: 0.0,
+        },
+        camera_position_std_m: 0.0,
+        camera_speed_std_mps: 0.0,
+    }
+}
+
+/// The model's own spread per observation (thrust fluctuation): the sample standard deviation
+/// over an ensemble of seeded runs, 0 where fewer than two runs give a value.
+fn model_spread(start: &Configs, s: &Summary) -> Result<Vec<f64>, GapError> {
+    let mut runs = Vec::new();
+    for seed in 1..=ENSEMBLE {
+        runs.push(predict(start, s, Some(seed))?);
+    }
+    Ok((0..s.observations.len())
+        .map(|i| {
+            let v: Vec<f64> = runs.iter().filter_map(|r| r[i]).collect();
+            if v.len() < 2 {
+                return 0.0;
+            }
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+        })
+        .collect())
+}
+
+/// The fitted model: the model's own effects, then the accepted ones with their final
+/// (jointly refitted) values and intervals.
+fn fitted_model(model: &GapModel, priors: &[Prior], accepted: &[Candidate]) -> GapModel {
     let mut fitted = model.clone();
     let last = accepted.last();
-    for (i, (p, a)) in priors.iter().zip(&accepted).enumerate() {
+    for (i, (p, a)) in priors.iter().zip(accepted).enumerate() {
         let ci95 = match last {
             Some(l) if i + 1 < accepted.len() => l
                 .refitted
@@ -447,10 +465,20 @@ pub fn analyse(
             delta_bic: Some(a.delta_bic),
         });
     }
-    let mean1 = predict(&configs, s, None)?;
+    fitted
+}
+
+/// Each observation with the model's prediction and z-score before (`mean0`) and after
+/// (`mean1`) the fit; `sigma` combines the measurement's and the model's spread.
+fn observation_results(
+    s: &Summary,
+    sigma_model: &[f64],
+    sigma: &[f64],
+    mean0: &[Option<f64>],
+    mean1: &[Option<f64>],
+) -> Vec<ObservationResult> {
     let z = |v: &Option<f64>, o: &Observation, sg: f64| v.map(|v| o.z(v, sg));
-    let observations: Vec<ObservationResult> = s
-        .observations
+    s.observations
         .iter()
         .enumerate()
         .map(|(i, o)| ObservationResult {
@@ -468,7 +496,17 @@ pub fn analyse(
             z_before: z(&mean0[i], o, sigma[i]),
             z_after: z(&mean1[i], o, sigma[i]),
         })
-        .collect();
+        .collect()
+}
+
+/// The summary's statistics (chi-square, RMS gap before and after, what stays unexplained)
+/// and verdict, from the observation results and the selection's outcome.
+fn conclude(
+    observations: Vec<ObservationResult>,
+    rounds: Vec<Vec<Candidate>>,
+    accepted: Vec<Candidate>,
+    fitted: GapModel,
+) -> SummaryAnalysis {
     let zs = |f: fn(&ObservationResult) -> Option<f64>| -> Vec<f64> {
         // An undefined quantity after fitting counts as a large miss, not as agreement.
         observations.iter().map(|o| f(o).unwrap_or(1e3)).collect()
@@ -485,7 +523,7 @@ pub fn analyse(
     let chi2_critical_after = residuals::chi2_critical_95(dof);
     let rms = |z: &[f64]| (chi2(z) / n.max(1) as f64).sqrt();
     let (gb, ga) = (rms(&zb), rms(&za));
-    Ok(SummaryAnalysis {
+    SummaryAnalysis {
         unexplained: observations
             .iter()
             .zip(&za)
@@ -509,5 +547,5 @@ pub fn analyse(
         rounds,
         accepted,
         fitted,
-    })
+    }
 }

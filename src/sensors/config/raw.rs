@@ -247,208 +247,10 @@ fn finite3(doc: &Document<'_>, key: &str, v: [f64; 3], max: f64) -> Result<[f64;
 impl RawSensors {
     pub(super) fn resolve(self, doc: &Document<'_>) -> Result<SensorsConfig, ConfigError> {
         let adc = self.adc.resolve(doc)?;
-        let depth = {
-            let d = &self.depth;
-            DepthSettings {
-                position_body_m: finite3(doc, "depth.position_body_m", d.position_body_m, 2.0)?,
-                full_scale_m: positive(doc, "depth.full_scale_m", d.full_scale_m, 100.0, "m")?,
-                volts_per_m: positive(doc, "depth.volts_per_m", d.volts_per_m, 100.0, "V/m")?,
-                hysteresis_fraction_fs: doc.check_range(
-                    "depth.hysteresis_fraction_fs",
-                    d.hysteresis_fraction_fs,
-                    0.0,
-                    0.1,
-                    "(fraction of full scale)",
-                )?,
-                noise_v_rms: doc.check_range("depth.noise_v_rms", d.noise_v_rms, 0.0, 1.0, "V")?,
-                emi_v_rms_full_duty: doc.check_range(
-                    "depth.emi_v_rms_full_duty",
-                    d.emi_v_rms_full_duty,
-                    0.0,
-                    5.0,
-                    "V",
-                )?,
-                low_pass_cutoff_hz: match d.low_pass_cutoff_hz {
-                    Some(f) => Some(positive(doc, "depth.low_pass_cutoff_hz", f, 1e5, "Hz")?),
-                    None => None,
-                },
-                emi_bandwidth_hz: positive(
-                    doc,
-                    "depth.emi_bandwidth_hz",
-                    d.emi_bandwidth_hz,
-                    1e7,
-                    "Hz",
-                )?,
-                errors: d.errors.resolve(doc, "depth")?,
-            }
-        };
-        if let Some(fc) = depth.low_pass_cutoff_hz
-            && fc >= depth.emi_bandwidth_hz
-        {
-            return Err(doc.invalid(
-                "depth.low_pass_cutoff_hz",
-                format!(
-                    "{fc} Hz must lie below depth.emi_bandwidth_hz ({} Hz)",
-                    depth.emi_bandwidth_hz
-                ),
-            ));
-        }
-        let velocity = {
-            let v = &self.velocity;
-            VelocitySettings {
-                pulses_per_metre: positive(
-                    doc,
-                    "velocity.pulses_per_metre",
-                    v.pulses_per_metre,
-                    1e4,
-                    "pulses/m",
-                )?,
-                pulse_fraction: {
-                    let f = doc.check_range(
-                        "velocity.pulse_fraction",
-                        v.pulse_fraction,
-                        0.0,
-                        1.0,
-                        "(fraction)",
-                    )?;
-                    if f <= 0.0 || f >= 1.0 {
-                        return Err(doc.invalid(
-                            "velocity.pulse_fraction",
-                            "must lie strictly between 0 and 1",
-                        ));
-                    }
-                    f
-                },
-                high_v: positive(doc, "velocity.high_v", v.high_v, 24.0, "V")?,
-                poll_period_s: positive(doc, "velocity.poll_period_s", v.poll_period_s, 1.0, "s")?,
-                window_s: positive(doc, "velocity.window_s", v.window_s, 60.0, "s")?,
-                firmware_scale: positive(
-                    doc,
-                    "velocity.firmware_scale",
-                    v.firmware_scale,
-                    100.0,
-                    "(factor)",
-                )?,
-                errors: v.errors.resolve(doc, "velocity")?,
-            }
-        };
-        if velocity.window_s < velocity.poll_period_s {
-            return Err(doc.invalid(
-                "velocity.window_s",
-                "must be at least velocity.poll_period_s",
-            ));
-        }
-        let accelerometer = {
-            let a = &self.accelerometer;
-            let r = AccelerometerSettings {
-                zero_g_v: positive(doc, "accelerometer.zero_g_v", a.zero_g_v, 5.0, "V")?,
-                sensitivity_v_per_g: positive(
-                    doc,
-                    "accelerometer.sensitivity_v_per_g",
-                    a.sensitivity_v_per_g,
-                    5.0,
-                    "V/g",
-                )?,
-                min_v: doc.check_range("accelerometer.min_v", a.min_v, 0.0, 5.0, "V")?,
-                max_v: doc.check_range("accelerometer.max_v", a.max_v, 0.0, 5.0, "V")?,
-                noise_v_rms: doc.check_range(
-                    "accelerometer.noise_v_rms",
-                    a.noise_v_rms,
-                    0.0,
-                    1.0,
-                    "V",
-                )?,
-                cutoff_hz: {
-                    for (i, f) in a.cutoff_hz.iter().enumerate() {
-                        positive(doc, &format!("accelerometer.cutoff_hz.{i}"), *f, 1e5, "Hz")?;
-                    }
-                    a.cutoff_hz
-                },
-                errors: a.errors.resolve(doc, "accelerometer")?,
-            };
-            if !(r.min_v < r.zero_g_v && r.zero_g_v < r.max_v) {
-                return Err(doc.invalid(
-                    "accelerometer.zero_g_v",
-                    "must lie strictly between accelerometer.min_v and accelerometer.max_v",
-                ));
-            }
-            r
-        };
-        let compass = {
-            let c = &self.compass;
-            for (i, h) in c.hard_iron_ut.iter().enumerate() {
-                doc.check_range(
-                    &format!("compass.hard_iron_ut.{i}"),
-                    *h,
-                    -1000.0,
-                    1000.0,
-                    "uT",
-                )?;
-            }
-            for (i, row) in c.soft_iron.iter().enumerate() {
-                for (j, x) in row.iter().enumerate() {
-                    doc.check_range(
-                        &format!("compass.soft_iron.{i}.{j}"),
-                        *x,
-                        -2.0,
-                        2.0,
-                        "(factor)",
-                    )?;
-                }
-            }
-            let det = c.soft_iron[0][0] * c.soft_iron[1][1] - c.soft_iron[0][1] * c.soft_iron[1][0];
-            if det.abs() < 0.1 {
-                return Err(doc.invalid("compass.soft_iron", "matrix is (nearly) singular"));
-            }
-            CompassSettings {
-                field_ut: positive(doc, "compass.field_ut", c.field_ut, 100.0, "uT")?,
-                inclination_deg: doc.check_range(
-                    "compass.inclination_deg",
-                    c.inclination_deg,
-                    -89.0,
-                    89.0,
-                    "deg",
-                )?,
-                declination_deg: doc.check_range(
-                    "compass.declination_deg",
-                    c.declination_deg,
-                    -180.0,
-                    180.0,
-                    "deg",
-                )?,
-                hard_iron_ut: c.hard_iron_ut,
-                soft_iron: c.soft_iron,
-                field_noise_ut: doc.check_range(
-                    "compass.field_noise_ut",
-                    c.field_noise_ut,
-                    0.0,
-                    50.0,
-                    "uT",
-                )?,
-                raw_counts_per_ut: positive(
-                    doc,
-                    "compass.raw_counts_per_ut",
-                    c.raw_counts_per_ut,
-                    300.0,
-                    "counts/uT",
-                )?,
-                continuous_period_s: positive(
-                    doc,
-                    "compass.continuous_period_s",
-                    c.continuous_period_s,
-                    10.0,
-                    "s",
-                )?,
-                conversion_delay_s: doc.check_range(
-                    "compass.conversion_delay_s",
-                    c.conversion_delay_s,
-                    0.0,
-                    10.0,
-                    "s",
-                )?,
-                errors: c.errors.resolve(doc, "compass")?,
-            }
-        };
+        let depth = self.depth.resolve(doc)?;
+        let velocity = self.velocity.resolve(doc)?;
+        let accelerometer = self.accelerometer.resolve(doc)?;
+        let compass = self.compass.resolve(doc)?;
         let sonar = self.sonar.resolve(doc)?;
         Ok(SensorsConfig {
             adc,
@@ -461,6 +263,229 @@ impl RawSensors {
     }
 }
 
+impl RawDepth {
+    /// Checks the depth sensor's settings; a low-pass cutoff, if any, must lie below the
+    /// EMI bandwidth it filters.
+    fn resolve(&self, doc: &Document<'_>) -> Result<DepthSettings, ConfigError> {
+        let d = self;
+        let depth = DepthSettings {
+            position_body_m: finite3(doc, "depth.position_body_m", d.position_body_m, 2.0)?,
+            full_scale_m: positive(doc, "depth.full_scale_m", d.full_scale_m, 100.0, "m")?,
+            volts_per_m: positive(doc, "depth.volts_per_m", d.volts_per_m, 100.0, "V/m")?,
+            hysteresis_fraction_fs: doc.check_range(
+                "depth.hysteresis_fraction_fs",
+                d.hysteresis_fraction_fs,
+                0.0,
+                0.1,
+                "(fraction of full scale)",
+            )?,
+            noise_v_rms: doc.check_range("depth.noise_v_rms", d.noise_v_rms, 0.0, 1.0, "V")?,
+            emi_v_rms_full_duty: doc.check_range(
+                "depth.emi_v_rms_full_duty",
+                d.emi_v_rms_full_duty,
+                0.0,
+                5.0,
+                "V",
+            )?,
+            low_pass_cutoff_hz: match d.low_pass_cutoff_hz {
+                Some(f) => Some(positive(doc, "depth.low_pass_cutoff_hz", f, 1e5, "Hz")?),
+                None => None,
+            },
+            emi_bandwidth_hz: positive(
+                doc,
+                "depth.emi_bandwidth_hz",
+                d.emi_bandwidth_hz,
+                1e7,
+                "Hz",
+            )?,
+            errors: d.errors.resolve(doc, "depth")?,
+        };
+        if let Some(fc) = depth.low_pass_cutoff_hz
+            && fc >= depth.emi_bandwidth_hz
+        {
+            return Err(doc.invalid(
+                "depth.low_pass_cutoff_hz",
+                format!(
+                    "{fc} Hz must lie below depth.emi_bandwidth_hz ({} Hz)",
+                    depth.emi_bandwidth_hz
+                ),
+            ));
+        }
+        Ok(depth)
+    }
+}
+
+impl RawVelocity {
+    /// Checks the velocity sensor's settings; its averaging window must span at least one
+    /// poll period.
+    fn resolve(&self, doc: &Document<'_>) -> Result<VelocitySettings, ConfigError> {
+        let v = self;
+        let velocity = VelocitySettings {
+            pulses_per_metre: positive(
+                doc,
+                "velocity.pulses_per_metre",
+                v.pulses_per_metre,
+                1e4,
+                "pulses/m",
+            )?,
+            pulse_fraction: {
+                let f = doc.check_range(
+                    "velocity.pulse_fraction",
+                    v.pulse_fraction,
+                    0.0,
+                    1.0,
+                    "(fraction)",
+                )?;
+                if f <= 0.0 || f >= 1.0 {
+                    return Err(doc.invalid(
+                        "velocity.pulse_fraction",
+                        "must lie strictly between 0 and 1",
+                    ));
+                }
+                f
+            },
+            high_v: positive(doc, "velocity.high_v", v.high_v, 24.0, "V")?,
+            poll_period_s: positive(doc, "velocity.poll_period_s", v.poll_period_s, 1.0, "s")?,
+            window_s: positive(doc, "velocity.window_s", v.window_s, 60.0, "s")?,
+            firmware_scale: positive(
+                doc,
+                "velocity.firmware_scale",
+                v.firmware_scale,
+                100.0,
+                "(factor)",
+            )?,
+            errors: v.errors.resolve(doc, "velocity")?,
+        };
+        if velocity.window_s < velocity.poll_period_s {
+            return Err(doc.invalid(
+                "velocity.window_s",
+                "must be at least velocity.poll_period_s",
+            ));
+        }
+        Ok(velocity)
+    }
+}
+
+impl RawAccelerometer {
+    /// Checks the accelerometer's settings; the zero-g voltage must lie strictly inside its
+    /// output range.
+    fn resolve(&self, doc: &Document<'_>) -> Result<AccelerometerSettings, ConfigError> {
+        let a = self;
+        let r = AccelerometerSettings {
+            zero_g_v: positive(doc, "accelerometer.zero_g_v", a.zero_g_v, 5.0, "V")?,
+            sensitivity_v_per_g: positive(
+                doc,
+                "accelerometer.sensitivity_v_per_g",
+                a.sensitivity_v_per_g,
+                5.0,
+                "V/g",
+            )?,
+            min_v: doc.check_range("accelerometer.min_v", a.min_v, 0.0, 5.0, "V")?,
+            max_v: doc.check_range("accelerometer.max_v", a.max_v, 0.0, 5.0, "V")?,
+            noise_v_rms: doc.check_range(
+                "accelerometer.noise_v_rms",
+                a.noise_v_rms,
+                0.0,
+                1.0,
+                "V",
+            )?,
+            cutoff_hz: {
+                for (i, f) in a.cutoff_hz.iter().enumerate() {
+                    positive(doc, &format!("accelerometer.cutoff_hz.{i}"), *f, 1e5, "Hz")?;
+                }
+                a.cutoff_hz
+            },
+            errors: a.errors.resolve(doc, "accelerometer")?,
+        };
+        if !(r.min_v < r.zero_g_v && r.zero_g_v < r.max_v) {
+            return Err(doc.invalid(
+                "accelerometer.zero_g_v",
+                "must lie strictly between accelerometer.min_v and accelerometer.max_v",
+            ));
+        }
+        Ok(r)
+    }
+}
+
+impl RawCompass {
+    /// Checks the compass's hard- and soft-iron calibration (the soft-iron matrix must be
+    /// invertible), then its field and timing settings.
+    fn resolve(&self, doc: &Document<'_>) -> Result<CompassSettings, ConfigError> {
+        let c = self;
+        for (i, h) in c.hard_iron_ut.iter().enumerate() {
+            doc.check_range(
+                &format!("compass.hard_iron_ut.{i}"),
+                *h,
+                -1000.0,
+                1000.0,
+                "uT",
+            )?;
+        }
+        for (i, row) in c.soft_iron.iter().enumerate() {
+            for (j, x) in row.iter().enumerate() {
+                doc.check_range(
+                    &format!("compass.soft_iron.{i}.{j}"),
+                    *x,
+                    -2.0,
+                    2.0,
+                    "(factor)",
+                )?;
+            }
+        }
+        let det = c.soft_iron[0][0] * c.soft_iron[1][1] - c.soft_iron[0][1] * c.soft_iron[1][0];
+        if det.abs() < 0.1 {
+            return Err(doc.invalid("compass.soft_iron", "matrix is (nearly) singular"));
+        }
+        Ok(CompassSettings {
+            field_ut: positive(doc, "compass.field_ut", c.field_ut, 100.0, "uT")?,
+            inclination_deg: doc.check_range(
+                "compass.inclination_deg",
+                c.inclination_deg,
+                -89.0,
+                89.0,
+                "deg",
+            )?,
+            declination_deg: doc.check_range(
+                "compass.declination_deg",
+                c.declination_deg,
+                -180.0,
+                180.0,
+                "deg",
+            )?,
+            hard_iron_ut: c.hard_iron_ut,
+            soft_iron: c.soft_iron,
+            field_noise_ut: doc.check_range(
+                "compass.field_noise_ut",
+                c.field_noise_ut,
+                0.0,
+                50.0,
+                "uT",
+            )?,
+            raw_counts_per_ut: positive(
+                doc,
+                "compass.raw_counts_per_ut",
+                c.raw_counts_per_ut,
+                300.0,
+                "counts/uT",
+            )?,
+            continuous_period_s: positive(
+                doc,
+                "compass.continuous_period_s",
+                c.continuous_period_s,
+                10.0,
+                "s",
+            )?,
+            conversion_delay_s: doc.check_range(
+                "compass.conversion_delay_s",
+                c.conversion_delay_s,
+                0.0,
+                10.0,
+                "s",
+            )?,
+            errors: c.errors.resolve(doc, "compass")?,
+        })
+    }
+}
 impl RawAdc {
     fn resolve(&self, doc: &Document<'_>) -> Result<AdcSettings, ConfigError> {
         let bits = self.bits;
@@ -519,6 +544,65 @@ impl RawAdc {
 
 impl RawSonar {
     fn resolve(&self, doc: &Document<'_>) -> Result<SonarSettings, ConfigError> {
+        let detection = self.resolve_detection(doc)?;
+        let rings = u32::try_from(self.cone_rings)
+            .ok()
+            .filter(|r| *r <= 8)
+            .ok_or_else(|| doc.invalid("sonar.cone_rings", "expected 0..=8"))?;
+        let timing = self.timing.resolve(doc)?;
+        let transducers = self.resolve_transducers(doc)?;
+        Ok(SonarSettings {
+            beam_width_deg: positive(
+                doc,
+                "sonar.beam_width_deg",
+                self.beam_width_deg,
+                90.0,
+                "deg",
+            )?,
+            cone_rings: rings,
+            min_range_m: doc.check_range("sonar.min_range_m", self.min_range_m, 0.0, 10.0, "m")?,
+            detection,
+            max_incidence_deg: doc.check_range(
+                "sonar.max_incidence_deg",
+                self.max_incidence_deg,
+                0.0,
+                90.0,
+                "deg",
+            )?,
+            incidence_sigma_deg: positive(
+                doc,
+                "sonar.incidence_sigma_deg",
+                self.incidence_sigma_deg,
+                90.0,
+                "deg",
+            )?,
+            speed_half_mps: positive(
+                doc,
+                "sonar.speed_half_mps",
+                self.speed_half_mps,
+                10.0,
+                "m/s",
+            )?,
+            resolution_m: positive(doc, "sonar.resolution_m", self.resolution_m, 1.0, "m")?,
+            crosstalk_probability: probability(
+                doc,
+                "sonar.crosstalk_probability",
+                self.crosstalk_probability,
+            )?,
+            reverberation_probability: probability(
+                doc,
+                "sonar.reverberation_probability",
+                self.reverberation_probability,
+            )?,
+            errors: self.errors.resolve(doc, "sonar")?,
+            timing,
+            transducers,
+        })
+    }
+
+    /// Checks the detection curve: one percentage per range, at least two points, ranges
+    /// strictly increasing; returns (range m, probability) pairs.
+    fn resolve_detection(&self, doc: &Document<'_>) -> Result<Vec<(f64, f64)>, ConfigError> {
         if self.detection_range_m.len() != self.detection_percent.len()
             || self.detection_range_m.len() < 2
         {
@@ -551,46 +635,15 @@ impl RawSonar {
             }
             detection.push((r, p / 100.0));
         }
-        let rings = u32::try_from(self.cone_rings)
-            .ok()
-            .filter(|r| *r <= 8)
-            .ok_or_else(|| doc.invalid("sonar.cone_rings", "expected 0..=8"))?;
-        let t = &self.timing;
-        let timing = SonarTiming {
-            period_s: positive(doc, "sonar.timing.period_s", t.period_s, 60.0, "s")?,
-            command_latency_s: doc.check_range(
-                "sonar.timing.command_latency_s",
-                t.command_latency_s,
-                0.0,
-                10.0,
-                "s",
-            )?,
-            relay_switch_s: doc.check_range(
-                "sonar.timing.relay_switch_s",
-                t.relay_switch_s,
-                0.0,
-                10.0,
-                "s",
-            )?,
-            reacquire_pings: u32::try_from(t.reacquire_pings)
-                .ok()
-                .filter(|p| *p <= 10)
-                .ok_or_else(|| doc.invalid("sonar.timing.reacquire_pings", "expected 0..=10"))?,
-            ack_latency_s: doc.check_range(
-                "sonar.timing.ack_latency_s",
-                t.ack_latency_s,
-                0.0,
-                10.0,
-                "s",
-            )?,
-            sentence_latency_s: doc.check_range(
-                "sonar.timing.sentence_latency_s",
-                t.sentence_latency_s,
-                0.0,
-                10.0,
-                "s",
-            )?,
-        };
+        Ok(detection)
+    }
+
+    /// Checks the four `[[sonar.transducer]]` tables: each on controller 0 or 1 with a
+    /// unique non-empty name, two per controller.
+    fn resolve_transducers(
+        &self,
+        doc: &Document<'_>,
+    ) -> Result<Vec<TransducerSettings>, ConfigError> {
         if self.transducer.len() != 4 {
             return Err(doc.invalid(
                 "sonar.transducer",
@@ -642,52 +695,49 @@ impl RawSonar {
                 format!("each controller owns two transducers; got {per_controller:?}"),
             ));
         }
-        Ok(SonarSettings {
-            beam_width_deg: positive(
-                doc,
-                "sonar.beam_width_deg",
-                self.beam_width_deg,
-                90.0,
-                "deg",
-            )?,
-            cone_rings: rings,
-            min_range_m: doc.check_range("sonar.min_range_m", self.min_range_m, 0.0, 10.0, "m")?,
-            detection,
-            max_incidence_deg: doc.check_range(
-                "sonar.max_incidence_deg",
-                self.max_incidence_deg,
+        Ok(transducers)
+    }
+}
+
+impl RawTiming {
+    /// Checks the sonar's timing: ping period, latencies, relay switching and the pings lost
+    /// while a transducer reacquires.
+    fn resolve(&self, doc: &Document<'_>) -> Result<SonarTiming, ConfigError> {
+        let t = self;
+        Ok(SonarTiming {
+            period_s: positive(doc, "sonar.timing.period_s", t.period_s, 60.0, "s")?,
+            command_latency_s: doc.check_range(
+                "sonar.timing.command_latency_s",
+                t.command_latency_s,
                 0.0,
-                90.0,
-                "deg",
-            )?,
-            incidence_sigma_deg: positive(
-                doc,
-                "sonar.incidence_sigma_deg",
-                self.incidence_sigma_deg,
-                90.0,
-                "deg",
-            )?,
-            speed_half_mps: positive(
-                doc,
-                "sonar.speed_half_mps",
-                self.speed_half_mps,
                 10.0,
-                "m/s",
+                "s",
             )?,
-            resolution_m: positive(doc, "sonar.resolution_m", self.resolution_m, 1.0, "m")?,
-            crosstalk_probability: probability(
-                doc,
-                "sonar.crosstalk_probability",
-                self.crosstalk_probability,
+            relay_switch_s: doc.check_range(
+                "sonar.timing.relay_switch_s",
+                t.relay_switch_s,
+                0.0,
+                10.0,
+                "s",
             )?,
-            reverberation_probability: probability(
-                doc,
-                "sonar.reverberation_probability",
-                self.reverberation_probability,
+            reacquire_pings: u32::try_from(t.reacquire_pings)
+                .ok()
+                .filter(|p| *p <= 10)
+                .ok_or_else(|| doc.invalid("sonar.timing.reacquire_pings", "expected 0..=10"))?,
+            ack_latency_s: doc.check_range(
+                "sonar.timing.ack_latency_s",
+                t.ack_latency_s,
+                0.0,
+                10.0,
+                "s",
             )?,
-            errors: self.errors.resolve(doc, "sonar")?,
-            timing,
-            transducers,
+            sentence_latency_s: doc.check_range(
+                "sonar.timing.sentence_latency_s",
+                t.sentence_latency_s,
+                0.0,
+                10.0,
+                "s",
+            )?,
         })
     }
 }
