@@ -424,7 +424,7 @@ fn robios63_demo_calls_run_on_mako_without_its_devices() {
     let dir = TempDir::new("robios6-m5-demos");
     let out = dir.join("out");
     let o = check(
-        &workspace_root().join("tests/fixtures/robios6_m5_demos.toml"),
+        &workspace_root().join("pty-tests/fixtures/robios6_m5_demos.toml"),
         &out,
         &[host.join("m5_demos").to_str().expect("utf-8 path")],
     );

@@ -239,7 +239,7 @@ fn the_headers_are_the_field_names_of_the_row_types() {
 /// configuration, model files, bytes and state.
 #[test]
 fn a_format_1_recording_still_reads() {
-    let dir = &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/recording-format-1");
+    let dir = &Path::new(env!("CARGO_MANIFEST_DIR")).join("pty-tests/fixtures/recording-format-1");
     let meta = read_meta(dir).unwrap();
     assert_eq!(meta.format, format::FORMAT_COMMENTED_CONFIG);
     assert_eq!(meta.time_mode, "lockstep");

@@ -34,7 +34,7 @@ fn duty_to_percent_inverts_the_hdt_table() {
 /// `meta.toml`) converts, with the model files its configuration named.
 #[test]
 fn a_format_1_recording_converts() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/recording-format-1");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("pty-tests/fixtures/recording-format-1");
     let conv = convert(&dir, &ConvertOptions::default()).unwrap();
     let names: Vec<&str> = conv
         .measurement
