@@ -152,15 +152,7 @@ fn hidden_thrust_gain_in_summary_numbers_is_found() {
         duration_s: 0.0,
         world: "worlds/pool.toml".into(),
         sensors: "sensors/mako-2008.toml".into(),
-        initial: Initial {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: None,
-            heading_deg: 0.0,
-            roll_deg: 0.0,
-            pitch_deg: 0.0,
-            surge_mps: 0.0,
-        },
+        initial: Initial::default(),
         camera_position_std_m: 0.0,
         camera_speed_std_mps: 0.0,
     };
@@ -191,15 +183,7 @@ fn subsim_2_4_model_reproduces_subsim_s_own_reported_numbers() {
         duration_s: 0.0,
         world: "worlds/pool.toml".into(),
         sensors: "sensors/mako-2008.toml".into(),
-        initial: Initial {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: None,
-            heading_deg: 0.0,
-            roll_deg: 0.0,
-            pitch_deg: 0.0,
-            surge_mps: 0.0,
-        },
+        initial: Initial::default(),
         camera_position_std_m: 0.0,
         camera_speed_std_mps: 0.0,
     };

@@ -87,8 +87,9 @@ fn default_speed_std() -> f64 {
     0.02
 }
 
-/// Where the run started (world NED; `z_m = None`: floating at the surface).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Where the run started (world NED; `z_m = None`: floating at the surface). The default is
+/// at rest at the origin, heading north, floating.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Initial {
     pub x_m: f64,
     pub y_m: f64,

@@ -48,15 +48,7 @@ pub fn setup(
             .sensors_ref
             .clone()
             .unwrap_or_else(|| "sensors/mako-2008.toml".to_string()),
-        initial: Initial {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: None,
-            heading_deg: 0.0,
-            roll_deg: 0.0,
-            pitch_deg: 0.0,
-            surge_mps: 0.0,
-        },
+        initial: Initial::default(),
         camera_position_std_m,
         camera_speed_std_mps: 0.02,
     }

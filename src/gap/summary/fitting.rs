@@ -412,15 +412,7 @@ fn summary_experiment(s: &Summary) -> crate::gap::format::ExperimentInfo {
         duration_s: 0.0,
         world: crate::physics::DEFAULT_WORLD.to_string(),
         sensors: "sensors/mako-2008.toml".to_string(),
-        initial: crate::gap::format::Initial {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: None,
-            heading_deg: 0.0,
-            roll_deg: 0.0,
-            pitch_deg: 0.0,
-            surge_mps: 0.0,
-        },
+        initial: crate::gap::format::Initial::default(),
         camera_position_std_m: 0.0,
         camera_speed_std_mps: 0.0,
     }
