@@ -192,11 +192,11 @@ impl Measurement {
 
     /// MOTORDrive percentages in force at `t_s`.
     pub fn percent_at(&self, t_s: f64) -> [f64; 4] {
-        self.commands
-            .iter()
-            .take_while(|c| c.t_s <= t_s + 1e-9)
-            .last()
-            .map_or([0.0; 4], |c| c.percent)
+        // Rows are in time order (loading refuses others): the last row at or before `t_s`,
+        // found by bisection, as the re-simulation asks for every step.
+        let n = self.commands.partition_point(|c| c.t_s <= t_s + 1e-9);
+        n.checked_sub(1)
+            .map_or([0.0; 4], |k| self.commands[k].percent)
     }
 
     /// Writes the three files into `dir` (created if needed).
@@ -551,6 +551,43 @@ fn parse_measured(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    proptest::proptest! {
+        /// The command in force is the last row at or before the time (within 1 ns), rows
+        /// at the same time the last of them, and none before the first row: what a scan from
+        /// the start gives, found by bisection.
+        #[test]
+        fn the_command_in_force_is_the_last_row_not_after_the_time(
+            steps in proptest::collection::vec((0u8..4, -100.0f64..100.0), 1..40),
+            query in -1.0f64..50.0,
+        ) {
+            let mut t = 0.0;
+            let commands: Vec<CommandRow> = steps
+                .iter()
+                .map(|(dt, p)| {
+                    t += f64::from(*dt) * 0.5;
+                    CommandRow { t_s: t, percent: [*p, -*p, 0.0, 1.0] }
+                })
+                .collect();
+            let mut m = Measurement::from_texts(
+                ("e", EXP),
+                ("c", "t_s,port,starboard,bow,stern\n0,0,0,0,0\n"),
+                ("m", "t_s,x_m\n0.0,1.0\n"),
+            )
+            .unwrap();
+            m.commands = commands.clone();
+            // Every row read: the last one at or before the time wins.
+            let scan = |t: f64| {
+                commands
+                    .iter()
+                    .fold([0.0; 4], |now, c| if c.t_s <= t + 1e-9 { c.percent } else { now })
+            };
+            proptest::prop_assert_eq!(m.percent_at(query), scan(query));
+            for c in &commands {
+                proptest::prop_assert_eq!(m.percent_at(c.t_s), scan(c.t_s));
+            }
+        }
+    }
 
     const EXP: &str =
         "name = \"t\"\nduration_s = 10.0\n[initial]\nx_m = 1.0\ny_m = 2.0\nheading_deg = 0.0\n";

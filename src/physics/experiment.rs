@@ -216,11 +216,11 @@ impl Experiment {
 
     /// The scheduled MOTORDrive percentages at `t_s`.
     pub fn percent_at(&self, t_s: f64) -> [f64; 4] {
-        self.schedule
-            .iter()
-            .take_while(|c| c.t_s <= t_s + 1e-9)
-            .last()
-            .map_or([0.0; 4], |c| c.percent)
+        // Rows are in time order (loading refuses others): the last row at or before `t_s`,
+        // found by bisection, as the re-simulation asks for every step.
+        let n = self.schedule.partition_point(|c| c.t_s <= t_s + 1e-9);
+        n.checked_sub(1)
+            .map_or([0.0; 4], |k| self.schedule[k].percent)
     }
 }
 
