@@ -119,10 +119,11 @@ fn verdict_text(a: &Analysis) -> String {
                 .to_string()
         }
         (crate::gap::Verdict::Ambiguous, None) => {
-            let [sensor, physics] = a.ambiguous.clone().unwrap_or_default();
+            let [first, second] = a.ambiguous.clone().unwrap_or_default();
             format!(
-                "**ambiguous**: the sensor effect `{sensor}` and the physics effect `{physics}` \
-                 explain the same disagreement about as well; neither is named"
+                "**ambiguous**: `{first}` and `{second}` explain the same disagreement about as \
+                 well (delta BIC within {}); neither is named",
+                fit::BIC_MARGIN
             )
         }
         _ => "no significant missing effect".to_string(),

@@ -458,6 +458,8 @@ pub fn run(
             held_out_truth_reduction_pct: None,
             held_out_raw_reduction_pct: first.map(|_| a.raw.heldout_reduction_pct()),
             held_out_grew: Some(first.is_some() && a.heldout_gap_after > a.heldout_gap_before),
+            ambiguous: a.ambiguous.clone(),
+            runner_up: super::runner_up(&a),
             seconds,
         });
         progress(out.len(), total, &label, out.last());

@@ -176,6 +176,13 @@ pub struct CaseResult {
     pub held_out_raw_reduction_pct: Option<f64>,
     /// True when an effect was accepted and the held-out gap grew (independent source).
     pub held_out_grew: Option<bool>,
+    /// The two effects of an `ambiguous` verdict, the better first.
+    #[serde(default)]
+    pub ambiguous: Option<[String; 2]>,
+    /// The first round's best other candidate passing every guard, and how far its delta
+    /// BIC is behind the round's winner (a margin under 10 is an `ambiguous` round).
+    #[serde(default)]
+    pub runner_up: Option<(String, f64)>,
     /// Wall time of the workflow on the training data (s).
     pub seconds: f64,
 }
@@ -210,6 +217,12 @@ impl CaseResult {
     pub fn is_pair(&self) -> bool {
         self.expected_second.is_some()
     }
+}
+
+/// The first round's runner-up of `a` and its delta-BIC margin behind the winner.
+pub(crate) fn runner_up(a: &crate::gap::Analysis) -> Option<(String, f64)> {
+    let (_, next, margin) = crate::gap::candidate::runner_up(a.rounds.first()?)?;
+    Some((next.name.clone(), margin))
 }
 
 /// How the calibration of the independent source did on a null run it was not fitted to.

@@ -631,6 +631,8 @@ fn run_case(env: &CaseEnv<'_>, case: PlannedCase<'_>) -> Result<CaseResult, GapE
         held_out_truth_reduction_pct,
         held_out_raw_reduction_pct: None,
         held_out_grew: None,
+        ambiguous: a.ambiguous.clone(),
+        runner_up: super::runner_up(&a),
         seconds,
     })
 }

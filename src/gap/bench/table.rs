@@ -246,6 +246,11 @@ pub struct CaseRow {
     pub held_out_truth_reduction_pct: Option<f64>,
     pub held_out_raw_reduction_pct: Option<f64>,
     pub held_out_grew: Option<bool>,
+    /// An `ambiguous` verdict's two effects, `A;B`.
+    pub ambiguous: String,
+    /// The first round's best other passing candidate and its delta-BIC margin behind the
+    /// winner, `NAME:MARGIN`.
+    pub runner_up: String,
     pub seconds: f64,
 }
 
@@ -273,6 +278,11 @@ impl From<&CaseResult> for CaseRow {
             held_out_truth_reduction_pct: r.held_out_truth_reduction_pct,
             held_out_raw_reduction_pct: r.held_out_raw_reduction_pct,
             held_out_grew: r.held_out_grew,
+            ambiguous: r.ambiguous.as_ref().map_or(String::new(), |a| a.join(";")),
+            runner_up: r
+                .runner_up
+                .as_ref()
+                .map_or(String::new(), |(n, m)| format!("{n}:{m:.1}")),
             seconds: r.seconds,
         }
     }
@@ -317,6 +327,8 @@ mod tests {
             held_out_truth_reduction_pct: effect.map(|_| 90.0),
             held_out_raw_reduction_pct: effect.map(|_| 20.0),
             held_out_grew: None,
+            ambiguous: None,
+            runner_up: None,
             seconds: 1.0,
         }
     }
@@ -366,6 +378,8 @@ mod tests {
             held_out_truth_reduction_pct: Some(12.5),
             held_out_raw_reduction_pct: None,
             held_out_grew: Some(false),
+            ambiguous: None,
+            runner_up: Some(("yaw_damping".into(), 12.5)),
             seconds: 17.25,
         };
         let results = [case(0, Some("sway_drag")), case(1, None)];
@@ -379,6 +393,7 @@ mod tests {
         assert_eq!(back[0].ci95, "0.2:0.3;-1.7:-1.1");
         assert_eq!(back[0].effect, "sway, drag \"quoted\"");
         assert_eq!(back[0].expected.as_deref(), Some("sway_drag"));
+        assert_eq!(back[0].runner_up, "yaw_damping:12.5");
     }
 
     /// A two-effect case is right when both effects are named, in any order, and wrong when
