@@ -225,9 +225,9 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
             )
         }
         None if analysis.verdict == gap::Verdict::Ambiguous => {
-            let [first, second] = analysis.ambiguous.clone().unwrap_or_default();
+            let [sensor, physics] = analysis.ambiguous.clone().unwrap_or_default();
             outln!(
-                "ambiguous: {first} and {second} explain the same disagreement about as well; neither is named"
+                "ambiguous: the sensor effect {sensor} and the physics effect {physics} explain the same disagreement about as well; neither is named"
             )
         }
         None => outln!("no significant missing effect"),

@@ -171,7 +171,13 @@ pub fn select(
         let win = winner(&results).cloned();
         let lookalike = win
             .as_ref()
-            .and_then(|w| lookalike(&results, w).map(|alt| [w.name.clone(), alt.name.clone()]));
+            .and_then(|w| physics_lookalike(&results, w))
+            .map(|alt| {
+                [
+                    win.as_ref().map_or(String::new(), |w| w.name.clone()),
+                    alt.name.clone(),
+                ]
+            });
         rounds.push(results);
         let Some(win) = win else { break };
         if lookalike.is_some() {
@@ -195,49 +201,43 @@ pub struct Selection {
     pub rounds: Vec<Vec<Candidate>>,
     /// The accepted effects, in order.
     pub accepted: Vec<Candidate>,
-    /// A round whose winner has a rival the data do not tell apart from it: another effect
-    /// that passes every guard with a delta BIC within [`crate::gap::fit::BIC_MARGIN`] of
-    /// the winner's. The winner's name first. Selection stops there and names neither: a
-    /// name the data do not prefer over another sends the user after the wrong cause as
-    /// often as the right one.
+    /// A round whose winner was a sensor effect with a physics effect that explains the same
+    /// residual about as well (both pass every guard, delta BIC within
+    /// [`crate::gap::fit::BIC_MARGIN`]): the sensor's name first. Selection stops there and
+    /// names neither: a sensor effect may take a disagreement only with its own signature,
+    /// and the data do not say which it is.
     pub ambiguous: Option<[String; 2]>,
 }
 
-/// How much more the data favour `win` than `rival`, in BIC on the scale the significance
-/// margin uses: the difference of their chi-square gains over the larger of their
-/// quasi-likelihood scales (`noise_factor * variance_factor`: the model error and correlated
-/// noise both fits leave behind, as an F-test divides by the residual variance), less the
-/// difference of their parameter penalties. Ranking reads the unscaled likelihood, since
-/// every candidate of a round sees the same data; whether the ranking is decisive is judged
-/// on the scale that says how much a chi-square gain is worth.
-pub fn margin(win: &Candidate, rival: &Candidate) -> f64 {
-    let gain = |c: &Candidate| c.chi2_before - c.chi2_after;
-    let penalty = |c: &Candidate| gain(c) - c.delta_bic_uncalibrated;
-    let scale = |c: &Candidate| (c.noise_factor * c.variance_factor).max(1.0);
-    (gain(win) - gain(rival)) / scale(win).max(scale(rival)) - (penalty(win) - penalty(rival))
-}
-
-/// The best other candidate of `round` that passes every guard within [`margin`]
-/// [`crate::gap::fit::BIC_MARGIN`] of `win`: an effect the data prefer `win` to by less than
-/// "very strong" evidence (a Bayes factor below e^5, Kass & Raftery 1995). Sensor or physics,
-/// either way round.
-fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
+/// A physics effect of `round` that passes every guard with a delta BIC within the margin
+/// of `win`'s, when `win` is a sensor effect (library effects only).
+fn physics_lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
+    let sensor = crate::gap::effects::by_name(&win.name).is_some_and(|e| !e.physics);
+    if !sensor {
+        return None;
+    }
     round.iter().find(|c| {
         c.name != win.name
             && c.testable
             && c.guards.all()
-            && margin(win, c) < crate::gap::fit::BIC_MARGIN
+            && crate::gap::effects::by_name(&c.name).is_some_and(|e| e.physics)
+            && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
     })
 }
 
-/// The winner of `round` and the best other candidate that passes every guard, with the
-/// [`margin`] it is behind by (`None` when nothing else passes).
+/// The winner of `round` and the best other candidate that passes every guard, with how far
+/// behind it is in the likelihood the round is ranked by (`None` when nothing else passes):
+/// the margin the look-alike rule reads.
 pub fn runner_up(round: &[Candidate]) -> Option<(&Candidate, &Candidate, f64)> {
     let win = winner(round)?;
     let next = round
         .iter()
         .find(|c| c.name != win.name && c.testable && c.guards.all())?;
-    Some((win, next, margin(win, next)))
+    Some((
+        win,
+        next,
+        win.delta_bic_uncalibrated - next.delta_bic_uncalibrated,
+    ))
 }
 
 /// The candidate table of one round (markdown): rank, effect, delta BIC, the chi-square the
@@ -344,13 +344,13 @@ mod tests {
         assert_eq!(names, vec!["compass_offset"]);
     }
 
-    /// Regression (a look-alike named: a sensor effect for a disagreement the dynamics
-    /// explain as well, or one physics term for another's): a winner with any rival that
-    /// passes every guard within the delta-BIC margin ends the selection as ambiguous, naming
-    /// both (the winner first) and accepting neither, whichever kind each is; a winner clear
-    /// of every passing rival is named, and a rival that fails a guard is no rival.
+    /// Regression (a sensor effect named for a disagreement the dynamics explain as well): a
+    /// sensor winner with a physics effect that passes every guard within the delta-BIC
+    /// margin ends the selection as ambiguous, naming both and accepting neither; a physics
+    /// winner with a sensor effect close behind is named (the physics wins), and a sensor
+    /// winner clear of every physics effect is named.
     #[test]
-    fn a_winner_with_a_passing_rival_within_the_margin_is_ambiguous() {
+    fn a_sensor_effect_is_not_named_where_a_physics_effect_explains_as_much() {
         let run = |round0: Vec<Candidate>| {
             select(
                 2,
@@ -365,25 +365,24 @@ mod tests {
             )
             .unwrap()
         };
-        for (first, second) in [
-            ("depth_gain", "thrust_gain"),
-            ("thrust_gain", "depth_gain"),
-            ("yaw_damping", "sway_yaw_coupling"),
-            ("compass_offset", "compass_hard_iron"),
-        ] {
-            let close = run(vec![
-                candidate(first, 40.0, true),
-                candidate(second, 35.0, true),
-            ]);
-            assert!(close.accepted.is_empty(), "{:?}", close.accepted);
-            assert_eq!(
-                close.ambiguous,
-                Some([first.to_string(), second.to_string()])
-            );
-        }
+        let close = run(vec![
+            candidate("depth_gain", 40.0, true),
+            candidate("thrust_gain", 35.0, true),
+        ]);
+        assert!(close.accepted.is_empty(), "{:?}", close.accepted);
+        assert_eq!(
+            close.ambiguous,
+            Some(["depth_gain".to_string(), "thrust_gain".to_string()])
+        );
+        let physics_first = run(vec![
+            candidate("thrust_gain", 40.0, true),
+            candidate("depth_gain", 35.0, true),
+        ]);
+        assert_eq!(physics_first.accepted[0].name, "thrust_gain");
+        assert!(physics_first.ambiguous.is_none());
         let clear = run(vec![
             candidate("depth_gain", 60.0, true),
-            candidate("thrust_gain", 45.0, true),
+            candidate("thrust_gain", 35.0, true),
             candidate("yaw_damping", 58.0, false),
         ]);
         assert_eq!(clear.accepted[0].name, "depth_gain");
@@ -393,40 +392,7 @@ mod tests {
             (win.name.as_str(), next.name.as_str()),
             ("depth_gain", "thrust_gain")
         );
-        assert_eq!(margin, 15.0);
-    }
-
-    /// The rival margin reads chi-square gains on the scale of the larger quasi-likelihood
-    /// factor of the two: a lead of 40 in chi-square is decisive where the fits leave only
-    /// noise, and not where they leave eight times the noise floor's variance.
-    #[test]
-    fn a_lead_is_judged_on_the_scale_the_fits_leave() {
-        let fitted = |name: &str, gain: f64, variance_factor: f64| {
-            let mut c = candidate(name, 0.0, true);
-            c.chi2_before = 1000.0;
-            c.chi2_after = 1000.0 - gain;
-            c.delta_bic_uncalibrated = gain - 6.0;
-            c.variance_factor = variance_factor;
-            c
-        };
-        let (win, rival) = (
-            fitted("yaw_damping", 400.0, 1.0),
-            fitted("sway_yaw_coupling", 360.0, 1.0),
-        );
-        assert_eq!(margin(&win, &rival), 40.0);
-        let (win, rival) = (
-            fitted("yaw_damping", 400.0, 1.0),
-            fitted("sway_yaw_coupling", 360.0, 8.0),
-        );
-        assert_eq!(margin(&win, &rival), 5.0);
-        assert_eq!(margin(&rival, &win), -5.0);
-        let mut rival = rival;
-        rival.delta_bic_uncalibrated -= 3.0;
-        assert_eq!(
-            margin(&win, &rival),
-            8.0,
-            "one more parameter costs its penalty"
-        );
+        assert_eq!(margin, 25.0, "the failed yaw_damping is no runner-up");
     }
 
     /// A candidate is named only when every guard holds.

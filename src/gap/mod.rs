@@ -92,8 +92,8 @@ pub enum Verdict {
     /// The data disagree with the model beyond its noise floor and nothing in the library
     /// explains it; `Analysis::unexplained` says where.
     Unexplained,
-    /// Two effects explain the same disagreement about as well (`Analysis::ambiguous` names
-    /// both), and nothing was named before them.
+    /// A sensor effect and a physics effect explain the same disagreement about as well
+    /// (`Analysis::ambiguous` names both), and nothing was named before them.
     Ambiguous,
 }
 
@@ -130,7 +130,7 @@ pub struct Analysis {
     pub after: Vec<ChannelStats>,
     /// Candidate results of each greedy round, best first.
     pub rounds: Vec<Vec<Candidate>>,
-    /// The two effects the last round could not tell apart, its winner first
+    /// The sensor effect and the physics effect the last round could not tell apart
     /// ([`candidate::Selection::ambiguous`]).
     pub ambiguous: Option<[String; 2]>,
     pub accepted: Vec<Candidate>,

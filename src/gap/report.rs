@@ -119,11 +119,10 @@ fn verdict_text(a: &Analysis) -> String {
                 .to_string()
         }
         (crate::gap::Verdict::Ambiguous, None) => {
-            let [first, second] = a.ambiguous.clone().unwrap_or_default();
+            let [sensor, physics] = a.ambiguous.clone().unwrap_or_default();
             format!(
-                "**ambiguous**: `{first}` and `{second}` explain the same disagreement about as \
-                 well (delta BIC within {}); neither is named",
-                fit::BIC_MARGIN
+                "**ambiguous**: the sensor effect `{sensor}` and the physics effect `{physics}` \
+                 explain the same disagreement about as well; neither is named"
             )
         }
         _ => "no significant missing effect".to_string(),
