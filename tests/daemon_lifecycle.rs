@@ -360,6 +360,11 @@ fn shutdown_is_bounded_when_the_recorder_hangs() {
         daemon.log()
     );
     assert!(daemon.log().contains("shutdown did not finish in time"));
+    assert!(
+        daemon.log().contains("still waiting for"),
+        "the error names what shutdown was waiting for:\n{}",
+        daemon.log()
+    );
     assert_cleaned_up(&daemon, &pid_file, "cut short");
 }
 

@@ -588,6 +588,8 @@ impl<M: Model> Daemon<M> {
         let sim_time_s = self.engine.now() as f64 * 1e-9;
         let overruns = self.pacing.map.as_ref().map_or(0, RealtimeMap::overruns);
         self.stop.send_replace(true);
+        let stopping = Instant::now();
+        shutdown::Phase::Links.enter();
         drop(std::mem::take(&mut self.lines));
         // Link tasks get `TASKS_BUDGET` between them; one that has not stopped by then is
         // aborted, which drops its endpoint (and symlink). See `shutdown` for the whole bound.
@@ -624,6 +626,7 @@ impl<M: Model> Daemon<M> {
         while let Ok(inbound) = self.inbound.try_recv() {
             self.engine.record_unprocessed(inbound.line, &inbound.data);
         }
+        shutdown::Phase::Services.enter();
         let services_deadline = Instant::now() + shutdown::SERVICES_BUDGET;
         for mut service in std::mem::take(&mut self.services) {
             if tokio::time::timeout_at(services_deadline, &mut service.task)
@@ -637,15 +640,22 @@ impl<M: Model> Daemon<M> {
                 service.task.abort();
             }
         }
+        shutdown::Phase::Recording.enter();
         drop(self.engine.take_journal());
         let records = match self.recorder.take() {
             Some(recorder) => Some(recorder.finish()?),
             None => None,
         };
+        shutdown::Phase::Cleanup.enter();
         drop(self.pid_file.take());
         self.leftovers.remove_all();
         drop(self.run_dir_lock.take());
         warn_limit::flush();
+        shutdown::Phase::Done.enter();
+        tracing::debug!(
+            ms = stopping.elapsed().as_millis() as u64,
+            "links, services and recording stopped"
+        );
         Ok(Summary {
             sim_time_s,
             records,

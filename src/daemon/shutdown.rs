@@ -17,8 +17,9 @@
 //!   is lost, and the log says so.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use tokio::sync::watch;
 
@@ -33,6 +34,57 @@ pub const TASKS_BUDGET: Duration = Duration::from_millis(300);
 pub const SERVICES_BUDGET: Duration = Duration::from_millis(200);
 /// Exit status when shutdown had to be cut short.
 pub const EXIT_SHUTDOWN_HUNG: i32 = 3;
+
+/// Where a clean shutdown is, so that the guard can say what it was waiting for when it
+/// gives up (one daemon per process).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Phase {
+    /// The loop has not yet seen the stop.
+    Serving = 0,
+    /// Waiting for the link tasks to stop.
+    Links = 1,
+    /// Waiting for the services beside the links (status, feed, view).
+    Services = 2,
+    /// Finishing the recording (flush and `fsync`).
+    Recording = 3,
+    /// Removing the pid file, sockets and symlinks.
+    Cleanup = 4,
+    /// Finished; the process is exiting.
+    Done = 5,
+}
+
+static PHASE: AtomicU8 = AtomicU8::new(Phase::Serving as u8);
+
+impl Phase {
+    /// Records that shutdown has reached this phase.
+    pub fn enter(self) {
+        PHASE.store(self as u8, Ordering::Relaxed);
+    }
+
+    fn current() -> Self {
+        match PHASE.load(Ordering::Relaxed) {
+            1 => Self::Links,
+            2 => Self::Services,
+            3 => Self::Recording,
+            4 => Self::Cleanup,
+            5 => Self::Done,
+            _ => Self::Serving,
+        }
+    }
+
+    /// What the shutdown waits for in this phase, for the guard's error.
+    pub fn waiting_for(self) -> &'static str {
+        match self {
+            Self::Serving => "the main loop to see the stop (it is busy or not scheduled)",
+            Self::Links => "the link tasks to stop",
+            Self::Services => "the services (status, feed, view) to stop",
+            Self::Recording => "the recording's flush and fsync (the disk)",
+            Self::Cleanup => "removing the pid file, sockets and symlinks (the file system)",
+            Self::Done => "the process to exit",
+        }
+    }
+}
 
 #[derive(Debug, Clone)]
 enum Leftover {
@@ -131,11 +183,16 @@ pub fn spawn_signal_guard(
                 }
             });
             tracing::info!("signal received, shutting down");
+            let signalled = Instant::now();
             let _ = stop.send(true);
             std::thread::sleep(HARD_EXIT_AFTER);
+            let phase = Phase::current();
             tracing::error!(
                 limit_ms = SHUTDOWN_LIMIT.as_millis() as u64,
-                "shutdown did not finish in time (a hung task or disk); removing our links and sockets and exiting; the recording may be incomplete"
+                after_ms = signalled.elapsed().as_millis() as u64,
+                phase = ?phase,
+                "shutdown did not finish in time: still waiting for {}; removing our links and sockets and exiting; the recording may be incomplete",
+                phase.waiting_for()
             );
             leftovers.remove_all();
             std::process::exit(EXIT_SHUTDOWN_HUNG);
