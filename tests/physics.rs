@@ -96,6 +96,17 @@ fn vehicle_errors_point_at_the_key() {
         err.to_string().contains("above the centre of mass"),
         "{err}"
     );
+    // The optional N_uv: read when given, refused out of range with its key.
+    let set = text.replace("# yaw_uv = 0.0", "yaw_uv = 12.5");
+    assert_ne!(set, text, "mako.toml documents yaw_uv");
+    let v = VehicleConfig::from_document(&Document::new("v.toml", &set)).unwrap();
+    assert_eq!(v.damping_yaw_uv, 12.5);
+    let bad = text.replace("# yaw_uv = 0.0", "yaw_uv = 5000.0");
+    let err = VehicleConfig::from_document(&Document::new("v.toml", &bad)).unwrap_err();
+    assert!(
+        matches!(&err, ConfigError::Invalid { key, .. } if key == "damping.yaw_uv"),
+        "{err}"
+    );
 }
 
 /// The mass distribution gives the thesis's 35 kg, a CG below the box centre (batteries in
@@ -432,4 +443,40 @@ fn surge_acceleration_uses_the_added_mass() {
         "{fx} vs {expected}"
     );
     assert!((fx - thrust / m.vehicle().mass_kg).abs() > 0.05 * expected);
+}
+
+/// The yaw moment of surge times sway is the Munk moment of the added masses,
+/// `(a_sway - a_surge) u v`, less the lift term `damping.yaw_uv` (`N_uv`): a vehicle sliding
+/// sideways under way starts to turn at that moment over its yaw inertia, and an `N_uv` equal
+/// and opposite to the Munk coefficient leaves it without a turn.
+#[test]
+fn surge_times_sway_turns_by_the_munk_moment_less_n_uv() {
+    let (u, v) = (0.3, 0.1);
+    let yaw_rate_after = |n_uv: f64| {
+        let mut vehicle = vehicle();
+        vehicle.damping_yaw_uv = n_uv;
+        let m = Model::new(vehicle, world());
+        let mut start = at(12.0, 6.0, 1.0);
+        start.velocity_body_mps = Vector3::new(u, v, 0.0);
+        let mut sim = Simulation::new(m, &start, 1);
+        sim.step().unwrap();
+        sim.state().angular_velocity_body_radps.z
+    };
+    let v0 = vehicle();
+    let munk = v0.added_mass[1] - v0.added_mass[0];
+    let i_zz = v0.inertia_kgm2[(2, 2)] + v0.added_mass[5];
+    let dt = world().step_s;
+    for n_uv in [0.0, 20.0, -15.0] {
+        let expected = -(munk + n_uv) * u * v / i_zz * dt;
+        let got = yaw_rate_after(n_uv);
+        assert!(
+            (got - expected).abs() < 0.02 * expected.abs(),
+            "N_uv {n_uv}: yaw rate {got} after one step, expected {expected}"
+        );
+    }
+    let cancelled = yaw_rate_after(-munk);
+    assert!(
+        cancelled.abs() < 0.02 * (munk * u * v / i_zz * dt).abs(),
+        "N_uv = -(a_sway - a_surge) cancels the Munk moment: {cancelled}"
+    );
 }

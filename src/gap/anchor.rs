@@ -209,8 +209,10 @@ pub fn estimate(
             read.pick(y, t_s, 0.25, false),
         )
     {
-        anchor.north_m = Some(vx + velocity_ned.x * (t_s - tx));
-        anchor.east_m = Some(vy + velocity_ned.y * (t_s - ty));
+        // The camera sees its marker, not the centre of mass.
+        let [mx, my] = c.camera_marker_ned(&state.attitude);
+        anchor.north_m = Some(vx - mx + velocity_ned.x * (t_s - tx));
+        anchor.east_m = Some(vy - my + velocity_ned.y * (t_s - ty));
     }
     if let Some(ch) = m.channel("compass_deg") {
         // The reading of a conversion finished at `tc` describes the heading at `tc - latency`.
@@ -293,6 +295,42 @@ mod tests {
             assert!(
                 wrap_deg(back - yaw).abs() < 1e-3,
                 "heading {yaw} deg read {reading:.3} deg, inverted to {back:.3} deg"
+            );
+        }
+    }
+
+    /// The camera tracks a marker off the centre of mass: the anchored position is the
+    /// marker's reading less the marker's offset at the state's heading, at every heading, so
+    /// that a re-simulation started there predicts the reading back.
+    #[test]
+    fn a_camera_marker_off_the_centre_anchors_the_centre() {
+        let mut c = configs();
+        c.camera_marker_body_m = [0.12, -0.05];
+        for k in 0..8 {
+            let s = level_state(f64::from(k) * 45.0);
+            let [mx, my] = c.camera_marker_ned(&s.attitude);
+            assert!(
+                ((mx * mx + my * my).sqrt() - 0.13).abs() < 2e-3,
+                "the marker is 0.13 m from the centre at any heading: {mx} {my}"
+            );
+            let measured = format!(
+                "t_s,x_m,y_m\n1.0,{},{}\n",
+                s.position_m.x + mx,
+                s.position_m.y + my
+            );
+            let m = Measurement::from_texts(
+                ("e", "name = \"t\"\nduration_s = 10.0\n[initial]\nx_m = 1.0\ny_m = 2.0\nheading_deg = 0.0\n"),
+                ("c", "t_s,port,starboard,bow,stern\n0,0,0,0,0\n"),
+                ("m", &measured),
+            )
+            .expect("measurement");
+            let earth = Compass::new(&c.sensors.compass, 0).earth_field_ned_ut();
+            let a = estimate(&c, &m, &earth, 1.0, &s, Read::Nearest);
+            let (north, east) = (a.north_m.expect("north"), a.east_m.expect("east"));
+            assert!(
+                (north - s.position_m.x).abs() < 1e-9 && (east - s.position_m.y).abs() < 1e-9,
+                "anchored at ({north}, {east}), the centre is at {:?}",
+                s.position_m
             );
         }
     }

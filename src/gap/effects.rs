@@ -21,18 +21,25 @@ pub struct Configs {
     pub sensors: SensorsConfig,
     /// Per-axis analog errors the sensor configuration has no key for.
     pub analog: AnalogErrors,
+    /// Where the point the overhead camera tracks (`x_m`, `y_m`) sits in the body frame,
+    /// forward and starboard of the centre of mass (m). `[0, 0]` unless calibration fits it:
+    /// the measurement format states no marker, and a marker off the centre traces a circle in
+    /// every spin that no sway of the hull explains.
+    pub camera_marker_body_m: [f64; 2],
     /// How the re-simulation is cut into re-anchored segments.
     pub shooting: Shooting,
 }
 
 impl Configs {
-    /// The configurations as given: no analog errors, open-loop re-simulation.
+    /// The configurations as given: no analog errors, the camera on the centre of mass,
+    /// open-loop re-simulation.
     pub fn new(vehicle: VehicleConfig, world: WorldConfig, sensors: SensorsConfig) -> Self {
         Self {
             vehicle,
             world,
             sensors,
             analog: AnalogErrors::default(),
+            camera_marker_body_m: [0.0; 2],
             shooting: Shooting::OPEN_LOOP,
         }
     }
@@ -45,6 +52,16 @@ impl Configs {
 pub struct AnalogErrors {
     pub accel_offset_lsb: [f64; 3],
     pub accel_gain_scale: [f64; 3],
+}
+
+impl Configs {
+    /// The north and east offsets of the camera's marker from the centre of mass at
+    /// `attitude`.
+    pub fn camera_marker_ned(&self, attitude: &nalgebra::UnitQuaternion<f64>) -> [f64; 2] {
+        let [x, y] = self.camera_marker_body_m;
+        let offset = attitude * nalgebra::Vector3::new(x, y, 0.0);
+        [offset.x, offset.y]
+    }
 }
 
 impl AnalogErrors {

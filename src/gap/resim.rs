@@ -240,8 +240,14 @@ fn earth_field(c: &Configs) -> Vector3<f64> {
 pub fn predict(c: &Configs, run: &Run, channel: &Channel, lag_s: f64) -> Option<Vec<f64>> {
     let ts = channel.samples.iter().map(|(t, _)| *t);
     Some(match channel.name.as_str() {
-        "x_m" => ts.map(|t| run.at(t - lag_s).position_m.x).collect(),
-        "y_m" => ts.map(|t| run.at(t - lag_s).position_m.y).collect(),
+        "x_m" | "y_m" => {
+            let axis = usize::from(channel.name == "y_m");
+            ts.map(|t| {
+                let s = run.at(t - lag_s);
+                s.position_m[axis] + c.camera_marker_ned(&s.attitude)[axis]
+            })
+            .collect()
+        }
         "surge_mps" => ts.map(|t| run.at(t - lag_s).velocity_body_mps.x).collect(),
         "compass_deg" => {
             let earth = earth_field(c);

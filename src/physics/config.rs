@@ -89,6 +89,8 @@ struct RawDamping {
     quadratic: [f64; 6],
     #[serde(default)]
     sway_yaw: [f64; 2],
+    #[serde(default)]
+    yaw_uv: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -169,6 +171,11 @@ pub struct VehicleConfig {
     /// with a positive sign, as the diagonal terms do (the off-diagonal sway-yaw entries of Fossen's linear damping
     /// matrix `D`). Zero unless the vehicle file sets `damping.sway_yaw`.
     pub damping_sway_yaw: [f64; 2],
+    /// Yaw moment per unit product of surge and sway speed, `N_uv` (N m per (m/s)^2), opposing
+    /// with a positive sign: the lift of the hulls and fins that works against the Munk
+    /// moment the added masses give (`(a_sway - a_surge) u v`, which the model always has).
+    /// Zero unless the vehicle file sets `damping.yaw_uv`.
+    pub damping_yaw_uv: f64,
     pub thruster_common: ThrusterCommon,
     pub thrusters: [ThrusterConfig; 4],
 }
@@ -216,6 +223,7 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
         damping_linear: damping.linear,
         damping_quadratic: damping.quadratic,
         damping_sway_yaw: damping.sway_yaw,
+        damping_yaw_uv: damping.yaw_uv,
         thruster_common,
         thrusters,
     })
@@ -360,6 +368,7 @@ struct Damping {
     linear: [f64; 6],
     quadratic: [f64; 6],
     sway_yaw: [f64; 2],
+    yaw_uv: f64,
 }
 
 /// Checks the damping coefficients, axis by axis, and that every axis is damped at all.
@@ -398,6 +407,7 @@ fn resolve_damping(doc: &Document<'_>, raw: &RawDamping) -> Result<Damping, Conf
             "N m/(m/s)",
         )?,
     ];
+    let yaw_uv = doc.check_range("damping.yaw_uv", raw.yaw_uv, -1e3, 1e3, "N m/(m/s)^2")?;
     if damping_linear
         .iter()
         .zip(&damping_quadratic)
@@ -412,6 +422,7 @@ fn resolve_damping(doc: &Document<'_>, raw: &RawDamping) -> Result<Damping, Conf
         linear: damping_linear,
         quadratic: damping_quadratic,
         sway_yaw: damping_sway_yaw,
+        yaw_uv,
     })
 }
 

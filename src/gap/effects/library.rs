@@ -28,7 +28,7 @@ const ALL_THRUSTERS: [&str; 9] = [
 ];
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 34] = [
+pub const LIBRARY: [Effect; 36] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -796,6 +796,46 @@ pub const LIBRARY: [Effect; 34] = [
         moves_anchors: false,
         summary: &[],
         calibration: Calibration::Discrepancy(26),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "munk_moment",
+        parameters: &["n_uv_nm_per_mps2"],
+        scales: &[5.0],
+        bounds: &[(-80.0, 80.0)],
+        signature: "turns under way tighten or open with speed more than spot turns predict: \
+                    the yaw moment that grows with surge times sway (the Munk moment less the \
+                    hull's lift) is off",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| c.vehicle.damping_yaw_uv += at(p, 0),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(28),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "camera_marker_position",
+        parameters: &["forward_m", "starboard_m"],
+        scales: &[0.05, 0.05],
+        bounds: &[(-0.3, 0.3), (-0.3, 0.3)],
+        signature: "the tracked position circles in every spin, by the same radius at any \
+                    speed: the camera follows a marker away from the centre of mass",
+        channels: &["x_m", "y_m"],
+        kind: Kind::Mean,
+        physics: false,
+        extend: |p, c| {
+            c.camera_marker_body_m[0] += at(p, 0);
+            c.camera_marker_body_m[1] += at(p, 1);
+        },
+        moves_anchors: true,
+        summary: &[],
+        calibration: Calibration::Discrepancy(29),
         positive: false,
         parameter_error_target: false,
         hidden: None,
