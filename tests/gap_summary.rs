@@ -155,6 +155,7 @@ fn hidden_thrust_gain_in_summary_numbers_is_found() {
         initial: Initial::default(),
         camera_position_std_m: 0.0,
         camera_speed_std_mps: 0.0,
+        camera_marker_body_m: [0.0; 2],
     };
     let c = truth.configs(&info, Path::new(".")).expect("configs");
     let values = summary::predict(&c, &s, None).expect("truth runs");
@@ -186,6 +187,7 @@ fn subsim_2_4_model_reproduces_subsim_s_own_reported_numbers() {
         initial: Initial::default(),
         camera_position_std_m: 0.0,
         camera_speed_std_mps: 0.0,
+        camera_marker_body_m: [0.0; 2],
     };
     let c = model.configs(&info, &model.base).expect("configs");
     let values = summary::predict(&c, &s, None).expect("runs");

@@ -212,6 +212,7 @@ fn depth_prediction_follows_the_sensor_hysteresis_and_low_pass() {
             },
             camera_position_std_m: 0.01,
             camera_speed_std_mps: 0.02,
+            camera_marker_body_m: [0.0; 2],
         },
         commands: vec![
             CommandRow {

@@ -397,6 +397,14 @@ fn joint_fit(
                 ));
             };
             evaluations += fit.evaluations;
+            tracing::debug!(
+                start = i + 1,
+                pass = pass + 1,
+                evaluations = fit.evaluations,
+                chi2 = fit.chi2(),
+                termination = ?fit.termination,
+                "calibration pass done"
+            );
             x = fit.x.clone();
             last = Some(fit);
         }

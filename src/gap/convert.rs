@@ -185,6 +185,7 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
                 initial,
                 camera_position_std_m: camera_std,
                 camera_speed_std_mps: 0.02,
+                camera_marker_body_m: [0.0; 2],
             },
             commands,
             channels,

@@ -81,6 +81,12 @@ struct RawCamera {
     position_std_m: f64,
     #[serde(default = "default_speed_std")]
     speed_std_mps: f64,
+    #[serde(default, skip_serializing_if = "is_centre")]
+    marker_body_m: [f64; 2],
+}
+
+fn is_centre(marker: &[f64; 2]) -> bool {
+    *marker == [0.0; 2]
 }
 
 fn default_speed_std() -> f64 {
@@ -115,6 +121,9 @@ pub struct ExperimentInfo {
     pub camera_position_std_m: f64,
     /// Camera-derived speed noise (m/s, 1 sigma).
     pub camera_speed_std_mps: f64,
+    /// Where the marker the camera tracks sits on the vehicle, forward and starboard of the
+    /// centre of mass (m); `[0, 0]` when not stated.
+    pub camera_marker_body_m: [f64; 2],
 }
 
 /// One `commands.csv` row: MOTORDrive percent for port, starboard, bow, stern from `t_s` on.
@@ -236,6 +245,7 @@ impl Measurement {
             camera: Some(RawCamera {
                 position_std_m: e.camera_position_std_m,
                 speed_std_mps: e.camera_speed_std_mps,
+                marker_body_m: e.camera_marker_body_m,
             }),
         };
         let body = toml::to_string(&raw)
@@ -330,12 +340,16 @@ fn parse_experiment(origin: &str, text: &str) -> Result<ExperimentInfo, GapError
     let check = |k: &str, v: f64, lo: f64, hi: f64, u: &str| -> Result<f64, ConfigError> {
         doc.check_range(k, v, lo, hi, u)
     };
-    let (pos_std, speed_std) = match &raw.camera {
+    let (pos_std, speed_std, marker) = match &raw.camera {
         Some(c) => (
             check("camera.position_std_m", c.position_std_m, 1e-4, 1.0, "m")?,
             check("camera.speed_std_mps", c.speed_std_mps, 1e-4, 1.0, "m/s")?,
+            [
+                check("camera.marker_body_m.0", c.marker_body_m[0], -2.0, 2.0, "m")?,
+                check("camera.marker_body_m.1", c.marker_body_m[1], -2.0, 2.0, "m")?,
+            ],
         ),
-        None => (0.01, default_speed_std()),
+        None => (0.01, default_speed_std(), [0.0; 2]),
     };
     Ok(ExperimentInfo {
         duration_s: check("duration_s", raw.duration_s, 0.1, 3600.0, "s")?,
@@ -357,6 +371,7 @@ fn parse_experiment(origin: &str, text: &str) -> Result<ExperimentInfo, GapError
         sensors: raw.sensors,
         camera_position_std_m: pos_std,
         camera_speed_std_mps: speed_std,
+        camera_marker_body_m: marker,
     })
 }
 
@@ -663,6 +678,32 @@ mod tests {
         let back = Measurement::load(&dir).unwrap();
         assert_eq!(back.channels, m.channels);
         assert_eq!(back.commands, m.commands);
+    }
+
+    /// `[camera] marker_body_m` states where the tracked marker sits: read, written back, and
+    /// refused out of range with its key; absent, the centre of mass.
+    #[test]
+    fn a_stated_camera_marker_is_read_written_and_checked() {
+        let commands = "t_s,port,starboard,bow,stern\n0,0,0,0,0\n";
+        let with = |camera: &str| {
+            Measurement::from_texts(
+                ("e", &format!("{EXP}[camera]\n{camera}\n")),
+                ("c", commands),
+                ("m", "t_s,x_m\n0,1\n"),
+            )
+        };
+        let m = with("position_std_m = 0.01\nmarker_body_m = [0.11, -0.02]").unwrap();
+        assert_eq!(m.experiment.camera_marker_body_m, [0.11, -0.02]);
+        let scratch = crate::scratch::dir("gap-format-marker");
+        m.write(scratch.path()).unwrap();
+        let back = Measurement::load(scratch.path()).unwrap();
+        assert_eq!(back.experiment.camera_marker_body_m, [0.11, -0.02]);
+        let plain = Measurement::from_texts(("e", EXP), ("c", commands), ("m", "t_s,x_m\n0,1\n"));
+        assert_eq!(plain.unwrap().experiment.camera_marker_body_m, [0.0; 2]);
+        let err = with("position_std_m = 0.01\nmarker_body_m = [3.0, 0.0]")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("camera.marker_body_m.0"), "{err}");
     }
 
     /// A directory with none of the three files is named as not a measurement, with what one

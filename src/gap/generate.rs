@@ -51,6 +51,7 @@ pub fn setup(
         initial: Initial::default(),
         camera_position_std_m,
         camera_speed_std_mps: 0.02,
+        camera_marker_body_m: [0.0; 2],
     }
 }
 
@@ -114,6 +115,7 @@ pub fn generate_with(
             },
             camera_position_std_m,
             camera_speed_std_mps: 0.02,
+            camera_marker_body_m: [0.0; 2],
         },
         commands,
         channels: Vec::new(),

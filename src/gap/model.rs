@@ -157,7 +157,7 @@ impl GapModel {
     }
 
     /// The base configurations (no effects), with the experiment's world and sensors unless
-    /// the model names its own.
+    /// the model names its own, and the camera marker where the experiment states it.
     pub fn base_configs(
         &self,
         experiment: &ExperimentInfo,
@@ -175,7 +175,9 @@ impl GapModel {
             None => read_ref(exp_dir, &experiment.sensors)?,
         };
         let sensors = SensorsConfig::from_text(o, &t)?;
-        Ok(Configs::new(vehicle, world, sensors))
+        let mut configs = Configs::new(vehicle, world, sensors);
+        configs.camera_marker_body_m = experiment.camera_marker_body_m;
+        Ok(configs)
     }
 
     /// The configurations with every enabled effect applied.

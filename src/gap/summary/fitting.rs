@@ -415,6 +415,7 @@ fn summary_experiment(s: &Summary) -> crate::gap::format::ExperimentInfo {
         initial: crate::gap::format::Initial::default(),
         camera_position_std_m: 0.0,
         camera_speed_std_mps: 0.0,
+        camera_marker_body_m: [0.0; 2],
     }
 }
 
