@@ -606,13 +606,12 @@ impl<M: Model> Daemon<M> {
             }
         };
         tokio::pin!(joined);
+        // The deadline is polled first: a client that keeps writing keeps `inbound` ready,
+        // and polled first it starved the deadline until the process-level guard cut the
+        // shutdown short.
         loop {
             tokio::select! {
                 biased;
-                Some(inbound) = self.inbound.recv() => {
-                    self.engine.record_unprocessed(inbound.line, &inbound.data);
-                }
-                () = &mut joined => break,
                 () = tokio::time::sleep_until(tasks_deadline) => {
                     tracing::warn!("a link task did not stop in time; aborting it");
                     for abort in &aborts {
@@ -620,6 +619,10 @@ impl<M: Model> Daemon<M> {
                     }
                     let _ = tokio::time::timeout(Duration::from_millis(20), &mut joined).await;
                     break;
+                }
+                () = &mut joined => break,
+                Some(inbound) = self.inbound.recv() => {
+                    self.engine.record_unprocessed(inbound.line, &inbound.data);
                 }
             }
         }
