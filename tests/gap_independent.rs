@@ -27,6 +27,19 @@ fn root() -> PathBuf {
 /// Writes a three-minute run of `program` with `hidden` (and `size`, in the effect's unit)
 /// into `dir/name`.
 fn generate(dir: &Path, name: &str, seed: u64, hidden: &str, size: Option<&str>) -> PathBuf {
+    generate_vehicle(dir, name, None, seed, hidden, size)
+}
+
+/// As [`generate`], for the vehicle of `structure_seed` (a start away from the stated one
+/// included) when given, else the nominal vehicle.
+fn generate_vehicle(
+    dir: &Path,
+    name: &str,
+    structure_seed: Option<u64>,
+    seed: u64,
+    hidden: &str,
+    size: Option<&str>,
+) -> PathBuf {
     let python = require_tool("python3", "python3");
     let out = dir.join(name);
     let mut cmd = Command::new(python);
@@ -46,6 +59,9 @@ fn generate(dir: &Path, name: &str, seed: u64, hidden: &str, size: Option<&str>)
         .env("PYTHONDONTWRITEBYTECODE", "1");
     if let Some(s) = size {
         cmd.args(["--size", s]);
+    }
+    if let Some(k) = structure_seed {
+        cmd.arg("--structure-seed").arg(k.to_string());
     }
     let status = cmd.status().expect("python3 runs");
     assert!(status.success(), "the independent model failed on {name}");
@@ -142,9 +158,12 @@ fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
         r.gap_after,
         r.reduction_pct
     );
-    // The calibration found the thrust deficit built into the independent model (about
-    // -11 % at full power, -27 % at half), in the thrust curve's scale and shape together:
-    // thrust at half the curve's range is (1 + gain) 0.5^curve of the model's (exponent 1).
+    // The calibration found the shape of the thrust deficit built into the independent
+    // model (about -11 % at full power, -27 % at half: half-range thrust 0.73 / 0.89 = 0.82
+    // of full-range thrust, relative to the model's). The curve's shape is what these data
+    // identify: its scale is not, because thrust, drag and added mass scaled together move
+    // the hull alike and the buoyancy term absorbs the vertical pair's share (two fits
+    // with the same gap on these runs put the scale 3 % and 15 % up).
     let value = |effect: &str| {
         c.parameters
             .iter()
@@ -152,11 +171,11 @@ fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
             .unwrap_or_else(|| panic!("{effect} calibrated"))
             .value
     };
-    let (gain, curve) = (value("thrust_gain"), value("thrust_curve"));
-    let half = (1.0 + gain) * 0.5_f64.powf(curve);
+    let curve = value("thrust_curve");
+    let shape = 0.5_f64.powf(curve);
     assert!(
-        (0.6..0.9).contains(&half),
-        "thrust at half range x{half:.3} (gain {gain:.3}, curve {curve:.3})"
+        (shape - 0.73 / 0.89).abs() < 0.05,
+        "half-range thrust x{shape:.3} of full-range (curve {curve:.3}); the truth 0.82"
     );
     assert!(!c.spread.is_empty(), "two baseline runs give a spread");
     // The model discrepancy: every discrepancy term of the library is calibrated, so the
@@ -179,6 +198,43 @@ fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
         c.discrepancy.iter().all(|(_, v)| *v > 1.0),
         "{:?}",
         c.discrepancy
+    );
+}
+
+/// A vehicle of another structure: structure seed 52361 (no Munk moment, purely quadratic
+/// surge drag, `Y_r` and `N_v` both positive, two thrusters saturating early, a start away
+/// from the stated one). Calibration on three baseline runs halves a fourth run's gap. On
+/// this vehicle the joint fit used to stop near the model as given (10 % smaller): counted
+/// by the noise floor's white-noise time, the three accelerometer channels outweighed the
+/// others twenty to one, their gains ran onto their bounds, and the clamped search stalled
+/// there before buoyancy, heave damping or thrust moved.
+#[test]
+fn calibration_halves_the_gap_of_a_vehicle_of_another_structure() {
+    const STRUCTURE: u64 = 52361;
+    let dir = TempDir::new("gap-structure");
+    let run = |name: &str, seed: u64| {
+        let d = generate_vehicle(dir.path(), name, Some(STRUCTURE), seed, "none", None);
+        Run::load(&d).expect("run loads")
+    };
+    let base: Vec<Run> = [7311, 7312, 7313]
+        .iter()
+        .map(|s| run(&format!("base-{s}"), *s))
+        .collect();
+    let validate = vec![run("validate-7314", 7314)];
+    let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
+    let c = calibrate::calibrate(&model, &base, &validate, &[], &mut |_| {}).expect("calibrates");
+    let r = c
+        .runs
+        .iter()
+        .find(|r| !r.fitted)
+        .expect("validation run scored");
+    assert!(
+        r.reduction_pct >= 50.0,
+        "validation run: gap {:.2} -> {:.2} ({:.0} % smaller); channels {:?}",
+        r.gap_before,
+        r.gap_after,
+        r.reduction_pct,
+        r.channels
     );
 }
 

@@ -10,7 +10,9 @@
 //! - **Channel weights.** Model error, not noise, dominates an uncalibrated model's residual,
 //!   and one channel (a depth hold) can hold a hundred times the chi-square of another. Each
 //!   channel is weighted by `1 / sqrt(max(1, chi2/n))` of its residual at the previous pass,
-//!   so every channel speaks with about one voice (two passes).
+//!   with its samples counted over the residual's own correlation time
+//!   ([`channel_weights`]): every channel speaks with the number of independent
+//!   disagreements it holds (two passes).
 //! - **A weak prior.** Each parameter adds a residual `x / PRIOR_WIDTH` (in units of its
 //!   typical size): a direction the data do not inform stays near the model as given instead
 //!   of wandering to a bound.
@@ -170,6 +172,46 @@ fn channel_chi2(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Option<Vec<
         }
     }
     Some(out)
+}
+
+/// The joint fit's weight of each channel of a prepared run under `c`: a channel speaks with
+/// the number of independent disagreements it holds. Its chi-square per independent sample
+/// is brought to one (`1 / sqrt(max(1, chi2/n))`), and its samples are counted over the
+/// residual's own correlation time where that is longer than the noise floor's: model error
+/// is correlated over a manoeuvre, so a channel sampled at 100 Hz whose disagreement follows
+/// the thrust steps (an accelerometer) holds about as many independent disagreements as a
+/// 5 Hz position track, not twenty times as many. Counted by the floor's time alone, three
+/// accelerometer channels outweighed every other channel twenty to one, and their gains ran
+/// onto their bounds before the dynamics moved. A channel the run cannot evaluate weighs 1.
+fn channel_weights(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Vec<f64> {
+    let mut w = vec![1.0; p.run.m.channels.len()];
+    let Some(run) = resim::simulate(c, &p.run.m, None)
+        .ok()
+        .filter(|r| r.divergences.is_empty())
+    else {
+        return w;
+    };
+    let r = setup.residuals(c, &run);
+    for i in setup.modelled() {
+        let Some(f) = p.floors[i].as_ref() else {
+            continue;
+        };
+        let z: Vec<f64> = r
+            .values
+            .iter()
+            .zip(&r.owner)
+            .filter(|(_, o)| **o == i)
+            .map(|(v, _)| *v)
+            .collect();
+        if z.is_empty() {
+            continue;
+        }
+        let n = z.len() as f64;
+        let chi2 = z.iter().map(|v| v * v).sum::<f64>() / (n / f.tau);
+        let tau = crate::gap::residuals::correlation_time(&z).max(f.tau);
+        w[i] = (f.tau / tau / chi2.max(1.0)).sqrt();
+    }
+    w
 }
 
 /// The gap measure `gap` reports against the noise floor alone (every known level 1): a
@@ -349,17 +391,7 @@ fn joint_fit(
         prepared
             .iter()
             .zip(setups)
-            .map(|(p, s)| {
-                let c = applied(&p.base, chosen, x);
-                let per = channel_chi2(p, s, &c).unwrap_or_default();
-                (0..p.run.m.channels.len())
-                    .map(|i| {
-                        per.iter()
-                            .find(|(k, _)| *k == i)
-                            .map_or(1.0, |(_, c)| 1.0 / c.max(1.0).sqrt())
-                    })
-                    .collect()
-            })
+            .map(|(p, s)| channel_weights(p, s, &applied(&p.base, chosen, x)))
             .collect()
     };
     let residuals_with = |x: &DVector<f64>, weights: &[Vec<f64>]| -> Option<DVector<f64>> {
