@@ -107,6 +107,33 @@ fn vehicle_errors_point_at_the_key() {
         matches!(&err, ConfigError::Invalid { key, .. } if key == "damping.yaw_uv"),
         "{err}"
     );
+    // The optional N_|u|r likewise.
+    let set = text.replace("# yaw_ur = 0.0", "yaw_ur = 3.5");
+    assert_ne!(set, text, "mako.toml documents yaw_ur");
+    let v = VehicleConfig::from_document(&Document::new("v.toml", &set)).unwrap();
+    assert_eq!(v.damping_yaw_ur, 3.5);
+    let bad = text.replace("# yaw_ur = 0.0", "yaw_ur = -2000.0");
+    let err = VehicleConfig::from_document(&Document::new("v.toml", &bad)).unwrap_err();
+    assert!(
+        matches!(&err, ConfigError::Invalid { key, .. } if key == "damping.yaw_ur"),
+        "{err}"
+    );
+    // The reverse curve's exponent is the forward one unless given.
+    let v = VehicleConfig::from_document(&Document::new("v.toml", &text)).unwrap();
+    assert_eq!(
+        v.thruster_common.exponent_reverse,
+        v.thruster_common.exponent
+    );
+    let set = text.replace("# exponent_reverse = 1.0", "exponent_reverse = 1.4");
+    assert_ne!(set, text, "mako.toml documents exponent_reverse");
+    let v = VehicleConfig::from_document(&Document::new("v.toml", &set)).unwrap();
+    assert_eq!(v.thruster_common.exponent_reverse, 1.4);
+    let bad = text.replace("# exponent_reverse = 1.0", "exponent_reverse = 0.1");
+    let err = VehicleConfig::from_document(&Document::new("v.toml", &bad)).unwrap_err();
+    assert!(
+        matches!(&err, ConfigError::Invalid { key, .. } if key == "thrusters.exponent_reverse"),
+        "{err}"
+    );
 }
 
 /// The mass distribution gives the thesis's 35 kg, a CG below the box centre (batteries in
@@ -478,5 +505,41 @@ fn surge_times_sway_turns_by_the_munk_moment_less_n_uv() {
     assert!(
         cancelled.abs() < 0.02 * (munk * u * v / i_zz * dt).abs(),
         "N_uv = -(a_sway - a_surge) cancels the Munk moment: {cancelled}"
+    );
+}
+
+/// `damping.yaw_ur` (`N_|u|r`) damps a turn in proportion to the forward speed, ahead or
+/// astern alike: a vehicle turning at `r` while moving at `u` loses `N_|u|r |u| r / I_zz` of yaw
+/// rate per second more than without it, and a vehicle turning on the spot loses nothing more.
+#[test]
+fn yaw_damping_under_way_grows_with_forward_speed() {
+    let r = 0.4;
+    let yaw_rate_after = |u: f64, n_ur: f64| {
+        let mut vehicle = vehicle();
+        vehicle.damping_yaw_ur = n_ur;
+        let m = Model::new(vehicle, world());
+        let mut start = at(12.0, 6.0, 1.0);
+        start.velocity_body_mps = Vector3::new(u, 0.0, 0.0);
+        start.angular_velocity_body_radps = Vector3::new(0.0, 0.0, r);
+        let mut sim = Simulation::new(m, &start, 1);
+        sim.step().unwrap();
+        sim.state().angular_velocity_body_radps.z
+    };
+    let v0 = vehicle();
+    let i_zz = v0.inertia_kgm2[(2, 2)] + v0.added_mass[5];
+    let dt = world().step_s;
+    let n_ur = 6.0;
+    for u in [0.3f64, -0.2] {
+        let expected = -n_ur * u.abs() * r / i_zz * dt;
+        let got = yaw_rate_after(u, n_ur) - yaw_rate_after(u, 0.0);
+        assert!(
+            (got - expected).abs() < 0.02 * expected.abs(),
+            "u {u}: extra yaw-rate change {got} in one step, expected {expected}"
+        );
+    }
+    let on_the_spot = yaw_rate_after(0.0, n_ur) - yaw_rate_after(0.0, 0.0);
+    assert!(
+        on_the_spot.abs() < 1e-12,
+        "no extra damping at rest: {on_the_spot}"
     );
 }

@@ -91,6 +91,8 @@ struct RawDamping {
     sway_yaw: [f64; 2],
     #[serde(default)]
     yaw_uv: f64,
+    #[serde(default)]
+    yaw_ur: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -99,6 +101,8 @@ struct RawThrusters {
     forward_max_n: f64,
     deadband: f64,
     exponent: f64,
+    #[serde(default)]
+    exponent_reverse: Option<f64>,
     lag_s: f64,
     fluctuation_rel_std: f64,
     fluctuation_corr_s: f64,
@@ -143,6 +147,10 @@ pub struct ThrusterCommon {
     pub deadband: f64,
     /// Shape of the static curve: thrust ~ ((on - deadband) / (1 - deadband))^exponent.
     pub exponent: f64,
+    /// Shape of the reverse curve, likewise. A propeller built to push forward loses more
+    /// of its thrust at part power in reverse, so the two curves need not share a shape.
+    /// Equals `exponent` unless the vehicle file sets `thrusters.exponent_reverse`.
+    pub exponent_reverse: f64,
     pub lag_s: f64,
     /// Relative standard deviation of the thrust fluctuation at full speed.
     pub fluctuation_rel_std: f64,
@@ -176,6 +184,13 @@ pub struct VehicleConfig {
     /// moment the added masses give (`(a_sway - a_surge) u v`, which the model always has).
     /// Zero unless the vehicle file sets `damping.yaw_uv`.
     pub damping_yaw_uv: f64,
+    /// Yaw damping that grows with forward speed, `N_|u|r` (N m per (m/s x rad/s)), opposing
+    /// the turn with a positive sign: the yaw moment `N_|u|r |u| r`. Manoeuvring theory writes
+    /// the hull's and fins' linear yaw damping as a dimensionless derivative times the speed
+    /// through the water (`N_r = N'_r (rho/2) L^4 U`), so a hull turns more sluggishly under
+    /// way than on the spot, where only the viscous part acts.
+    /// Zero unless the vehicle file sets `damping.yaw_ur`.
+    pub damping_yaw_ur: f64,
     pub thruster_common: ThrusterCommon,
     pub thrusters: [ThrusterConfig; 4],
 }
@@ -224,6 +239,7 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
         damping_quadratic: damping.quadratic,
         damping_sway_yaw: damping.sway_yaw,
         damping_yaw_uv: damping.yaw_uv,
+        damping_yaw_ur: damping.yaw_ur,
         thruster_common,
         thrusters,
     })
@@ -369,6 +385,7 @@ struct Damping {
     quadratic: [f64; 6],
     sway_yaw: [f64; 2],
     yaw_uv: f64,
+    yaw_ur: f64,
 }
 
 /// Checks the damping coefficients, axis by axis, and that every axis is damped at all.
@@ -408,6 +425,13 @@ fn resolve_damping(doc: &Document<'_>, raw: &RawDamping) -> Result<Damping, Conf
         )?,
     ];
     let yaw_uv = doc.check_range("damping.yaw_uv", raw.yaw_uv, -1e3, 1e3, "N m/(m/s)^2")?;
+    let yaw_ur = doc.check_range(
+        "damping.yaw_ur",
+        raw.yaw_ur,
+        -1e3,
+        1e3,
+        "N m/((m/s) (rad/s))",
+    )?;
     if damping_linear
         .iter()
         .zip(&damping_quadratic)
@@ -423,6 +447,7 @@ fn resolve_damping(doc: &Document<'_>, raw: &RawDamping) -> Result<Damping, Conf
         quadratic: damping_quadratic,
         sway_yaw: damping_sway_yaw,
         yaw_uv,
+        yaw_ur,
     })
 }
 
@@ -441,6 +466,13 @@ fn resolve_thruster_common(
         )?,
         deadband: doc.check_range("thrusters.deadband", t.deadband, 0.0, 0.9, "")?,
         exponent: doc.check_range("thrusters.exponent", t.exponent, 0.5, 3.0, "")?,
+        exponent_reverse: doc.check_range(
+            "thrusters.exponent_reverse",
+            t.exponent_reverse.unwrap_or(t.exponent),
+            0.5,
+            3.0,
+            "",
+        )?,
         lag_s: doc.check_range("thrusters.lag_s", t.lag_s, 0.0, 10.0, "s")?,
         fluctuation_rel_std: doc.check_range(
             "thrusters.fluctuation_rel_std",

@@ -383,7 +383,9 @@ impl Model {
         }
         let [y_r, n_v] = self.vehicle.damping_sway_yaw;
         out[1] += y_r * nu[5];
-        out[5] += n_v * nu[1] + self.vehicle.damping_yaw_uv * nu[0] * nu[1];
+        out[5] += n_v * nu[1]
+            + self.vehicle.damping_yaw_uv * nu[0] * nu[1]
+            + self.vehicle.damping_yaw_ur * nu[0].abs() * nu[5];
         out
     }
 

@@ -83,10 +83,10 @@ pub fn static_thrust_n(
 ) -> f64 {
     let on = cmd.on_fraction();
     let x = ((on - common.deadband) / (1.0 - common.deadband)).max(0.0);
-    let forward = common.forward_max_n * motor.gain * x.powf(common.exponent);
+    let full = common.forward_max_n * motor.gain;
     match cmd.direction {
-        Direction::Forward => forward,
-        Direction::Reverse => -forward * motor.reverse_ratio,
+        Direction::Forward => full * x.powf(common.exponent),
+        Direction::Reverse => -full * motor.reverse_ratio * x.powf(common.exponent_reverse),
     }
 }
 
@@ -152,6 +152,7 @@ mod tests {
             forward_max_n: 10.0,
             deadband: 0.1,
             exponent: 1.0,
+            exponent_reverse: 1.0,
             lag_s: 0.25,
             fluctuation_rel_std: 0.03,
             fluctuation_corr_s: 0.3,
@@ -192,6 +193,31 @@ mod tests {
             direction: Direction::Forward,
         };
         assert_eq!(static_thrust_n(&c, &m, slow), 0.0);
+    }
+
+    /// The reverse curve has its own shape: at part power forward thrust follows `exponent`,
+    /// reverse thrust `exponent_reverse`, and both meet their full-power values.
+    #[test]
+    fn forward_and_reverse_curves_have_their_own_exponents() {
+        let c = ThrusterCommon {
+            exponent: 1.2,
+            exponent_reverse: 1.6,
+            ..common()
+        };
+        let m = motor();
+        // On-fraction 0.55: halfway between the deadband 0.1 and full power.
+        let half = |direction| ThrusterCommand {
+            duty: (255.0 * 0.45f64).round() as u8,
+            direction,
+        };
+        let x = (half(Direction::Forward).on_fraction() - 0.1) / 0.9;
+        let fwd = static_thrust_n(&c, &m, half(Direction::Forward));
+        let rev = static_thrust_n(&c, &m, half(Direction::Reverse));
+        assert!((fwd - 10.0 * x.powf(1.2)).abs() < 1e-12, "{fwd}");
+        assert!((rev + 5.0 * x.powf(1.6)).abs() < 1e-12, "{rev}");
+        let full = |direction| ThrusterCommand { duty: 0, direction };
+        assert_eq!(static_thrust_n(&c, &m, full(Direction::Reverse)), -5.0);
+        assert_eq!(static_thrust_n(&c, &m, full(Direction::Forward)), 10.0);
     }
 
     #[test]
