@@ -7,12 +7,17 @@
 //! jointly with the bounded engine ([`crate::gap::lsq`]) on the re-anchored residuals of every
 //! baseline run. Two things keep a fit of twenty-odd parameters on data that never match the
 //! model exactly well posed:
-//! - **Channel weights.** Model error, not noise, dominates an uncalibrated model's residual,
-//!   and one channel (a depth hold) can hold a hundred times the chi-square of another. Each
-//!   channel is weighted by `1 / sqrt(max(1, chi2/n))` of its residual at the previous pass,
-//!   with its samples counted over the residual's own correlation time
-//!   ([`channel_weights`]): every channel speaks with the number of independent
-//!   disagreements it holds (two passes).
+//! - **Channel weights.** Each channel's squared residuals sum to its chi-square per
+//!   independent sample ([`channel_weights`]), so every channel counts once, as in the gap
+//!   measure the calibration is judged by, whatever its sample rate or how far it is off. The
+//!   intervals are then taken with the residuals in units of their own spread, each channel's
+//!   samples counted over the residual's correlation time.
+//! - **A robust loss.** Each residual is measured against its channel's own spread at the
+//!   previous pass (`max(1, rms)` in floor units), and beyond [`HUBER_K`] of those it counts
+//!   linearly, not squared (Huber's loss, applied as the square root so the least-squares
+//!   engine minimises it). A few samples far off (a wall contact the re-simulation places a
+//!   moment earlier, an accelerometer spike) then cannot outvote a disagreement that runs
+//!   through a whole channel.
 //! - **A weak prior.** Each parameter adds a residual `x / PRIOR_WIDTH` (in units of its
 //!   typical size): a direction the data do not inform stays near the model as given instead
 //!   of wandering to a bound.
@@ -48,6 +53,20 @@ use crate::gap::resim::{self, Floor};
 
 /// Width of the prior on each parameter, in units of its typical size.
 pub const PRIOR_WIDTH: f64 = 10.0;
+
+/// Where the calibration's loss turns from squared to linear, in units of a channel's own
+/// spread: three standard deviations, the usual outlier threshold.
+pub const HUBER_K: f64 = 3.0;
+
+/// The residual whose square is Huber's loss of `u` with threshold `k`: `u` inside `k`,
+/// `sign(u) sqrt(2 k |u| - k^2)` beyond (continuous, with a continuous derivative).
+fn huber(u: f64, k: f64) -> f64 {
+    if u.abs() <= k {
+        u
+    } else {
+        u.signum() * (2.0 * k * u.abs() - k * k).sqrt()
+    }
+}
 
 /// One run the calibration reads.
 pub struct Run {
@@ -174,17 +193,40 @@ fn channel_chi2(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Option<Vec<
     Some(out)
 }
 
-/// The joint fit's weight of each channel of a prepared run under `c`: a channel speaks with
-/// the number of independent disagreements it holds. Its chi-square per independent sample
-/// is brought to one (`1 / sqrt(max(1, chi2/n))`), and its samples are counted over the
-/// residual's own correlation time where that is longer than the noise floor's: model error
-/// is correlated over a manoeuvre, so a channel sampled at 100 Hz whose disagreement follows
-/// the thrust steps (an accelerometer) holds about as many independent disagreements as a
-/// 5 Hz position track, not twenty times as many. Counted by the floor's time alone, three
-/// accelerometer channels outweighed every other channel twenty to one, and their gains ran
-/// onto their bounds before the dynamics moved. A channel the run cannot evaluate weighs 1.
-fn channel_weights(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Vec<f64> {
-    let mut w = vec![1.0; p.run.m.channels.len()];
+/// How one channel of a prepared run enters the calibration, from its residual at a point.
+#[derive(Debug, Clone, Copy)]
+struct ChannelWeight {
+    /// The fit's weight per sample, `sqrt(tau_floor / n)`: the channel's squared residuals
+    /// sum to its chi-square per independent sample, so every channel counts once, as in the
+    /// gap measure calibration is judged by ([`crate::gap::excess`]), whatever its sample
+    /// rate. Weighted by its samples instead, three 100 Hz accelerometer channels whose
+    /// disagreement is white held most of the objective; weighted to bring each channel's
+    /// chi-square to one, a position track below its floor outvoted a compass four times above
+    /// it. Either way the fit settled where the compass still disagreed, and the gap stayed.
+    fit: f64,
+    /// The weight per sample for the intervals, `sqrt(tau_floor / tau / max(1, chi2/n))`:
+    /// the chi-square per independent sample brought to one, samples counted over the
+    /// residual's own correlation time where that is longer than the floor's (model error is
+    /// correlated over a manoeuvre). The residuals are then in units of their own spread, so
+    /// the Jacobian gives the parameters' uncertainty.
+    intervals: f64,
+    /// The channel's spread, `max(1, rms)` of its residual in floor units: the unit of the
+    /// robust loss ([`HUBER_K`]).
+    spread: f64,
+}
+
+impl ChannelWeight {
+    /// A channel the run cannot evaluate.
+    const UNIT: Self = Self {
+        fit: 1.0,
+        intervals: 1.0,
+        spread: 1.0,
+    };
+}
+
+/// Each channel's weights on a prepared run under `c`.
+fn channel_weights(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Vec<ChannelWeight> {
+    let mut w = vec![ChannelWeight::UNIT; p.run.m.channels.len()];
     let Some(run) = resim::simulate(c, &p.run.m, None)
         .ok()
         .filter(|r| r.divergences.is_empty())
@@ -207,9 +249,14 @@ fn channel_weights(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Vec<f64>
             continue;
         }
         let n = z.len() as f64;
-        let chi2 = z.iter().map(|v| v * v).sum::<f64>() / (n / f.tau);
+        let sum_sq = z.iter().map(|v| v * v).sum::<f64>();
+        let chi2 = sum_sq / (n / f.tau);
         let tau = crate::gap::residuals::correlation_time(&z).max(f.tau);
-        w[i] = (f.tau / tau / chi2.max(1.0)).sqrt();
+        w[i] = ChannelWeight {
+            fit: (f.tau / n).sqrt(),
+            intervals: (f.tau / tau / chi2.max(1.0)).sqrt(),
+            spread: (sum_sq / n).sqrt().max(1.0),
+        };
     }
     w
 }
@@ -387,14 +434,18 @@ fn joint_fit(
     let bounds = Bounds::scaled(&bounds_raw, &scales);
     let dims = scales.len();
     // Channel weights, one per (run, channel), from the residual at the current point.
-    let weights_at = |x: &DVector<f64>| -> Vec<Vec<f64>> {
+    let weights_at = |x: &DVector<f64>| -> Vec<Vec<ChannelWeight>> {
         prepared
             .iter()
             .zip(setups)
             .map(|(p, s)| channel_weights(p, s, &applied(&p.base, chosen, x)))
             .collect()
     };
-    let residuals_with = |x: &DVector<f64>, weights: &[Vec<f64>]| -> Option<DVector<f64>> {
+    // The residuals at `x` under `weights`, each channel's by `pick` of its weights.
+    let residuals_with = |x: &DVector<f64>,
+                          weights: &[Vec<ChannelWeight>],
+                          pick: fn(&ChannelWeight) -> f64|
+     -> Option<DVector<f64>> {
         let mut out = Vec::new();
         for ((p, s), w) in prepared.iter().zip(setups).zip(weights) {
             let c = applied(&p.base, chosen, x);
@@ -404,7 +455,10 @@ fn joint_fit(
                 .ok()
                 .filter(|r| r.divergences.is_empty())?;
             let r = s.residuals(&c, &run);
-            out.extend(r.values.iter().zip(&r.owner).map(|(v, o)| v * w[*o]));
+            out.extend(r.values.iter().zip(&r.owner).map(|(v, o)| {
+                let w = &w[*o];
+                huber(v / w.spread, HUBER_K) * w.spread * pick(w)
+            }));
         }
         out.extend(x.iter().map(|v| v / PRIOR_WIDTH));
         Some(DVector::from_vec(out))
@@ -422,7 +476,7 @@ fn joint_fit(
                 pass + 1
             ));
             let weights = weights_at(&x);
-            let objective = |x: &DVector<f64>| residuals_with(x, &weights);
+            let objective = |x: &DVector<f64>| residuals_with(x, &weights, |w| w.fit);
             let Some(fit) = lsq::minimize(&objective, &bounds, std::slice::from_ref(&x)) else {
                 return Err(GapError::Data(
                     "calibration: the model could not be re-simulated at the starting point".into(),
@@ -454,9 +508,18 @@ fn joint_fit(
             best = Some((gap, x, fit));
         }
     }
-    let Some((_, x, fit)) = best else {
+    let Some((_, x, mut fit)) = best else {
         return Err(GapError::Data("calibration: no fit".into()));
     };
+    // The intervals come from the residuals in units of their own spread, not from the
+    // fit's per-channel weights (which count each channel once, not each disagreement).
+    let weights = weights_at(&x);
+    let in_spread_units = |x: &DVector<f64>| residuals_with(x, &weights, |w| w.intervals);
+    if let Some(r) = in_spread_units(&x) {
+        fit.jacobian = lsq::jacobian_at(&in_spread_units, &bounds, &x);
+        fit.residuals = r;
+        evaluations += dims + 1;
+    }
     Ok((x, fit, evaluations))
 }
 

@@ -74,3 +74,24 @@ fn unidentified_and_bound_sensor_effects_are_named() {
     assert!(out[0].1.contains("bound"), "{}", out[0].1);
     assert!(out[1].1.contains("do not bound"), "{}", out[1].1);
 }
+
+/// The robust residual's square is Huber's loss: `u^2` inside the threshold, `2 k |u| - k^2`
+/// beyond it, continuous there and odd in `u`: a sample thirty spreads off costs 171 (what
+/// thirteen spreads cost squared), not 900.
+#[test]
+fn the_robust_residual_squares_to_hubers_loss() {
+    let k = HUBER_K;
+    for u in [0.0, 0.5, -2.0, k] {
+        assert_eq!(huber(u, k), u);
+    }
+    for u in [3.5, -7.0, 30.0] {
+        let h = huber(u, k);
+        assert!(
+            (h * h - (2.0 * k * u.abs() - k * k)).abs() < 1e-9,
+            "{u}: {h}"
+        );
+        assert_eq!(h.signum(), u.signum());
+    }
+    assert!((huber(k + 1e-9, k) - k).abs() < 1e-6);
+    assert!((huber(30.0, k).powi(2) - 171.0).abs() < 1e-9);
+}

@@ -28,7 +28,7 @@ const ALL_THRUSTERS: [&str; 9] = [
 ];
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 36] = [
+pub const LIBRARY: [Effect; 39] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -427,8 +427,9 @@ pub const LIBRARY: [Effect; 36] = [
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
-            let e = &mut c.vehicle.thruster_common.exponent;
-            *e = (*e * (1.0 + at(p, 0))).max(0.1);
+            let t = &mut c.vehicle.thruster_common;
+            t.exponent = (t.exponent * (1.0 + at(p, 0))).max(0.1);
+            t.exponent_reverse = (t.exponent_reverse * (1.0 + at(p, 0))).max(0.1);
         },
         moves_anchors: false,
         summary: &[Behaviour::Speed, Behaviour::Turn],
@@ -854,6 +855,71 @@ pub const LIBRARY: [Effect; 36] = [
         moves_anchors: true,
         summary: &[],
         calibration: Calibration::Discrepancy(27),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "vertical_thrust_gain",
+        parameters: &["gain_scale"],
+        scales: &[0.1],
+        bounds: &[(-0.5, 1.0)],
+        signature: "the vertical pair pushes harder or softer than the stern pair: depth \
+                    responds to the vertical commands off in proportion, while speed and turns \
+                    match",
+        channels: &["depth_adc", "accel_z_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            for t in c.vehicle.thrusters.iter_mut() {
+                if t.direction.z.abs() > 0.5 {
+                    t.gain = (t.gain * (1.0 + at(p, 0))).max(1e-3);
+                }
+            }
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Discrepancy(30),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "yaw_damping_under_way",
+        parameters: &["n_ur_nm_s_per_m"],
+        scales: &[1.0],
+        bounds: &[(-5.0, 30.0)],
+        signature: "turns under way are damped more or less than spot turns predict: the yaw \
+                    damping that grows with forward speed is off",
+        channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| c.vehicle.damping_yaw_ur += at(p, 0),
+        moves_anchors: false,
+        summary: &[Behaviour::Turn],
+        calibration: Calibration::Discrepancy(31),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "reverse_thrust_curve",
+        parameters: &["exponent_scale"],
+        scales: &[0.2],
+        bounds: &[(-0.5, 2.0)],
+        signature: "reverse thrust off in a proportion that changes with the command, forward \
+                    thrust not: part-power reversing (turns, braking, rising) disagrees more or \
+                    less than full reverse",
+        channels: &ALL_THRUSTERS,
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            let e = &mut c.vehicle.thruster_common.exponent_reverse;
+            *e = (*e * (1.0 + at(p, 0))).max(0.1);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Discrepancy(32),
         positive: false,
         parameter_error_target: false,
         hidden: None,
