@@ -203,13 +203,13 @@ fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
 
 /// A vehicle of another structure: structure seed 52361 (no Munk moment, purely quadratic
 /// surge drag, `Y_r` and `N_v` both positive, two thrusters saturating early, a start away
-/// from the stated one). Calibration on three baseline runs halves a fourth run's gap. On
-/// this vehicle the joint fit used to stop near the model as given (10 % smaller): counted
-/// by the noise floor's white-noise time, the three accelerometer channels outweighed the
-/// others twenty to one, their gains ran onto their bounds, and the clamped search stalled
-/// there before buoyancy, heave damping or thrust moved.
+/// from the stated one). Calibration on three baseline runs shrinks a fourth run's gap by
+/// the 60 % the workflow promises. On this vehicle the joint fit used to stop near the model
+/// as given (10 % smaller: the accelerometers outweighed the other channels twenty to one and
+/// the clamped search stalled on their bounds), then at 57 % (channels brought to chi2 = 1
+/// each: a camera track below its floor outvoted the compass).
 #[test]
-fn calibration_halves_the_gap_of_a_vehicle_of_another_structure() {
+fn calibration_shrinks_the_gap_of_a_vehicle_of_another_structure_by_60_percent() {
     const STRUCTURE: u64 = 52361;
     let dir = TempDir::new("gap-structure");
     let run = |name: &str, seed: u64| {
@@ -229,7 +229,7 @@ fn calibration_halves_the_gap_of_a_vehicle_of_another_structure() {
         .find(|r| !r.fitted)
         .expect("validation run scored");
     assert!(
-        r.reduction_pct >= 50.0,
+        r.reduction_pct >= 60.0,
         "validation run: gap {:.2} -> {:.2} ({:.0} % smaller); channels {:?}",
         r.gap_before,
         r.gap_after,
