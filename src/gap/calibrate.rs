@@ -5,7 +5,7 @@
 //! The parameters are those of the library's effects marked [`Effect::calibrated`] (thrust gain and curve, drag,
 //! added mass, yaw damping, thruster balance and lag, sensor offsets and gains), fitted
 //! jointly with the bounded engine ([`crate::gap::lsq`]) on the re-anchored residuals of every
-//! baseline run. Two things keep a fit of twenty-odd parameters on data that never match the
+//! baseline run. These keep a fit of thirty-odd parameters on data that never match the
 //! model exactly well posed:
 //! - **Channel weights.** Each channel's squared residuals sum to its chi-square per
 //!   independent sample ([`channel_weights`]), so every channel counts once, as in the gap

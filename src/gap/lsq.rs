@@ -16,8 +16,10 @@ use nalgebra::{DMatrix, DVector, Dyn, Owned};
 pub const JACOBIAN_STEP: f64 = 0.02;
 
 /// A search ends when [`STALLED_STEPS`] accepted steps in a row each lower the chi-square by
-/// less than this. Residuals are in units of their noise floor, so the chi-square counts
-/// independent samples and a change of a twentieth is no information. The relative test of
+/// less than this. The callers' residuals are scaled so the chi-square counts independent
+/// samples (the time-series fit's are in units of their noise floor; calibration's sum to
+/// each channel's chi-square per independent sample), and a change of a twentieth is below
+/// what noise moves it by. The relative test of
 /// the engine alone does not fire while a parameter presses on its bound (the linear model
 /// keeps predicting the reduction the bound forbids) or the search zig-zags down a narrow
 /// valley: calibration crawled on for thousands of re-simulations at a few thousandths of
