@@ -76,8 +76,9 @@ pub enum GapCommand {
     /// Convert a daemon recording (`run --record DIR`) into a measurement directory.
     Convert(ConvertArgs),
     /// Fit the base model's continuous parameters on baseline runs (thrust curve, drag,
-    /// added mass, yaw damping, sensor offsets and gains, and the hull's own sway, yaw-inertia,
-    /// heave and buoyancy terms as model discrepancy) and write a calibrated model.
+    /// added mass, yaw damping, sensor offsets and gains, and as model discrepancy the hull's
+    /// own sway, yaw-inertia, yaw-under-way, heave and buoyancy terms and its thruster balance
+    /// and reverse curve) and write a calibrated model.
     Calibrate(CalibrateArgs),
 }
 
