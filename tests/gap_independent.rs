@@ -396,7 +396,7 @@ fn a_wrong_stated_start_gives_the_same_answer() {
 }
 
 /// Two hidden effects at once, a water current and a compass mounted 8 deg rotated: both
-/// are named, and each has a share of the shrink.
+/// are named, their intervals cover the hidden sizes, and each has a share of the shrink.
 #[test]
 fn two_hidden_effects_are_both_named() {
     let a = discover(
@@ -411,6 +411,17 @@ fn two_hidden_effects_are_both_named() {
         "{}",
         explain(&a)
     );
+    // Each named effect's values come from the refit of both together; their intervals
+    // cover the hidden sizes.
+    for (name, truth) in [
+        ("water_current", vec![0.04, -0.03]),
+        ("compass_offset", vec![8.0]),
+    ] {
+        let c = a.accepted.iter().find(|c| c.name == name).unwrap();
+        for ((p, ci), t) in c.ci95.iter().zip(&truth) {
+            assert!(ci[0] <= *t && *t <= ci[1], "{name}.{p}: {ci:?} misses {t}");
+        }
+    }
     assert_eq!(a.shares_pct.len(), a.accepted.len());
     let total: f64 = a.shares_pct.iter().sum();
     assert!((total - 100.0).abs() < 1e-6, "{:?}", a.shares_pct);

@@ -146,14 +146,15 @@ pub fn winner(round: &[Candidate]) -> Option<&Candidate> {
 /// candidate's fit out (`None`: nothing can be fitted any more).
 pub type FitRound<'a> =
     dyn FnMut(usize, &[Candidate]) -> Result<Option<Vec<Candidate>>, GapError> + 'a;
-/// Takes a round's winner into the model (the earlier winners alongside).
-pub type Accept<'a> = dyn FnMut(&Candidate, &mut [Candidate]) -> Result<(), GapError> + 'a;
+/// Takes a round's winner, the last of the accepted effects, into the model; it may replace
+/// the accepted effects' values (the winner's too) by their joint refit.
+pub type Accept<'a> = dyn FnMut(&mut [Candidate]) -> Result<(), GapError> + 'a;
 
 /// The greedy selection, whatever the objective: up to `max` rounds; in each, `fit_round`
 /// fits every candidate not yet accepted against the model with the accepted effects
-/// (`None`: nothing can be fitted any more), the round is ranked, and its winner is handed to
-/// `accept` (which may replace the earlier accepted effects' values by their joint refit) and
-/// accepted. Stops at the first round without a winner. Returns every round and the
+/// (`None`: nothing can be fitted any more), the round is ranked, and its winner is accepted
+/// and handed to `accept` (which may replace the accepted effects' values by their joint
+/// refit). Stops at the first round without a winner. Returns every round and the
 /// accepted effects in order.
 pub fn select(
     max: usize,
@@ -163,6 +164,7 @@ pub fn select(
     let mut rounds = Vec::new();
     let mut accepted: Vec<Candidate> = Vec::new();
     let mut ambiguous = None;
+    let mut beyond_bounds = None;
     for round in 0..max {
         let Some(mut results) = fit_round(round, &accepted)? else {
             break;
@@ -178,19 +180,28 @@ pub fn select(
                     alt.name.clone(),
                 ]
             });
+        let beyond = win
+            .as_ref()
+            .and_then(|w| outgrows_its_bounds(&results, w))
+            .map(|c| c.name.clone());
         rounds.push(results);
         let Some(win) = win else { break };
+        if beyond.is_some() {
+            beyond_bounds = beyond;
+            break;
+        }
         if lookalike.is_some() {
             ambiguous = lookalike;
             break;
         }
-        accept(&win, &mut accepted)?;
         accepted.push(win);
+        accept(&mut accepted)?;
     }
     Ok(Selection {
         rounds,
         accepted,
         ambiguous,
+        beyond_bounds,
     })
 }
 
@@ -207,6 +218,24 @@ pub struct Selection {
     /// names neither: a sensor effect may take a disagreement only with its own signature,
     /// and the data do not say which it is.
     pub ambiguous: Option<[String; 2]>,
+    /// A round whose disagreement an effect explains better than the round's winner by more
+    /// than [`crate::gap::fit::BIC_MARGIN`], passing every guard but its bounds: the data show
+    /// that effect, larger than its physical range allows the fit to go. Selection stops
+    /// there: the winner would be a stand-in taking the share of the disagreement it can.
+    pub beyond_bounds: Option<String>,
+}
+
+/// A candidate of `round` that fails only its bounds and explains the round's disagreement
+/// better than `win` by more than the delta-BIC margin.
+fn outgrows_its_bounds<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
+    round.iter().find(|c| {
+        let mut inside = c.guards;
+        inside.inside_bounds = true;
+        c.testable
+            && !c.guards.inside_bounds
+            && inside.all()
+            && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated + crate::gap::fit::BIC_MARGIN
+    })
 }
 
 /// A physics effect of `round` that passes every guard with a delta BIC within the margin
@@ -328,7 +357,8 @@ mod tests {
                     _ => vec![candidate("thrust_gain", 5.0, false)],
                 }))
             },
-            &mut |win, earlier| {
+            &mut |accepted| {
+                let (win, earlier) = accepted.split_last().unwrap();
                 assert!(earlier.is_empty() || win.name != earlier[0].name);
                 Ok(())
             },
@@ -361,7 +391,7 @@ mod tests {
                         Vec::new()
                     }))
                 },
-                &mut |_, _| Ok(()),
+                &mut |_| Ok(()),
             )
             .unwrap()
         };
@@ -393,6 +423,43 @@ mod tests {
             ("depth_gain", "thrust_gain")
         );
         assert_eq!(margin, 25.0, "the failed yaw_damping is no runner-up");
+    }
+
+    /// Regression (a stand-in named for an effect beyond its bounds): a thruster lag the fit
+    /// holds on its bound explains far more than anything inside its bounds; the best passing
+    /// candidate is not named in its place and the selection stops naming the bounded one.
+    /// A bounded candidate that also fails another guard, or explains no more, changes nothing.
+    #[test]
+    fn a_candidate_is_not_named_in_place_of_one_beyond_its_bounds() {
+        let run = |round0: Vec<Candidate>| {
+            select(
+                2,
+                &mut |round, _| {
+                    Ok(Some(if round == 0 {
+                        round0.clone()
+                    } else {
+                        Vec::new()
+                    }))
+                },
+                &mut |_| Ok(()),
+            )
+            .unwrap()
+        };
+        let mut lag = candidate("thruster_lag", 7500.0, true);
+        lag.guards.inside_bounds = false;
+        let stand_in = run(vec![lag.clone(), candidate("thrust_gain", 1400.0, true)]);
+        assert!(stand_in.accepted.is_empty(), "{:?}", stand_in.accepted);
+        assert_eq!(stand_in.beyond_bounds.as_deref(), Some("thruster_lag"));
+        let mut overfit = lag.clone();
+        overfit.guards.heldout = Some(false);
+        let other_guard = run(vec![overfit, candidate("thrust_gain", 1400.0, true)]);
+        assert_eq!(other_guard.accepted[0].name, "thrust_gain");
+        assert!(other_guard.beyond_bounds.is_none());
+        let mut small = lag;
+        small.delta_bic_uncalibrated = 1405.0;
+        let close = run(vec![small, candidate("thrust_gain", 1400.0, true)]);
+        assert_eq!(close.accepted[0].name, "thrust_gain");
+        assert!(close.beyond_bounds.is_none());
     }
 
     /// A candidate is named only when every guard holds.

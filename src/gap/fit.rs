@@ -772,6 +772,110 @@ pub fn fit_candidates(
     out
 }
 
+/// One effect's values and 95 % intervals from a joint refit (no intervals: held as it was).
+pub type Refit = (Vec<f64>, Vec<[f64; 2]>);
+
+/// The accepted effects refitted together on all the data, from their values when named.
+/// Each was fitted with only the effects named before it in the model, so an earlier one has
+/// taken part of a later one's disagreement; fitted together, the later rounds fit against
+/// what is really left. `accepted` holds each effect with its values and its round's scaling
+/// of chi-square (`noise_factor * variance_factor`); variance-type effects (EMI) are applied
+/// as they are and not refitted. Returns, per effect in order, the values and their 95 %
+/// intervals (the joint covariance at the largest round scaling, plus the between-run spread);
+/// `None` when no mean-type effect is accepted or the joint fit fails (the round values stand).
+pub fn refit_jointly(
+    setup: &Setup<'_>,
+    accepted: &[(&'static Effect, Vec<f64>, f64)],
+) -> Option<Vec<Refit>> {
+    let free: Vec<usize> = (0..accepted.len())
+        .filter(|&i| accepted[i].0.kind == Kind::Mean)
+        .collect();
+    if free.is_empty() {
+        return None;
+    }
+    let scales: Vec<f64> = free
+        .iter()
+        .flat_map(|&i| accepted[i].0.scales.iter().copied())
+        .collect();
+    let bounds: Vec<(f64, f64)> = free
+        .iter()
+        .flat_map(|&i| accepted[i].0.bounds.iter().copied())
+        .collect();
+    let values_at = |x: &DVector<f64>| -> Vec<Vec<f64>> {
+        let mut k = 0;
+        accepted
+            .iter()
+            .enumerate()
+            .map(|(i, (effect, values, _))| {
+                if !free.contains(&i) {
+                    return values.clone();
+                }
+                let v = effect
+                    .scales
+                    .iter()
+                    .enumerate()
+                    .map(|(j, s)| x[k + j] * s)
+                    .collect();
+                k += effect.parameters.len();
+                v
+            })
+            .collect()
+    };
+    let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
+        let mut c = setup.base.clone();
+        for ((effect, _, _), v) in accepted.iter().zip(values_at(x)) {
+            effects::apply(effect, &v, &mut c);
+        }
+        let run = resim::simulate(&c, setup.m, None)
+            .ok()
+            .filter(|r| r.divergences.is_empty())?;
+        Some(DVector::from_vec(setup.residuals(&c, &run).values))
+    };
+    let start = DVector::from_iterator(
+        scales.len(),
+        free.iter().flat_map(|&i| {
+            accepted[i]
+                .1
+                .iter()
+                .zip(accepted[i].0.scales)
+                .map(|(v, s)| v / s)
+        }),
+    );
+    let fit = lsq::minimize(&objective, &Bounds::scaled(&bounds, &scales), &[start])?;
+    let chi2 = fit.residuals.norm_squared();
+    let n_eff = setup.n_eff(None);
+    let variance_factor = (chi2 / (n_eff - scales.len() as f64).max(1.0)).max(1.0);
+    let noise_factor = free.iter().map(|&i| accepted[i].2).fold(1.0_f64, f64::max);
+    let spread: Vec<f64> = free
+        .iter()
+        .flat_map(|&i| setup.spread_variance(accepted[i].0))
+        .collect();
+    let cov = fit.covariance().map(|c| {
+        let mut total = c * (noise_factor * variance_factor);
+        for (j, v) in spread.iter().enumerate() {
+            total[(j, j)] += v;
+        }
+        total
+    });
+    let ci = lsq::intervals(&fit.x, cov.as_ref(), &scales, 1.0);
+    let mut k = 0;
+    Some(
+        accepted
+            .iter()
+            .zip(values_at(&fit.x))
+            .enumerate()
+            .map(|(i, ((effect, _, _), v))| {
+                if !free.contains(&i) {
+                    return (v, Vec::new());
+                }
+                let n = effect.parameters.len();
+                k += n;
+                (v, ci[k - n..k].to_vec())
+            })
+            .collect(),
+    )
+}
+
 /// Builds a setup for the given configs.
 pub fn setup<'a>(
     m: &'a Measurement,

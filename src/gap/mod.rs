@@ -133,6 +133,9 @@ pub struct Analysis {
     /// The sensor effect and the physics effect the last round could not tell apart
     /// ([`candidate::Selection::ambiguous`]).
     pub ambiguous: Option<[String; 2]>,
+    /// The effect the last round's disagreement looks like, beyond its physical bounds
+    /// ([`candidate::Selection::beyond_bounds`]).
+    pub beyond_bounds: Option<String>,
     pub accepted: Vec<Candidate>,
     pub verdict: Verdict,
     pub fitted: GapModel,
@@ -409,6 +412,7 @@ pub fn analyse_with(
         rounds,
         accepted,
         ambiguous,
+        beyond_bounds,
     } = candidate::select(
         fit::MAX_EFFECTS,
         &mut |round, accepted| {
@@ -425,18 +429,42 @@ pub fn analyse_with(
                 progress(round, name)
             })))
         },
-        &mut |win, _| {
-            let effect = effects::by_name(&win.name).ok_or_else(|| {
-                GapError::Data(format!("`{}` is not in the effect library", win.name))
-            })?;
-            let values = win.values();
-            effects::apply(effect, &values, &mut configs.borrow_mut());
-            fitted.borrow_mut().effects.push(EnabledEffect {
-                effect,
-                values,
-                ci95: win.ci95.iter().map(|(_, c)| *c).collect(),
-                delta_bic: Some(win.delta_bic),
-            });
+        &mut |accepted| {
+            let mut named = Vec::new();
+            for c in accepted.iter() {
+                let effect = effects::by_name(&c.name).ok_or_else(|| {
+                    GapError::Data(format!("`{}` is not in the effect library", c.name))
+                })?;
+                named.push((effect, c.values(), c.noise_factor));
+            }
+            // With two or more named, each is refitted alongside the others.
+            if named.len() > 1 {
+                let setup = fit::setup(m, start.clone(), &floors, options.split, &model.spread)?;
+                if let Some(joint) = fit::refit_jointly(&setup, &named) {
+                    for (c, (values, ci)) in accepted.iter_mut().zip(joint) {
+                        for ((_, v), new) in c.parameters.iter_mut().zip(&values) {
+                            *v = *new;
+                        }
+                        for ((_, old), new) in c.ci95.iter_mut().zip(ci) {
+                            *old = new;
+                        }
+                    }
+                }
+            }
+            let mut c = start.clone();
+            let mut model_with = model.clone();
+            for (a, (effect, _, _)) in accepted.iter().zip(&named) {
+                let values = a.values();
+                effects::apply(effect, &values, &mut c);
+                model_with.effects.push(EnabledEffect {
+                    effect,
+                    values,
+                    ci95: a.ci95.iter().map(|(_, c)| *c).collect(),
+                    delta_bic: Some(a.delta_bic),
+                });
+            }
+            *configs.borrow_mut() = c;
+            *fitted.borrow_mut() = model_with;
             Ok(())
         },
     )?;
@@ -502,6 +530,7 @@ pub fn analyse_with(
         after,
         rounds,
         ambiguous,
+        beyond_bounds,
         accepted,
         fitted,
         unmodelled,

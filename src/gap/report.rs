@@ -83,6 +83,7 @@ pub fn json(a: &Analysis) -> Value {
         "before": a.clean_before.divergences,
         "after": a.clean_after.divergences,
     });
+    out["beyond_bounds"] = json!(a.beyond_bounds);
     out
 }
 
@@ -107,7 +108,15 @@ pub fn markdown(a: &Analysis, m: &Measurement) -> String {
 /// The verdict in words: the named effect, or why none is named.
 fn verdict_text(a: &Analysis) -> String {
     match (a.verdict, a.accepted.first()) {
-        (_, Some(w)) => format!("missing effect: **{}**", w.name),
+        (_, Some(w)) if a.accepted.len() == 1 => format!("missing effect: **{}**", w.name),
+        (_, Some(_)) => {
+            let names: Vec<String> = a
+                .accepted
+                .iter()
+                .map(|c| format!("**{}**", c.name))
+                .collect();
+            format!("missing effects, in the order named: {}", names.join(", "))
+        }
         (crate::gap::Verdict::Unexplained, None) if a.fitted.discrepancy.is_empty() => {
             "**unexplained**: the model disagrees with the data beyond its noise floor and no \
              effect in the library passes every guard"
@@ -150,6 +159,16 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
             )),
         a.split.block_s
     );
+    if let Some(name) = &a.beyond_bounds {
+        let _ = writeln!(
+            s,
+            "- the disagreement left looks most like **{name}**, larger than its physical \
+             bounds let the fit go (every other guard passes, and it explains more than the \
+             best candidate inside its bounds by over {} delta BIC): nothing more is named, as \
+             a candidate inside its bounds would only stand in for it",
+            fit::BIC_MARGIN
+        );
+    }
     for u in &a.unexplained {
         let w: Vec<String> = u
             .windows

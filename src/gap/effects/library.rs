@@ -131,7 +131,7 @@ pub const LIBRARY: [Effect; 39] = [
         name: "thruster_lag",
         parameters: &["lag_s"],
         scales: &[0.2],
-        bounds: &[(-1.0, 2.0)],
+        bounds: &[(-1.0, 3.0)],
         signature: "error right after command changes, decaying with a time constant",
         channels: &[
             "x_m",

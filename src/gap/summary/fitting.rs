@@ -380,7 +380,10 @@ pub fn analyse(
             }
             Ok(Some(results))
         },
-        &mut |win, _| {
+        &mut |accepted| {
+            let Some(win) = accepted.last() else {
+                return Ok(());
+            };
             let effect = effects::by_name(&win.name).ok_or_else(|| {
                 GapError::Data(format!("`{}` is not in the effect library", win.name))
             })?;
