@@ -164,7 +164,7 @@ pub fn select(
     let mut rounds = Vec::new();
     let mut accepted: Vec<Candidate> = Vec::new();
     let mut ambiguous = None;
-    let mut beyond_bounds = None;
+    let mut outranked_by = None;
     for round in 0..max {
         let Some(mut results) = fit_round(round, &accepted)? else {
             break;
@@ -180,14 +180,17 @@ pub fn select(
                     alt.name.clone(),
                 ]
             });
-        let beyond = win
+        let unconfirmed = win
             .as_ref()
-            .and_then(|w| outgrows_its_bounds(&results, w))
-            .map(|c| c.name.clone());
+            .and_then(|w| unconfirmed_rival(&results, w))
+            .map(|c| Outranked {
+                name: c.name.clone(),
+                failed: c.guards.failed(),
+            });
         rounds.push(results);
         let Some(win) = win else { break };
-        if beyond.is_some() {
-            beyond_bounds = beyond;
+        if unconfirmed.is_some() {
+            outranked_by = unconfirmed;
             break;
         }
         if lookalike.is_some() {
@@ -201,7 +204,7 @@ pub fn select(
         rounds,
         accepted,
         ambiguous,
-        beyond_bounds,
+        outranked_by,
     })
 }
 
@@ -218,22 +221,36 @@ pub struct Selection {
     /// names neither: a sensor effect may take a disagreement only with its own signature,
     /// and the data do not say which it is.
     pub ambiguous: Option<[String; 2]>,
-    /// A round whose disagreement an effect explains better than the round's winner by more
-    /// than [`crate::gap::fit::BIC_MARGIN`], passing every guard but its bounds: the data show
-    /// that effect, larger than its physical range allows the fit to go. Selection stops
-    /// there: the winner would be a stand-in taking the share of the disagreement it can.
-    pub beyond_bounds: Option<String>,
+    /// A round whose winner another candidate outranks by more than
+    /// [`crate::gap::fit::BIC_MARGIN`] in the likelihood, passing every guard but its bounds:
+    /// the disagreement looks most like that effect, larger than its physical range lets the
+    /// fit go. Selection stops there: the winner would be a stand-in taking the share of the
+    /// disagreement it can.
+    pub outranked_by: Option<Outranked>,
 }
 
-/// A candidate of `round` that fails only its bounds and explains the round's disagreement
-/// better than `win` by more than the delta-BIC margin.
-fn outgrows_its_bounds<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
+/// The candidate a round's winner was not named for ([`Selection::outranked_by`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Outranked {
+    pub name: String,
+    /// The guards it failed (its bounds).
+    pub failed: Vec<&'static str>,
+}
+
+/// A candidate of `round` that explains the round's disagreement better than `win` by more
+/// than the delta-BIC margin and fails no guard but its bounds: its interval excludes no
+/// effect even with the between-run spread, it passes its signature and the held-out blocks,
+/// and its fit ends on a bound. The effect is larger than its range; the winner is not what
+/// the data point to. (A rival that fails only its interval is no such evidence: the
+/// calibration's own known disagreement shows in every run as an effect null runs also
+/// show, beside whatever the winner explains.)
+fn unconfirmed_rival<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
     round.iter().find(|c| {
-        let mut inside = c.guards;
-        inside.inside_bounds = true;
+        let mut rest = c.guards;
+        rest.inside_bounds = true;
         c.testable
             && !c.guards.inside_bounds
-            && inside.all()
+            && rest.all()
             && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated + crate::gap::fit::BIC_MARGIN
     })
 }
@@ -425,12 +442,13 @@ mod tests {
         assert_eq!(margin, 25.0, "the failed yaw_damping is no runner-up");
     }
 
-    /// Regression (a stand-in named for an effect beyond its bounds): a thruster lag the fit
-    /// holds on its bound explains far more than anything inside its bounds; the best passing
-    /// candidate is not named in its place and the selection stops naming the bounded one.
-    /// A bounded candidate that also fails another guard, or explains no more, changes nothing.
+    /// Regression (a stand-in named): a thruster lag the fit holds on its bound explains far
+    /// more than anything inside its bounds; the best passing candidate is not named in its
+    /// place, and the selection reports the rival with its failed guard. A rival that fails
+    /// its interval (a size null runs show too), also fails another guard, or explains no
+    /// more, changes nothing.
     #[test]
-    fn a_candidate_is_not_named_in_place_of_one_beyond_its_bounds() {
+    fn a_candidate_is_not_named_in_place_of_an_unconfirmed_better_one() {
         let run = |round0: Vec<Candidate>| {
             select(
                 2,
@@ -449,17 +467,28 @@ mod tests {
         lag.guards.inside_bounds = false;
         let stand_in = run(vec![lag.clone(), candidate("thrust_gain", 1400.0, true)]);
         assert!(stand_in.accepted.is_empty(), "{:?}", stand_in.accepted);
-        assert_eq!(stand_in.beyond_bounds.as_deref(), Some("thruster_lag"));
+        assert_eq!(
+            stand_in.outranked_by,
+            Some(Outranked {
+                name: "thruster_lag".into(),
+                failed: vec!["bounds"]
+            })
+        );
+        let mut known = candidate("compass_hard_iron", 168.0, true);
+        known.guards.interval_excludes_zero = false;
+        let beside = run(vec![known, candidate("thruster_lag", 115.0, true)]);
+        assert_eq!(beside.accepted[0].name, "thruster_lag");
+        assert!(beside.outranked_by.is_none());
         let mut overfit = lag.clone();
         overfit.guards.heldout = Some(false);
         let other_guard = run(vec![overfit, candidate("thrust_gain", 1400.0, true)]);
         assert_eq!(other_guard.accepted[0].name, "thrust_gain");
-        assert!(other_guard.beyond_bounds.is_none());
+        assert!(other_guard.outranked_by.is_none());
         let mut small = lag;
         small.delta_bic_uncalibrated = 1405.0;
         let close = run(vec![small, candidate("thrust_gain", 1400.0, true)]);
         assert_eq!(close.accepted[0].name, "thrust_gain");
-        assert!(close.beyond_bounds.is_none());
+        assert!(close.outranked_by.is_none());
     }
 
     /// A candidate is named only when every guard holds.

@@ -133,9 +133,9 @@ pub struct Analysis {
     /// The sensor effect and the physics effect the last round could not tell apart
     /// ([`candidate::Selection::ambiguous`]).
     pub ambiguous: Option<[String; 2]>,
-    /// The effect the last round's disagreement looks like, beyond its physical bounds
-    /// ([`candidate::Selection::beyond_bounds`]).
-    pub beyond_bounds: Option<String>,
+    /// The candidate the last round's winner was not named for
+    /// ([`candidate::Selection::outranked_by`]).
+    pub outranked_by: Option<candidate::Outranked>,
     pub accepted: Vec<Candidate>,
     pub verdict: Verdict,
     pub fitted: GapModel,
@@ -412,7 +412,7 @@ pub fn analyse_with(
         rounds,
         accepted,
         ambiguous,
-        beyond_bounds,
+        outranked_by,
     } = candidate::select(
         fit::MAX_EFFECTS,
         &mut |round, accepted| {
@@ -530,7 +530,7 @@ pub fn analyse_with(
         after,
         rounds,
         ambiguous,
-        beyond_bounds,
+        outranked_by,
         accepted,
         fitted,
         unmodelled,

@@ -83,7 +83,7 @@ pub fn json(a: &Analysis) -> Value {
         "before": a.clean_before.divergences,
         "after": a.clean_after.divergences,
     });
-    out["beyond_bounds"] = json!(a.beyond_bounds);
+    out["outranked_by"] = json!(a.outranked_by);
     out
 }
 
@@ -159,13 +159,14 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
             )),
         a.split.block_s
     );
-    if let Some(name) = &a.beyond_bounds {
+    if let Some(o) = &a.outranked_by {
         let _ = writeln!(
             s,
-            "- the disagreement left looks most like **{name}**, larger than its physical \
-             bounds let the fit go (every other guard passes, and it explains more than the \
-             best candidate inside its bounds by over {} delta BIC): nothing more is named, as \
-             a candidate inside its bounds would only stand in for it",
+            "- the disagreement left looks most like **{}**, which explains it better than any \
+             candidate that passes every guard (by over {} delta BIC), but its fit ends on a \
+             physical bound: it is larger than its range. Nothing more is named, as the best \
+             passing candidate would only stand in for it",
+            o.name,
             fit::BIC_MARGIN
         );
     }
