@@ -157,6 +157,7 @@ impl Setup<'_> {
                     .sample_times(i)
                     .iter()
                     .filter(|t| part.is_none_or(|p| self.split.is_training(**t) == p))
+                    .filter(|t| !self.clean.in_contact(**t))
                     .count();
                 Some(n as f64 / f.tau)
             })
@@ -189,6 +190,11 @@ impl Setup<'_> {
                 .iter()
                 .map(|t| part.is_none_or(|p| self.split.is_training(*t) == p))
                 .collect();
+            // Left out where the fitted residuals are (contact), as zeros of the same length.
+            let live: Vec<f64> = times
+                .iter()
+                .map(|t| f64::from(u8::from(!self.clean.in_contact(*t))))
+                .collect();
             let k = f.tau.sqrt();
             for (m, v) in null.iter_mut().enumerate() {
                 v.extend(
@@ -196,8 +202,9 @@ impl Setup<'_> {
                         .iter()
                         .zip(&f.sigma)
                         .zip(&keep)
-                        .filter(|(_, k)| **k)
-                        .map(|((d, s), _)| d / (s * k)),
+                        .zip(&live)
+                        .filter(|((_, k), _)| **k)
+                        .map(|(((d, s), _), l)| l * d / (s * k)),
                 );
             }
             white.extend(
@@ -205,14 +212,16 @@ impl Setup<'_> {
                     .iter()
                     .zip(&f.sigma)
                     .zip(&keep)
-                    .filter(|(_, k)| **k)
-                    .map(|((m, s), _)| (m / (s * k)).powi(2)),
+                    .zip(&live)
+                    .filter(|((_, k), _)| **k)
+                    .map(|(((m, s), _), l)| l * (m / (s * k)).powi(2)),
             );
         }
         (null, white)
     }
 
-    /// Normalised residuals of all modelled channels for configs `c` and run `run`.
+    /// Normalised residuals of all modelled channels for configs `c` and run `run`; zero
+    /// where the setup's base re-simulation touched the pool ([`Run::contacts`]).
     pub fn residuals(&self, c: &Configs, run: &Run) -> Residuals {
         let mut out = Residuals::default();
         for i in self.modelled() {
@@ -236,7 +245,11 @@ impl Setup<'_> {
                     .collect()
             };
             for (v, t) in values.iter().zip(&times) {
-                out.values.push(*v);
+                // Where the base re-simulation touched the pool, contact impulses make the
+                // residual jump with any change of a parameter: left out of every fit (a
+                // zero), the same samples for every candidate of the setup.
+                out.values
+                    .push(if self.clean.in_contact(*t) { 0.0 } else { *v });
                 out.owner.push(i);
                 out.training.push(self.split.is_training(*t));
             }

@@ -102,6 +102,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                 states: vec![model.vehicle_state(&state)],
                 percent: vec![p],
                 divergences: Vec::new(),
+                contacts: Vec::new(),
             };
             anchor_noise(c, m, &probe)
         });
@@ -154,12 +155,18 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     // Set while the current segment is held after a divergence.
     let mut held = false;
     let mut segment_start_s = 0.0;
+    let mut contacts = Vec::new();
+    // The first contact of the current segment (s).
+    let mut touched: Option<f64> = None;
     for k in 0..steps {
         let t = k as f64 * dt;
         if let Some(n) = segment_steps
             && k > 0
             && k % n == 0
         {
+            if let Some(from) = touched.take() {
+                contacts.push([from, t]);
+            }
             anchor_at(&mut state, t, false);
             held = false;
             segment_start_s = t;
@@ -177,6 +184,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
             model.hold(&mut state);
         } else {
             let before = state.clone();
+            let touching = state.contact_steps();
             if let Err(e) = model.step(&mut state, &commands) {
                 divergences.push(Divergence {
                     segment_start_s,
@@ -186,16 +194,22 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                 state = before;
                 model.hold(&mut state);
                 held = true;
+            } else if touched.is_none() && state.contact_steps() > touching {
+                touched = Some(t);
             }
         }
         states.push(model.vehicle_state(&state));
         percent.push(p);
+    }
+    if let Some(from) = touched {
+        contacts.push([from, m.experiment.duration_s + dt]);
     }
     Ok(Run {
         dt_s: dt,
         states,
         percent,
         divergences,
+        contacts,
     })
 }
 
@@ -564,6 +578,89 @@ mod tests {
         let clean = super::simulate(&c, &m, None).unwrap();
         let floors = super::noise_floor(&c, &m, &clean).expect("the floor of a diverging model");
         assert!(floors.iter().any(Option::is_some));
+    }
+
+    /// Regression (fits that could not move: a thruster imbalance stayed on its start point,
+    /// because contact impulses begin on whichever step the hull first reaches a wall and the
+    /// chi-square jumped by tens as the parameter moved by 1e-9): a re-simulation that runs
+    /// into a wall records where, and a fit's residuals leave those samples out, with the
+    /// contact's memory after them, for every candidate alike.
+    #[test]
+    fn wall_contacts_are_recorded_and_left_out_of_fits() {
+        let (_, mut c, m) = manoeuvre(7);
+        c.shooting = Shooting::DEFAULT;
+        let free = super::simulate(&c, &m, None).unwrap();
+        assert!(free.contacts.is_empty(), "{:?}", free.contacts);
+        // A pool wall across the track: the far wall of the axis the track runs furthest
+        // along from the start, moved halfway in.
+        let (axis, start, reach) = [
+            ("x_m", m.experiment.initial.x_m),
+            ("y_m", m.experiment.initial.y_m),
+        ]
+        .into_iter()
+        .enumerate()
+        .map(|(k, (name, start))| {
+            let ch = m.channel(name).unwrap();
+            (
+                k,
+                start,
+                ch.samples.iter().map(|s| s.1).fold(f64::MIN, f64::max),
+            )
+        })
+        .max_by(|a, b| (a.2 - a.1).total_cmp(&(b.2 - b.1)))
+        .unwrap();
+        assert!(
+            reach > start + 1.0,
+            "the track runs away from its start: {start} -> {reach}"
+        );
+        c.world.pool_m[axis] = start + 0.5 * (reach - start);
+        let walled = super::simulate(&c, &m, None).unwrap();
+        assert!(!walled.contacts.is_empty(), "the hull reaches the wall");
+        assert!(
+            walled
+                .contacts
+                .windows(2)
+                .all(|w| w[0][1] <= w[1][0] && w[0][0] < w[0][1]),
+            "{:?}",
+            walled.contacts
+        );
+        let floors = super::noise_floor(&c, &m, &walled).unwrap();
+        let setup =
+            crate::gap::fit::setup(&m, c.clone(), &floors, crate::gap::fit::Split::DEFAULT, &[])
+                .unwrap();
+        assert_eq!(setup.clean.contacts, walled.contacts);
+        let r = setup.residuals(&c, &setup.clean);
+        let x = m.channels.iter().position(|ch| ch.name == "x_m").unwrap();
+        let times: Vec<f64> = m.channels[x].samples.iter().map(|s| s.0).collect();
+        let values: Vec<f64> = r
+            .values
+            .iter()
+            .zip(&r.owner)
+            .filter(|(_, o)| **o == x)
+            .map(|(v, _)| *v)
+            .collect();
+        assert_eq!(values.len(), times.len());
+        let [from, to] = walled.contacts[0];
+        for (t, v) in times.iter().zip(&values) {
+            if *t >= from && *t < to + crate::gap::run::CONTACT_MEMORY_S {
+                assert_eq!(*v, 0.0, "x_m at {t} s is in contact");
+            }
+        }
+        assert!(
+            values
+                .iter()
+                .zip(&times)
+                .any(|(v, t)| *t < from && *v != 0.0),
+            "samples before the contact count"
+        );
+        let mut open = setup;
+        open.clean.contacts.clear();
+        assert!(
+            open.n_eff(None)
+                > crate::gap::fit::setup(&m, c, &floors, crate::gap::fit::Split::DEFAULT, &[])
+                    .unwrap()
+                    .n_eff(None)
+        );
     }
 
     /// The start is estimated from the data when the re-simulation is re-anchored: an

@@ -46,6 +46,10 @@ pub struct Run {
     pub percent: Vec<[f64; 4]>,
     /// Segments the physics could not step to their end, in time order.
     pub divergences: Vec<Divergence>,
+    /// Where the hull touched the pool: from the first contact in a segment to the segment's
+    /// end (s, in time order). Contact impulses start on whichever step the hull first
+    /// reaches a wall, so there the residuals jump as a parameter moves by any amount.
+    pub contacts: Vec<[f64; 2]>,
 }
 
 /// A segment of a re-simulation that diverged: held from `t_s` to the segment's end.
@@ -59,7 +63,20 @@ pub struct Divergence {
     pub what: String,
 }
 
+/// How long after a contact segment its impulses stay in the state each segment carries over
+/// to the next (velocities, rates, thruster lag), so that those samples are left out of fits
+/// too (s). Surge is the slowest: `configs/vehicles/mako.toml`'s linear surge damping of
+/// 3.3 N/(m/s) against a hull of tens of kilograms gives a time constant of several seconds.
+pub const CONTACT_MEMORY_S: f64 = 10.0;
+
 impl Run {
+    /// True when `t_s` lies where the hull touched the pool ([`Run::contacts`]).
+    pub fn in_contact(&self, t_s: f64) -> bool {
+        self.contacts
+            .iter()
+            .any(|[a, b]| *a <= t_s && t_s < *b + CONTACT_MEMORY_S)
+    }
+
     /// The state nearest `t_s` (clamped to the run).
     pub fn at(&self, t_s: f64) -> &VehicleState {
         let i = (t_s / self.dt_s).round().max(0.0) as usize;
