@@ -791,11 +791,12 @@ pub type Refit = (Vec<f64>, Vec<[f64; 2]>);
 /// The accepted effects refitted together on all the data, from their values when named.
 /// Each was fitted with only the effects named before it in the model, so an earlier one has
 /// taken part of a later one's disagreement; fitted together, the later rounds fit against
-/// what is really left. `accepted` holds each effect with its values and its round's scaling
-/// of chi-square (`noise_factor * variance_factor`); variance-type effects (EMI) are applied
-/// as they are and not refitted. Returns, per effect in order, the values and their 95 %
-/// intervals (the joint covariance at the largest round scaling, plus the between-run spread);
-/// `None` when no mean-type effect is accepted or the joint fit fails (the round values stand).
+/// what is really left. `accepted` holds each effect with its values and its round's
+/// `noise_factor`; variance-type effects (EMI) are applied as they are and not refitted.
+/// Returns, per effect in order, the values and their 95 % intervals: the joint covariance
+/// times the largest noise factor and the joint fit's own variance factor, plus the between-run
+/// spread. `None` when no mean-type effect is accepted or the joint fit fails (the round values
+/// stand). The guards are not taken again at the joint values.
 pub fn refit_jointly(
     setup: &Setup<'_>,
     accepted: &[(&'static Effect, Vec<f64>, f64)],
