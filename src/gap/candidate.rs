@@ -353,6 +353,22 @@ mod tests {
         c
     }
 
+    /// The selection over one round of `round0` (the next round has no candidates).
+    fn one_round(round0: Vec<Candidate>) -> Selection {
+        select(
+            2,
+            &mut |round, _| {
+                Ok(Some(if round == 0 {
+                    round0.clone()
+                } else {
+                    Vec::new()
+                }))
+            },
+            &mut |_| Ok(()),
+        )
+        .unwrap()
+    }
+
     /// The loop ranks each round, accepts its best candidate that passes every guard (not
     /// the best ranked), hands the earlier winners to `accept`, and stops at a round
     /// without a winner.
@@ -398,21 +414,7 @@ mod tests {
     /// winner clear of every physics effect is named.
     #[test]
     fn a_sensor_effect_is_not_named_where_a_physics_effect_explains_as_much() {
-        let run = |round0: Vec<Candidate>| {
-            select(
-                2,
-                &mut |round, _| {
-                    Ok(Some(if round == 0 {
-                        round0.clone()
-                    } else {
-                        Vec::new()
-                    }))
-                },
-                &mut |_| Ok(()),
-            )
-            .unwrap()
-        };
-        let close = run(vec![
+        let close = one_round(vec![
             candidate("depth_gain", 40.0, true),
             candidate("thrust_gain", 35.0, true),
         ]);
@@ -421,13 +423,13 @@ mod tests {
             close.ambiguous,
             Some(["depth_gain".to_string(), "thrust_gain".to_string()])
         );
-        let physics_first = run(vec![
+        let physics_first = one_round(vec![
             candidate("thrust_gain", 40.0, true),
             candidate("depth_gain", 35.0, true),
         ]);
         assert_eq!(physics_first.accepted[0].name, "thrust_gain");
         assert!(physics_first.ambiguous.is_none());
-        let clear = run(vec![
+        let clear = one_round(vec![
             candidate("depth_gain", 60.0, true),
             candidate("thrust_gain", 35.0, true),
             candidate("yaw_damping", 58.0, false),
@@ -449,23 +451,9 @@ mod tests {
     /// more, changes nothing.
     #[test]
     fn a_candidate_is_not_named_in_place_of_an_unconfirmed_better_one() {
-        let run = |round0: Vec<Candidate>| {
-            select(
-                2,
-                &mut |round, _| {
-                    Ok(Some(if round == 0 {
-                        round0.clone()
-                    } else {
-                        Vec::new()
-                    }))
-                },
-                &mut |_| Ok(()),
-            )
-            .unwrap()
-        };
         let mut lag = candidate("thruster_lag", 7500.0, true);
         lag.guards.inside_bounds = false;
-        let stand_in = run(vec![lag.clone(), candidate("thrust_gain", 1400.0, true)]);
+        let stand_in = one_round(vec![lag.clone(), candidate("thrust_gain", 1400.0, true)]);
         assert!(stand_in.accepted.is_empty(), "{:?}", stand_in.accepted);
         assert_eq!(
             stand_in.outranked_by,
@@ -476,17 +464,17 @@ mod tests {
         );
         let mut known = candidate("compass_hard_iron", 168.0, true);
         known.guards.interval_excludes_zero = false;
-        let beside = run(vec![known, candidate("thruster_lag", 115.0, true)]);
+        let beside = one_round(vec![known, candidate("thruster_lag", 115.0, true)]);
         assert_eq!(beside.accepted[0].name, "thruster_lag");
         assert!(beside.outranked_by.is_none());
         let mut overfit = lag.clone();
         overfit.guards.heldout = Some(false);
-        let other_guard = run(vec![overfit, candidate("thrust_gain", 1400.0, true)]);
+        let other_guard = one_round(vec![overfit, candidate("thrust_gain", 1400.0, true)]);
         assert_eq!(other_guard.accepted[0].name, "thrust_gain");
         assert!(other_guard.outranked_by.is_none());
         let mut small = lag;
         small.delta_bic_uncalibrated = 1405.0;
-        let close = run(vec![small, candidate("thrust_gain", 1400.0, true)]);
+        let close = one_round(vec![small, candidate("thrust_gain", 1400.0, true)]);
         assert_eq!(close.accepted[0].name, "thrust_gain");
         assert!(close.outranked_by.is_none());
     }
