@@ -331,7 +331,7 @@ fn apparent_spread(
     let mut apparent: Vec<(&'static Effect, Vec<Vec<f64>>)> = Vec::new();
     for (i, p) in runs.iter().enumerate() {
         progress(&format!("spread: run {} of {}", i + 1, runs.len()));
-        let base = applied(&p.base, chosen, x);
+        let base = effects::apply_joint(&p.base, chosen, x);
         let s = fit::setup(&p.run.m, base, &p.floors, Split::DEFAULT, &[])?;
         for r in fit::fit_candidates(&s, &[], &mut |_| {}) {
             let Some(e) = effects::by_name(&r.name) else {
@@ -374,14 +374,6 @@ fn apparent_spread(
     Ok((spread, unidentified))
 }
 
-/// The parameter scales and bounds of `chosen`, in the joint fit's parameter order.
-fn scales_and_bounds(chosen: &[&'static Effect]) -> (Vec<f64>, Vec<(f64, f64)>) {
-    chosen
-        .iter()
-        .flat_map(|e| e.scales.iter().copied().zip(e.bounds.iter().copied()))
-        .unzip()
-}
-
 /// Where the joint fit starts: the model as given, and one more start per effect with a
 /// second start ([`Fitted::JointTwoStarts`]). The thrust curve's scale (`thrust_gain`)
 /// and shape (`thrust_curve`) trade off against each other, and from the linear curve alone
@@ -402,22 +394,6 @@ fn starts(chosen: &[&'static Effect]) -> Vec<DVector<f64>> {
     out
 }
 
-fn applied(base: &Configs, chosen: &[&'static Effect], x: &DVector<f64>) -> Configs {
-    let mut c = base.clone();
-    let mut k = 0;
-    for e in chosen {
-        let values: Vec<f64> = e
-            .scales
-            .iter()
-            .enumerate()
-            .map(|(j, s)| x[k + j] * s)
-            .collect();
-        k += e.parameters.len();
-        effects::apply(e, &values, &mut c);
-    }
-    c
-}
-
 /// The joint fit of `chosen` on every prepared run: `passes` passes (channel weights from the
 /// residual at the previous pass) from each of `starts`; the start whose result leaves the
 /// smallest gap on the baseline runs is kept. Returns the point, its fit and the residual
@@ -430,7 +406,7 @@ fn joint_fit(
     passes: usize,
     progress: &mut dyn FnMut(&str),
 ) -> Result<(DVector<f64>, lsq::Fit, usize), GapError> {
-    let (scales, bounds_raw) = scales_and_bounds(chosen);
+    let (scales, bounds_raw) = effects::joint_scales_and_bounds(chosen);
     let bounds = Bounds::scaled(&bounds_raw, &scales);
     let dims = scales.len();
     // Channel weights, one per (run, channel), from the residual at the current point.
@@ -438,7 +414,7 @@ fn joint_fit(
         prepared
             .iter()
             .zip(setups)
-            .map(|(p, s)| channel_weights(p, s, &applied(&p.base, chosen, x)))
+            .map(|(p, s)| channel_weights(p, s, &effects::apply_joint(&p.base, chosen, x)))
             .collect()
     };
     // The residuals at `x` under `weights`, each channel's by `pick` of its weights.
@@ -448,7 +424,7 @@ fn joint_fit(
      -> Option<DVector<f64>> {
         let mut out = Vec::new();
         for ((p, s), w) in prepared.iter().zip(setups).zip(weights) {
-            let c = applied(&p.base, chosen, x);
+            let c = effects::apply_joint(&p.base, chosen, x);
             // A trial point under which a run diverges is a failed evaluation: the
             // bounded fit steps back from it.
             let run = resim::simulate(&c, &p.run.m, None)
@@ -501,7 +477,10 @@ fn joint_fit(
             .iter()
             .zip(setups)
             .map(|(p, s)| {
-                excess(&channel_chi2(p, s, &applied(&p.base, chosen, &x)).unwrap_or_default())
+                excess(
+                    &channel_chi2(p, s, &effects::apply_joint(&p.base, chosen, &x))
+                        .unwrap_or_default(),
+                )
             })
             .sum::<f64>();
         if best.as_ref().is_none_or(|(b, _, _)| gap < *b) {
@@ -573,7 +552,7 @@ fn unidentified_effects(
 /// True when the model with `chosen` at `x` diverges on one of the runs.
 fn diverges(prepared: &[Prepared<'_>], chosen: &[&'static Effect], x: &DVector<f64>) -> bool {
     prepared.iter().any(|p| {
-        resim::simulate(&applied(&p.base, chosen, x), &p.run.m, None)
+        resim::simulate(&effects::apply_joint(&p.base, chosen, x), &p.run.m, None)
             .map_or(true, |run| !run.divergences.is_empty())
     })
 }
@@ -751,7 +730,7 @@ fn fitted_parameters(
     x: &DVector<f64>,
     fit: &lsq::Fit,
 ) -> Calibrated {
-    let (scales, bounds_raw) = scales_and_bounds(chosen);
+    let (scales, bounds_raw) = effects::joint_scales_and_bounds(chosen);
     let dims = scales.len();
     let n = fit.residuals.len() as f64;
     let variance_factor = (fit.chi2() / (n - dims as f64).max(1.0)).max(1.0);
@@ -808,7 +787,7 @@ fn fit_noise_levels(
         for p in prepared {
             let s = fit::setup(
                 &p.run.m,
-                applied(&p.base, chosen, x),
+                effects::apply_joint(&p.base, chosen, x),
                 &p.floors,
                 Split::DEFAULT,
                 &[],
@@ -899,7 +878,7 @@ fn score_runs(
         for r in list {
             let p = prepare(model, r)?;
             let s = p.setup()?;
-            let after_c = applied(&p.base, chosen, x);
+            let after_c = effects::apply_joint(&p.base, chosen, x);
             let before = channel_chi2(&p, &s, &p.base).unwrap_or_default();
             let after = channel_chi2(&p, &s, &after_c).unwrap_or_default();
             let (gb, ga) = (excess(&before), excess(&after));

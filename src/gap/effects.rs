@@ -194,6 +194,46 @@ pub fn apply(effect: &Effect, params: &[f64], c: &mut Configs) {
     (effect.extend)(params, c);
 }
 
+/// The parameter scales and bounds of `chosen` jointly fitted, in the joint parameter order
+/// (each effect's parameters in turn).
+pub fn joint_scales_and_bounds(chosen: &[&'static Effect]) -> (Vec<f64>, Vec<(f64, f64)>) {
+    chosen
+        .iter()
+        .flat_map(|e| e.scales.iter().copied().zip(e.bounds.iter().copied()))
+        .unzip()
+}
+
+/// Each of `chosen`'s values at the joint point `x` (in units of the scales).
+pub fn joint_values(chosen: &[&'static Effect], x: &nalgebra::DVector<f64>) -> Vec<Vec<f64>> {
+    let mut k = 0;
+    chosen
+        .iter()
+        .map(|e| {
+            let values = e
+                .scales
+                .iter()
+                .enumerate()
+                .map(|(j, s)| x[k + j] * s)
+                .collect();
+            k += e.parameters.len();
+            values
+        })
+        .collect()
+}
+
+/// `base` with `chosen` applied at the joint point `x` (in units of the scales).
+pub fn apply_joint(
+    base: &Configs,
+    chosen: &[&'static Effect],
+    x: &nalgebra::DVector<f64>,
+) -> Configs {
+    let mut c = base.clone();
+    for (e, values) in chosen.iter().zip(joint_values(chosen, x)) {
+        apply(e, &values, &mut c);
+    }
+    c
+}
+
 /// True when `values` lie strictly inside `effect`'s bounds (an end on a bound is not a fit).
 pub fn inside_bounds(effect: &Effect, values: &[f64]) -> bool {
     effect.bounds.iter().zip(values).all(|((lo, hi), v)| {

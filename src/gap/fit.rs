@@ -807,39 +807,15 @@ pub fn refit_jointly(
     if free.is_empty() {
         return None;
     }
-    let scales: Vec<f64> = free
-        .iter()
-        .flat_map(|&i| accepted[i].0.scales.iter().copied())
-        .collect();
-    let bounds: Vec<(f64, f64)> = free
-        .iter()
-        .flat_map(|&i| accepted[i].0.bounds.iter().copied())
-        .collect();
-    let values_at = |x: &DVector<f64>| -> Vec<Vec<f64>> {
-        let mut k = 0;
-        accepted
-            .iter()
-            .enumerate()
-            .map(|(i, (effect, values, _))| {
-                if !free.contains(&i) {
-                    return values.clone();
-                }
-                let v = effect
-                    .scales
-                    .iter()
-                    .enumerate()
-                    .map(|(j, s)| x[k + j] * s)
-                    .collect();
-                k += effect.parameters.len();
-                v
-            })
-            .collect()
-    };
+    let chosen: Vec<&'static Effect> = free.iter().map(|&i| accepted[i].0).collect();
+    let (scales, bounds) = effects::joint_scales_and_bounds(&chosen);
+    // The variance-type effects held as they are; the others at the joint point.
+    let mut held = setup.base.clone();
+    for (effect, values, _) in accepted.iter().filter(|a| a.0.kind != Kind::Mean) {
+        effects::apply(effect, values, &mut held);
+    }
     let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
-        let mut c = setup.base.clone();
-        for ((effect, _, _), v) in accepted.iter().zip(values_at(x)) {
-            effects::apply(effect, &v, &mut c);
-        }
+        let c = effects::apply_joint(&held, &chosen, x);
         let run = resim::simulate(&c, setup.m, None)
             .ok()
             .filter(|r| r.divergences.is_empty())?;
@@ -872,19 +848,18 @@ pub fn refit_jointly(
         total
     });
     let ci = lsq::intervals(&fit.x, cov.as_ref(), &scales, 1.0);
+    let mut fitted = effects::joint_values(&chosen, &fit.x).into_iter();
     let mut k = 0;
     Some(
         accepted
             .iter()
-            .zip(values_at(&fit.x))
-            .enumerate()
-            .map(|(i, ((effect, _, _), v))| {
-                if !free.contains(&i) {
-                    return (v, Vec::new());
+            .map(|(effect, values, _)| {
+                if effect.kind != Kind::Mean {
+                    return (values.clone(), Vec::new());
                 }
                 let n = effect.parameters.len();
                 k += n;
-                (v, ci[k - n..k].to_vec())
+                (fitted.next().unwrap_or_default(), ci[k - n..k].to_vec())
             })
             .collect(),
     )
