@@ -147,15 +147,17 @@ pub fn winner(round: &[Candidate]) -> Option<&Candidate> {
 pub type FitRound<'a> =
     dyn FnMut(usize, &[Candidate]) -> Result<Option<Vec<Candidate>>, GapError> + 'a;
 /// Takes a round's winner, the last of the accepted effects, into the model; it may replace
-/// the accepted effects' values (the winner's too) by their joint refit.
-pub type Accept<'a> = dyn FnMut(&mut [Candidate]) -> Result<(), GapError> + 'a;
+/// the accepted effects' values (the winner's too) by their joint refit. `Some(why)` refuses
+/// the winner after all (the accepted effects' values left as they were): the selection
+/// stops there.
+pub type Accept<'a> = dyn FnMut(&mut [Candidate]) -> Result<Option<String>, GapError> + 'a;
 
 /// The greedy selection, whatever the objective: up to `max` rounds; in each, `fit_round`
 /// fits every candidate not yet accepted against the model with the accepted effects
 /// (`None`: nothing can be fitted any more), the round is ranked, and its winner is accepted
 /// and handed to `accept` (which may replace the accepted effects' values by their joint
-/// refit). Stops at the first round without a winner. Returns every round and the
-/// accepted effects in order.
+/// refit, or refuse it). Stops at the first round without a winner or with a refused one.
+/// Returns every round and the accepted effects in order.
 pub fn select(
     max: usize,
     fit_round: &mut FitRound<'_>,
@@ -165,6 +167,7 @@ pub fn select(
     let mut accepted: Vec<Candidate> = Vec::new();
     let mut ambiguous = None;
     let mut outranked_by = None;
+    let mut refused = None;
     for round in 0..max {
         let Some(mut results) = fit_round(round, &accepted)? else {
             break;
@@ -197,14 +200,20 @@ pub fn select(
             ambiguous = lookalike;
             break;
         }
+        let name = win.name.clone();
         accepted.push(win);
-        accept(&mut accepted)?;
+        if let Some(why) = accept(&mut accepted)? {
+            accepted.pop();
+            refused = Some(Refused { name, why });
+            break;
+        }
     }
     Ok(Selection {
         rounds,
         accepted,
         ambiguous,
         outranked_by,
+        refused,
     })
 }
 
@@ -227,6 +236,17 @@ pub struct Selection {
     /// fit go. Selection stops there: the winner would be a stand-in taking the share of the
     /// disagreement it can.
     pub outranked_by: Option<Outranked>,
+    /// A round's winner that passed every guard but that the model could not take in (see
+    /// [`Accept`]): selection stops there, naming it not.
+    pub refused: Option<Refused>,
+}
+
+/// A winner refused when it was taken into the model ([`Selection::refused`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Refused {
+    pub name: String,
+    /// Why, in words with the figures.
+    pub why: String,
 }
 
 /// The candidate a round's winner was not named for ([`Selection::outranked_by`]).
@@ -364,7 +384,7 @@ mod tests {
                     Vec::new()
                 }))
             },
-            &mut |_| Ok(()),
+            &mut |_| Ok(None),
         )
         .unwrap()
     }
@@ -393,7 +413,7 @@ mod tests {
             &mut |accepted| {
                 let (win, earlier) = accepted.split_last().unwrap();
                 assert!(earlier.is_empty() || win.name != earlier[0].name);
-                Ok(())
+                Ok(None)
             },
         )
         .unwrap();
@@ -405,6 +425,39 @@ mod tests {
         );
         let names: Vec<&str> = accepted.iter().map(|c| c.name.as_str()).collect();
         assert_eq!(names, vec!["compass_offset"]);
+    }
+
+    /// A winner the model refuses to take in (`accept` gives a reason) is not named: the
+    /// effects accepted before it stay, the reason is kept, and no further round is fitted.
+    #[test]
+    fn a_refused_winner_is_not_named_and_ends_the_selection() {
+        let mut rounds_fitted = 0;
+        let selection = select(
+            3,
+            &mut |round, _| {
+                rounds_fitted += 1;
+                Ok(Some(match round {
+                    0 => vec![candidate("thruster_lag", 900.0, true)],
+                    1 => vec![candidate("added_mass", 300.0, true)],
+                    _ => vec![candidate("thrust_gain", 200.0, true)],
+                }))
+            },
+            &mut |accepted| {
+                Ok((accepted.len() == 2).then(|| "it does not shrink the gap".to_string()))
+            },
+        )
+        .unwrap();
+        let names: Vec<&str> = selection.accepted.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, vec!["thruster_lag"]);
+        assert_eq!(
+            selection.refused,
+            Some(Refused {
+                name: "added_mass".into(),
+                why: "it does not shrink the gap".into()
+            })
+        );
+        assert_eq!(rounds_fitted, 2, "no round after the refusal");
+        assert_eq!(selection.rounds.len(), 2);
     }
 
     /// Regression (a sensor effect named for a disagreement the dynamics explain as well): a

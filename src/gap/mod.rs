@@ -136,6 +136,9 @@ pub struct Analysis {
     /// The candidate the last round's winner was not named for
     /// ([`candidate::Selection::outranked_by`]).
     pub outranked_by: Option<candidate::Outranked>,
+    /// The last round's winner, refused when taken into the model
+    /// ([`candidate::Selection::refused`]).
+    pub refused: Option<candidate::Refused>,
     pub accepted: Vec<Candidate>,
     pub verdict: Verdict,
     pub fitted: GapModel,
@@ -251,15 +254,18 @@ fn track_distance(m: &Measurement, run: &resim::Run) -> Option<f64> {
 /// chi-square per sample over its known level (`known`: the calibrated model's on baseline
 /// runs, or 1, the noise floor alone). Each channel counts once, whatever its sample rate.
 pub(crate) fn excess(per_channel: impl Iterator<Item = (f64, f64)>) -> f64 {
+    channel_mean(per_channel).map_or(0.0, |q| (q - 1.0).max(0.0).sqrt())
+}
+
+/// The gap measure's `q` before its floor at 1: the mean over channels of chi2 per sample over
+/// the known level (`None` without channels).
+fn channel_mean(per_channel: impl Iterator<Item = (f64, f64)>) -> Option<f64> {
     let (mut sum, mut n) = (0.0, 0usize);
     for (chi2, known) in per_channel {
         sum += chi2 / known.max(1.0);
         n += 1;
     }
-    if n == 0 {
-        return 0.0;
-    }
-    (sum / n as f64 - 1.0).max(0.0).sqrt()
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// The whole run's gap from channel statistics, against each channel's known level (`raw`:
@@ -280,21 +286,38 @@ fn heldout_excess(
     run: &resim::Run,
     raw: bool,
 ) -> f64 {
+    excess(part_channels(model, setup, c, run, raw, Some(false)).into_iter())
+}
+
+/// Channel by channel, the chi-square per independent sample of `setup`'s residuals of
+/// `run` (the samples its fits see: wall contacts left out) on `part` (the training blocks,
+/// the held-out blocks, or all of them), with the model's known level (`raw`: 1).
+fn part_channels(
+    model: &GapModel,
+    setup: &fit::Setup<'_>,
+    c: &Configs,
+    run: &resim::Run,
+    raw: bool,
+    part: Option<bool>,
+) -> Vec<(f64, f64)> {
     let r = setup.residuals(c, run);
-    let per_channel = setup.modelled().into_iter().filter_map(|i| {
-        let tau = setup.floors[i].as_ref()?.tau;
-        let (sum, n) = r
-            .values
-            .iter()
-            .zip(&r.owner)
-            .zip(&r.training)
-            .filter(|((_, o), t)| **o == i && !**t)
-            .fold((0.0, 0usize), |(s, n), ((v, _), _)| (s + v * v, n + 1));
-        let name = &setup.m.channels[i].name;
-        let known = if raw { 1.0 } else { model.known_chi2(name) };
-        (n > 0).then(|| (sum / (n as f64 / tau), known))
-    });
-    excess(per_channel)
+    setup
+        .modelled()
+        .into_iter()
+        .filter_map(|i| {
+            let tau = setup.floors[i].as_ref()?.tau;
+            let (sum, n) = r
+                .values
+                .iter()
+                .zip(&r.owner)
+                .zip(&r.training)
+                .filter(|((_, o), t)| **o == i && part.is_none_or(|p| **t == p))
+                .fold((0.0, 0usize), |(s, n), ((v, _), _)| (s + v * v, n + 1));
+            let name = &setup.m.channels[i].name;
+            let known = if raw { 1.0 } else { model.known_chi2(name) };
+            (n > 0).then(|| (sum / (n as f64 / tau), known))
+        })
+        .collect()
 }
 
 /// How much smaller `after` is than `before`, in percent (0 when there was no gap).
@@ -405,14 +428,20 @@ pub fn analyse_with(
     let first = fit::setup(m, start.clone(), &floors, options.split, &model.spread)?;
     let heldout_before = heldout_excess(model, &first, &start, &clean0, false);
     let heldout_raw_before = heldout_excess(model, &first, &start, &clean0, true);
-    // The model with the accepted effects: what each round fits against.
+    // The model with the accepted effects: what each round fits against, and its gap
+    // measure's channel mean on the samples the fits see.
     let configs = std::cell::RefCell::new(start.clone());
     let fitted = std::cell::RefCell::new(model.clone());
+    let mean_of = |c: &Configs, run: &resim::Run| {
+        channel_mean(part_channels(model, &first, c, run, false, None).into_iter()).unwrap_or(0.0)
+    };
+    let current_mean = std::cell::Cell::new(mean_of(&start, &clean0));
     let candidate::Selection {
         rounds,
         accepted,
         ambiguous,
         outranked_by,
+        refused,
     } = candidate::select(
         fit::MAX_EFFECTS,
         &mut |round, accepted| {
@@ -438,34 +467,66 @@ pub fn analyse_with(
                 named.push((effect, c.values(), c.noise_factor));
             }
             // With two or more named, each is refitted alongside the others.
+            let mut joint: Vec<(Vec<f64>, Vec<[f64; 2]>)> = accepted
+                .iter()
+                .map(|a| (a.values(), a.ci95.iter().map(|(_, c)| *c).collect()))
+                .collect();
             if named.len() > 1 {
                 let setup = fit::setup(m, start.clone(), &floors, options.split, &model.spread)?;
-                if let Some(joint) = fit::refit_jointly(&setup, &named) {
-                    for (c, (values, ci)) in accepted.iter_mut().zip(joint) {
-                        for ((_, v), new) in c.parameters.iter_mut().zip(&values) {
-                            *v = *new;
-                        }
-                        for ((_, old), new) in c.ci95.iter_mut().zip(ci) {
-                            *old = new;
+                if let Some(refit) = fit::refit_jointly(&setup, &named) {
+                    for ((values, ci), (new_values, new_ci)) in joint.iter_mut().zip(refit) {
+                        *values = new_values;
+                        if !new_ci.is_empty() {
+                            *ci = new_ci;
                         }
                     }
                 }
             }
             let mut c = start.clone();
+            for ((effect, _, _), (values, _)) in named.iter().zip(&joint) {
+                effects::apply(effect, values, &mut c);
+            }
+            // A mean effect must bring the model closer to the data by the measure the gap is
+            // reported in, every channel counted once: a fit that buys chi-square in a channel
+            // of many samples with a worse fit of others trades disagreement, as a stand-in for
+            // a term the library lacks does.
+            let run = resim::simulate(&c, m, None)?;
+            let mean = mean_of(&c, &run);
+            tracing::debug!(
+                effect = named.last().map(|n| n.0.name),
+                mean,
+                without = current_mean.get(),
+                "the gap's channel mean with the newest effect"
+            );
+            if let Some((effect, _, _)) = named.last()
+                && effect.kind == effects::Kind::Mean
+                && mean >= current_mean.get()
+            {
+                return Ok(Some(format!(
+                    "with it, the channels' mean chi-square over their known levels is \
+                     {mean:.3}, against {:.3} without it: it does not shrink the gap",
+                    current_mean.get()
+                )));
+            }
+            current_mean.set(mean);
             let mut model_with = model.clone();
-            for (a, (effect, _, _)) in accepted.iter().zip(&named) {
-                let values = a.values();
-                effects::apply(effect, &values, &mut c);
+            for ((a, (effect, _, _)), (values, ci)) in accepted.iter_mut().zip(&named).zip(joint) {
+                for ((_, v), new) in a.parameters.iter_mut().zip(&values) {
+                    *v = *new;
+                }
+                for ((_, old), new) in a.ci95.iter_mut().zip(&ci) {
+                    *old = *new;
+                }
                 model_with.effects.push(EnabledEffect {
                     effect,
                     values,
-                    ci95: a.ci95.iter().map(|(_, c)| *c).collect(),
+                    ci95: ci,
                     delta_bic: Some(a.delta_bic),
                 });
             }
             *configs.borrow_mut() = c;
             *fitted.borrow_mut() = model_with;
-            Ok(())
+            Ok(None)
         },
     )?;
     let (configs, fitted) = (configs.into_inner(), fitted.into_inner());
@@ -531,6 +592,7 @@ pub fn analyse_with(
         rounds,
         ambiguous,
         outranked_by,
+        refused,
         accepted,
         fitted,
         unmodelled,

@@ -84,6 +84,7 @@ pub fn json(a: &Analysis) -> Value {
         "after": a.clean_after.divergences,
     });
     out["outranked_by"] = json!(a.outranked_by);
+    out["refused"] = json!(a.refused);
     out
 }
 
@@ -168,6 +169,13 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
              passing candidate would only stand in for it",
             o.name,
             fit::BIC_MARGIN
+        );
+    }
+    if let Some(r) = &a.refused {
+        let _ = writeln!(
+            s,
+            "- **{}** passed every guard but is not named: {}. Nothing more is named",
+            r.name, r.why
         );
     }
     for u in &a.unexplained {

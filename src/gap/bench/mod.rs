@@ -214,6 +214,14 @@ impl CaseResult {
         }
     }
 
+    /// A hidden effect's case that names, first or later, any effect that was not hidden.
+    pub fn any_wrong(&self) -> bool {
+        self.effect.is_some()
+            && self.named_all.iter().any(|n| {
+                Some(n) != self.expected.as_ref() && Some(n) != self.expected_second.as_ref()
+            })
+    }
+
     /// A case with two hidden effects.
     pub fn is_pair(&self) -> bool {
         self.expected_second.is_some()

@@ -42,14 +42,18 @@ impl<'a> Split<'a> {
     }
 
     /// The naming columns every source shows: correct name, at >= 3 sigma, wrong name,
-    /// false alarm.
+    /// any wrong name (first or later), false alarm.
     fn naming(&self) -> String {
         let (hidden, big, nulls) = (&self.hidden, &self.big, &self.nulls);
         format!(
-            "{} | {} | {} | {}",
+            "{} | {} | {} | {} | {}",
             pct(hidden.iter().filter(|c| c.correct()).count(), hidden.len()),
             pct(big.iter().filter(|c| c.correct()).count(), big.len()),
             pct(hidden.iter().filter(|c| c.wrong()).count(), hidden.len()),
+            pct(
+                hidden.iter().filter(|c| c.any_wrong()).count(),
+                hidden.len()
+            ),
             pct(
                 nulls.iter().filter(|c| c.named.is_some()).count(),
                 nulls.len()
@@ -116,8 +120,8 @@ fn labels(results: &[CaseResult]) -> Vec<&str> {
 /// overall.
 pub fn simulator_table(results: &[CaseResult]) -> String {
     let mut s = String::from(
-        "| effect | cases | correct name | correct name >= 3 sigma | wrong name | false alarm | median param error | CI95 covers truth | held-out reduction (data) | held-out reduction (vs truth) | s/case |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| effect | cases | correct name | correct name >= 3 sigma | wrong name | any wrong name | false alarm | median param error | CI95 covers truth | held-out reduction (data) | held-out reduction (vs truth) | s/case |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for n in labels(results) {
         let cases: Vec<&CaseResult> = results.iter().filter(|r| r.label == n).collect();
@@ -182,7 +186,8 @@ fn independent_row(label: &str, cases: &[&CaseResult]) -> String {
 /// to, then per effect (the independent model's names), nulls, overall and the two-effect
 /// cases' row ([`PAIRS_ROW`]). "correct name"
 /// for an effect the library has no counterpart for is no name at all; "wrong name" counts
-/// hidden-effect cases whose first name is another effect (worse than none); "size" is the
+/// hidden-effect cases whose first name is another effect (worse than none), "any wrong
+/// name" those naming, first or later, any effect that was not hidden; "size" is the
 /// post-hoc size in sigma of the right candidate in round 1; the held-out reduction is
 /// against the calibrated model's known disagreement, then against the noise floor alone;
 /// "fit grew held-out gap" counts,
@@ -196,8 +201,8 @@ pub fn independent_table(results: &[CaseResult], calibration: Option<&Calibratio
         ));
     }
     s.push_str(
-        "| effect | cases | correct name | correct name >= 3 sigma | wrong name | false alarm | median held-out reduction | same, noise floor only | fit grew held-out gap | median size (sigma) | s/case |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| effect | cases | correct name | correct name >= 3 sigma | wrong name | any wrong name | false alarm | median held-out reduction | same, noise floor only | fit grew held-out gap | median size (sigma) | s/case |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let (pairs, single): (Vec<&CaseResult>, Vec<&CaseResult>) =
         results.iter().partition(|r| r.is_pair());
@@ -436,5 +441,37 @@ mod tests {
         );
         assert!(row.contains("| 25 % (1/4) |"), "one wrong name: {row}");
         assert_eq!(t.matches(PAIRS_ROW).count(), 1, "{t}");
+    }
+
+    /// "wrong name" reads the first name of a one-effect case; "any wrong name" every name:
+    /// a right first name followed by another effect is a wrong name there, as it sends the
+    /// user after a cause that is not in the data.
+    #[test]
+    fn a_later_wrong_name_is_counted_apart_from_the_first() {
+        let named = |names: &[&str]| {
+            let mut c = case(Some("thruster_lag"), None);
+            c.named_all = names.iter().map(|n| n.to_string()).collect();
+            c.named = c.named_all.first().cloned();
+            c
+        };
+        let right_then_other = named(&["thruster_lag", "added_mass"]);
+        assert!(right_then_other.correct() && !right_then_other.wrong());
+        assert!(right_then_other.any_wrong());
+        let only_right = named(&["thruster_lag"]);
+        assert!(!only_right.any_wrong());
+        let other_first = named(&["added_mass"]);
+        assert!(other_first.wrong() && other_first.any_wrong());
+        let null = case(None, None);
+        let t = independent_table(&[right_then_other, only_right, other_first, null], None);
+        let row = t
+            .lines()
+            .find(|l| l.starts_with("| thruster_lag |"))
+            .unwrap();
+        assert!(
+            row.starts_with(
+                "| thruster_lag | 3 | 67 % (2/3) | 67 % (2/3) | 33 % (1/3) | 67 % (2/3) | - |"
+            ),
+            "{row}"
+        );
     }
 }

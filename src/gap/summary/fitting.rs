@@ -382,7 +382,7 @@ pub fn analyse(
         },
         &mut |accepted| {
             let Some(win) = accepted.last() else {
-                return Ok(());
+                return Ok(None);
             };
             let effect = effects::by_name(&win.name).ok_or_else(|| {
                 GapError::Data(format!("`{}` is not in the effect library", win.name))
@@ -395,7 +395,7 @@ pub fn analyse(
                 effect,
                 values: win.values(),
             });
-            Ok(())
+            Ok(None)
         },
     )?;
     let priors = priors.into_inner();
