@@ -137,9 +137,10 @@ fn explain(a: &Analysis) -> String {
         })
         .collect();
     format!(
-        "named {:?}, verdict {:?}; round 1: {}",
+        "named {:?}, verdict {:?}, refused {:?}; round 1: {}",
         names(a),
         a.verdict,
+        a.refused,
         round1.join("; ")
     )
 }

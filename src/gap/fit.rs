@@ -102,7 +102,6 @@ impl Residuals {
 }
 
 /// The re-simulation context one greedy round fits against.
-#[derive(Clone)]
 pub struct Setup<'a> {
     pub m: &'a Measurement,
     pub base: Configs,

@@ -370,35 +370,6 @@ fn shares(
         .collect())
 }
 
-/// The share of the disagreement left by the effects named before it that an effect named
-/// second or later must explain ([`analyse_with`]): most of it.
-pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
-
-/// Why a mean effect is not taken into the model, if it is not: `without` and `with` are the
-/// gap measure's channel mean (1 at the known level) of the model without and with it,
-/// `later` whether effects were named before it. It must lower the mean; named later, it
-/// must also explain more than [`LATER_NAME_MIN_SHARE`] of the excess over the known level
-/// the earlier names left (none left: lowering the mean is enough).
-fn refusal(later: bool, without: f64, with: f64) -> Option<String> {
-    let explained = (without - with) / (without - 1.0);
-    if with >= without {
-        Some(format!(
-            "with it, the channels' mean chi-square over their known levels is {with:.3}, \
-             against {without:.3} without it: it does not shrink the gap"
-        ))
-    } else if later && without > 1.0 && explained <= LATER_NAME_MIN_SHARE {
-        Some(format!(
-            "it explains {:.0} % of the disagreement the effects named before it left (the \
-             channels' mean chi-square over their known levels {without:.3} -> {with:.3}, 1 at \
-             the known level), not most of it: read it as what the model still lacks where \
-             those effects took it",
-            100.0 * explained
-        ))
-    } else {
-        None
-    }
-}
-
 /// Options of one analysis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Options {
@@ -461,16 +432,8 @@ pub fn analyse_with(
     // measure's channel mean on the samples the fits see.
     let configs = std::cell::RefCell::new(start.clone());
     let fitted = std::cell::RefCell::new(model.clone());
-    // The floors the channel mean is judged against: a named noise source (depth EMI)
-    // raises them, so that what it explains is not counted as disagreement left.
-    let mean_floors = std::cell::RefCell::new(floors.clone());
     let mean_of = |c: &Configs, run: &resim::Run| {
-        let floors = mean_floors.borrow();
-        let setup = fit::Setup {
-            floors: &floors,
-            ..first.clone()
-        };
-        channel_mean(part_channels(model, &setup, c, run, false, None).into_iter()).unwrap_or(0.0)
+        channel_mean(part_channels(model, &first, c, run, false, None).into_iter()).unwrap_or(0.0)
     };
     let current_mean = std::cell::Cell::new(mean_of(&start, &clean0));
     let candidate::Selection {
@@ -526,27 +489,24 @@ pub fn analyse_with(
             // A mean effect must bring the model closer to the data by the measure the gap is
             // reported in, every channel counted once: a fit that buys chi-square in a channel
             // of many samples with a worse fit of others trades disagreement, as a stand-in for
-            // a term the library lacks does. From the second name on it must also explain
-            // most of the disagreement the earlier names left: after a large effect, what the
-            // library's form of it lacks shows as a disagreement of its own that another
-            // effect can follow in part, held-out blocks included.
+            // a term the library lacks does.
             let run = resim::simulate(&c, m, None)?;
-            let newest = named.last().map(|n| n.0);
-            if newest.is_some_and(|e| e.kind != effects::Kind::Mean) {
-                *mean_floors.borrow_mut() = resim::noise_floor(&c, m, &run)?;
-            }
-            let (mean, without) = (mean_of(&c, &run), current_mean.get());
+            let mean = mean_of(&c, &run);
             tracing::debug!(
-                effect = newest.map(|e| e.name),
+                effect = named.last().map(|n| n.0.name),
                 mean,
-                without,
+                without = current_mean.get(),
                 "the gap's channel mean with the newest effect"
             );
-            if let Some(effect) = newest
+            if let Some((effect, _, _)) = named.last()
                 && effect.kind == effects::Kind::Mean
-                && let Some(why) = refusal(accepted.len() > 1, without, mean)
+                && mean >= current_mean.get()
             {
-                return Ok(Some(why));
+                return Ok(Some(format!(
+                    "with it, the channels' mean chi-square over their known levels is \
+                     {mean:.3}, against {:.3} without it: it does not shrink the gap",
+                    current_mean.get()
+                )));
             }
             current_mean.set(mean);
             let mut model_with = model.clone();
@@ -647,31 +607,6 @@ pub fn analyse_with(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A named effect must lower the gap measure's channel mean; named after others, it must
-    /// explain most of the excess they left: a thrust gain taking 2.865 -> 2.034 after a
-    /// thruster lag (45 %) is refused, a compass offset taking 1.265 -> 0.903 after yaw
-    /// damping is not, and with no excess left lowering the mean is enough.
-    #[test]
-    fn a_later_name_must_explain_most_of_what_the_earlier_left() {
-        assert!(refusal(false, 2.0, 2.0).is_some(), "no shrink");
-        assert!(
-            refusal(false, 2.0, 1.9).is_none(),
-            "a first name needs only shrink it"
-        );
-        let partial = refusal(true, 2.865, 2.034).expect("45 % is not most");
-        assert!(partial.contains("45 %"), "{partial}");
-        assert!(refusal(true, 1.265, 0.903).is_none());
-        assert!(
-            refusal(true, 2.0, 1.5).is_some(),
-            "exactly half is not most"
-        );
-        assert!(
-            refusal(true, 0.938, 0.760).is_none(),
-            "nothing left beyond the known level"
-        );
-        assert!(refusal(true, 0.938, 0.938).is_some());
-    }
 
     /// The gap measure is the mean over channels of chi2 over the known level, less 1: a run
     /// as far off as the baseline runs has no gap, each channel counts once, and a known
