@@ -41,8 +41,8 @@ enum Tolerance {
 
 /// Runs `case`, whose truth hides `effect` with `truth` (the values in
 /// pty-tests/fixtures/gap/truth/CASE.toml), and checks: `effect` is named first, its parameters
-/// meet `tolerance` and the gap shrinks by at least 80 %.
-fn check(case: &str, effect: &str, truth: &[f64], tolerance: Tolerance) {
+/// meet `tolerance` and the gap shrinks by at least 80 %. Returns the analysis.
+fn check(case: &str, effect: &str, truth: &[f64], tolerance: Tolerance) -> gap::Analysis {
     let a = analyse(case);
     assert_eq!(a.verdict, Verdict::Effect, "{case}: nothing named");
     let first = &a.accepted[0];
@@ -84,6 +84,7 @@ fn check(case: &str, effect: &str, truth: &[f64], tolerance: Tolerance) {
         "{case}: {}",
         a.gap_reduction_pct
     );
+    a
 }
 
 /// A steady current (0.03 m/s north, -0.02 m/s east) is named, fitted within 10 % and removes
@@ -234,14 +235,32 @@ fn hidden_sensor_latency_is_named_and_fitted() {
     );
 }
 
+/// Once the EMI is named, the next round is judged against the noise floor with it: the
+/// motor noise is no disagreement left for another effect to fit, and nothing else is named.
 #[test]
 fn hidden_depth_pwm_emi_is_named_and_fitted() {
-    check(
+    let a = check(
         "depth-pwm-emi",
         "depth_pwm_emi",
         &[1.0],
         Tolerance::Relative(0.10),
     );
+    let chi2 = |round: usize| {
+        a.rounds[round]
+            .iter()
+            .find(|c| c.name == "compass_offset")
+            .map(|c| c.chi2_before)
+            .expect("the compass offset is fitted in every round")
+    };
+    assert!(a.rounds.len() > 1, "a second round is fitted");
+    assert!(
+        chi2(1) < 0.5 * chi2(0),
+        "the disagreement the second round starts from: {} (the first round's {})",
+        chi2(1),
+        chi2(0)
+    );
+    let named: Vec<&str> = a.accepted.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(named, ["depth_pwm_emi"]);
 }
 
 #[test]

@@ -398,6 +398,11 @@ pub fn analyse(
     analyse_with(model, m, exp_dir, Options::default(), progress)
 }
 
+/// An effect named after others that explains less than this share of the excess of the
+/// gap measure's channel mean over 1 the earlier names left is tested for constancy
+/// ([`fit::constancy`]): "most" of what is left.
+pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
+
 /// As [`analyse`], with explicit options.
 pub fn analyse_with(
     model: &GapModel,
@@ -432,8 +437,20 @@ pub fn analyse_with(
     // measure's channel mean on the samples the fits see.
     let configs = std::cell::RefCell::new(start.clone());
     let fitted = std::cell::RefCell::new(model.clone());
+    // The noise floor every round is judged against: the model's, and once a noise source
+    // (depth EMI) is named, the model's with it. Against the old floor, the named noise would
+    // stay in the residuals as disagreement for the next round's candidates to fit.
+    let current_floors = std::cell::RefCell::new(floors.clone());
     let mean_of = |c: &Configs, run: &resim::Run| {
-        channel_mean(part_channels(model, &first, c, run, false, None).into_iter()).unwrap_or(0.0)
+        let floors = current_floors.borrow();
+        let judged = fit::Setup {
+            floors: &floors,
+            base: first.base.clone(),
+            clean: first.clean.clone(),
+            spread: first.spread.clone(),
+            ..first
+        };
+        channel_mean(part_channels(model, &judged, c, run, false, None).into_iter()).unwrap_or(0.0)
     };
     let current_mean = std::cell::Cell::new(mean_of(&start, &clean0));
     let candidate::Selection {
@@ -445,6 +462,7 @@ pub fn analyse_with(
     } = candidate::select(
         fit::MAX_EFFECTS,
         &mut |round, accepted| {
+            let floors = current_floors.borrow();
             let setup = fit::setup(
                 m,
                 configs.borrow().clone(),
@@ -471,7 +489,21 @@ pub fn analyse_with(
                 .iter()
                 .map(|a| (a.values(), a.ci95.iter().map(|(_, c)| *c).collect()))
                 .collect();
+            // A newly named noise source moves the floor the fits are judged against.
+            if named
+                .last()
+                .is_some_and(|n| n.0.kind == effects::Kind::Variance)
+            {
+                let mut noisy = start.clone();
+                for (effect, values, _) in named.iter().filter(|n| n.0.kind != effects::Kind::Mean)
+                {
+                    effects::apply(effect, values, &mut noisy);
+                }
+                let clean = resim::simulate(&noisy, m, None)?;
+                *current_floors.borrow_mut() = resim::noise_floor(&noisy, m, &clean)?;
+            }
             if named.len() > 1 {
+                let floors = current_floors.borrow();
                 let setup = fit::setup(m, start.clone(), &floors, options.split, &model.spread)?;
                 if let Some(refit) = fit::refit_jointly(&setup, &named) {
                     for ((values, ci), (new_values, new_ci)) in joint.iter_mut().zip(refit) {
@@ -508,6 +540,70 @@ pub fn analyse_with(
                     current_mean.get()
                 )));
             }
+            // An effect named after others is refused as a stand-in when it explains only a
+            // small part of what the earlier names left and its value follows them: where they
+            // act strongly they drive the model where the calibration did not take it, and
+            // what their form lacks shows as a disagreement another effect can take in part.
+            // Either sign alone is no proof: on a vehicle of another structure a right effect's
+            // value depends on the regime too, and a right effect may be a small part of a
+            // disagreement that is mostly structure.
+            let without = current_mean.get();
+            let share = if without > 1.0 {
+                (without - mean) / (without - 1.0)
+            } else {
+                0.0
+            };
+            if let Some((effect, values, noise_factor)) = named.last()
+                && named.len() > 1
+                && effect.kind == effects::Kind::Mean
+                && share < LATER_NAME_MIN_SHARE
+            {
+                let floors = current_floors.borrow();
+                let setup = fit::setup(
+                    m,
+                    configs.borrow().clone(),
+                    &floors,
+                    options.split,
+                    &model.spread,
+                )?;
+                let strong = fit::strong_blocks(
+                    &first.residuals(&start, &clean0),
+                    &setup.residuals(&setup.base, &setup.clean),
+                    options.split.block_s,
+                );
+                let test = fit::constancy(&setup, effect, values, *noise_factor, &strong);
+                tracing::debug!(
+                    effect = effect.name,
+                    share,
+                    ?test,
+                    "a later name's constancy"
+                );
+                if let Some(t) = test
+                    && !t.holds()
+                {
+                    let show = |v: &[f64]| {
+                        v.iter()
+                            .map(|x| format!("{x:.4}"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    };
+                    return Ok(Some(format!(
+                        "it explains {:.0} % of the disagreement the effects named before it \
+                         left (the channels' mean chi-square over their known levels {without:.3} \
+                         -> {mean:.3}), and its value follows them: [{}] in the {} s blocks where \
+                         they change the fit most, [{}] where they change it least (Wald \
+                         statistic {:.1} > {:.1}, its {:.0} % point). Read it as what the earlier \
+                         names' form lacks",
+                        100.0 * share,
+                        show(&t.strong),
+                        options.split.block_s,
+                        show(&t.weak),
+                        t.statistic,
+                        t.critical,
+                        100.0 * fit::CONSTANCY_LEVEL
+                    )));
+                }
+            }
             current_mean.set(mean);
             let mut model_with = model.clone();
             for ((a, (effect, _, _)), (values, ci)) in accepted.iter_mut().zip(&named).zip(joint) {
@@ -538,8 +634,13 @@ pub fn analyse_with(
         resim::noise_floor(&configs, m, &clean1)?
     };
     let after = stats_for(model, m, &configs, &clean1, &floors_after);
-    let heldout_after = heldout_excess(model, &first, &configs, &clean1, false);
-    let heldout_raw_after = heldout_excess(model, &first, &configs, &clean1, true);
+    // Judged against the floor the model's named noise sources give, as the whole run is.
+    let judged = fit::Setup {
+        floors: &floors_after,
+        ..first
+    };
+    let heldout_after = heldout_excess(model, &judged, &configs, &clean1, false);
+    let heldout_raw_after = heldout_excess(model, &judged, &configs, &clean1, true);
     let (eb, ea) = (stats_excess(&before, false), stats_excess(&after, false));
     let shares_pct = shares(model, m, &start, &accepted, &floors, ea)?;
     let (rb, ra) = (stats_excess(&before, true), stats_excess(&after, true));

@@ -465,7 +465,7 @@ pub fn noise_floor(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use crate::config::{ConfigSource, Document, Embedded};
     use crate::gap::anchor::Shooting;
     use crate::gap::{Verdict, analyse_with, bench, generate, model::GapModel};
@@ -501,7 +501,7 @@ mod tests {
 
     /// The shipped model, its configurations and the benchmark's manoeuvre generated with
     /// them.
-    fn manoeuvre(
+    pub(crate) fn manoeuvre(
         seed: u64,
     ) -> (
         GapModel,

@@ -92,3 +92,67 @@ fn split_alternates_blocks() {
     assert!(!s.is_training(19.9));
     assert!(s.is_training(20.0));
 }
+
+/// The blocks where the earlier names changed the fit most: per block, the chi-square
+/// without them less the chi-square with them; the blocks at or above the median change
+/// (whatever its sign) are strong, every element of a block alike.
+#[test]
+fn strong_blocks_are_where_the_earlier_names_changed_the_fit_most() {
+    let times: Vec<f64> = (0..40).map(|i| f64::from(i) * 0.5).collect();
+    let before: Vec<f64> = times
+        .iter()
+        .map(|t| if *t < 10.0 { 3.0 } else { 1.0 })
+        .collect();
+    let residuals = |values: Vec<f64>| Residuals {
+        owner: vec![0; values.len()],
+        training: vec![true; values.len()],
+        times: times.clone(),
+        values,
+    };
+    // Fixed in the first 10 s block; in the second, one sample made worse.
+    let mut after = vec![1.0; times.len()];
+    after[30] = 1.5;
+    let strong = strong_blocks(&residuals(before), &residuals(after), 10.0);
+    assert_eq!(strong.len(), times.len());
+    assert!(strong[..20].iter().all(|s| *s), "{strong:?}");
+    assert!(strong[20..].iter().all(|s| !*s), "{strong:?}");
+}
+
+/// The constancy test on a run of the model's own form whose compass reads off: by a
+/// constant angle, the values fitted in the two halves agree; by one angle where the
+/// earlier names act and another elsewhere, they differ, each half finding its own.
+#[test]
+fn constancy_tells_one_value_from_a_value_that_follows_the_earlier_names() {
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre(7);
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let effect = effects::by_name("compass_offset").unwrap();
+    let half = m.experiment.duration_s / 2.0;
+    let offset = |first: f64, second: f64| {
+        let mut off = m.clone();
+        let ch = off
+            .channels
+            .iter_mut()
+            .find(|ch| ch.name == "compass_deg")
+            .unwrap();
+        for (t, v) in &mut ch.samples {
+            *v += if *t < half { first } else { second };
+        }
+        off
+    };
+    let test = |measured: &Measurement| {
+        let setup = setup(measured, c.clone(), &floors, Split::DEFAULT, &[]).unwrap();
+        let r = setup.residuals(&setup.base, &setup.clean);
+        let strong: Vec<bool> = r.times.iter().map(|t| *t < half).collect();
+        constancy(&setup, effect, &[6.0], 1.0, &strong).expect("both halves fit")
+    };
+    let one = test(&offset(6.0, 6.0));
+    assert!(one.holds(), "{one:?}");
+    assert!((one.strong[0] - one.weak[0]).abs() < 1.0, "{one:?}");
+    let two = test(&offset(2.0, 12.0));
+    assert!(!two.holds(), "{two:?}");
+    assert!(
+        (two.weak[0] - two.strong[0]).abs() > 7.0,
+        "each half finds its own: {two:?}"
+    );
+}
