@@ -551,7 +551,7 @@ pub fn analyse_with(
             let share = if without > 1.0 {
                 (without - mean) / (without - 1.0)
             } else {
-                0.0
+                1.0
             };
             if let Some((effect, values, noise_factor)) = named.last()
                 && named.len() > 1

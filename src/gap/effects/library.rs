@@ -28,7 +28,7 @@ const ALL_THRUSTERS: [&str; 9] = [
 ];
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 40] = [
+pub const LIBRARY: [Effect; 39] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -920,30 +920,6 @@ pub const LIBRARY: [Effect; 40] = [
         moves_anchors: false,
         summary: &[],
         calibration: Calibration::Discrepancy(32),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
-    },
-    // Where the propellers start to turn: a depth hold on a noisy reading, or any controller
-    // near its set point, commands the thrusters around zero, where a deadband the model
-    // places wrongly shows as a thrust error no gain or curve shape expresses.
-    Effect {
-        name: "thruster_deadband",
-        parameters: &["deadband_shift"],
-        scales: &[0.03],
-        bounds: &[(-0.1, 0.3)],
-        signature: "small commands push too much or not at all: a hold near its set point \
-                    drifts or chatters differently, while full-power legs match",
-        channels: &ALL_THRUSTERS,
-        kind: Kind::Mean,
-        physics: true,
-        extend: |p, c| {
-            let d = &mut c.vehicle.thruster_common.deadband;
-            *d = (*d + at(p, 0)).clamp(0.0, 0.6);
-        },
-        moves_anchors: false,
-        summary: &[],
-        calibration: Calibration::Discrepancy(33),
         positive: false,
         parameter_error_target: false,
         hidden: None,
