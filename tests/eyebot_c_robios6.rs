@@ -110,11 +110,12 @@ fn robios6_programs_build_unchanged_for_the_host_and_the_68k() {
     }
 }
 
-/// What `missing_devices.c` prints in each of its two rounds: RoBIOS's failure values, the
+/// What `missing_devices.c` prints in each of its two rounds: RoBIOS's failure values
+/// (`SERVORelease`'s is RoBIOS's "totally wrong handle", 0x11110000), the
 /// caller's buffers (stamp 42, pixels 9, parameters 1 2 3, v 1.5, x 2.5) untouched, and the
 /// radio's received size (was 9) and status list count (was 7) set to 0.
 const EXPECTED_ROUND: &str = "\
-servo 0 -1 -1 -1
+servo 0 -1 -1 0x11110000
 quad 0 0 -1 -1 0 0.0 -1
 vw 0 -1 -1 -1 -1 -1 -1 -1 -1 -1 0.0 -1 -1 -1 -1 v 1.5 x 2.5
 bump 0 -1 stamp 42 -1

@@ -44,10 +44,13 @@ ServoHandle SERVOInit(DeviceSemantics semantics) {
     once("SERVOInit", NO_SERVO, "0");
     return 0;
 }
+/* RoBIOS's SERVORelease answers a handle that names no servo at all with 0x11110000
+ * ("totally wrong handle"); on Mako no handle names a servo. */
+#define SERVO_TOTALLY_WRONG_HANDLE 0x11110000
 int SERVORelease(ServoHandle handle) {
     (void)handle;
-    once("SERVORelease", NO_SERVO, "-1");
-    return -1;
+    once("SERVORelease", NO_SERVO, "0x11110000 (totally wrong handle)");
+    return SERVO_TOTALLY_WRONG_HANDLE;
 }
 int SERVOSet(ServoHandle handle, int angle) {
     (void)handle;

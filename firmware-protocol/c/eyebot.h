@@ -328,8 +328,9 @@ int KEYWait(int excode);     /* waits for the key(s) in excode; returns the key 
 #define IR_LEFT 0x0B03
 #define IR_RIGHT 0x0B04
 
-/* Handles. PSD handles are bits, OR-ed together for PSDStart; 0 is the failure value of
- * every init call. */
+/* Handles. PSD handles are bits, OR-ed together for PSDStart (servo handles are summed the
+ * same way); 0 is the failure value of every init call. RoBIOS names these types; their
+ * underlying C type is not in the sources seen (docs/eyebot.md), so they are int here. */
 typedef int PSDHandle;
 typedef int ServoHandle;
 typedef int QuadHandle;
@@ -434,9 +435,12 @@ int PSDGet(PSDHandle handle);            /* latest distance in mm, or PSD_OUT_OF
 int PSDGetRaw(PSDHandle handle);         /* the same (the sonar has no raw value) */
 
 /* ---- Servos, encoders, v-omega: no such devices on Mako ----------------------------------- */
+/* RoBIOS: servo handles are summed (OR-ed) to release or set several servos at once;
+ * SERVOSet's angle is 0..255. */
 ServoHandle SERVOInit(DeviceSemantics semantics);        /* 0: no servo */
-int SERVORelease(ServoHandle handle);                    /* -1 */
-int SERVOSet(ServoHandle handle, int angle);             /* -1 */
+int SERVORelease(ServoHandle handle);                    /* 0x11110000: totally wrong handle */
+int SERVOSet(ServoHandle handle, int angle);             /* -1: wrong handle */
+/* Not in the RoBIOS servo section seen (docs/eyebot.md, source U). */
 int SERVOSetRaw(ServoHandle handle, int angle);          /* -1 */
 QuadHandle QUADInit(DeviceSemantics semantics);          /* 0: no encoder */
 int QUADRelease(QuadHandle handle);                      /* -1 */

@@ -29,7 +29,7 @@ int main(void)
     r[0] = SERVOSet(s, 128);
     r[1] = SERVOSetRaw(s, 10);
     r[2] = SERVORelease(s);
-    printf("servo %d %d %d %d\n", s, r[0], r[1], r[2]);
+    printf("servo %d %d %d %#x\n", s, r[0], r[1], (unsigned)r[2]);
     r[0] = QUADRead(q);
     r[1] = QUADReset(q);
     r[2] = QUADRelease(q);
