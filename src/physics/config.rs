@@ -104,6 +104,10 @@ struct RawThrusters {
     #[serde(default)]
     exponent_reverse: Option<f64>,
     lag_s: f64,
+    #[serde(default)]
+    lag_down_s: Option<f64>,
+    #[serde(default)]
+    lag_exponent: Option<f64>,
     fluctuation_rel_std: f64,
     fluctuation_corr_s: f64,
 }
@@ -151,7 +155,15 @@ pub struct ThrusterCommon {
     /// of its thrust at part power in reverse, so the two curves need not share a shape.
     /// Equals `exponent` unless the vehicle file sets `thrusters.exponent_reverse`.
     pub exponent_reverse: f64,
+    /// Time constant of the first-order lag while a motor speeds up.
     pub lag_s: f64,
+    /// Time constant while it slows down (a propeller coasts down more slowly than its motor
+    /// drives it up). Equals `lag_s` unless the vehicle file sets `thrusters.lag_down_s`.
+    pub lag_down_s: f64,
+    /// What lags: the lagged quantity q is (thrust / full thrust)^(1 / lag_exponent), so 1
+    /// lags the thrust itself and 2 lags the propeller's speed of a thrust that grows with
+    /// its square. 1 unless the vehicle file sets `thrusters.lag_exponent`.
+    pub lag_exponent: f64,
     /// Relative standard deviation of the thrust fluctuation at full speed.
     pub fluctuation_rel_std: f64,
     pub fluctuation_corr_s: f64,
@@ -474,6 +486,20 @@ fn resolve_thruster_common(
             "",
         )?,
         lag_s: doc.check_range("thrusters.lag_s", t.lag_s, 0.0, 10.0, "s")?,
+        lag_down_s: doc.check_range(
+            "thrusters.lag_down_s",
+            t.lag_down_s.unwrap_or(t.lag_s),
+            0.0,
+            10.0,
+            "s",
+        )?,
+        lag_exponent: doc.check_range(
+            "thrusters.lag_exponent",
+            t.lag_exponent.unwrap_or(1.0),
+            0.5,
+            3.0,
+            "",
+        )?,
         fluctuation_rel_std: doc.check_range(
             "thrusters.fluctuation_rel_std",
             t.fluctuation_rel_std,

@@ -93,8 +93,12 @@ pub fn static_thrust_n(
 /// Per-step constants of the thruster dynamics, precomputed for one step size.
 #[derive(Debug, Clone)]
 pub(crate) struct ThrusterDynamics {
-    /// Fraction of the gap to the static thrust closed in one step (exact first-order lag).
-    lag_alpha: f64,
+    /// Fraction of the gap to the static value closed in one step (exact first-order lag),
+    /// while the motor speeds up and while it slows down.
+    lag_alpha_up: f64,
+    lag_alpha_down: f64,
+    /// What lags (`ThrusterCommon::lag_exponent`): 1 the thrust, 2 the propeller speed.
+    lag_exponent: f64,
     /// Ornstein-Uhlenbeck decay per step and the matching innovation scale (exact
     /// discretisation, so the fluctuation's variance does not depend on the step).
     ou_decay: f64,
@@ -104,22 +108,41 @@ pub(crate) struct ThrusterDynamics {
 
 impl ThrusterDynamics {
     pub(crate) fn new(common: &ThrusterCommon, dt_s: f64) -> Self {
-        let lag_alpha = if common.lag_s > 0.0 {
-            1.0 - (-dt_s / common.lag_s).exp()
-        } else {
-            1.0
+        let alpha = |tau_s: f64| {
+            if tau_s > 0.0 {
+                1.0 - (-dt_s / tau_s).exp()
+            } else {
+                1.0
+            }
         };
         let ou_decay = (-dt_s / common.fluctuation_corr_s).exp();
         Self {
-            lag_alpha,
+            lag_alpha_up: alpha(common.lag_s),
+            lag_alpha_down: alpha(common.lag_down_s),
+            lag_exponent: common.lag_exponent,
             ou_decay,
             ou_innovation: (1.0 - ou_decay * ou_decay).sqrt(),
             rel_std: common.fluctuation_rel_std,
         }
     }
 
+    /// The lag's fraction for one step from `now` toward `target`: the spin-up one while the
+    /// motor speeds up in the direction it turns, the spin-down one while it slows down (a
+    /// reversal slows down to standstill first).
+    fn alpha(&self, now: f64, target: f64) -> f64 {
+        if now * target >= 0.0 && target.abs() > now.abs() {
+            self.lag_alpha_up
+        } else {
+            self.lag_alpha_down
+        }
+    }
+
     /// Advances one motor: the lagged thrust moves toward `target_n`, the unit fluctuation
     /// process takes one step. Returns the thrust delivered now.
+    ///
+    /// The lag acts on q = sign(T) (|T| / `full_n`)^(1 / lag_exponent), with the spin-up
+    /// time constant while |q| grows toward its target and the spin-down one otherwise; the
+    /// thrust is `full_n` sign(q) |q|^lag_exponent. With exponent 1 the thrust itself lags.
     pub(crate) fn step<R: Rng>(
         &self,
         lagged_n: &mut f64,
@@ -128,7 +151,14 @@ impl ThrusterDynamics {
         full_n: f64,
         rng: &mut R,
     ) -> f64 {
-        *lagged_n += (target_n - *lagged_n) * self.lag_alpha;
+        if self.lag_exponent == 1.0 || full_n <= 0.0 {
+            *lagged_n += (target_n - *lagged_n) * self.alpha(*lagged_n, target_n);
+        } else {
+            let root = |t: f64| t.signum() * (t.abs() / full_n).powf(1.0 / self.lag_exponent);
+            let (target_q, mut q) = (root(target_n), root(*lagged_n));
+            q += (target_q - q) * self.alpha(q, target_q);
+            *lagged_n = full_n * q.signum() * q.abs().powf(self.lag_exponent);
+        }
         let z: f64 = rng.sample(StandardNormal);
         *fluctuation = *fluctuation * self.ou_decay + self.ou_innovation * z;
         // Relative fluctuation grows with speed (thesis fig 4.6): zero at rest, rel_std at full.
@@ -154,6 +184,8 @@ mod tests {
             exponent: 1.0,
             exponent_reverse: 1.0,
             lag_s: 0.25,
+            lag_down_s: 0.25,
+            lag_exponent: 1.0,
             fluctuation_rel_std: 0.03,
             fluctuation_corr_s: 0.3,
         }
@@ -252,6 +284,70 @@ mod tests {
         assert!((out - 10.0 * (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{out}");
     }
 
+    /// Thrust after `steps` steps of 10 ms from `start_n` toward `target_n`, without the
+    /// fluctuation.
+    fn lagged(c: ThrusterCommon, start_n: f64, target_n: f64, steps: usize) -> f64 {
+        let dyn_ = ThrusterDynamics::new(
+            &ThrusterCommon {
+                fluctuation_rel_std: 0.0,
+                ..c
+            },
+            0.01,
+        );
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64_for_test(1);
+        let (mut lag, mut f) = (start_n, 0.0);
+        let mut out = start_n;
+        for _ in 0..steps {
+            out = dyn_.step(&mut lag, &mut f, target_n, 10.0, &mut rng);
+        }
+        out
+    }
+
+    /// A motor that coasts down more slowly than it spins up: slowing down follows
+    /// `lag_down_s`, speeding up `lag_s`, in either direction of thrust.
+    #[test]
+    fn spin_down_follows_its_own_time_constant() {
+        let c = ThrusterCommon {
+            lag_s: 0.25,
+            lag_down_s: 0.5,
+            ..common()
+        };
+        let e = (-1.0f64).exp();
+        let down = lagged(c.clone(), 10.0, 0.0, 50);
+        assert!((down - 10.0 * e).abs() < 1e-9, "{down}");
+        let up = lagged(c.clone(), 0.0, -5.0, 25);
+        assert!((up + 5.0 * (1.0 - e)).abs() < 1e-9, "{up}");
+        // From full reverse to full forward: the slowing half takes the longer constant.
+        let mut through_zero = 0;
+        let dyn_ = ThrusterDynamics::new(&c, 0.01);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64_for_test(1);
+        let (mut lag, mut f) = (-10.0, 0.0);
+        while lag < 0.0 && through_zero < 1000 {
+            dyn_.step(&mut lag, &mut f, 10.0, 10.0, &mut rng);
+            through_zero += 1;
+        }
+        // -10 + 20 (1 - exp(-t / 0.5)) = 0 at t = 0.5 ln 2 = 0.347 s.
+        assert!((34..=36).contains(&through_zero), "{through_zero}");
+    }
+
+    /// With `lag_exponent` 2 the propeller's speed lags and the thrust is its square: from
+    /// rest, one time constant gives (1 - 1/e)^2 of the thrust, and the way down is as slow.
+    #[test]
+    fn a_lagged_propeller_speed_gives_thrust_by_its_square() {
+        let c = ThrusterCommon {
+            lag_exponent: 2.0,
+            ..common()
+        };
+        let e = (-1.0f64).exp();
+        let up = lagged(c.clone(), 0.0, 10.0, 25);
+        assert!((up - 10.0 * (1.0 - e).powi(2)).abs() < 1e-9, "{up}");
+        let down = lagged(c.clone(), -10.0, 0.0, 25);
+        assert!((down + 10.0 * e * e).abs() < 1e-9, "{down}");
+        // The steady state is the static thrust whatever lags.
+        let steady = lagged(c, 0.0, 4.0, 1000);
+        assert!((steady - 4.0).abs() < 1e-9, "{steady}");
+    }
+
     trait SeedForTest {
         fn seed_from_u64_for_test(seed: u64) -> Self;
     }
@@ -268,6 +364,7 @@ mod tests {
         let dyn_ = ThrusterDynamics::new(
             &ThrusterCommon {
                 lag_s: 0.0,
+                lag_down_s: 0.0,
                 fluctuation_rel_std: 0.1,
                 ..c
             },
