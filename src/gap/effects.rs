@@ -145,19 +145,38 @@ pub enum Calibration {
     /// vehicle's own coefficients a different hull has differently), so that what a vehicle
     /// of another structure does differently lands here and not in the named effects' values.
     Discrepancy(u8),
+    /// A structural term of the base model that the calibration leaves as given and `gap`
+    /// never names: tried only as a rival of an effect named after others
+    /// ([`structural_rivals`]). Baseline runs seldom tell it (a lag's shape shows only after
+    /// commands far faster or lags far longer than a calibration run's), so calibrated it would
+    /// only take up other terms' share.
+    Rival,
 }
 
 impl Effect {
     /// True for an effect `gap` may name as new (every effect but the calibration's
-    /// discrepancy terms).
+    /// discrepancy terms and the structural rivals).
     pub fn candidate(&self) -> bool {
-        !matches!(self.calibration, Calibration::Discrepancy(_))
+        !matches!(
+            self.calibration,
+            Calibration::Discrepancy(_) | Calibration::Rival
+        )
     }
 }
 
 /// The effects `gap` may name, in library order.
 pub fn candidates() -> impl Iterator<Item = &'static Effect> {
     LIBRARY.iter().filter(|e| e.candidate())
+}
+
+/// The structural terms (the calibration's discrepancy terms and the rivals) that act on a
+/// channel of `effect`'s signature: the structure of the base model that could explain what
+/// `effect` would.
+pub fn structural_rivals(effect: &Effect) -> Vec<&'static Effect> {
+    LIBRARY
+        .iter()
+        .filter(|e| !e.candidate() && e.channels.iter().any(|c| effect.channels.contains(c)))
+        .collect()
 }
 
 /// How the bridge and the independent model hide an effect.

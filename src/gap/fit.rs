@@ -731,14 +731,24 @@ pub fn fit_candidates(
     skip: &[&str],
     progress: &mut dyn FnMut(&str),
 ) -> Vec<Candidate> {
+    let todo: Vec<&'static Effect> = effects::candidates()
+        .filter(|e| !skip.contains(&e.name))
+        .collect();
+    fit_effects(setup, &todo, progress)
+}
+
+/// Fits each of `todo` alone against the setup's model (in parallel), ranked; as
+/// [`fit_candidates`] does for the library's candidates.
+pub fn fit_effects(
+    setup: &Setup<'_>,
+    todo: &[&'static Effect],
+    progress: &mut dyn FnMut(&str),
+) -> Vec<Candidate> {
     let r0 = setup.residuals(&setup.base, &setup.clean);
     let measured: Vec<&str> = setup
         .modelled()
         .iter()
         .map(|&i| setup.m.channels[i].name.as_str())
-        .collect();
-    let todo: Vec<&'static Effect> = effects::candidates()
-        .filter(|e| !skip.contains(&e.name))
         .collect();
     let one = |effect: &'static Effect| -> Candidate {
         if !effect.channels.iter().any(|c| measured.contains(c)) {
@@ -889,6 +899,8 @@ pub fn setup<'a>(
 
 mod constancy;
 pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, strong_blocks};
+mod rival;
+pub use rival::structural_rival;
 
 #[cfg(test)]
 mod tests;

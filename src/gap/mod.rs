@@ -604,6 +604,33 @@ pub fn analyse_with(
                     )));
                 }
             }
+            // A later name is refused when a structural term of the base model, one the
+            // calibration fixed on the baseline runs, explains the same disagreement as well
+            // or better (`fit::structural_rival`).
+            if let Some((effect, _, _)) = named.last()
+                && named.len() > 1
+                && effect.kind == effects::Kind::Mean
+                && let Some(win) = accepted.last()
+            {
+                let floors = current_floors.borrow();
+                let setup = fit::setup(
+                    m,
+                    configs.borrow().clone(),
+                    &floors,
+                    options.split,
+                    &model.spread,
+                )?;
+                if let Some(rival) = fit::structural_rival(&setup, win) {
+                    return Ok(Some(format!(
+                        "`{}`, a structural term of the base model that the calibration fixed, \
+                         explains the same disagreement as well or better (delta BIC {:.1} \
+                         against {:.1}): the earlier names take the vehicle where the baseline \
+                         runs did not, and the data do not tell a new effect from structure \
+                         those runs left unpinned there",
+                        rival.name, rival.delta_bic_uncalibrated, win.delta_bic_uncalibrated
+                    )));
+                }
+            }
             current_mean.set(mean);
             let mut model_with = model.clone();
             for ((a, (effect, _, _)), (values, ci)) in accepted.iter_mut().zip(&named).zip(joint) {

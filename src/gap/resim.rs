@@ -508,6 +508,19 @@ pub(crate) mod tests {
         crate::gap::effects::Configs,
         crate::gap::format::Measurement,
     ) {
+        manoeuvre_of(seed, |_| {})
+    }
+
+    /// As [`manoeuvre`], measured on the bench model changed by `truth`; the configurations
+    /// returned are the bench model's, unchanged.
+    pub(crate) fn manoeuvre_of(
+        seed: u64,
+        truth: impl Fn(&mut crate::gap::effects::Configs),
+    ) -> (
+        GapModel,
+        crate::gap::effects::Configs,
+        crate::gap::format::Measurement,
+    ) {
         let text = Embedded.read(bench::MODEL).unwrap();
         let model =
             GapModel::from_text(&Embedded.describe(bench::MODEL), &text, ".".into()).unwrap();
@@ -521,8 +534,10 @@ pub(crate) mod tests {
         );
         let info = generate::setup(&model, &schedule, bench::CAMERA_STD_M);
         let c = model.configs(&info, std::path::Path::new(".")).unwrap();
+        let mut t = c.clone();
+        truth(&mut t);
         let m = generate::generate(
-            &c,
+            &t,
             &schedule,
             &info.world,
             &info.sensors,

@@ -28,7 +28,7 @@ const ALL_THRUSTERS: [&str; 9] = [
 ];
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 39] = [
+pub const LIBRARY: [Effect; 41] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -144,8 +144,9 @@ pub const LIBRARY: [Effect; 39] = [
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
-            let lag = &mut c.vehicle.thruster_common.lag_s;
-            *lag = (*lag + at(p, 0)).max(0.0);
+            let t = &mut c.vehicle.thruster_common;
+            t.lag_s = (t.lag_s + at(p, 0)).max(0.0);
+            t.lag_down_s = (t.lag_down_s + at(p, 0)).max(0.0);
         },
         moves_anchors: false,
         summary: &[Behaviour::Speed],
@@ -920,6 +921,49 @@ pub const LIBRARY: [Effect; 39] = [
         moves_anchors: false,
         summary: &[],
         calibration: Calibration::Discrepancy(32),
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "thruster_spin_down",
+        parameters: &["lag_down_s"],
+        scales: &[0.2],
+        bounds: &[(-1.0, 3.0)],
+        signature: "thrust falls off more slowly or quickly than it builds up: the error after \
+                    a command is cut or reversed decays on its own time constant",
+        channels: &ALL_THRUSTERS,
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            let t = &mut c.vehicle.thruster_common;
+            t.lag_down_s = (t.lag_down_s + at(p, 0)).max(0.0);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Rival,
+        positive: false,
+        parameter_error_target: false,
+        hidden: None,
+    },
+    Effect {
+        name: "thruster_lag_shape",
+        parameters: &["lag_exponent"],
+        scales: &[0.3],
+        bounds: &[(-0.5, 1.5)],
+        signature: "the lag acts on the propeller's speed rather than on its thrust: thrust \
+                    builds up late and falls off early, and a command that flickers gives \
+                    less mean thrust than the static curve",
+        channels: &ALL_THRUSTERS,
+        kind: Kind::Mean,
+        physics: true,
+        extend: |p, c| {
+            let t = &mut c.vehicle.thruster_common;
+            t.lag_exponent = (t.lag_exponent + at(p, 0)).clamp(0.5, 3.0);
+        },
+        moves_anchors: false,
+        summary: &[],
+        calibration: Calibration::Rival,
         positive: false,
         parameter_error_target: false,
         hidden: None,

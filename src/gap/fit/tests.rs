@@ -156,3 +156,48 @@ fn constancy_tells_one_value_from_a_value_that_follows_the_earlier_names() {
         "each half finds its own: {two:?}"
     );
 }
+
+/// A later name is a stand-in when the base model's structure explains its disagreement: on a
+/// vehicle whose lag acts on the propeller's speed (thrust ~ speed squared) and is long, a
+/// model that lags the thrust itself leaves a disagreement after every thrust step that the
+/// surge added mass takes in part, and the lag's shape, a discrepancy term of the calibration,
+/// takes in better. A surge added mass that is really there has no such rival.
+#[test]
+fn a_structural_term_outranks_a_later_stand_in_and_not_a_real_effect() {
+    let lag = |c: &mut Configs| {
+        c.vehicle.thruster_common.lag_s = 1.5;
+        c.vehicle.thruster_common.lag_down_s = 1.5;
+    };
+    let added = effects::by_name("added_mass").unwrap();
+    let fitted = |truth: &dyn Fn(&mut Configs)| {
+        let (_, mut c, m) = crate::gap::resim::tests::manoeuvre_of(11, truth);
+        lag(&mut c);
+        let clean = resim::simulate(&c, &m, None).unwrap();
+        let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+        let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+        let win = fit_effects(&setup, &[added], &mut |_| {}).remove(0);
+        (win.clone(), structural_rival(&setup, &win))
+    };
+    let (stand_in, rival) = fitted(&|c: &mut Configs| {
+        lag(c);
+        c.vehicle.thruster_common.lag_exponent = 2.0;
+    });
+    let rival = rival.expect("a structural rival");
+    assert!(
+        ["thruster_lag_shape", "thruster_spin_down"].contains(&rival.name.as_str()),
+        "{} (stand-in delta BIC {:.1})",
+        rival.name,
+        stand_in.delta_bic_uncalibrated
+    );
+    let (real, rival) = fitted(&|c: &mut Configs| {
+        lag(c);
+        c.vehicle.added_mass[0] += 20.0;
+    });
+    assert!(real.guards.all(), "{:?}", real.guards);
+    assert!(
+        rival.is_none(),
+        "{:?} against a real added mass (delta BIC {:.1})",
+        rival.map(|r| (r.name, r.delta_bic_uncalibrated)),
+        real.delta_bic_uncalibrated
+    );
+}
