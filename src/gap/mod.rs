@@ -604,9 +604,8 @@ pub fn analyse_with(
                     )));
                 }
             }
-            // A later name is refused when a structural term of the base model, one the
-            // calibration fixed on the baseline runs, explains the same disagreement as well
-            // or better (`fit::structural_rival`).
+            // A later name is refused when a term of the base model's structure explains the
+            // same disagreement as well or better (`fit::structural_rival`).
             if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
@@ -622,8 +621,8 @@ pub fn analyse_with(
                 )?;
                 if let Some(rival) = fit::structural_rival(&setup, win) {
                     return Ok(Some(format!(
-                        "`{}`, a structural term of the base model that the calibration fixed, \
-                         explains the same disagreement as well or better (delta BIC {:.1} \
+                        "`{}`, a term of the base model's structure, explains the same \
+                         disagreement as well or better (delta BIC {:.1} \
                          against {:.1}): the earlier names take the vehicle where the baseline \
                          runs did not, and the data do not tell a new effect from structure \
                          those runs left unpinned there",
