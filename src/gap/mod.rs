@@ -453,6 +453,8 @@ pub fn analyse_with(
         channel_mean(part_channels(model, &judged, c, run, false, None).into_iter()).unwrap_or(0.0)
     };
     let current_mean = std::cell::Cell::new(mean_of(&start, &clean0));
+X
+    let round_configs = || configs.borrow().clone();
     let candidate::Selection {
         rounds,
         accepted,
@@ -463,13 +465,7 @@ pub fn analyse_with(
         fit::MAX_EFFECTS,
         &mut |round, accepted| {
             let floors = current_floors.borrow();
-            let setup = fit::setup(
-                m,
-                configs.borrow().clone(),
-                &floors,
-                options.split,
-                &model.spread,
-            )?;
+            let setup = fit::setup(m, round_configs(), &floors, options.split, &model.spread)?;
             let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
             skip.extend(model.effects.iter().map(|e| e.effect.name));
             Ok(Some(fit::fit_candidates(&setup, &skip, &mut |name| {
@@ -559,13 +555,7 @@ pub fn analyse_with(
                 && share < LATER_NAME_MIN_SHARE
             {
                 let floors = current_floors.borrow();
-                let setup = fit::setup(
-                    m,
-                    configs.borrow().clone(),
-                    &floors,
-                    options.split,
-                    &model.spread,
-                )?;
+                let setup = fit::setup(m, round_configs(), &floors, options.split, &model.spread)?;
                 let strong = fit::strong_blocks(
                     &first.residuals(&start, &clean0),
                     &setup.residuals(&setup.base, &setup.clean),
@@ -612,13 +602,7 @@ pub fn analyse_with(
                 && let Some(win) = accepted.last()
             {
                 let floors = current_floors.borrow();
-                let setup = fit::setup(
-                    m,
-                    configs.borrow().clone(),
-                    &floors,
-                    options.split,
-                    &model.spread,
-                )?;
+                let setup = fit::setup(m, round_configs(), &floors, options.split, &model.spread)?;
                 if let Some(rival) = fit::structural_rival(&setup, win) {
                     return Ok(Some(format!(
                         "`{}`, a term of the base model's structure, explains the same \
