@@ -453,7 +453,8 @@ pub fn analyse_with(
         channel_mean(part_channels(model, &judged, c, run, false, None).into_iter()).unwrap_or(0.0)
     };
     let current_mean = std::cell::Cell::new(mean_of(&start, &clean0));
-X
+    // The configurations with the effects accepted so far, which each round's setup fits
+    // against.
     let round_configs = || configs.borrow().clone();
     let candidate::Selection {
         rounds,
