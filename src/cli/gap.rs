@@ -226,10 +226,7 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
             )
         }
         None if analysis.verdict == gap::Verdict::Ambiguous => {
-            let [sensor, physics] = analysis.ambiguous.clone().unwrap_or_default();
-            outln!(
-                "ambiguous: the sensor effect {sensor} and the physics effect {physics} explain the same disagreement about as well; neither is named"
-            )
+            outln!("ambiguous: {}", gap::report::ambiguity(&analysis))
         }
         None => outln!("no significant missing effect"),
     }

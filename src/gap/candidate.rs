@@ -176,7 +176,7 @@ pub fn select(
         let win = winner(&results).cloned();
         let lookalike = win
             .as_ref()
-            .and_then(|w| physics_lookalike(&results, w))
+            .and_then(|w| lookalike(&results, w))
             .map(|alt| {
                 [
                     win.as_ref().map_or(String::new(), |w| w.name.clone()),
@@ -224,11 +224,10 @@ pub struct Selection {
     pub rounds: Vec<Vec<Candidate>>,
     /// The accepted effects, in order.
     pub accepted: Vec<Candidate>,
-    /// A round whose winner was a sensor effect with a physics effect that explains the same
-    /// residual about as well (both pass every guard, delta BIC within
-    /// [`crate::gap::fit::BIC_MARGIN`]): the sensor's name first. Selection stops there and
-    /// names neither: a sensor effect may take a disagreement only with its own signature,
-    /// and the data do not say which it is.
+    /// A round whose winner has a look-alike that explains the same residual about as well
+    /// (both pass every guard, delta BIC within [`crate::gap::fit::BIC_MARGIN`]; two effects
+    /// of one kind, or a physics effect behind a sensor winner): the winner's name first.
+    /// Selection stops there and names neither: the data do not say which it is.
     pub ambiguous: Option<[String; 2]>,
     /// A round whose winner another candidate outranks by more than
     /// [`crate::gap::fit::BIC_MARGIN`] in the likelihood, passing every guard but its bounds:
@@ -275,18 +274,19 @@ fn unconfirmed_rival<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a 
     })
 }
 
-/// A physics effect of `round` that passes every guard with a delta BIC within the margin
-/// of `win`'s, when `win` is a sensor effect (library effects only).
-fn physics_lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
-    let sensor = crate::gap::effects::by_name(&win.name).is_some_and(|e| !e.physics);
-    if !sensor {
-        return None;
-    }
+/// An effect of `round` that passes every guard with a delta BIC within the margin of
+/// `win`'s and that the data do not rank below it: a delta BIC under the margin is not strong
+/// evidence for either (Kass and Raftery 1995), so two sensor effects or two physics effects
+/// that close are a tie, and so is a physics effect close behind a sensor winner (a sensor
+/// effect may take a disagreement only with its own signature). Only a sensor effect close
+/// behind a physics winner is no tie: the physics wins. Library effects only.
+fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
+    let win_physics = crate::gap::effects::by_name(&win.name).map(|e| e.physics)?;
     round.iter().find(|c| {
         c.name != win.name
             && c.testable
             && c.guards.all()
-            && crate::gap::effects::by_name(&c.name).is_some_and(|e| e.physics)
+            && crate::gap::effects::by_name(&c.name).is_some_and(|e| e.physics || !win_physics)
             && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
     })
 }
@@ -464,7 +464,7 @@ mod tests {
     /// sensor winner with a physics effect that passes every guard within the delta-BIC
     /// margin ends the selection as ambiguous, naming both and accepting neither; a physics
     /// winner with a sensor effect close behind is named (the physics wins), and a sensor
-    /// winner clear of every physics effect is named.
+    /// winner clear of every other effect is named.
     #[test]
     fn a_sensor_effect_is_not_named_where_a_physics_effect_explains_as_much() {
         let close = one_round(vec![
@@ -495,6 +495,41 @@ mod tests {
             ("depth_gain", "thrust_gain")
         );
         assert_eq!(margin, 25.0, "the failed yaw_damping is no runner-up");
+    }
+
+    /// Regression (a coin toss named: a depth gain named `depth_offset` 0.6 BIC ahead of
+    /// `depth_gain`, a thrust gain named `thrust_curve` 4.3 ahead): two effects of one kind
+    /// that both pass every guard within the delta-BIC margin end the selection as ambiguous,
+    /// the winner first; the same pair further apart names the winner, and a candidate close
+    /// behind that fails a guard is no look-alike.
+    #[test]
+    fn two_effects_of_one_kind_within_the_margin_are_ambiguous() {
+        for (first, second) in [
+            ("depth_offset", "depth_gain"),
+            ("thrust_curve", "thrust_gain"),
+        ] {
+            let close = one_round(vec![
+                candidate(first, 40.0, true),
+                candidate(second, 39.4, true),
+            ]);
+            assert!(close.accepted.is_empty(), "{:?}", close.accepted);
+            assert_eq!(
+                close.ambiguous,
+                Some([first.to_string(), second.to_string()])
+            );
+            let apart = one_round(vec![
+                candidate(first, 40.0, true),
+                candidate(second, 29.0, true),
+            ]);
+            assert_eq!(apart.accepted[0].name, first);
+            assert!(apart.ambiguous.is_none());
+            let failed = one_round(vec![
+                candidate(first, 40.0, true),
+                candidate(second, 39.4, false),
+            ]);
+            assert_eq!(failed.accepted[0].name, first);
+            assert!(failed.ambiguous.is_none());
+        }
     }
 
     /// Regression (a stand-in named): a thruster lag the fit holds on its bound explains far

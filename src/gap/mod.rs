@@ -92,8 +92,9 @@ pub enum Verdict {
     /// The data disagree with the model beyond its noise floor and nothing in the library
     /// explains it; `Analysis::unexplained` says where.
     Unexplained,
-    /// A sensor effect and a physics effect explain the same disagreement about as well
-    /// (`Analysis::ambiguous` names both), and nothing was named before them.
+    /// Two effects explain the same disagreement about as well (`Analysis::ambiguous` names
+    /// both; a physics effect close behind a sensor winner, or two of one kind), and nothing
+    /// was named before them.
     Ambiguous,
 }
 
@@ -130,7 +131,7 @@ pub struct Analysis {
     pub after: Vec<ChannelStats>,
     /// Candidate results of each greedy round, best first.
     pub rounds: Vec<Vec<Candidate>>,
-    /// The sensor effect and the physics effect the last round could not tell apart
+    /// The two effects the last round could not tell apart, its winner first
     /// ([`candidate::Selection::ambiguous`]).
     pub ambiguous: Option<[String; 2]>,
     /// The candidate the last round's winner was not named for

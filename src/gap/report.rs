@@ -129,14 +129,25 @@ fn verdict_text(a: &Analysis) -> String {
                 .to_string()
         }
         (crate::gap::Verdict::Ambiguous, None) => {
-            let [sensor, physics] = a.ambiguous.clone().unwrap_or_default();
-            format!(
-                "**ambiguous**: the sensor effect `{sensor}` and the physics effect `{physics}` \
-                 explain the same disagreement about as well; neither is named"
-            )
+            format!("**ambiguous**: {}", ambiguity(a))
         }
         _ => "no significant missing effect".to_string(),
     }
+}
+
+/// Why an `ambiguous` verdict names nothing: the two effects, each with its kind.
+pub fn ambiguity(a: &Analysis) -> String {
+    let [first, second] = a.ambiguous.clone().unwrap_or_default();
+    let kind = |name: &str| match crate::gap::effects::by_name(name) {
+        Some(e) if e.physics => "the physics effect",
+        _ => "the sensor effect",
+    };
+    format!(
+        "{} `{first}` and {} `{second}` explain the same disagreement about as well (delta BIC \
+         within the margin); neither is named",
+        kind(&first),
+        kind(&second)
+    )
 }
 
 /// The verdict paragraph with the naming rules, then one bullet per channel left unexplained
