@@ -24,7 +24,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::physics::config::{VehicleConfig, WorldConfig};
 use crate::physics::state::VehicleState;
-use crate::physics::thruster::{ThrusterCommand, ThrusterDynamics, static_thrust_n};
+use crate::physics::thruster::{Direction, ThrusterCommand, ThrusterDynamics, static_thrust_n};
 use crate::physics::world::{Contact, Pool};
 
 /// The physics' own RNG stream (ChaCha stream id). Sensors draw from other streams, so adding
@@ -142,6 +142,9 @@ pub struct Model {
     full_n: [f64; 4],
     /// Unit wrench of each thruster (direction; moment arm x direction).
     wrench: [Vector6<f64>; 4],
+    /// Each motor's static thrust for every command, `[motor][reverse][duty]`: a command is
+    /// one of 512, so the curve (two powers) is read, not computed, every step.
+    static_n: Box<[[[f64; 256]; 2]; 4]>,
 }
 
 fn smoothstep(x: f64) -> f64 {
@@ -181,6 +184,21 @@ impl Model {
         let full_n = std::array::from_fn(|i| {
             vehicle.thruster_common.forward_max_n * vehicle.thrusters[i].gain
         });
+        let static_n = Box::new(std::array::from_fn(|i| {
+            std::array::from_fn(|reverse| {
+                std::array::from_fn(|duty| {
+                    let command = ThrusterCommand {
+                        duty: duty as u8,
+                        direction: if reverse == 1 {
+                            Direction::Reverse
+                        } else {
+                            Direction::Forward
+                        },
+                    };
+                    static_thrust_n(&vehicle.thruster_common, &vehicle.thrusters[i], command)
+                })
+            })
+        }));
         Self {
             thruster_dynamics: ThrusterDynamics::new(&vehicle.thruster_common, dt_s),
             pool: Pool::new(&world),
@@ -195,6 +213,7 @@ impl Model {
             cg_to_box_m: -vehicle.cg_from_box_centre_m,
             full_n,
             wrench,
+            static_n,
             vehicle,
             world,
         }
@@ -414,12 +433,12 @@ impl Model {
         commands: &[ThrusterCommand; 4],
     ) -> Result<(), PhysicsError> {
         let dt = self.dt_s;
-        let common = &self.vehicle.thruster_common;
 
         // Thrusters: static curve -> lag -> fluctuation -> fade when out of the water.
         let mut tau = Vector6::zeros();
         for (i, motor) in self.vehicle.thrusters.iter().enumerate() {
-            let target = static_thrust_n(common, motor, commands[i]);
+            let reverse = usize::from(commands[i].direction == Direction::Reverse);
+            let target = self.static_n[i][reverse][usize::from(commands[i].duty)];
             let produced = self.thruster_dynamics.step(
                 &mut state.thrust_lagged_n[i],
                 &mut state.fluctuation[i],
