@@ -333,7 +333,7 @@ fn apparent_spread(
         progress(&format!("spread: run {} of {}", i + 1, runs.len()));
         let base = effects::apply_joint(&p.base, chosen, x);
         let s = fit::setup(&p.run.m, base, &p.floors, Split::DEFAULT, &[])?;
-        for r in fit::fit_candidates(&s, &[], &mut |_| {}) {
+        for r in fit::fit_candidates(&s, &[], &[], &mut |_| {}) {
             let Some(e) = effects::by_name(&r.name) else {
                 continue;
             };

@@ -481,15 +481,28 @@ fn fit_part(
 /// blocks; a candidate that the held-out blocks confirm is then fitted on all the data for
 /// its values, interval and significance (the structure validated on data it was not
 /// fitted to, the values estimated from everything).
-fn fit_mean(setup: &Setup<'_>, effect: &'static Effect, r0: &Residuals) -> Candidate {
+///
+/// The training fit starts from the best of a scan along each parameter's axis
+/// ([`START_SCAN`]), or, given `warm` (the candidate's values in the round before, with one
+/// more effect in the model since), from the better of no effect and those values: the
+/// scan found the candidate's basin then, and the newly named effect either took the
+/// disagreement the candidate explained (its optimum falls back toward no effect) or left it
+/// (it stays near those values).
+fn fit_mean(
+    setup: &Setup<'_>,
+    effect: &'static Effect,
+    r0: &Residuals,
+    warm: Option<&[f64]>,
+) -> Candidate {
     let k = effect.parameters.len();
-    let Some(train) = fit_part(
-        setup,
-        effect,
-        r0,
-        Some(true),
-        &lsq::axis_scan(k, &START_SCAN),
-    ) else {
+    let starts = match warm {
+        Some(values) if values.len() == k => vec![
+            DVector::zeros(k),
+            DVector::from_iterator(k, values.iter().zip(effect.scales).map(|(v, s)| v / s)),
+        ],
+        _ => lsq::axis_scan(k, &START_SCAN),
+    };
+    let Some(train) = fit_part(setup, effect, r0, Some(true), &starts) else {
         return Candidate::untestable(
             effect,
             r0.chi2(true),
@@ -725,16 +738,18 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
 /// Fits every candidate not yet in the model, on as many threads as the machine has cores
 /// (each fit is independent and deterministic, and results keep the library's order before
 /// ranking, so the outcome does not depend on the thread count); `progress` is called as
-/// each candidate finishes.
+/// each candidate finishes. `previous`, the round before's candidates, warm-starts each
+/// candidate fitted there (see [`fit_mean`]); empty, every fit scans.
 pub fn fit_candidates(
     setup: &Setup<'_>,
     skip: &[&str],
+    previous: &[Candidate],
     progress: &mut dyn FnMut(&str),
 ) -> Vec<Candidate> {
     let todo: Vec<&'static Effect> = effects::candidates()
         .filter(|e| !skip.contains(&e.name))
         .collect();
-    fit_effects(setup, &todo, progress)
+    fit_warm(setup, &todo, previous, progress)
 }
 
 /// Fits each of `todo` alone against the setup's model (in parallel), ranked; as
@@ -744,6 +759,21 @@ pub fn fit_effects(
     todo: &[&'static Effect],
     progress: &mut dyn FnMut(&str),
 ) -> Vec<Candidate> {
+    fit_warm(setup, todo, &[], progress)
+}
+
+fn fit_warm(
+    setup: &Setup<'_>,
+    todo: &[&'static Effect],
+    previous: &[Candidate],
+    progress: &mut dyn FnMut(&str),
+) -> Vec<Candidate> {
+    let warm = |name: &str| -> Option<Vec<f64>> {
+        previous
+            .iter()
+            .find(|c| c.name == name && c.testable)
+            .map(Candidate::values)
+    };
     let r0 = setup.residuals(&setup.base, &setup.clean);
     let measured: Vec<&str> = setup
         .modelled()
@@ -762,7 +792,7 @@ pub fn fit_effects(
             );
         }
         let result = match effect.kind {
-            Kind::Mean => fit_mean(setup, effect, &r0),
+            Kind::Mean => fit_mean(setup, effect, &r0, warm(effect.name).as_deref()),
             Kind::Variance => fit_emi(setup, effect)
                 .unwrap_or_else(|| Candidate::untestable(effect, r0.chi2(true), "no depth data")),
         };

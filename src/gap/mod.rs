@@ -457,6 +457,8 @@ pub fn analyse_with(
     // The configurations with the effects accepted so far, which each round's setup fits
     // against.
     let round_configs = || configs.borrow().clone();
+    // Each round's candidates warm-start the next round's fits.
+    let mut previous: Vec<Candidate> = Vec::new();
     let candidate::Selection {
         rounds,
         accepted,
@@ -470,9 +472,10 @@ pub fn analyse_with(
             let setup = fit::setup(m, round_configs(), &floors, options.split, &model.spread)?;
             let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
             skip.extend(model.effects.iter().map(|e| e.effect.name));
-            Ok(Some(fit::fit_candidates(&setup, &skip, &mut |name| {
-                progress(round, name)
-            })))
+            let results =
+                fit::fit_candidates(&setup, &skip, &previous, &mut |name| progress(round, name));
+            previous.clone_from(&results);
+            Ok(Some(results))
         },
         &mut |accepted| {
             let mut named = Vec::new();
