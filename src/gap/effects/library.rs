@@ -27,6 +27,27 @@ const ALL_THRUSTERS: [&str; 9] = [
     "accel_z_adc",
 ];
 
+/// What a structural term of the base model (a calibration discrepancy term or a
+/// structural rival) has unless its entry says otherwise: a mean-type physics effect that
+/// moves no anchor, has no summary behaviour and is never hidden by the benchmarks.
+const STRUCTURAL: Effect = Effect {
+    name: "",
+    parameters: &[],
+    scales: &[],
+    bounds: &[],
+    signature: "",
+    channels: &[],
+    kind: Kind::Mean,
+    physics: true,
+    extend: |_, _| {},
+    moves_anchors: false,
+    summary: &[],
+    calibration: Calibration::Rival,
+    positive: false,
+    parameter_error_target: false,
+    hidden: None,
+};
+
 /// The library. Its order is the order candidates are fitted and reported in.
 pub const LIBRARY: [Effect; 41] = [
     Effect {
@@ -697,15 +718,10 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "the hull slides sideways in turns more or less than modelled: track \
                     curvature and heading rate off together while turning under way",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| scale_damping(&mut c.vehicle, 1, 1.0 + at(p, 0), 1.0 + at(p, 0)),
-        moves_anchors: false,
         summary: &[Behaviour::Turn],
         calibration: Calibration::Discrepancy(21),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "sway_added_mass",
@@ -714,17 +730,12 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-30.0, 100.0)],
         signature: "sideways slip lags or leads after each turn command",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| {
             c.vehicle.added_mass[1] = (c.vehicle.added_mass[1] + at(p, 0)).max(0.0);
         },
-        moves_anchors: false,
         summary: &[Behaviour::Turn],
         calibration: Calibration::Discrepancy(22),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "yaw_added_inertia",
@@ -734,17 +745,12 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "turn rate builds up and dies away faster or slower than modelled; steady \
                     spins match",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| {
             c.vehicle.added_mass[5] = (c.vehicle.added_mass[5] + at(p, 0)).max(0.0);
         },
-        moves_anchors: false,
         summary: &[Behaviour::Turn],
         calibration: Calibration::Discrepancy(23),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "sway_from_yaw",
@@ -753,15 +759,10 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-20.0, 20.0)],
         signature: "a turn pushes the hull sideways: track drifts out of or into spot turns",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| c.vehicle.damping_sway_yaw[0] += at(p, 0),
-        moves_anchors: false,
         summary: &[Behaviour::Turn],
         calibration: Calibration::Discrepancy(24),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "heave_damping",
@@ -770,15 +771,9 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-0.9, 5.0)],
         signature: "depth changes faster or slower than modelled for the same vertical thrust",
         channels: &["depth_adc", "accel_z_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| scale_damping(&mut c.vehicle, 2, 1.0 + at(p, 0), 1.0 + at(p, 0)),
-        moves_anchors: false,
-        summary: &[],
         calibration: Calibration::Discrepancy(25),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "net_buoyancy",
@@ -788,19 +783,13 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "the vehicle rises or sinks between depth commands more than modelled: a \
                     depth drift of one sign whenever the vertical thrusters are idle",
         channels: &["depth_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| {
             let weight_per_m3 = c.world.water_density_kgpm3 * c.world.gravity_mps2;
             let v = &mut c.vehicle.displaced_volume_m3;
             *v = (*v + at(p, 0) / weight_per_m3).max(1e-4);
         },
-        moves_anchors: false,
-        summary: &[],
         calibration: Calibration::Discrepancy(26),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "munk_moment",
@@ -811,15 +800,10 @@ pub const LIBRARY: [Effect; 41] = [
                     the yaw moment that grows with surge times sway (the Munk moment less the \
                     hull's lift) is off",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| c.vehicle.damping_yaw_uv += at(p, 0),
-        moves_anchors: false,
         summary: &[Behaviour::Turn],
         calibration: Calibration::Discrepancy(28),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "camera_marker_position",
@@ -829,18 +813,14 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "the tracked position circles in every spin, by the same radius at any \
                     speed: the camera follows a marker away from the centre of mass",
         channels: &["x_m", "y_m"],
-        kind: Kind::Mean,
         physics: false,
         extend: |p, c| {
             c.camera_marker_body_m[0] += at(p, 0);
             c.camera_marker_body_m[1] += at(p, 1);
         },
         moves_anchors: true,
-        summary: &[],
         calibration: Calibration::Discrepancy(29),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "depth_port_position",
@@ -850,15 +830,11 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "depth readings follow the pitch: a port away from the centre of mass reads \
                     deeper when its end dips",
         channels: &["depth_adc"],
-        kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.sensors.depth.position_body_m[0] += at(p, 0),
         moves_anchors: true,
-        summary: &[],
         calibration: Calibration::Discrepancy(27),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "vertical_thrust_gain",
@@ -869,8 +845,6 @@ pub const LIBRARY: [Effect; 41] = [
                     responds to the vertical commands off in proportion, while speed and turns \
                     match",
         channels: &["depth_adc", "accel_z_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| {
             for t in c.vehicle.thrusters.iter_mut() {
                 if t.direction.z.abs() > 0.5 {
@@ -878,12 +852,8 @@ pub const LIBRARY: [Effect; 41] = [
                 }
             }
         },
-        moves_anchors: false,
-        summary: &[],
         calibration: Calibration::Discrepancy(30),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "yaw_damping_under_way",
@@ -893,15 +863,10 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "turns under way are damped more or less than spot turns predict: the yaw \
                     damping that grows with forward speed is off",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| c.vehicle.damping_yaw_ur += at(p, 0),
-        moves_anchors: false,
         summary: &[Behaviour::Turn],
         calibration: Calibration::Discrepancy(31),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "reverse_thrust_curve",
@@ -912,18 +877,12 @@ pub const LIBRARY: [Effect; 41] = [
                     thrust not: part-power reversing (turns, braking, rising) disagrees more or \
                     less than full reverse",
         channels: &ALL_THRUSTERS,
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| {
             let e = &mut c.vehicle.thruster_common.exponent_reverse;
             *e = (*e * (1.0 + at(p, 0))).max(0.1);
         },
-        moves_anchors: false,
-        summary: &[],
         calibration: Calibration::Discrepancy(32),
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "thruster_spin_down",
@@ -933,18 +892,12 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "thrust falls off more slowly or quickly than it builds up: the error after \
                     a command is cut or reversed decays on its own time constant",
         channels: &ALL_THRUSTERS,
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| {
             let t = &mut c.vehicle.thruster_common;
             t.lag_down_s = (t.lag_down_s + at(p, 0)).max(0.0);
         },
-        moves_anchors: false,
-        summary: &[],
         calibration: Calibration::Rival,
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
     Effect {
         name: "thruster_lag_shape",
@@ -955,18 +908,12 @@ pub const LIBRARY: [Effect; 41] = [
                     builds up late and falls off early, and a command that flickers gives \
                     less mean thrust than the static curve",
         channels: &ALL_THRUSTERS,
-        kind: Kind::Mean,
-        physics: true,
         extend: |p, c| {
             let t = &mut c.vehicle.thruster_common;
             t.lag_exponent = (t.lag_exponent + at(p, 0)).clamp(0.5, 3.0);
         },
-        moves_anchors: false,
-        summary: &[],
         calibration: Calibration::Rival,
-        positive: false,
-        parameter_error_target: false,
-        hidden: None,
+        ..STRUCTURAL
     },
 ];
 
