@@ -134,6 +134,23 @@ fn vehicle_errors_point_at_the_key() {
         matches!(&err, ConfigError::Invalid { key, .. } if key == "thrusters.exponent_reverse"),
         "{err}"
     );
+    // A motor's own dead band: none unless given, checked where it is.
+    assert!(v.thrusters.iter().all(|t| t.deadband.is_none()));
+    let stern = |d: &str| {
+        text.replacen(
+            "name = \"stern\"",
+            &format!("name = \"stern\"\ndeadband = {d}"),
+            1,
+        )
+    };
+    let v = VehicleConfig::from_document(&Document::new("v.toml", &stern("0.05"))).unwrap();
+    assert_eq!(v.thrusters[3].deadband, Some(0.05));
+    assert!(v.thrusters[..3].iter().all(|t| t.deadband.is_none()));
+    let err = VehicleConfig::from_document(&Document::new("v.toml", &stern("1.5"))).unwrap_err();
+    assert!(
+        matches!(&err, ConfigError::Invalid { key, .. } if key == "thruster.3.deadband"),
+        "{err}"
+    );
 }
 
 /// The mass distribution gives the thesis's 35 kg, a CG below the box centre (batteries in

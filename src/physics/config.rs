@@ -120,6 +120,8 @@ struct RawThruster {
     direction: [f64; 3],
     gain: f64,
     reverse_ratio: f64,
+    #[serde(default)]
+    deadband: Option<f64>,
     hdt_duty: Vec<f64>,
 }
 
@@ -139,6 +141,9 @@ pub struct ThrusterConfig {
     pub gain: f64,
     /// Reverse thrust at full reverse relative to this motor's full forward thrust.
     pub reverse_ratio: f64,
+    /// This motor's own dead band (PWM on-fraction); `ThrusterCommon::deadband` when `None`.
+    /// Motors of one type still stand still below different duties.
+    pub deadband: Option<f64>,
     /// The HDT balancing table: PWM duty for MOTORDrive 0, 10, ..., 100 %.
     pub hdt_duty: [f64; 11],
 }
@@ -605,6 +610,10 @@ fn resolve_thruster(
         1.0,
         "",
     )?;
+    let deadband = th
+        .deadband
+        .map(|d| doc.check_range(&format!("{key}.deadband"), d, 0.0, 0.9, ""))
+        .transpose()?;
     let hdt_duty = resolve_hdt_duty(doc, &key, &th.hdt_duty)?;
     Ok(ThrusterConfig {
         name: th.name.clone(),
@@ -612,6 +621,7 @@ fn resolve_thruster(
         direction: dir,
         gain,
         reverse_ratio,
+        deadband,
         hdt_duty,
     })
 }

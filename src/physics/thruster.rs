@@ -82,7 +82,8 @@ pub fn static_thrust_n(
     cmd: ThrusterCommand,
 ) -> f64 {
     let on = cmd.on_fraction();
-    let x = ((on - common.deadband) / (1.0 - common.deadband)).max(0.0);
+    let deadband = motor.deadband.unwrap_or(common.deadband);
+    let x = ((on - deadband) / (1.0 - deadband)).max(0.0);
     let full = common.forward_max_n * motor.gain;
     match cmd.direction {
         Direction::Forward => full * x.powf(common.exponent),
@@ -198,6 +199,7 @@ mod tests {
             direction: Vector3::x(),
             gain: 1.0,
             reverse_ratio: 0.5,
+            deadband: None,
             hdt_duty: [
                 255.0, 207.0, 184.0, 161.0, 138.0, 115.0, 92.0, 69.0, 46.0, 23.0, 0.0,
             ],
@@ -250,6 +252,30 @@ mod tests {
         let full = |direction| ThrusterCommand { duty: 0, direction };
         assert_eq!(static_thrust_n(&c, &m, full(Direction::Reverse)), -5.0);
         assert_eq!(static_thrust_n(&c, &m, full(Direction::Forward)), 10.0);
+    }
+
+    /// A motor with its own dead band stands still below it and reaches full thrust at full
+    /// duty, whatever the common dead band says.
+    #[test]
+    fn a_motor_s_own_dead_band_overrides_the_common_one() {
+        let c = common();
+        let own = ThrusterConfig {
+            deadband: Some(0.3),
+            ..motor()
+        };
+        let at = |on: f64| ThrusterCommand {
+            duty: (255.0 * (1.0 - on)).round() as u8,
+            direction: Direction::Forward,
+        };
+        assert!(
+            static_thrust_n(&c, &motor(), at(0.25)) > 0.0,
+            "common dead band 0.1"
+        );
+        assert_eq!(static_thrust_n(&c, &own, at(0.25)), 0.0);
+        let on = at(0.65).on_fraction();
+        let expected = 10.0 * (on - 0.3) / 0.7;
+        assert!((static_thrust_n(&c, &own, at(0.65)) - expected).abs() < 1e-12);
+        assert_eq!(static_thrust_n(&c, &own, at(1.0)), 10.0);
     }
 
     #[test]
