@@ -49,6 +49,9 @@ pub const HELDOUT_MIN_GAIN: f64 = 3.84;
 /// +-0.25 steps find a small effect whose chi-square holds a shallow minimum between zero
 /// and the coarser steps.
 pub const START_SCAN: [f64; 9] = [-4.0, -2.0, -1.0, -0.25, 0.25, 1.0, 2.0, 4.0, 8.0];
+/// The coarser scan of a later round, beside the candidate's values in the round before
+/// ([`fit_mean`]).
+pub const LATER_SCAN: [f64; 4] = [-2.0, -0.5, 0.5, 2.0];
 
 /// How the data are split into the blocks a candidate is fitted on and the blocks it is
 /// judged on: time blocks of `block_s`, even blocks train, odd blocks held out. Alternating
@@ -484,10 +487,11 @@ fn fit_part(
 ///
 /// The training fit starts from the best of a scan along each parameter's axis
 /// ([`START_SCAN`]), or, given `warm` (the candidate's values in the round before, with one
-/// more effect in the model since), from the better of no effect and those values: the
-/// scan found the candidate's basin then, and the newly named effect either took the
-/// disagreement the candidate explained (its optimum falls back toward no effect) or left it
-/// (it stays near those values).
+/// more effect in the model since), from the best of those values and a coarser scan
+/// ([`LATER_SCAN`]): the newly named effect either took the disagreement the candidate
+/// explained (its optimum falls back toward no effect) or left it (it stays near those
+/// values), or, where the earlier effect had pushed the candidate into a basin of the wrong
+/// sign, the coarse scan finds the other side.
 fn fit_mean(
     setup: &Setup<'_>,
     effect: &'static Effect,
@@ -496,10 +500,14 @@ fn fit_mean(
 ) -> Candidate {
     let k = effect.parameters.len();
     let starts = match warm {
-        Some(values) if values.len() == k => vec![
-            DVector::zeros(k),
-            DVector::from_iterator(k, values.iter().zip(effect.scales).map(|(v, s)| v / s)),
-        ],
+        Some(values) if values.len() == k => {
+            let mut starts = lsq::axis_scan(k, &LATER_SCAN);
+            starts.push(DVector::from_iterator(
+                k,
+                values.iter().zip(effect.scales).map(|(v, s)| v / s),
+            ));
+            starts
+        }
         _ => lsq::axis_scan(k, &START_SCAN),
     };
     let Some(train) = fit_part(setup, effect, r0, Some(true), &starts) else {
