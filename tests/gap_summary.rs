@@ -133,7 +133,10 @@ fn mako_model_against_mako_numbers_has_no_significant_missing_effect() {
 }
 
 /// Summary numbers computed from a truth model (Mako with 25 % more thrust), with the
-/// thesis's uncertainties: the hidden thrust gain is named and fitted within 10 % of 0.25.
+/// thesis's uncertainties: the hidden thrust gain ranks first and is fitted within 10 % of
+/// 0.25, but most of its evidence is in the turn times, which a lower yaw damping explains
+/// within the delta-BIC margin; the verdict is `ambiguous`, the thrust gain first, and
+/// nothing is named.
 #[test]
 fn hidden_thrust_gain_in_summary_numbers_is_found() {
     let mut s = mako_numbers();
@@ -164,11 +167,19 @@ fn hidden_thrust_gain_in_summary_numbers_is_found() {
     }
     let a = summary::analyse(&model, &s, &mut |_, _| {}).expect("gap runs");
     print(&a);
-    assert_eq!(a.verdict, Verdict::Effect);
-    assert_eq!(a.accepted[0].name, "thrust_gain", "{:?}", a.rounds[0]);
-    let g = a.fitted.effects[0].values[0];
-    assert!((g - 0.25).abs() <= 0.025, "gain {g}");
-    assert!(a.gap_reduction_pct >= 80.0, "{}", a.gap_reduction_pct);
+    let round0: Vec<(&str, f64, bool)> = a.rounds[0]
+        .iter()
+        .map(|c| (c.name.as_str(), c.delta_bic_uncalibrated, c.guards.all()))
+        .collect();
+    assert_eq!(a.verdict, Verdict::Ambiguous, "{round0:?}");
+    assert!(a.accepted.is_empty());
+    let pair = a.ambiguous.clone().expect("an ambiguous verdict names its pair");
+    assert_eq!(pair[0], "thrust_gain", "{round0:?}");
+    let win = &a.rounds[0][0];
+    assert_eq!(win.name, "thrust_gain");
+    assert!((win.values()[0] - 0.25).abs() <= 0.025, "gain {:?}", win.values());
+    let behind = win.delta_bic_uncalibrated - a.rounds[0][1].delta_bic_uncalibrated;
+    assert!(behind < 10.0, "{round0:?}");
 }
 
 /// configs/vehicles/subsim-2.4.toml derives its thrust from SubSim 2.4's reported 9 cm/s top

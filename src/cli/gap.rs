@@ -212,6 +212,12 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
                     e.delta_bic
                 );
             }
+            if let Some(pair) = &analysis.ambiguous {
+                outln!(
+                    "then ambiguous: {}; nothing more is named",
+                    gap::report::ambiguity(pair)
+                );
+            }
         }
         None if analysis.verdict == gap::Verdict::Unexplained
             && analysis.fitted.discrepancy.is_empty() =>
@@ -226,7 +232,13 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
             )
         }
         None if analysis.verdict == gap::Verdict::Ambiguous => {
-            outln!("ambiguous: {}", gap::report::ambiguity(&analysis))
+            outln!(
+                "ambiguous: {}",
+                analysis
+                    .ambiguous
+                    .as_ref()
+                    .map_or_else(String::new, gap::report::ambiguity)
+            )
         }
         None => outln!("no significant missing effect"),
     }
@@ -490,8 +502,14 @@ fn run_summary(
             f(o.z_after, 1)
         );
     }
-    if a.accepted.is_empty() {
-        outln!("no significant missing effect");
+    match (&a.ambiguous, a.accepted.is_empty()) {
+        (Some(pair), true) => outln!("ambiguous: {}", gap::report::ambiguity(pair)),
+        (Some(pair), false) => outln!(
+            "then ambiguous: {}; nothing more is named",
+            gap::report::ambiguity(pair)
+        ),
+        (None, true) => outln!("no significant missing effect"),
+        (None, false) => {}
     }
     // Final values: each accepted effect as refitted jointly with the ones after it.
     for e in a.fitted.effects.iter().skip(model.effects.len()) {

@@ -95,6 +95,10 @@ pub struct Candidate {
     pub variance_factor: f64,
     /// Effects accepted before, refitted jointly with this one (empty when they are held).
     pub refitted: Vec<Refitted>,
+    /// The values of the fit on the training blocks alone, where there was one: a later
+    /// round's warm start, which must not have seen the blocks that round judges on.
+    #[serde(skip)]
+    pub trained: Vec<f64>,
 }
 
 impl Candidate {
@@ -120,6 +124,7 @@ impl Candidate {
             noise_factor: 1.0,
             variance_factor: 1.0,
             refitted: Vec::new(),
+            trained: Vec::new(),
         }
     }
 
@@ -274,19 +279,25 @@ fn unconfirmed_rival<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a 
     })
 }
 
-/// An effect of `round` that passes every guard with a delta BIC within the margin of
-/// `win`'s and that the data do not rank below it: a delta BIC under the margin is not strong
-/// evidence for either (Kass and Raftery 1995), so two sensor effects or two physics effects
-/// that close are a tie, and so is a physics effect close behind a sensor winner (a sensor
-/// effect may take a disagreement only with its own signature). Only a sensor effect close
-/// behind a physics winner is no tie: the physics wins. Library effects only.
+/// An effect of `round` that explains the same disagreement as `win` about as well: it
+/// passes every guard, is of the same kind (mean or variance: their delta BICs come from
+/// different likelihoods), shares a signature channel with it, and trails it by less than
+/// the delta-BIC margin, which is not very strong evidence for either (Kass and Raftery
+/// 1995). Two sensor effects or two physics effects that close are a tie, and so is a
+/// physics effect close behind a sensor winner (a sensor effect may take a disagreement only
+/// with its own signature). Only a sensor effect close behind a physics winner is no tie:
+/// the physics wins. Library effects only.
 fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
-    let win_physics = crate::gap::effects::by_name(&win.name).map(|e| e.physics)?;
+    let w = crate::gap::effects::by_name(&win.name)?;
     round.iter().find(|c| {
         c.name != win.name
             && c.testable
             && c.guards.all()
-            && crate::gap::effects::by_name(&c.name).is_some_and(|e| e.physics || !win_physics)
+            && crate::gap::effects::by_name(&c.name).is_some_and(|e| {
+                (e.physics || !w.physics)
+                    && e.kind == w.kind
+                    && e.channels.iter().any(|ch| w.channels.contains(ch))
+            })
             && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
     })
 }
@@ -499,9 +510,10 @@ mod tests {
 
     /// Regression (a coin toss named: a depth gain named `depth_offset` 0.6 BIC ahead of
     /// `depth_gain`, a thrust gain named `thrust_curve` 4.3 ahead): two effects of one kind
-    /// that both pass every guard within the delta-BIC margin end the selection as ambiguous,
-    /// the winner first; the same pair further apart names the winner, and a candidate close
-    /// behind that fails a guard is no look-alike.
+    /// on a shared channel that both pass every guard within the delta-BIC margin end the
+    /// selection as ambiguous, the winner first; the same pair further apart names the
+    /// winner, and a candidate close behind that fails a guard, shares no channel or is of
+    /// the other kind is no look-alike.
     #[test]
     fn two_effects_of_one_kind_within_the_margin_are_ambiguous() {
         for (first, second) in [
@@ -529,6 +541,19 @@ mod tests {
             ]);
             assert_eq!(failed.accepted[0].name, first);
             assert!(failed.ambiguous.is_none());
+        }
+        // Close but on channels the other does not touch, or of the other kind (a variance
+        // effect's delta BIC is of another likelihood): no tie, the winner is named.
+        for (first, second) in [
+            ("compass_offset", "depth_gain"),
+            ("depth_pwm_emi", "depth_offset"),
+        ] {
+            let apart = one_round(vec![
+                candidate(first, 40.0, true),
+                candidate(second, 39.4, true),
+            ]);
+            assert_eq!(apart.accepted[0].name, first);
+            assert!(apart.ambiguous.is_none());
         }
     }
 

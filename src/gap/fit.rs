@@ -486,8 +486,9 @@ fn fit_part(
 /// fitted to, the values estimated from everything).
 ///
 /// The training fit starts from the best of a scan along each parameter's axis
-/// ([`START_SCAN`]), or, given `warm` (the candidate's values in the round before, with one
-/// more effect in the model since), from the best of those values and a coarser scan
+/// ([`START_SCAN`]), or, given `warm` (the candidate's training-fit values in the round
+/// before, with one more effect in the model since), from the best of those values and a
+/// coarser scan
 /// ([`LATER_SCAN`]): the newly named effect either took the disagreement the candidate
 /// explained (its optimum falls back toward no effect) or left it (it stays near those
 /// values), or, where the earlier effect had pushed the candidate into a basin of the wrong
@@ -523,6 +524,7 @@ fn fit_mean(
     let (signature_pass, signature_text) = signature(setup, effect, r0, &train.residuals);
     let heldout = heldout_gain > HELDOUT_MIN_GAIN;
     let mut evaluations = train.evaluations;
+    let trained = train.params.clone();
     let chosen = if heldout && signature_pass {
         let start = DVector::from_iterator(
             k,
@@ -564,6 +566,7 @@ fn fit_mean(
         noise_factor: chosen.noise_factor,
         variance_factor: chosen.variance_factor,
         refitted: Vec::new(),
+        trained,
     }
 }
 
@@ -740,6 +743,7 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
         noise_factor: 1.0,
         variance_factor: 1.0,
         refitted: Vec::new(),
+        trained: Vec::new(),
     })
 }
 
@@ -779,8 +783,8 @@ fn fit_warm(
     let warm = |name: &str| -> Option<Vec<f64>> {
         previous
             .iter()
-            .find(|c| c.name == name && c.testable)
-            .map(Candidate::values)
+            .find(|c| c.name == name && c.testable && !c.trained.is_empty())
+            .map(|c| c.trained.clone())
     };
     let r0 = setup.residuals(&setup.base, &setup.clean);
     let measured: Vec<&str> = setup

@@ -129,15 +129,17 @@ fn verdict_text(a: &Analysis) -> String {
                 .to_string()
         }
         (crate::gap::Verdict::Ambiguous, None) => {
-            format!("**ambiguous**: {}", ambiguity(a))
+            format!(
+                "**ambiguous**: {}",
+                a.ambiguous.as_ref().map_or_else(String::new, ambiguity)
+            )
         }
         _ => "no significant missing effect".to_string(),
     }
 }
 
-/// Why an `ambiguous` verdict names nothing: the two effects, each with its kind.
-pub fn ambiguity(a: &Analysis) -> String {
-    let [first, second] = a.ambiguous.clone().unwrap_or_default();
+/// Why an ambiguous round names neither of its two effects, each given with its kind.
+pub fn ambiguity([first, second]: &[String; 2]) -> String {
     let kind = |name: &str| match crate::gap::effects::by_name(name) {
         Some(e) if e.physics => "the physics effect",
         _ => "the sensor effect",
@@ -145,8 +147,8 @@ pub fn ambiguity(a: &Analysis) -> String {
     format!(
         "{} `{first}` and {} `{second}` explain the same disagreement about as well (delta BIC \
          within the margin); neither is named",
-        kind(&first),
-        kind(&second)
+        kind(first),
+        kind(second)
     )
 }
 
@@ -187,6 +189,13 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
             s,
             "- **{}** passed every guard but is not named: {}. Nothing more is named",
             r.name, r.why
+        );
+    }
+    if let Some(pair) = a.ambiguous.as_ref().filter(|_| !a.accepted.is_empty()) {
+        let _ = writeln!(
+            s,
+            "- after the effects named, {}. Nothing more is named",
+            ambiguity(pair)
         );
     }
     for u in &a.unexplained {

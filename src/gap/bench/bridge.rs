@@ -55,6 +55,7 @@ pub const FORM: [Edit; 22] = [
     edit(File::Vehicle, "damping.sway_yaw[0]", Change::Set(-3.0)),
     edit(File::Vehicle, "damping.sway_yaw[1]", Change::Set(-6.0)),
     edit(File::Vehicle, "thrusters.exponent", Change::Set(1.3)),
+    // The common dead band: the model file gives no motor a dead band of its own.
     edit(File::Vehicle, "thrusters.deadband", Change::Set(0.15)),
     edit(File::Vehicle, "thrusters.forward_max_n", Change::Scale(0.9)),
     edit(

@@ -176,12 +176,12 @@ pub struct CaseResult {
     pub held_out_raw_reduction_pct: Option<f64>,
     /// True when an effect was accepted and the held-out gap grew (independent source).
     pub held_out_grew: Option<bool>,
-    /// The two effects of an `ambiguous` verdict, the sensor effect first.
+    /// The two effects of an `ambiguous` verdict, the round's winner first.
     #[serde(default)]
     pub ambiguous: Option<[String; 2]>,
     /// The first round's best other candidate passing every guard, and how far its delta
-    /// BIC is behind the round's winner (a sensor winner with a physics runner-up under 10
-    /// behind makes the round `ambiguous`).
+    /// BIC is behind the round's winner (a look-alike under 10 behind makes the round
+    /// `ambiguous`: see `candidate::Selection::ambiguous`).
     #[serde(default)]
     pub runner_up: Option<(String, f64)>,
     /// Wall time of the workflow on the training data (s).

@@ -39,6 +39,9 @@ pub struct SummaryAnalysis {
     pub observations: Vec<ObservationResult>,
     pub rounds: Vec<Vec<Candidate>>,
     pub accepted: Vec<Candidate>,
+    /// The two effects of a round that could not tell them apart
+    /// ([`candidate::Selection::ambiguous`]), its winner first.
+    pub ambiguous: Option<[String; 2]>,
     pub verdict: Verdict,
     pub fitted: GapModel,
     pub chi2_before: f64,
@@ -288,6 +291,7 @@ fn fit_one(
         noise_factor: 1.0,
         variance_factor: 1.0,
         refitted,
+        trained: Vec::new(),
     }
 }
 
@@ -354,7 +358,10 @@ pub fn analyse(
     // The accepted effects with their latest (jointly refitted) values.
     let priors: std::cell::RefCell<Vec<Prior>> = std::cell::RefCell::new(Vec::new());
     let candidate::Selection {
-        rounds, accepted, ..
+        rounds,
+        accepted,
+        ambiguous,
+        ..
     } = candidate::select(
         fit::MAX_EFFECTS,
         &mut |round, _| {
@@ -403,7 +410,7 @@ pub fn analyse(
     let fitted = fitted_model(model, &priors, &accepted);
     let mean1 = predict(&configs, s, None)?;
     let observations = observation_results(s, &sigma_model, &sigma, &mean0, &mean1);
-    Ok(conclude(observations, rounds, accepted, fitted))
+    Ok(conclude(observations, rounds, accepted, ambiguous, fitted))
 }
 
 /// The stand-in experiment the model's configurations are built for: the summary's name and
@@ -501,6 +508,7 @@ fn conclude(
     observations: Vec<ObservationResult>,
     rounds: Vec<Vec<Candidate>>,
     accepted: Vec<Candidate>,
+    ambiguous: Option<[String; 2]>,
     fitted: GapModel,
 ) -> SummaryAnalysis {
     let zs = |f: fn(&ObservationResult) -> Option<f64>| -> Vec<f64> {
@@ -531,10 +539,10 @@ fn conclude(
         consistent_after: chi2(&za) <= chi2_critical_after,
         chi2_critical_after,
         few_observations: n < FEW_OBSERVATIONS,
-        verdict: if accepted.is_empty() {
-            Verdict::None
-        } else {
-            Verdict::Effect
+        verdict: match (accepted.is_empty(), &ambiguous) {
+            (false, _) => Verdict::Effect,
+            (true, Some(_)) => Verdict::Ambiguous,
+            (true, None) => Verdict::None,
         },
         gap_before: gb,
         gap_after: ga,
@@ -542,6 +550,7 @@ fn conclude(
         observations,
         rounds,
         accepted,
+        ambiguous,
         fitted,
     }
 }

@@ -48,6 +48,7 @@ pub fn json(a: &SummaryAnalysis, s: &Summary) -> Value {
             "delta_bic": e.delta_bic,
         })).collect::<Vec<_>>(),
         "verdict": a.verdict,
+        "ambiguous": a.ambiguous,
         "bic_margin": fit::BIC_MARGIN,
         "gap_before": gap(|o| o.z_before),
         "gap_after": gap(|o| o.z_after),
@@ -76,17 +77,19 @@ pub fn markdown(a: &SummaryAnalysis, s: &Summary) -> String {
     if !s.description.is_empty() {
         let _ = writeln!(out, "{}\n", s.description);
     }
-    let verdict = if a.accepted.is_empty() {
-        "no significant missing effect".to_string()
-    } else {
-        format!(
-            "missing or wrong: **{}**",
+    let ambiguous = a.ambiguous.as_ref().map(crate::gap::report::ambiguity);
+    let verdict = match (a.accepted.is_empty(), ambiguous) {
+        (true, None) => "no significant missing effect".to_string(),
+        (true, Some(why)) => format!("**ambiguous**: {why}"),
+        (false, then) => format!(
+            "missing or wrong: **{}**{}",
             a.accepted
                 .iter()
                 .map(|c| c.name.as_str())
                 .collect::<Vec<_>>()
-                .join("**, then **")
-        )
+                .join("**, then **"),
+            then.map_or_else(String::new, |why| format!("; then ambiguous: {why}"))
+        ),
     };
     let _ = writeln!(
         out,
