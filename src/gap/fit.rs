@@ -488,11 +488,10 @@ fn fit_part(
 /// The training fit starts from the best of a scan along each parameter's axis
 /// ([`START_SCAN`]), or, given `warm` (the candidate's training-fit values in the round
 /// before, with one more effect in the model since), from the best of those values and a
-/// coarser scan
-/// ([`LATER_SCAN`]): the newly named effect either took the disagreement the candidate
-/// explained (its optimum falls back toward no effect) or left it (it stays near those
-/// values), or, where the earlier effect had pushed the candidate into a basin of the wrong
-/// sign, the coarse scan finds the other side.
+/// coarser scan ([`LATER_SCAN`]): the newly named effect either took the disagreement the
+/// candidate explained (its optimum falls back toward no effect) or left it (it stays near
+/// those values), or, where the earlier effect had pushed the candidate into a basin of the
+/// wrong sign, the coarse scan finds the other side.
 fn fit_mean(
     setup: &Setup<'_>,
     effect: &'static Effect,
