@@ -173,11 +173,18 @@ fn hidden_thrust_gain_in_summary_numbers_is_found() {
         .collect();
     assert_eq!(a.verdict, Verdict::Ambiguous, "{round0:?}");
     assert!(a.accepted.is_empty());
-    let pair = a.ambiguous.clone().expect("an ambiguous verdict names its pair");
+    let pair = a
+        .ambiguous
+        .clone()
+        .expect("an ambiguous verdict names its pair");
     assert_eq!(pair[0], "thrust_gain", "{round0:?}");
     let win = &a.rounds[0][0];
     assert_eq!(win.name, "thrust_gain");
-    assert!((win.values()[0] - 0.25).abs() <= 0.025, "gain {:?}", win.values());
+    assert!(
+        (win.values()[0] - 0.25).abs() <= 0.025,
+        "gain {:?}",
+        win.values()
+    );
     let behind = win.delta_bic_uncalibrated - a.rounds[0][1].delta_bic_uncalibrated;
     assert!(behind < 10.0, "{round0:?}");
 }
