@@ -293,20 +293,7 @@ mod tests {
 
     #[test]
     fn lag_reaches_63_percent_after_one_time_constant() {
-        let c = common();
-        let dyn_ = ThrusterDynamics::new(
-            &ThrusterCommon {
-                fluctuation_rel_std: 0.0,
-                ..c
-            },
-            0.01,
-        );
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64_for_test(1);
-        let (mut f, mut n) = (0.0, 0.0);
-        let mut out = 0.0;
-        for _ in 0..25 {
-            out = dyn_.step(&mut f, &mut n, 10.0, 10.0, &mut rng);
-        }
+        let out = lagged(common(), 0.0, 10.0, 25);
         assert!((out - 10.0 * (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{out}");
     }
 
