@@ -367,8 +367,14 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
              --spread-from) runs so `gap` knows how far an effect strays when nothing changed"
         );
     } else {
+        let dof = c.model.spread_dof.map_or(String::new(), |d| {
+            format!(
+                " ({d} degrees of freedom: `gap` widens it x{:.2} in its intervals)",
+                crate::gap::model::spread_factor(d)
+            )
+        });
         outln!(
-            "between-run spread measured on {}",
+            "between-run spread measured on {}{dof}",
             c.spread_from.join(", ")
         );
         outln!("| effect | parameter | between-run spread (1 sigma) |");

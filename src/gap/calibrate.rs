@@ -607,6 +607,14 @@ pub fn calibrate(
     let (apparent, spread_unidentified) =
         between_run_spread(model, &prepared, spread_from, &chosen, &x, progress)?;
     let spread = record_spread(apparent, &mut out.model);
+    // The scatter is measured on the spread runs, or on the baseline runs the joint fit
+    // already pulled towards zero: one degree of freedom fewer.
+    out.model.spread_dof = match spread_from.len() {
+        0 => baseline.len().checked_sub(1),
+        n => Some(n),
+    }
+    .filter(|_| !spread.is_empty())
+    .and_then(|n| u32::try_from(n).ok());
 
     progress("scoring");
     let runs = score_runs(model, baseline, validate, &chosen, &x)?;

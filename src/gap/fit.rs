@@ -115,9 +115,44 @@ pub struct Setup<'a> {
     pub split: Split,
     /// Between-run spread of each effect on baseline runs (`GapModel::spread`).
     pub spread: Vec<EnabledEffect>,
+    /// Each channel's known chi-square per sample (`GapModel::known_chi2`; 1: the noise
+    /// floor), by channel index: what the report's gap measure is taken against.
+    pub known: Vec<f64>,
 }
 
 impl Setup<'_> {
+    /// The setup with `model`'s known disagreement as the level of each channel.
+    #[must_use]
+    pub fn with_known(mut self, model: &crate::gap::model::GapModel) -> Self {
+        self.known = self
+            .m
+            .channels
+            .iter()
+            .map(|c| model.known_chi2(&c.name))
+            .collect();
+        self
+    }
+
+    /// Channel by channel (index), the chi-square per independent sample of `r` on `part`
+    /// (the training blocks, the held-out blocks, or all of them): the report's gap measure
+    /// before each channel is taken against its known level and averaged.
+    pub fn part_levels(&self, r: &Residuals, part: Option<bool>) -> Vec<(usize, f64)> {
+        self.modelled()
+            .into_iter()
+            .filter_map(|i| {
+                let tau = self.floors[i].as_ref()?.tau;
+                let (sum, n) = r
+                    .values
+                    .iter()
+                    .zip(&r.owner)
+                    .zip(&r.training)
+                    .filter(|((_, o), t)| **o == i && part.is_none_or(|p| **t == p))
+                    .fold((0.0, 0usize), |(s, n), ((v, _), _)| (s + v * v, n + 1));
+                (n > 0).then(|| (i, sum / (n as f64 / tau)))
+            })
+            .collect()
+    }
+
     /// The between-run variance of each of `effect`'s parameters, in units of its scales.
     fn spread_variance(&self, effect: &Effect) -> Vec<f64> {
         let found = self.spread.iter().find(|s| s.effect.name == effect.name);
@@ -480,6 +515,25 @@ fn fit_part(
     })
 }
 
+/// Whether the held-out blocks' gap, as the report measures it (each channel's chi-square per
+/// independent sample over its known level, averaged over channels), is larger with residuals
+/// `after` than with `before`. A fit that buys a large chi-square gain in one dense channel
+/// with losses in the others has not made the model better where the report looks.
+pub(crate) fn held_out_gap_grows(setup: &Setup<'_>, before: &Residuals, after: &Residuals) -> bool {
+    let measure = |r: &Residuals| {
+        let levels = setup.part_levels(r, Some(false));
+        crate::gap::channel_mean(
+            levels
+                .into_iter()
+                .map(|(i, chi2)| (chi2, setup.known.get(i).copied().unwrap_or(1.0))),
+        )
+    };
+    match (measure(after), measure(before)) {
+        (Some(a), Some(b)) => a > b,
+        _ => false,
+    }
+}
+
 /// Fits one mean-type candidate: on the training blocks first, judged on the held-out
 /// blocks; a candidate that the held-out blocks confirm is then fitted on all the data for
 /// its values, interval and significance (the structure validated on data it was not
@@ -521,7 +575,8 @@ fn fit_mean(
     let heldout_chi2_after = train.residuals.chi2(false);
     let heldout_gain = (heldout_chi2_before - heldout_chi2_after) / train.scale;
     let (signature_pass, signature_text) = signature(setup, effect, r0, &train.residuals);
-    let heldout = heldout_gain > HELDOUT_MIN_GAIN;
+    let heldout =
+        heldout_gain > HELDOUT_MIN_GAIN && !held_out_gap_grows(setup, r0, &train.residuals);
     let mut evaluations = train.evaluations;
     let trained = train.params.clone();
     let chosen = if heldout && signature_pass {
@@ -935,6 +990,7 @@ pub fn setup<'a>(
         floors,
         split,
         spread: spread.to_vec(),
+        known: vec![1.0; m.channels.len()],
     })
 }
 

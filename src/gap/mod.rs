@@ -260,7 +260,7 @@ pub(crate) fn excess(per_channel: impl Iterator<Item = (f64, f64)>) -> f64 {
 
 /// The gap measure's `q` before its floor at 1: the mean over channels of chi2 per sample over
 /// the known level (`None` without channels).
-fn channel_mean(per_channel: impl Iterator<Item = (f64, f64)>) -> Option<f64> {
+pub(crate) fn channel_mean(per_channel: impl Iterator<Item = (f64, f64)>) -> Option<f64> {
     let (mut sum, mut n) = (0.0, 0usize);
     for (chi2, known) in per_channel {
         sum += chi2 / known.max(1.0);
@@ -303,20 +303,15 @@ fn part_channels(
 ) -> Vec<(f64, f64)> {
     let r = setup.residuals(c, run);
     setup
-        .modelled()
+        .part_levels(&r, part)
         .into_iter()
-        .filter_map(|i| {
-            let tau = setup.floors[i].as_ref()?.tau;
-            let (sum, n) = r
-                .values
-                .iter()
-                .zip(&r.owner)
-                .zip(&r.training)
-                .filter(|((_, o), t)| **o == i && part.is_none_or(|p| **t == p))
-                .fold((0.0, 0usize), |(s, n), ((v, _), _)| (s + v * v, n + 1));
-            let name = &setup.m.channels[i].name;
-            let known = if raw { 1.0 } else { model.known_chi2(name) };
-            (n > 0).then(|| (sum / (n as f64 / tau), known))
+        .map(|(i, chi2)| {
+            let known = if raw {
+                1.0
+            } else {
+                model.known_chi2(&setup.m.channels[i].name)
+            };
+            (chi2, known)
         })
         .collect()
 }
@@ -431,7 +426,8 @@ pub fn analyse_with(
         .collect();
     let before = stats_for(model, m, &start, &clean0, &floors);
 
-    let first = fit::setup(m, start.clone(), &floors, options.split, &model.spread)?;
+    let spread = model.predictive_spread();
+    let first = fit::setup(m, start.clone(), &floors, options.split, &spread)?.with_known(model);
     let heldout_before = heldout_excess(model, &first, &start, &clean0, false);
     let heldout_raw_before = heldout_excess(model, &first, &start, &clean0, true);
     // The model with the accepted effects: what each round fits against, and its gap
@@ -449,6 +445,7 @@ pub fn analyse_with(
             base: first.base.clone(),
             clean: first.clean.clone(),
             spread: first.spread.clone(),
+            known: first.known.clone(),
             ..first
         };
         channel_mean(part_channels(model, &judged, c, run, false, None).into_iter()).unwrap_or(0.0)
@@ -469,7 +466,8 @@ pub fn analyse_with(
         fit::MAX_EFFECTS,
         &mut |round, accepted| {
             let floors = current_floors.borrow();
-            let setup = fit::setup(m, round_configs(), &floors, options.split, &model.spread)?;
+            let setup =
+                fit::setup(m, round_configs(), &floors, options.split, &spread)?.with_known(model);
             let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
             skip.extend(model.effects.iter().map(|e| e.effect.name));
             let results =
@@ -505,7 +503,8 @@ pub fn analyse_with(
             }
             if named.len() > 1 {
                 let floors = current_floors.borrow();
-                let setup = fit::setup(m, start.clone(), &floors, options.split, &model.spread)?;
+                let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
+                    .with_known(model);
                 if let Some(refit) = fit::refit_jointly(&setup, &named) {
                     for ((values, ci), (new_values, new_ci)) in joint.iter_mut().zip(refit) {
                         *values = new_values;
@@ -560,7 +559,8 @@ pub fn analyse_with(
                 && share < LATER_NAME_MIN_SHARE
             {
                 let floors = current_floors.borrow();
-                let setup = fit::setup(m, round_configs(), &floors, options.split, &model.spread)?;
+                let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
+                    .with_known(model);
                 let strong = fit::strong_blocks(
                     &first.residuals(&start, &clean0),
                     &setup.residuals(&setup.base, &setup.clean),
@@ -607,7 +607,8 @@ pub fn analyse_with(
                 && let Some(win) = accepted.last()
             {
                 let floors = current_floors.borrow();
-                let setup = fit::setup(m, round_configs(), &floors, options.split, &model.spread)?;
+                let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
+                    .with_known(model);
                 if let Some(rival) = fit::structural_rival(&setup, win) {
                     return Ok(Some(format!(
                         "`{}`, a term of the base model's structure, explains the same \

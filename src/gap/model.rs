@@ -41,6 +41,8 @@ struct RawModel {
     #[serde(default, rename = "spread")]
     spread: Vec<RawEffect>,
     #[serde(default)]
+    spread_dof: Option<u32>,
+    #[serde(default)]
     discrepancy: BTreeMap<String, f64>,
 }
 
@@ -82,6 +84,10 @@ pub struct GapModel {
     /// two or more runs): model error that looks like the effect. `gap` adds it to the fit's
     /// own uncertainty before deciding an effect is there.
     pub spread: Vec<EnabledEffect>,
+    /// The degrees of freedom of the spread's estimate: the number of null runs it was
+    /// measured on, one fewer when those were the runs the calibration was fitted to. `None`
+    /// (a hand-written spread) takes the spread as known.
+    pub spread_dof: Option<u32>,
     /// The calibrated model's known disagreement per channel: its chi-square per independent
     /// sample on baseline runs (written by `gap calibrate`; 1 = as the noise floor expects).
     /// `gap` measures what is new against it: a channel's gap is its chi-square over this.
@@ -143,8 +149,25 @@ impl GapModel {
             calibration,
             effects,
             spread,
+            spread_dof: raw.spread_dof,
             discrepancy: raw.discrepancy,
         })
+    }
+
+    /// The spread as a fit's interval takes it: each value times `t / z`, the 97.5 %
+    /// quantiles of Student's t with [`Self::spread_dof`] degrees of freedom and of the
+    /// normal. A scatter measured on a few runs is itself uncertain, and a new run's apparent
+    /// value over that estimate follows t, not the normal: with three runs the 95 % interval
+    /// is 1.6 times wider than 1.96 estimated sigmas would make it.
+    pub fn predictive_spread(&self) -> Vec<EnabledEffect> {
+        let factor = self.spread_dof.map_or(1.0, spread_factor);
+        self.spread
+            .iter()
+            .map(|e| EnabledEffect {
+                values: e.values.iter().map(|v| v * factor).collect(),
+                ..e.clone()
+            })
+            .collect()
     }
 
     /// The known chi-square per sample of `channel` (at least 1: the noise floor).
@@ -222,6 +245,12 @@ impl GapModel {
         if let Some(x) = &self.sensors_ref {
             let _ = writeln!(s, "sensors = {:?}", rel(x));
         }
+        if let (Some(dof), false) = (self.spread_dof, self.spread.is_empty()) {
+            let _ = writeln!(
+                s,
+                "spread_dof = {dof}   # degrees of freedom of the [[spread]] estimate"
+            );
+        }
         for (table, e) in self
             .calibration
             .iter()
@@ -264,6 +293,19 @@ impl GapModel {
         }
         s
     }
+}
+
+/// `t(0.975, dof) / z(0.975)`: how much wider a 95 % interval is when its sigma is
+/// estimated with `dof` degrees of freedom.
+pub fn spread_factor(dof: u32) -> f64 {
+    use statrs::distribution::{ContinuousCDF, Normal, StudentsT};
+    let (Ok(t), Ok(z)) = (
+        StudentsT::new(0.0, 1.0, f64::from(dof.max(1))),
+        Normal::new(0.0, 1.0),
+    ) else {
+        return 1.0;
+    };
+    t.inverse_cdf(0.975) / z.inverse_cdf(0.975)
 }
 
 /// Resolves the `[[effect]]` or `[[calibration]]` entries of a model file.
@@ -422,5 +464,35 @@ mod tests {
             m.known_chi2("x_m").to_bits(),
             "{text}"
         );
+    }
+
+    /// A spread measured on few runs widens a fit's interval by Student's t: with the
+    /// degrees of freedom written, each value is scaled by t(0.975, dof) / 1.96 (3.182 / 1.96
+    /// for three runs), the written values stay as measured, and `spread_dof` reads back; a
+    /// spread without it is taken as known.
+    #[test]
+    fn the_spread_widens_by_student_t_for_its_degrees_of_freedom() {
+        let spread = "[[spread]]\nname = \"yaw_damping\"\nparameters = { scale = 0.1 }\n";
+        let known = model(spread).expect("loads");
+        assert_eq!(known.spread_dof, None);
+        assert_eq!(known.predictive_spread()[0].values, vec![0.1]);
+
+        let m = model(&format!("spread_dof = 3\n{spread}")).expect("loads");
+        let widened = m.predictive_spread()[0].values[0];
+        assert!(
+            (widened / 0.1 - 3.182_446 / 1.959_964).abs() < 1e-5,
+            "{widened}"
+        );
+        assert_eq!(m.spread[0].values, vec![0.1]);
+        let again = GapModel::from_text(
+            "again.toml",
+            &m.to_toml("t", Path::new(".")),
+            PathBuf::new(),
+        )
+        .expect("written model loads");
+        assert_eq!(again.spread_dof, Some(3));
+        // Many runs: the normal's interval.
+        assert!((spread_factor(10_000) - 1.0).abs() < 1e-3);
+        assert!(spread_factor(1) > 6.0);
     }
 }

@@ -162,8 +162,9 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
         "Verdict: {verdict}.\n\nAn effect is named only when its parameters lie inside their \
          physical bounds, its 95 % interval is finite and excludes no effect, delta BIC > {} \
          (gain scaled by the residual variance and the correlated process noise), it passes its \
-         signature test, and it lowers the held-out chi-square by more than {} (re-simulation \
-         in {} segments; even {} s blocks fitted, odd blocks held out).\n",
+         signature test, and it lowers the held-out chi-square by more than {} without raising \
+         the held-out gap (re-simulation in {} segments; even {} s blocks fitted, odd blocks \
+         held out).\n",
         fit::BIC_MARGIN,
         fit::HELDOUT_MIN_GAIN,
         a.shooting

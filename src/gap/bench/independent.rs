@@ -1,7 +1,8 @@
 //! Data from the independent vehicle model (`pty-tests/independent/mako_independent.py`): a
 //! different model form, closed-loop programs on measured sensors, its own sensors and noise.
-//! Every run drives the `mixed` program for three minutes; the case loop, calibration and
-//! scoring are [`super::calibrated`]'s. Sizes are multiples of the model's default sizes (its
+//! Every run drives the `mixed` program for three minutes; the between-run spread is measured
+//! on [`SPREAD_RUNS`] null runs of it; the case loop, calibration and scoring are
+//! [`super::calibrated`]'s. Sizes are multiples of the model's default sizes (its
 //! `--list`).
 
 use std::path::Path;
@@ -16,6 +17,8 @@ use crate::gap::effects;
 pub const DURATION_S: f64 = 180.0;
 /// The program every run drives.
 pub const PROGRAM: &str = "mixed";
+/// Null runs the between-run spread is measured on.
+pub const SPREAD_RUNS: usize = 3;
 
 /// The independent model's effects the benchmark runs, in the library's order.
 pub static HIDDEN: LazyLock<Vec<Hidden>> = LazyLock::new(|| {
@@ -200,6 +203,13 @@ impl Truth for Independent<'_> {
 
     fn baseline(&self, _index: usize, seed: u64, out: &Path) -> Result<(), GapError> {
         generate(self.program, seed, self.structure_seed, &[], out)
+    }
+
+    /// As the README's protocol has it: repeat null runs of the cases' programme, apart
+    /// from the runs the calibration is fitted to (three give the spread three degrees of
+    /// freedom; the baseline runs would give two).
+    fn spread_runs(&self) -> usize {
+        SPREAD_RUNS
     }
 
     fn case(&self, seed: u64, hidden: &[(&Hidden, &[f64])], out: &Path) -> Result<(), GapError> {

@@ -201,3 +201,64 @@ fn a_structural_term_outranks_a_later_stand_in_and_not_a_real_effect() {
         real.delta_bic_uncalibrated
     );
 }
+
+/// The held-out guard's second half: residuals that lower the held-out chi-square in all (the
+/// channel with the most independent samples a little better) but raise the report's gap
+/// measure (the channel with the fewest much worse) grow the held-out gap; the same residuals
+/// against a known level that expects that channel to be so far off do not, and residuals
+/// better in both channels do not.
+#[test]
+fn a_held_out_gain_bought_in_one_dense_channel_grows_the_held_out_gap() {
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre(7);
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let plain = setup(&m, c.clone(), &floors, Split::DEFAULT, &[]).unwrap();
+    // One floor of residual everywhere: each channel's level is then its correlation time.
+    let mut before = plain.residuals(&plain.base, &plain.clean);
+    before.values.iter_mut().for_each(|v| *v = 1.0);
+    let held_out = |i: usize| {
+        before
+            .part(false)
+            .filter(|(k, _)| before.owner[*k] == i)
+            .count()
+    };
+    let independent = |i: usize| held_out(i) as f64 / floors[i].as_ref().unwrap().tau;
+    let mut channels = plain.modelled();
+    channels.sort_by(|a, b| independent(*a).total_cmp(&independent(*b)));
+    let (sparse, dense) = (channels[0], channels[channels.len() - 1]);
+    let tau = |i: usize| floors[i].as_ref().unwrap().tau;
+    // Squared residuals: dense 1 - d, sparse 1 + e, with e between the bounds that keep the
+    // chi-square falling (e < d n_dense / n_sparse) and make the measure rise
+    // (e > d tau_dense / tau_sparse).
+    let d = 0.5;
+    let (n_ratio, tau_ratio) = (
+        held_out(dense) as f64 / held_out(sparse) as f64,
+        tau(dense) / tau(sparse),
+    );
+    assert!(n_ratio > tau_ratio, "{n_ratio} {tau_ratio}");
+    let e = d * (n_ratio * tau_ratio).sqrt();
+    let with = |dense_sq: f64, sparse_sq: f64| {
+        let mut r = before.clone();
+        for (v, o) in r.values.iter_mut().zip(&r.owner) {
+            if *o == dense {
+                *v = dense_sq.sqrt();
+            } else if *o == sparse {
+                *v = sparse_sq.sqrt();
+            }
+        }
+        r
+    };
+    let traded = with(1.0 - d, 1.0 + e);
+    assert!(
+        before.chi2(false) - traded.chi2(false) > HELDOUT_MIN_GAIN,
+        "the trade gains in held-out chi-square: {} -> {}",
+        before.chi2(false),
+        traded.chi2(false)
+    );
+    assert!(held_out_gap_grows(&plain, &before, &traded));
+    assert!(!held_out_gap_grows(&plain, &before, &with(1.0 - d, 0.9)));
+    // A known level that holds the sparse channel's disagreement as the model's own.
+    let mut known = plain;
+    known.known[sparse] = 100.0 * (1.0 + e);
+    assert!(!held_out_gap_grows(&known, &before, &traded));
+}
