@@ -27,8 +27,6 @@ use crate::gap::format::Measurement;
 use crate::gap::lsq::{self, Bounds};
 use crate::gap::model::EnabledEffect;
 use crate::gap::resim::{self, Floor, Run};
-use crate::physics::state::STERN;
-use crate::sensors::AdcBoard;
 
 /// A candidate must beat "no effect" by this much BIC to be named (Kass and Raftery 1995:
 /// a BIC difference above 10 is "very strong" evidence).
@@ -628,179 +626,6 @@ fn names(effect: &Effect) -> impl Iterator<Item = String> + '_ {
     effect.parameters.iter().map(|p| p.to_string())
 }
 
-/// The depth channel's per-difference variance for an extra EMI amplitude `e` (V rms at full
-/// stern duty).
-struct EmiData {
-    /// Time of each difference's later sample (s).
-    times: Vec<f64>,
-    r2: Vec<f64>,
-    base_var: Vec<f64>,
-    /// Per-difference (duty * attenuation / lsb)^2, summed over the two samples.
-    gain: Vec<f64>,
-    training: Vec<bool>,
-    emi0: f64,
-    bins: Vec<Vec<usize>>,
-}
-
-impl EmiData {
-    fn var(&self, i: usize, e: f64) -> f64 {
-        let emi = (self.emi0 + e).max(0.0);
-        (self.base_var[i] + (emi * emi - self.emi0 * self.emi0) * self.gain[i]).max(1e-12)
-    }
-
-    fn minus2_log_l(&self, e: f64, training: bool) -> f64 {
-        (0..self.r2.len())
-            .filter(|&i| self.training[i] == training)
-            .map(|i| {
-                let v = self.var(i, e);
-                self.r2[i] / v + v.ln()
-            })
-            .sum::<f64>()
-    }
-
-    /// Per duty bin: the mean squared difference against its expected variance.
-    fn binned(&self, e: f64) -> DVector<f64> {
-        DVector::from_iterator(
-            self.bins.len(),
-            self.bins.iter().map(|b| {
-                let n = b.len().max(1) as f64;
-                let s2 = b.iter().map(|&i| self.r2[i]).sum::<f64>() / n;
-                let v = b.iter().map(|&i| self.var(i, e)).sum::<f64>() / n;
-                (s2 - v) / (v * (2.0 / n).sqrt())
-            }),
-        )
-    }
-}
-
-/// Length of the windows over which the EMI signature averages squared differences (s).
-pub const EMI_WINDOW_S: f64 = 1.0;
-
-/// Means of `a` and `b` over consecutive windows of `window_s` by `times` (ascending); windows
-/// with fewer than 5 samples are left out.
-fn window_means(times: &[f64], a: &[f64], b: &[f64], window_s: f64) -> (Vec<f64>, Vec<f64>) {
-    let (mut ma, mut mb) = (Vec::new(), Vec::new());
-    let mut start = 0;
-    while start < times.len() {
-        let w = (times[start] / window_s).floor();
-        let end = start
-            + times[start..]
-                .iter()
-                .take_while(|t| (**t / window_s).floor() == w)
-                .count()
-                .max(1);
-        if end - start >= 5 {
-            let n = (end - start) as f64;
-            ma.push(a[start..end].iter().sum::<f64>() / n);
-            mb.push(b[start..end].iter().sum::<f64>() / n);
-        }
-        start = end;
-    }
-    (ma, mb)
-}
-
-/// Fits the variance-type candidate (depth EMI) on the depth channel (`None`: no depth
-/// data, or no floor for it).
-pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> {
-    let i = setup
-        .m
-        .channels
-        .iter()
-        .position(|c| c.name == "depth_adc")?;
-    let floor = setup.floors[i].as_ref()?;
-    let ch = &setup.m.channels[i];
-    let p = resim::predict(&setup.base, &setup.clean, ch, 0.0)?;
-    let r = resim::residuals(ch, &p);
-    let d = &setup.base.sensors.depth;
-    let lsb = AdcBoard::new(&setup.base.sensors.adc, 0).lsb_v();
-    let att = d.low_pass_cutoff_hz.map_or(1.0, |fc| {
-        (std::f64::consts::FRAC_PI_2 * fc / d.emi_bandwidth_hz).sqrt()
-    });
-    let duty: Vec<f64> = ch
-        .samples
-        .iter()
-        .map(|(t, _)| setup.clean.at(*t).thruster_effort[STERN].abs().min(1.0))
-        .collect();
-    let g: Vec<f64> = duty.iter().map(|u| (u * att / lsb).powi(2)).collect();
-    let w: Vec<f64> = floor.measurement_std.iter().map(|s| s * s).collect();
-    // Successive differences: a mean error that varies slowly (a missing dynamic effect, the
-    // process noise) cancels, the white sensor noise and EMI add up. So the fit sees only
-    // the spread, and a mean-type effect cannot pose as EMI.
-    let idx: Vec<usize> = (1..r.len()).collect();
-    let training: Vec<bool> = idx
-        .iter()
-        .map(|&i| setup.split.is_training(ch.samples[i].0))
-        .collect();
-    let mut bins: Vec<Vec<usize>> = vec![Vec::new(); 5];
-    for (k, &i) in idx.iter().enumerate() {
-        if training[k] {
-            bins[((duty[i].max(duty[i - 1]) * 5.0) as usize).min(4)].push(k);
-        }
-    }
-    bins.retain(|b| b.len() >= 5);
-    let data = EmiData {
-        times: idx.iter().map(|&i| ch.samples[i].0).collect(),
-        r2: idx.iter().map(|&i| (r[i] - r[i - 1]).powi(2)).collect(),
-        base_var: idx.iter().map(|&i| w[i] + w[i - 1]).collect(),
-        gain: idx.iter().map(|&i| g[i] + g[i - 1]).collect(),
-        training,
-        emi0: d.emi_v_rms_full_duty,
-        bins,
-    };
-    let scale = effect.scales[0];
-    let objective = |x: &DVector<f64>| Some(data.binned(x[0] * scale));
-    let bounds = Bounds::scaled(effect.bounds, effect.scales);
-    let fit = lsq::minimize(&objective, &bounds, &lsq::axis_scan(1, &[1.0]))?;
-    let e = fit.x[0] * scale;
-    let cov = fit.covariance();
-    let ci = lsq::intervals(&fit.x, cov.as_ref(), effect.scales, 1.0);
-    let before = data.minus2_log_l(0.0, true);
-    let after = data.minus2_log_l(e, true);
-    let n = data.training.iter().filter(|t| **t).count().max(2) as f64;
-    // One parameter; the sample size is that of the differences the likelihood uses.
-    let delta_bic = before - after - n.ln();
-    let heldout_before = data.minus2_log_l(0.0, false);
-    let heldout_after = data.minus2_log_l(e, false);
-    // Signature: the local variance grows with the stern duty. One squared difference is a
-    // chi-square draw with one degree of freedom, so its own correlation with duty^2 stays
-    // below about 0.45 even when EMI is all the noise there is; means over
-    // [`EMI_WINDOW_S`] windows estimate the local variance.
-    let (local_r2, local_gain) = window_means(&data.times, &data.r2, &data.gain, EMI_WINDOW_S);
-    let corr = crate::gap::residuals::pearson(&local_r2, &local_gain);
-    let signature_pass = e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION;
-    let params = [e];
-    let guards = Guards {
-        inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
-        interval_excludes_zero: interval_excludes_zero(&ci, &fit.x, cov.as_ref(), 1.0),
-        significant: delta_bic > BIC_MARGIN,
-        signature: signature_pass,
-        heldout: Some(heldout_before - heldout_after > HELDOUT_MIN_GAIN),
-    };
-    Some(Candidate {
-        name: effect.name.to_string(),
-        parameters: vec![(effect.parameters[0].to_string(), e)],
-        ci95: vec![(effect.parameters[0].to_string(), ci[0])],
-        chi2_before: before,
-        chi2_after: after,
-        delta_bic,
-        delta_bic_uncalibrated: delta_bic,
-        heldout_chi2_before: Some(heldout_before),
-        heldout_chi2_after: Some(heldout_after),
-        heldout_gain: Some(heldout_before - heldout_after),
-        signature_pass,
-        signature: format!(
-            "{}: correlation of the depth residuals' local variance with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}; {EMI_WINDOW_S} s windows)",
-            effect.signature
-        ),
-        guards,
-        testable: true,
-        evaluations: fit.evaluations,
-        noise_factor: 1.0,
-        variance_factor: 1.0,
-        refitted: Vec::new(),
-        trained: Vec::new(),
-    })
-}
-
 /// Fits every candidate not yet in the model, on as many threads as the machine has cores
 /// (each fit is independent and deterministic, and results keep the library's order before
 /// ranking, so the outcome does not depend on the thread count); `progress` is called as
@@ -994,6 +819,8 @@ pub fn setup<'a>(
     })
 }
 
+mod emi;
+pub use emi::{EMI_WINDOW_S, fit_emi};
 mod constancy;
 pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, strong_blocks};
 mod rival;

@@ -1,3 +1,4 @@
+use super::emi::window_means;
 use super::*;
 
 /// The EMI signature on squared differences drawn with a variance that follows the duty
