@@ -117,6 +117,16 @@ impl GapModel {
         let calibration = enabled(&doc, "calibration", &raw.calibration)?;
         let effects = enabled(&doc, "effect", &raw.effects)?;
         let spread = enabled(&doc, "spread", &raw.spread)?;
+        if raw.spread_dof == Some(0) {
+            return Err(doc
+                .invalid(
+                    "spread_dof",
+                    "expected the degrees of freedom of the [[spread]] estimate, 1 or more \
+                     (the number of spread runs, or the baseline runs less one); got 0"
+                        .to_string(),
+                )
+                .into());
+        }
         for (channel, v) in &raw.discrepancy {
             if !crate::gap::resim::MODELLED.contains(&channel.as_str())
                 && crate::gap::sonar::index(channel).is_none()
@@ -491,6 +501,8 @@ mod tests {
         )
         .expect("written model loads");
         assert_eq!(again.spread_dof, Some(3));
+        let e = model(&format!("spread_dof = 0\n{spread}")).expect_err("no degrees of freedom");
+        assert!(e.to_string().contains("spread_dof"), "{e}");
         // Many runs: the normal's interval.
         assert!((spread_factor(10_000) - 1.0).abs() < 1e-3);
         assert!(spread_factor(1) > 6.0);
