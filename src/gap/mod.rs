@@ -280,21 +280,14 @@ fn stats_excess(stats: &[ChannelStats], raw: bool) -> f64 {
 
 /// The held-out gap: [`excess`] of the held-out blocks' chi-square per independent sample,
 /// channel by channel, against the model's known levels (`raw`: the noise floor alone).
-fn heldout_excess(
-    model: &GapModel,
-    setup: &fit::Setup<'_>,
-    c: &Configs,
-    run: &resim::Run,
-    raw: bool,
-) -> f64 {
-    excess(part_channels(model, setup, c, run, raw, Some(false)).into_iter())
+fn heldout_excess(setup: &fit::Setup<'_>, c: &Configs, run: &resim::Run, raw: bool) -> f64 {
+    excess(part_channels(setup, c, run, raw, Some(false)).into_iter())
 }
 
 /// Channel by channel, the chi-square per independent sample of `setup`'s residuals of
 /// `run` (the samples its fits see: wall contacts left out) on `part` (the training blocks,
-/// the held-out blocks, or all of them), with the model's known level (`raw`: 1).
+/// the held-out blocks, or all of them), with the setup's known level (`raw`: 1).
 fn part_channels(
-    model: &GapModel,
     setup: &fit::Setup<'_>,
     c: &Configs,
     run: &resim::Run,
@@ -306,11 +299,7 @@ fn part_channels(
         .part_levels(&r, part)
         .into_iter()
         .map(|(i, chi2)| {
-            let known = if raw {
-                1.0
-            } else {
-                model.known_chi2(&setup.m.channels[i].name)
-            };
+            let known = if raw { 1.0 } else { setup.known[i] };
             (chi2, known)
         })
         .collect()
@@ -428,8 +417,8 @@ pub fn analyse_with(
 
     let spread = model.predictive_spread();
     let first = fit::setup(m, start.clone(), &floors, options.split, &spread)?.with_known(model);
-    let heldout_before = heldout_excess(model, &first, &start, &clean0, false);
-    let heldout_raw_before = heldout_excess(model, &first, &start, &clean0, true);
+    let heldout_before = heldout_excess(&first, &start, &clean0, false);
+    let heldout_raw_before = heldout_excess(&first, &start, &clean0, true);
     // The model with the accepted effects: what each round fits against, and its gap
     // measure's channel mean on the samples the fits see.
     let configs = std::cell::RefCell::new(start.clone());
@@ -448,7 +437,7 @@ pub fn analyse_with(
             known: first.known.clone(),
             ..first
         };
-        channel_mean(part_channels(model, &judged, c, run, false, None).into_iter()).unwrap_or(0.0)
+        channel_mean(part_channels(&judged, c, run, false, None).into_iter()).unwrap_or(0.0)
     };
     let current_mean = std::cell::Cell::new(mean_of(&start, &clean0));
     // The configurations with the effects accepted so far, which each round's setup fits
@@ -655,8 +644,8 @@ pub fn analyse_with(
         floors: &floors_after,
         ..first
     };
-    let heldout_after = heldout_excess(model, &judged, &configs, &clean1, false);
-    let heldout_raw_after = heldout_excess(model, &judged, &configs, &clean1, true);
+    let heldout_after = heldout_excess(&judged, &configs, &clean1, false);
+    let heldout_raw_after = heldout_excess(&judged, &configs, &clean1, true);
     let (eb, ea) = (stats_excess(&before, false), stats_excess(&after, false));
     let shares_pct = shares(model, m, &start, &accepted, &floors, ea)?;
     let (rb, ra) = (stats_excess(&before, true), stats_excess(&after, true));
