@@ -99,6 +99,10 @@ pub struct Candidate {
     /// round's warm start, which must not have seen the blocks that round judges on.
     #[serde(skip)]
     pub trained: Vec<f64>,
+    /// How the fit changed each residual (after less before, all samples, in the order of the
+    /// setup's residuals); empty where there is none (a variance effect, a summary fit).
+    #[serde(skip)]
+    pub change: Vec<f64>,
 }
 
 impl Candidate {
@@ -125,6 +129,7 @@ impl Candidate {
             variance_factor: 1.0,
             refitted: Vec::new(),
             trained: Vec::new(),
+            change: Vec::new(),
         }
     }
 
@@ -147,70 +152,87 @@ pub fn winner(round: &[Candidate]) -> Option<&Candidate> {
     round.iter().find(|r| r.testable && r.guards.all())
 }
 
-/// One round of an objective: round number and the effects accepted so far in, every
+/// One round of an objective: round number, the effects accepted so far and the winners
+/// refused so far in (a refused winner need not be fitted again: it does not take part), every
 /// candidate's fit out (`None`: nothing can be fitted any more).
 pub type FitRound<'a> =
-    dyn FnMut(usize, &[Candidate]) -> Result<Option<Vec<Candidate>>, GapError> + 'a;
+    dyn FnMut(usize, &[Candidate], &[Refused]) -> Result<Option<Vec<Candidate>>, GapError> + 'a;
 /// Takes a round's winner, the last of the accepted effects, into the model; it may replace
 /// the accepted effects' values (the winner's too) by their joint refit. `Some(why)` refuses
-/// the winner after all (the accepted effects' values left as they were): the selection
-/// stops there.
-pub type Accept<'a> = dyn FnMut(&mut [Candidate]) -> Result<Option<String>, GapError> + 'a;
+/// the winner after all (the accepted effects' values left as they were): the round's next
+/// candidate is tried in its place, and is handed over with the winners refused before it in
+/// the same round.
+pub type Accept<'a> =
+    dyn FnMut(&mut [Candidate], &[Refused]) -> Result<Option<String>, GapError> + 'a;
+
+/// Winners one round may refuse before the selection stops. A refusal says the winner is
+/// no effect of its own (it does not shrink the gap, or it stands in for what the earlier
+/// names or the base model's structure lack), not that the round holds none: the next
+/// candidate may be the effect the refused one stood in front of. Two refused in one round
+/// say most of what is left is what no candidate is; each refusal also costs a structural
+/// check of up to 14 fits.
+pub const REFUSALS_PER_ROUND: usize = 2;
 
 /// The greedy selection, whatever the objective: up to `max` rounds; in each, `fit_round`
 /// fits every candidate not yet accepted against the model with the accepted effects
 /// (`None`: nothing can be fitted any more), the round is ranked, and its winner is accepted
 /// and handed to `accept` (which may replace the accepted effects' values by their joint
-/// refit, or refuse it). Stops at the first round without a winner or with a refused one.
+/// refit, or refuse it). A refused winner gives way to the round's next candidate that
+/// passes every guard, judged by the same rules without it. Stops at the first round without
+/// a winner, or with [`REFUSALS_PER_ROUND`] refused.
 /// Returns every round and the accepted effects in order.
 pub fn select(
     max: usize,
     fit_round: &mut FitRound<'_>,
     accept: &mut Accept<'_>,
 ) -> Result<Selection, GapError> {
-    let mut rounds = Vec::new();
+    let mut rounds: Vec<Vec<Candidate>> = Vec::new();
     let mut accepted: Vec<Candidate> = Vec::new();
     let mut ambiguous = None;
     let mut outranked_by = None;
-    let mut refused = None;
-    for round in 0..max {
-        let Some(mut results) = fit_round(round, &accepted)? else {
+    let mut refused = Vec::new();
+    'rounds: for round in 0..max {
+        let Some(mut results) = fit_round(round, &accepted, &refused)? else {
             break;
         };
         rank(&mut results);
-        let win = winner(&results).cloned();
-        let lookalike = win
-            .as_ref()
-            .and_then(|w| lookalike(&results, w))
-            .map(|alt| {
-                [
-                    win.as_ref().map_or(String::new(), |w| w.name.clone()),
-                    alt.name.clone(),
-                ]
-            });
-        let unconfirmed = win
-            .as_ref()
-            .and_then(|w| unconfirmed_rival(&results, w))
-            .map(|c| Outranked {
-                name: c.name.clone(),
-                failed: c.guards.failed(),
-            });
         rounds.push(results);
-        let Some(win) = win else { break };
-        if unconfirmed.is_some() {
-            outranked_by = unconfirmed;
-            break;
-        }
-        if lookalike.is_some() {
-            ambiguous = lookalike;
-            break;
-        }
-        let name = win.name.clone();
-        accepted.push(win);
-        if let Some(why) = accept(&mut accepted)? {
+        let results = rounds.last().map_or(&[][..], Vec::as_slice);
+        // The round's candidates less those refused in it or before: a refused winner is
+        // judged no effect, so it neither wins again nor counts as a rival of the next.
+        let mut refused_here = 0;
+        loop {
+            let pool: Vec<Candidate> = results
+                .iter()
+                .filter(|c| refused.iter().all(|r: &Refused| r.name != c.name))
+                .cloned()
+                .collect();
+            let Some(win) = winner(&pool).cloned() else {
+                break 'rounds;
+            };
+            if let Some(c) = unconfirmed_rival(&pool, &win) {
+                outranked_by = Some(Outranked {
+                    name: c.name.clone(),
+                    failed: c.guards.failed(),
+                });
+                break 'rounds;
+            }
+            if let Some(alt) = lookalike(&pool, &win) {
+                ambiguous = Some([win.name.clone(), alt.name.clone()]);
+                break 'rounds;
+            }
+            let name = win.name.clone();
+            accepted.push(win);
+            let this_round = &refused[refused.len() - refused_here..];
+            let Some(why) = accept(&mut accepted, this_round)? else {
+                continue 'rounds;
+            };
             accepted.pop();
-            refused = Some(Refused { name, why });
-            break;
+            refused.push(Refused { round, name, why });
+            refused_here += 1;
+            if refused_here >= REFUSALS_PER_ROUND {
+                break 'rounds;
+            }
         }
     }
     Ok(Selection {
@@ -240,14 +262,17 @@ pub struct Selection {
     /// fit go. Selection stops there: the winner would be a stand-in taking the share of the
     /// disagreement it can.
     pub outranked_by: Option<Outranked>,
-    /// A round's winner that passed every guard but that the model could not take in (see
-    /// [`Accept`]): selection stops there, naming it not.
-    pub refused: Option<Refused>,
+    /// Winners that passed every guard but that the model could not take in (see
+    /// [`Accept`]), in the order refused: none is named, and the next candidate of the same
+    /// round takes its place, up to [`REFUSALS_PER_ROUND`] refusals in a round.
+    pub refused: Vec<Refused>,
 }
 
 /// A winner refused when it was taken into the model ([`Selection::refused`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Refused {
+    /// The round it won (0 the first).
+    pub round: usize,
     pub name: String,
     /// Why, in words with the figures.
     pub why: String,
@@ -292,7 +317,7 @@ fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidat
     round.iter().find(|c| {
         c.name != win.name
             && c.testable
-            && c.guards.all()
+            && (c.guards.all() || same_change_but_interval(c, win))
             && crate::gap::effects::by_name(&c.name).is_some_and(|e| {
                 (e.physics || !w.physics)
                     && e.kind == w.kind
@@ -300,6 +325,34 @@ fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidat
             })
             && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
     })
+}
+
+/// Two fits whose changes of the residuals point the same way at least this closely (the
+/// cosine of the angle between them) explain the same disagreement.
+pub const SAME_CHANGE_COSINE: f64 = 0.9;
+
+/// `c` fails no guard but its interval, and changes the residuals as `win` does (cosine at
+/// least [`SAME_CHANGE_COSINE`]): it explains the same disagreement, and its interval holds 0
+/// only because null runs stray by as much (a depth gain beside a depth offset, both read at
+/// the surface where the buoyancy fixes the depth). The winner is then not established over
+/// it either. A rival that fails its interval and explains another part of the disagreement
+/// (a hard iron's once-per-turn error beside a compass offset) is no look-alike.
+fn same_change_but_interval(c: &Candidate, win: &Candidate) -> bool {
+    let mut rest = c.guards;
+    rest.interval_excludes_zero = true;
+    if c.guards.interval_excludes_zero || !rest.all() || c.change.len() != win.change.len() {
+        return false;
+    }
+    let dot: f64 = c.change.iter().zip(&win.change).map(|(a, b)| a * b).sum();
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let cosine = dot / (norm(&c.change) * norm(&win.change));
+    tracing::debug!(
+        winner = win.name,
+        rival = c.name,
+        cosine,
+        "a rival that fails only its interval"
+    );
+    cosine >= SAME_CHANGE_COSINE
 }
 
 /// The winner of `round` and the best other candidate that passes every guard, with how far
@@ -388,14 +441,14 @@ mod tests {
     fn one_round(round0: Vec<Candidate>) -> Selection {
         select(
             2,
-            &mut |round, _| {
+            &mut |round, _, _| {
                 Ok(Some(if round == 0 {
                     round0.clone()
                 } else {
                     Vec::new()
                 }))
             },
-            &mut |_| Ok(None),
+            &mut |_, _| Ok(None),
         )
         .unwrap()
     }
@@ -410,7 +463,7 @@ mod tests {
             rounds, accepted, ..
         } = select(
             3,
-            &mut |round, accepted| {
+            &mut |round, accepted, _| {
                 seen_accepted.push(accepted.len());
                 Ok(Some(match round {
                     0 => vec![
@@ -421,7 +474,7 @@ mod tests {
                     _ => vec![candidate("thrust_gain", 5.0, false)],
                 }))
             },
-            &mut |accepted| {
+            &mut |accepted, _| {
                 let (win, earlier) = accepted.split_last().unwrap();
                 assert!(earlier.is_empty() || win.name != earlier[0].name);
                 Ok(None)
@@ -439,36 +492,121 @@ mod tests {
     }
 
     /// A winner the model refuses to take in (`accept` gives a reason) is not named: the
-    /// effects accepted before it stay, the reason is kept, and no further round is fitted.
+    /// effects accepted before it stay, the reason is kept with its round, and the round's
+    /// next passing candidate takes its place, handed to `accept` with the refused one; a
+    /// refused winner is no rival of the next (it would be a look-alike here: within the
+    /// delta-BIC margin of it, both physics effects).
     #[test]
-    fn a_refused_winner_is_not_named_and_ends_the_selection() {
+    fn a_refused_winner_gives_way_to_the_next_candidate_of_its_round() {
         let mut rounds_fitted = 0;
+        let mut handed = Vec::new();
         let selection = select(
             3,
-            &mut |round, _| {
+            &mut |round, _, _| {
                 rounds_fitted += 1;
-                Ok(Some(match round {
-                    0 => vec![candidate("thruster_lag", 900.0, true)],
-                    1 => vec![candidate("added_mass", 300.0, true)],
-                    _ => vec![candidate("thrust_gain", 200.0, true)],
-                }))
+                Ok(match round {
+                    0 => Some(vec![candidate("thruster_lag", 900.0, true)]),
+                    1 => Some(vec![
+                        candidate("added_mass", 300.0, true),
+                        candidate("thrust_gain", 280.0, true),
+                        candidate("compass_offset", 200.0, true),
+                    ]),
+                    _ => None,
+                })
             },
-            &mut |accepted| {
-                Ok((accepted.len() == 2).then(|| "it does not shrink the gap".to_string()))
+            &mut |accepted, before| {
+                let name = accepted.last().unwrap().name.clone();
+                handed.push((
+                    name.clone(),
+                    before.iter().map(|r| r.name.clone()).collect::<Vec<_>>(),
+                ));
+                Ok((name == "added_mass").then(|| "it does not shrink the gap".to_string()))
             },
         )
         .unwrap();
         let names: Vec<&str> = selection.accepted.iter().map(|c| c.name.as_str()).collect();
-        assert_eq!(names, vec!["thruster_lag"]);
+        assert_eq!(names, vec!["thruster_lag", "thrust_gain"]);
+        let no: Vec<String> = Vec::new();
+        assert_eq!(
+            handed,
+            vec![
+                ("thruster_lag".to_string(), no.clone()),
+                ("added_mass".to_string(), no),
+                ("thrust_gain".to_string(), vec!["added_mass".to_string()]),
+            ],
+            "the winner in place of a refused one is handed over with it"
+        );
         assert_eq!(
             selection.refused,
-            Some(Refused {
+            vec![Refused {
+                round: 1,
                 name: "added_mass".into(),
                 why: "it does not shrink the gap".into()
-            })
+            }]
         );
-        assert_eq!(rounds_fitted, 2, "no round after the refusal");
+        assert_eq!(selection.ambiguous, None);
+        assert_eq!(rounds_fitted, 3);
         assert_eq!(selection.rounds.len(), 2);
+    }
+
+    /// A round whose winners are refused [`REFUSALS_PER_ROUND`] times ends the selection: no
+    /// further candidate of it is tried and no further round is fitted.
+    #[test]
+    fn refusals_up_to_the_limit_end_the_selection() {
+        let mut rounds_fitted = 0;
+        let mut tried = Vec::new();
+        let selection = select(
+            3,
+            &mut |round, _, _| {
+                rounds_fitted += 1;
+                Ok(Some(match round {
+                    0 => vec![
+                        candidate("added_mass", 300.0, true),
+                        candidate("thrust_gain", 200.0, true),
+                        candidate("compass_offset", 100.0, true),
+                    ],
+                    _ => vec![candidate("depth_offset", 50.0, true)],
+                }))
+            },
+            &mut |accepted, _| {
+                tried.push(accepted.last().unwrap().name.clone());
+                Ok(Some("a stand-in".to_string()))
+            },
+        )
+        .unwrap();
+        assert!(selection.accepted.is_empty());
+        assert_eq!(selection.refused.len(), REFUSALS_PER_ROUND);
+        assert_eq!(tried, vec!["added_mass", "thrust_gain"]);
+        assert_eq!(rounds_fitted, 1);
+    }
+
+    /// A rival that fails only its interval is a look-alike when it changes the residuals as
+    /// the winner does (a depth gain beside a depth offset, both fitting the surface reading):
+    /// the selection ends ambiguous. Changing them another way, or failing another guard
+    /// too, it is none, and the winner is named.
+    #[test]
+    fn a_rival_failing_only_its_interval_is_a_look_alike_when_it_changes_the_same() {
+        let with = |change: Vec<f64>, significant: bool| {
+            let mut offset = candidate("depth_offset", 100.0, true);
+            offset.change = vec![1.0, 1.0, 0.5, 0.0];
+            let mut gain = candidate("depth_gain", 105.0, true);
+            gain.guards.interval_excludes_zero = false;
+            gain.guards.significant = significant;
+            gain.change = change;
+            one_round(vec![gain, offset])
+        };
+        let same = with(vec![1.1, 0.9, 0.6, 0.1], true);
+        assert_eq!(
+            same.ambiguous,
+            Some(["depth_offset".to_string(), "depth_gain".to_string()])
+        );
+        assert!(same.accepted.is_empty());
+        let other = with(vec![1.0, -1.0, 0.0, 1.0], true);
+        assert_eq!(other.ambiguous, None);
+        assert_eq!(other.accepted[0].name, "depth_offset");
+        let weak = with(vec![1.1, 0.9, 0.6, 0.1], false);
+        assert_eq!(weak.ambiguous, None);
+        assert_eq!(weak.accepted[0].name, "depth_offset");
     }
 
     /// Regression (a sensor effect named for a disagreement the dynamics explain as well): a

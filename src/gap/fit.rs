@@ -619,6 +619,17 @@ fn fit_mean(
         variance_factor: chosen.variance_factor,
         refitted: Vec::new(),
         trained,
+        change: if chosen.residuals.values.len() == r0.values.len() {
+            chosen
+                .residuals
+                .values
+                .iter()
+                .zip(&r0.values)
+                .map(|(a, b)| a - b)
+                .collect()
+        } else {
+            Vec::new()
+        },
     }
 }
 

@@ -137,9 +137,9 @@ pub struct Analysis {
     /// The candidate the last round's winner was not named for
     /// ([`candidate::Selection::outranked_by`]).
     pub outranked_by: Option<candidate::Outranked>,
-    /// The last round's winner, refused when taken into the model
+    /// Winners refused when taken into the model, in order
     /// ([`candidate::Selection::refused`]).
-    pub refused: Option<candidate::Refused>,
+    pub refused: Vec<candidate::Refused>,
     pub accepted: Vec<Candidate>,
     pub verdict: Verdict,
     pub fitted: GapModel,
@@ -453,18 +453,19 @@ pub fn analyse_with(
         refused,
     } = candidate::select(
         fit::MAX_EFFECTS,
-        &mut |round, accepted| {
+        &mut |round, accepted, refused| {
             let floors = current_floors.borrow();
             let setup =
                 fit::setup(m, round_configs(), &floors, options.split, &spread)?.with_known(model);
             let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
+            skip.extend(refused.iter().map(|r| r.name.as_str()));
             skip.extend(model.effects.iter().map(|e| e.effect.name));
             let results =
                 fit::fit_candidates(&setup, &skip, &previous, &mut |name| progress(round, name));
             previous.clone_from(&results);
             Ok(Some(results))
         },
-        &mut |accepted| {
+        &mut |accepted, refused_before| {
             let mut named = Vec::new();
             for c in accepted.iter() {
                 let effect = effects::by_name(&c.name).ok_or_else(|| {
@@ -542,6 +543,24 @@ pub fn analyse_with(
             } else {
                 1.0
             };
+            // A winner in place of one refused in the same round must explain most of what
+            // is left: the refusal says the round's disagreement is where the model's form is
+            // loose, and there a small share is the first sign of a stand-in.
+            if let Some((effect, _, _)) = named.last()
+                && let Some(first) = refused_before.first()
+                && effect.kind == effects::Kind::Mean
+                && share < LATER_NAME_MIN_SHARE
+            {
+                return Ok(Some(format!(
+                    "it takes the place of `{}`, refused in the same round, and explains only \
+                     {:.0} % of the disagreement left (the channels' mean chi-square over their \
+                     known levels {without:.3} -> {mean:.3}); in place of a refused winner an \
+                     effect must explain most of it ({:.0} %)",
+                    first.name,
+                    100.0 * share,
+                    100.0 * LATER_NAME_MIN_SHARE
+                )));
+            }
             if let Some((effect, values, noise_factor)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean

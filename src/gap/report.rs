@@ -185,11 +185,13 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
             fit::BIC_MARGIN
         );
     }
-    if let Some(r) = &a.refused {
+    for r in &a.refused {
         let _ = writeln!(
             s,
-            "- **{}** passed every guard but is not named: {}. Nothing more is named",
-            r.name, r.why
+            "- **{}**, round {}'s winner, passed every guard but is not named: {}",
+            r.name,
+            r.round + 1,
+            r.why
         );
     }
     if let Some(pair) = a.ambiguous.as_ref().filter(|_| !a.accepted.is_empty()) {

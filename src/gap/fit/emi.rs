@@ -188,5 +188,6 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
         variance_factor: 1.0,
         refitted: Vec::new(),
         trained: Vec::new(),
+        change: Vec::new(),
     })
 }

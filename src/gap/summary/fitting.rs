@@ -292,6 +292,7 @@ fn fit_one(
         variance_factor: 1.0,
         refitted,
         trained: Vec::new(),
+        change: Vec::new(),
     }
 }
 
@@ -364,7 +365,7 @@ pub fn analyse(
         ..
     } = candidate::select(
         fit::MAX_EFFECTS,
-        &mut |round, _| {
+        &mut |round, _, _| {
             let priors = priors.borrow();
             let Some(z0) = ctx.z(&with(&priors)) else {
                 return Ok(None);
@@ -387,7 +388,7 @@ pub fn analyse(
             }
             Ok(Some(results))
         },
-        &mut |accepted| {
+        &mut |accepted, _| {
             let Some(win) = accepted.last() else {
                 return Ok(None);
             };
