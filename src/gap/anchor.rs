@@ -140,16 +140,16 @@ pub enum Read {
     /// The sample nearest the anchor's time (a segment start: the previous segment's state
     /// bridges what one sample misses).
     Nearest,
-    /// The median of the first [`START_SAMPLES`] samples within [`START_WINDOW_S`] after the
-    /// anchor's time (a run's start: nothing before it to fall back on, and the first reading
-    /// of a sensor is the one most often wrong, such as a compass read before its first full
-    /// conversion).
+    /// The median of the first [`START_SAMPLES`] samples from the anchor's time on, within
+    /// [`START_WINDOW_S`] of the first of them (a run's start: nothing before it to fall back
+    /// on, and the first reading of a sensor is the one most often wrong, such as a compass
+    /// read before its first full conversion).
     StartMedian,
 }
 
 /// A run's start is read from the median of this many samples per channel ...
 pub const START_SAMPLES: usize = 3;
-/// ... taken within this long after the start.
+/// ... taken within this long of the first of them.
 pub const START_WINDOW_S: f64 = 1.5;
 
 impl Read {
@@ -161,19 +161,24 @@ impl Read {
     }
 }
 
-/// The median of the first [`START_SAMPLES`] samples of `ch` in `t_s ..= t_s +
-/// START_WINDOW_S` (with `wrap`, of angles in degrees: the sample with the least summed
-/// wrapped distance to the others); with fewer samples there, the first one.
+/// The median of the first [`START_SAMPLES`] samples of `ch` from `t_s` on, within
+/// [`START_WINDOW_S`] of the first of them (with `wrap`, of angles in degrees: the sample with
+/// the least summed wrapped distance to the others); with two samples there, the second; with
+/// one, that one. The window opens at the first sample, not at `t_s`: a sensor with a latency
+/// delivers its first readings late, and a window that closed before the third of them left
+/// the first, the one most often wrong, to stand alone (a compass 0.9 s late read 82 deg
+/// before the 174 and 176 deg that followed it).
 fn first_median(ch: &Channel, t_s: f64, wrap: bool) -> Option<(f64, f64)> {
     let i = ch.samples.partition_point(|(t, _)| *t < t_s);
+    let opens = ch.samples.get(i)?.0;
     let first: Vec<(f64, f64)> = ch.samples[i..]
         .iter()
-        .take_while(|(t, _)| *t <= t_s + START_WINDOW_S)
+        .take_while(|(t, _)| *t <= opens + START_WINDOW_S)
         .take(START_SAMPLES)
         .copied()
         .collect();
     if first.len() < START_SAMPLES {
-        return first.first().copied();
+        return first.last().copied();
     }
     let distance = |a: f64, b: f64| {
         if wrap {
@@ -359,7 +364,22 @@ mod tests {
             Read::StartMedian.pick(&north, 0.0, 0.5, true),
             Some((0.9, 1.0))
         );
-        // Fewer samples than START_SAMPLES within the window: the first one.
+        // A compass 0.9 s late: its first reading, wrong, comes at 1.05 s, and the window
+        // opens there, so the two after it outvote it.
+        let late = ch(
+            "compass_deg",
+            &[(1.05, 82.0), (1.45, 174.0), (1.85, 176.0), (2.25, 177.0)],
+        );
+        assert_eq!(
+            Read::StartMedian.pick(&late, 0.0, 0.5, true),
+            Some((1.45, 174.0))
+        );
+        // Two samples within the window: the second; one: that one.
+        let two = ch("compass_deg", &[(0.1, 82.0), (1.2, 174.0), (3.0, 176.0)]);
+        assert_eq!(
+            Read::StartMedian.pick(&two, 0.0, 0.5, true),
+            Some((1.2, 174.0))
+        );
         let sparse = ch("x_m", &[(0.2, 4.0), (3.0, 9.0)]);
         assert_eq!(
             Read::StartMedian.pick(&sparse, 0.0, 0.25, false),
