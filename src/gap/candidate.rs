@@ -315,16 +315,37 @@ fn unconfirmed_rival<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a 
 fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
     let w = crate::gap::effects::by_name(&win.name)?;
     round.iter().find(|c| {
-        c.name != win.name
+        let kin = c.name != win.name
             && c.testable
             && (c.guards.all() || same_change_but_interval(c, win))
             && crate::gap::effects::by_name(&c.name).is_some_and(|e| {
                 (e.physics || !w.physics)
                     && e.kind == w.kind
                     && e.channels.iter().any(|ch| w.channels.contains(ch))
-            })
-            && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
+            });
+        if kin {
+            tracing::debug!(
+                winner = win.name,
+                rival = c.name,
+                cosine = change_cosine(c, win),
+                behind = win.delta_bic_uncalibrated - c.delta_bic_uncalibrated,
+                "a rival of the same kind"
+            );
+        }
+        kin && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
     })
+}
+
+/// The cosine of the angle between the changes of the residuals the fits of `a` and `b` make;
+/// `None` when either is unknown or zero.
+fn change_cosine(a: &Candidate, b: &Candidate) -> Option<f64> {
+    if a.change.len() != b.change.len() {
+        return None;
+    }
+    let dot: f64 = a.change.iter().zip(&b.change).map(|(x, y)| x * y).sum();
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let n = norm(&a.change) * norm(&b.change);
+    (n > 0.0).then(|| dot / n)
 }
 
 /// Two fits whose changes of the residuals point the same way at least this closely (the
@@ -340,12 +361,12 @@ pub const SAME_CHANGE_COSINE: f64 = 0.9;
 fn same_change_but_interval(c: &Candidate, win: &Candidate) -> bool {
     let mut rest = c.guards;
     rest.interval_excludes_zero = true;
-    if c.guards.interval_excludes_zero || !rest.all() || c.change.len() != win.change.len() {
+    if c.guards.interval_excludes_zero || !rest.all() {
         return false;
     }
-    let dot: f64 = c.change.iter().zip(&win.change).map(|(a, b)| a * b).sum();
-    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
-    let cosine = dot / (norm(&c.change) * norm(&win.change));
+    let Some(cosine) = change_cosine(c, win) else {
+        return false;
+    };
     tracing::debug!(
         winner = win.name,
         rival = c.name,
