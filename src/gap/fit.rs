@@ -371,7 +371,15 @@ pub fn interval_excludes_zero(
 }
 
 /// The signature test of a mean-type fit: correlation of the effect's change with the
-/// residual in the signature channels, and their share of the gain.
+/// disagreement in the signature channels, and their share of the gain.
+///
+/// The residual there is disagreement plus noise, and noise correlates with nothing: a true
+/// effect's correlation with the raw residual falls with the noise it carries, however well
+/// it explains the disagreement. The correlation is therefore taken against the residual's
+/// energy beyond the noise floor's ([`noise_energy`]), Spearman's correction for attenuation
+/// (1904): the observed correlation over the square root of the residual's reliability.
+/// The energy beyond the floor is never taken below what the effect explains, so the
+/// corrected correlation stays at most about 1.
 fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals) -> (bool, String) {
     let in_sig = |i: usize| effect.channels.contains(&setup.m.channels[i].name.as_str());
     let (mut dot, mut dd, mut rr, mut gain_sig, mut gain_all) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -387,8 +395,9 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
             rr += a * a;
         }
     }
-    let corr = if dd > 0.0 && rr > 0.0 {
-        dot / (dd * rr).sqrt()
+    let beyond_noise = (rr - noise_energy(setup, r0, true, in_sig)).max(dd);
+    let corr = if dd > 0.0 && beyond_noise > 0.0 {
+        dot / (dd * beyond_noise).sqrt()
     } else {
         0.0
     };
@@ -400,7 +409,7 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
     (
         corr >= SIGNATURE_MIN_CORRELATION && share >= SIGNATURE_MIN_SHARE,
         format!(
-            "{}: correlation with the residual in {} = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}), \
+            "{}: correlation with the disagreement beyond the noise floor in {} = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}), \
              share of the improvement there = {:.0} % (>= {:.0} %)",
             effect.signature,
             effect.channels.join("/"),
@@ -408,6 +417,26 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
             SIGNATURE_MIN_SHARE * 100.0
         ),
     )
+}
+
+/// The chi-square the noise floor alone puts into `r`'s samples of the channels `keep`
+/// selects, on `part`: one per independent sample (the residuals are normalised by the floor
+/// and its correlation time). Samples left out of the fit (zeros: pool contact) carry none;
+/// sonar channels, whose presence deviance is normalised otherwise, are left out.
+fn noise_energy(setup: &Setup<'_>, r: &Residuals, part: bool, keep: impl Fn(usize) -> bool) -> f64 {
+    let mut samples = vec![0usize; setup.m.channels.len()];
+    for (idx, v) in r.part(part) {
+        let i = r.owner[idx];
+        if v != 0.0 && keep(i) {
+            samples[i] += 1;
+        }
+    }
+    samples
+        .iter()
+        .enumerate()
+        .filter(|(i, n)| **n > 0 && crate::gap::sonar::index(&setup.m.channels[*i].name).is_none())
+        .filter_map(|(i, n)| Some(*n as f64 / setup.floors[i].as_ref()?.tau))
+        .sum()
 }
 
 /// A fit of one candidate on one part of the data, scored.

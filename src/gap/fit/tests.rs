@@ -263,3 +263,82 @@ fn a_held_out_gain_bought_in_one_dense_channel_grows_the_held_out_gap() {
     known.known[sparse] = 100.0 * (1.0 + e);
     assert!(!held_out_gap_grows(&known, &before, &traded));
 }
+
+/// The signature correlation is read against the disagreement beyond the noise floor. In the
+/// signature channels of a thruster imbalance, a smooth disagreement with 3 % of the noise
+/// floor's energy, under noise at exactly the floor (orthogonal to it): against the raw
+/// residual, an effect that explains the whole disagreement correlates only about 0.17 and
+/// would fail; against the disagreement it correlates fully and passes. An effect whose change
+/// is mostly elsewhere, explaining a tenth of that disagreement, still fails.
+#[test]
+fn signature_correlation_is_read_beyond_the_noise_floor() {
+    use rand::{RngExt, SeedableRng};
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre(7);
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let s = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+    let effect = effects::by_name("thruster_imbalance").unwrap();
+    let base = s.residuals(&s.base, &s.clean);
+    let in_sig = |i: usize| effect.channels.contains(&m.channels[i].name.as_str());
+    let sig: Vec<usize> = (0..base.values.len())
+        .filter(|k| in_sig(base.owner[*k]))
+        .collect();
+    let tau = |k: usize| floors[base.owner[k]].as_ref().unwrap().tau;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let mut gauss = |_| rng.sample::<f64, _>(rand_distr::StandardNormal);
+    let pattern: Vec<f64> = sig.iter().map(|k| (base.times[*k] / 5.0).sin()).collect();
+    let mut noise: Vec<f64> = sig.iter().map(&mut gauss).collect();
+    let other: Vec<f64> = sig.iter().map(&mut gauss).collect();
+    let training: Vec<bool> = sig.iter().map(|k| base.training[*k]).collect();
+    let train_dot = |a: &[f64], b: &[f64]| -> f64 {
+        a.iter()
+            .zip(b)
+            .zip(&training)
+            .filter(|(_, t)| **t)
+            .map(|((x, y), _)| x * y)
+            .sum()
+    };
+    // Noise: orthogonal to the pattern, then scaled so that its training energy is the
+    // floor's, one per independent sample.
+    let k = train_dot(&noise, &pattern) / train_dot(&pattern, &pattern);
+    noise
+        .iter_mut()
+        .zip(&pattern)
+        .for_each(|(n, p)| *n -= k * p);
+    let floor_energy: f64 = sig
+        .iter()
+        .zip(&training)
+        .filter(|(_, t)| **t)
+        .map(|(k, _)| 1.0 / tau(*k))
+        .sum();
+    let scale = (floor_energy / train_dot(&noise, &noise)).sqrt();
+    noise.iter_mut().for_each(|n| *n *= scale);
+    let amp = (0.03 * floor_energy / train_dot(&pattern, &pattern)).sqrt();
+    let with = |v: &dyn Fn(usize) -> f64| {
+        let mut r = base.clone();
+        r.values.iter_mut().for_each(|x| *x = 0.0);
+        for (j, k) in sig.iter().enumerate() {
+            r.values[*k] = v(j);
+        }
+        r
+    };
+    let r0 = with(&|j| amp * pattern[j] + noise[j]);
+    let explained = with(&|j| noise[j]);
+    let raw = train_dot(&pattern, &pattern).sqrt() * amp
+        / (train_dot(&pattern, &pattern) * amp * amp + floor_energy).sqrt();
+    assert!(raw < SIGNATURE_MIN_CORRELATION, "raw correlation {raw}");
+    let (pass, text) = signature(&s, effect, &r0, &explained);
+    assert!(pass, "{text}");
+    assert!(text.contains("= 1.00"), "{text}");
+    // A change mostly orthogonal to the disagreement: a tenth of the pattern and a part of
+    // its own as large as the whole noise.
+    let q = (floor_energy / train_dot(&other, &other)).sqrt();
+    let elsewhere = with(&|j| amp * pattern[j] + noise[j] - 0.1 * amp * pattern[j] - q * other[j]);
+    let (pass, text) = signature(&s, effect, &r0, &elsewhere);
+    assert!(!pass, "{text}");
+    let zeros = base.values.iter().filter(|v| **v == 0.0).count();
+    assert!(
+        (noise_energy(&s, &r0, true, in_sig) - floor_energy).abs() < 1e-9 * floor_energy,
+        "noise energy counts the signature channels' training samples ({zeros} zeros in the base)"
+    );
+}
