@@ -185,7 +185,8 @@ impl Measurement {
         let info = parse_experiment(experiment.0, experiment.1)?;
         let commands = parse_commands(commands.0, commands.1, info.duration_s)?;
         let mut notices = Vec::new();
-        let channels = parse_measured(measured.0, measured.1, &mut notices)?;
+        let mut channels = parse_measured(measured.0, measured.1, &mut notices)?;
+        crate::gap::outliers::set_aside(measured.0, &mut channels, &mut notices);
         Ok(Self {
             experiment: info,
             commands,

@@ -36,6 +36,7 @@ pub mod format;
 pub mod generate;
 pub mod lsq;
 pub mod model;
+pub mod outliers;
 pub mod report;
 pub mod residuals;
 pub mod resim;
