@@ -348,6 +348,23 @@ fn change_cosine(a: &Candidate, b: &Candidate) -> Option<f64> {
     (n > 0.0).then(|| dot / n)
 }
 
+/// As [`change_cosine`], on the residuals `b`'s fit changes only: how closely `a` moves
+/// those readings as `b` does, whatever else `a` moves.
+fn change_cosine_where_changed(a: &Candidate, b: &Candidate) -> Option<f64> {
+    if a.change.len() != b.change.len() {
+        return None;
+    }
+    let (mut dot, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.change.iter().zip(&b.change) {
+        if *y != 0.0 {
+            dot += x * y;
+            aa += x * x;
+            bb += y * y;
+        }
+    }
+    (aa > 0.0 && bb > 0.0).then(|| dot / (aa * bb).sqrt())
+}
+
 /// Two fits whose changes of the residuals point the same way at least this closely (the
 /// cosine of the angle between them) explain the same disagreement.
 pub const SAME_CHANGE_COSINE: f64 = 0.9;
@@ -358,13 +375,26 @@ pub const SAME_CHANGE_COSINE: f64 = 0.9;
 /// the surface where the buoyancy fixes the depth). The winner is then not established over
 /// it either. A rival that fails its interval and explains another part of the disagreement
 /// (a hard iron's once-per-turn error beside a compass offset) is no look-alike.
+///
+/// A sensor winner changes only its own channels; a physics rival changes those and others.
+/// There the two are compared on the readings the sensor effect changes: a physics effect
+/// that takes the sensor's disagreement as part of a larger one (a thruster imbalance's
+/// steady turn reads as a sway accelerometer offset) explains the same residual, and the
+/// physics wins; that null runs stray by as much says the whole pattern is the vehicle's
+/// run-to-run variation, the sensor's part of it included.
 fn same_change_but_interval(c: &Candidate, win: &Candidate) -> bool {
     let mut rest = c.guards;
     rest.interval_excludes_zero = true;
     if c.guards.interval_excludes_zero || !rest.all() {
         return false;
     }
-    let Some(cosine) = change_cosine(c, win) else {
+    let physics = |name: &str| crate::gap::effects::by_name(name).is_some_and(|e| e.physics);
+    let cosine = if physics(&c.name) && !physics(&win.name) {
+        change_cosine_where_changed(c, win)
+    } else {
+        change_cosine(c, win)
+    };
+    let Some(cosine) = cosine else {
         return false;
     };
     tracing::debug!(
@@ -628,6 +658,38 @@ mod tests {
         let weak = with(vec![1.1, 0.9, 0.6, 0.1], false);
         assert_eq!(weak.ambiguous, None);
         assert_eq!(weak.accepted[0].name, "depth_offset");
+    }
+
+    /// Regression (a thruster imbalance named `accel_y_offset` on a vehicle of another
+    /// structure: the imbalance fitted far better, delta BIC 110.6 against 38.0, but its
+    /// interval held 0 under the between-run spread): a physics rival that fails only its
+    /// interval and moves the sensor winner's readings as the winner does is a look-alike
+    /// although it moves other channels too, so the selection ends ambiguous. A physics
+    /// rival moving the sensor's readings another way is none, and the sensor is named.
+    #[test]
+    fn a_sensor_winner_is_compared_with_a_physics_rival_on_its_own_readings() {
+        let with = |rival: Vec<f64>| {
+            let mut offset = candidate("accel_y_offset", 38.0, true);
+            offset.change = vec![0.0, 0.0, 0.0, 0.5, 0.5, 0.4];
+            let mut imbalance = candidate("thruster_imbalance", 110.6, true);
+            imbalance.guards.interval_excludes_zero = false;
+            imbalance.change = rival;
+            one_round(vec![imbalance, offset])
+        };
+        // On all readings the two changes are far apart (cosine 0.27), on the sensor's 0.997 ...
+        let same = with(vec![2.0, -1.5, 1.8, 0.5, 0.6, 0.4]);
+        assert_eq!(
+            same.ambiguous,
+            Some([
+                "accel_y_offset".to_string(),
+                "thruster_imbalance".to_string()
+            ])
+        );
+        assert!(same.accepted.is_empty());
+        // ... and here they point apart on the sensor's readings too.
+        let other = with(vec![2.0, -1.5, 1.8, 0.5, -0.6, 0.0]);
+        assert_eq!(other.ambiguous, None);
+        assert_eq!(other.accepted[0].name, "accel_y_offset");
     }
 
     /// Regression (a sensor effect named for a disagreement the dynamics explain as well): a
