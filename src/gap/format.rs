@@ -3,7 +3,8 @@
 //!
 //! The loader takes text, not paths ([`Measurement::from_texts`]); [`Measurement::load`] reads
 //! the three files of a directory. Every error names the file, the line and, for CSV cells,
-//! the column. Unknown CSV columns are kept out of the data and reported as notices.
+//! the column. Unknown CSV columns are kept out of the data and reported as notices, as are
+//! the isolated gross outliers the loader sets aside ([`crate::gap::outliers`]).
 
 use std::path::Path;
 
