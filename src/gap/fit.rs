@@ -187,9 +187,17 @@ impl Setup<'_> {
 
     /// Independent sample count of one part (`None`: all).
     pub fn n_eff(&self, part: Option<bool>) -> f64 {
+        self.independent_samples(part, |_| true).max(1.0)
+    }
+
+    /// Independent sample count of one part (`None`: all) over the modelled channels `keep`
+    /// selects (by index), wall contacts left out: the chi-square the noise floor alone puts
+    /// there, the residuals being normalised by the floor and its correlation time.
+    pub fn independent_samples(&self, part: Option<bool>, keep: impl Fn(usize) -> bool) -> f64 {
         self.modelled()
-            .iter()
-            .filter_map(|&i| {
+            .into_iter()
+            .filter(|&i| keep(i))
+            .filter_map(|i| {
                 let f = self.floors[i].as_ref()?;
                 let n = self
                     .sample_times(i)
@@ -200,7 +208,6 @@ impl Setup<'_> {
                 Some(n as f64 / f.tau)
             })
             .sum::<f64>()
-            .max(1.0)
     }
 
     /// The model's own null residuals of one part (`Some(true)` training, `Some(false)` held
@@ -376,7 +383,7 @@ pub fn interval_excludes_zero(
 /// The residual there is disagreement plus noise, and noise correlates with nothing: a true
 /// effect's correlation with the raw residual falls with the noise it carries, however well
 /// it explains the disagreement. The correlation is therefore taken against the residual's
-/// energy beyond the noise floor's ([`noise_energy`]), Spearman's correction for attenuation
+/// energy beyond the noise floor's ([`Setup::independent_samples`]), Spearman's correction for attenuation
 /// (1904): the observed correlation over the square root of the residual's reliability.
 /// The energy beyond the floor is never taken below what the effect explains, so the
 /// corrected correlation stays at most about 1.
@@ -395,7 +402,11 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
             rr += a * a;
         }
     }
-    let beyond_noise = (rr - noise_energy(setup, r0, true, in_sig)).max(dd);
+    // Sonar channels' presence deviance is normalised otherwise: no floor share taken out.
+    let floor_share = setup.independent_samples(Some(true), |i| {
+        in_sig(i) && crate::gap::sonar::index(&setup.m.channels[i].name).is_none()
+    });
+    let beyond_noise = (rr - floor_share).max(dd);
     let corr = if dd > 0.0 && beyond_noise > 0.0 {
         dot / (dd * beyond_noise).sqrt()
     } else {
@@ -417,26 +428,6 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
             SIGNATURE_MIN_SHARE * 100.0
         ),
     )
-}
-
-/// The chi-square the noise floor alone puts into `r`'s samples of the channels `keep`
-/// selects, on `part`: one per independent sample (the residuals are normalised by the floor
-/// and its correlation time). Samples left out of the fit (zeros: pool contact) carry none;
-/// sonar channels, whose presence deviance is normalised otherwise, are left out.
-fn noise_energy(setup: &Setup<'_>, r: &Residuals, part: bool, keep: impl Fn(usize) -> bool) -> f64 {
-    let mut samples = vec![0usize; setup.m.channels.len()];
-    for (idx, v) in r.part(part) {
-        let i = r.owner[idx];
-        if v != 0.0 && keep(i) {
-            samples[i] += 1;
-        }
-    }
-    samples
-        .iter()
-        .enumerate()
-        .filter(|(i, n)| **n > 0 && crate::gap::sonar::index(&setup.m.channels[*i].name).is_none())
-        .filter_map(|(i, n)| Some(*n as f64 / setup.floors[i].as_ref()?.tau))
-        .sum()
 }
 
 /// A fit of one candidate on one part of the data, scored.
