@@ -495,7 +495,7 @@ fn joint_fit(
     let weights = weights_at(&x);
     let in_spread_units = |x: &DVector<f64>| residuals_with(x, &weights, |w| w.intervals);
     if let Some(r) = in_spread_units(&x) {
-        fit.jacobian = lsq::jacobian_at(&in_spread_units, &bounds, &x);
+        fit.jacobian = lsq::jacobian_at(&in_spread_units, &bounds, &x, None);
         fit.residuals = r;
         evaluations += dims + 1;
     }

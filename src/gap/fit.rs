@@ -461,14 +461,23 @@ fn fit_part(
     let scales = effect.scales;
     let to_params =
         |x: &DVector<f64>| -> Vec<f64> { x.iter().zip(scales).map(|(v, s)| v * s).collect() };
-    let select = |r: Residuals| -> DVector<f64> {
+    let select = |r: &Residuals| -> DVector<f64> {
         match part {
             Some(_) => r.training_vector(),
-            None => DVector::from_vec(r.values),
+            None => DVector::from_column_slice(&r.values),
         }
     };
+    // Every evaluation's full residuals, kept so the fitted point's (the fit selects one
+    // part) need not be re-simulated.
+    let evaluated: std::sync::Mutex<Vec<(Vec<f64>, Residuals)>> = Default::default();
     let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
-        setup.eval(effect, &to_params(x)).map(select)
+        let params = to_params(x);
+        let r = setup.eval(effect, &params)?;
+        let selected = select(&r);
+        if let Ok(mut kept) = evaluated.lock() {
+            kept.push((params, r));
+        }
+        Some(selected)
     };
     let bounds = Bounds::scaled(effect.bounds, scales);
     let fit = lsq::minimize(&objective, &bounds, starts)?;
@@ -481,7 +490,14 @@ fn fit_part(
         "fit finished"
     );
     let params = to_params(&fit.x);
-    let r1 = setup.eval(effect, &params)?;
+    let kept = evaluated.lock().ok().and_then(|mut kept| {
+        let at = kept.iter().position(|(p, _)| *p == params)?;
+        Some(kept.swap_remove(at).1)
+    });
+    let r1 = match kept {
+        Some(r) => r,
+        None => setup.eval(effect, &params)?,
+    };
     let (chi2_before, chi2_after) = match part {
         Some(_) => (r0.chi2(true), r1.chi2(true)),
         None => (r0.all_chi2(), r1.all_chi2()),
@@ -498,10 +514,11 @@ fn fit_part(
         (Some(j), Some(ai)) => null_factor(j, ai, &null, &white),
         _ => 1.0,
     };
-    let at_start = lsq::jacobian_at(&objective, &bounds, &DVector::zeros(k)).and_then(|j| {
-        let a = (j.transpose() * &j).try_inverse()?;
-        Some(null_factor(&j, &a, &null, &white))
-    });
+    let at_start = lsq::jacobian_at(&objective, &bounds, &DVector::zeros(k), Some(select(r0)))
+        .and_then(|j| {
+            let a = (j.transpose() * &j).try_inverse()?;
+            Some(null_factor(&j, &a, &null, &white))
+        });
     let noise_factor = at_start.map_or(at_fit, |f| f.max(at_fit));
     let variance_factor = (chi2_after / (n_eff - k as f64).max(1.0)).max(1.0);
     let scale = noise_factor * variance_factor;

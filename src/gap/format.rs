@@ -127,6 +127,30 @@ pub struct ExperimentInfo {
     pub camera_marker_body_m: [f64; 2],
 }
 
+/// The commands in force at non-decreasing times ([`Measurement::commands_in_order`]).
+#[derive(Debug)]
+pub struct CommandCursor<'a> {
+    rows: &'a [CommandRow],
+    /// The first row after the time last asked for.
+    next: usize,
+}
+
+impl CommandCursor<'_> {
+    /// The percentages in force at `t_s`; a time earlier than the last one asked for starts
+    /// the search again from the first row.
+    pub fn at(&mut self, t_s: f64) -> [f64; 4] {
+        if self.next > 0 && self.rows[self.next - 1].t_s > t_s + 1e-9 {
+            self.next = 0;
+        }
+        while self.next < self.rows.len() && self.rows[self.next].t_s <= t_s + 1e-9 {
+            self.next += 1;
+        }
+        self.next
+            .checked_sub(1)
+            .map_or([0.0; 4], |k| self.rows[k].percent)
+    }
+}
+
 /// One `commands.csv` row: MOTORDrive percent for port, starboard, bow, stern from `t_s` on.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CommandRow {
@@ -208,6 +232,15 @@ impl Measurement {
         let n = self.commands.partition_point(|c| c.t_s <= t_s + 1e-9);
         n.checked_sub(1)
             .map_or([0.0; 4], |k| self.commands[k].percent)
+    }
+
+    /// [`Measurement::percent_at`] for times read in order, as a re-simulation reads them:
+    /// each call moves on from where the last one stopped instead of bisecting again.
+    pub fn commands_in_order(&self) -> CommandCursor<'_> {
+        CommandCursor {
+            rows: &self.commands,
+            next: 0,
+        }
     }
 
     /// Writes the three files into `dir` (created if needed).
@@ -603,6 +636,14 @@ mod tests {
             for c in &commands {
                 proptest::prop_assert_eq!(m.percent_at(c.t_s), scan(c.t_s));
             }
+            // Read in order, in steps that land on rows, between them and on several rows at
+            // one time; then once back to the query.
+            let mut cursor = m.commands_in_order();
+            for k in 0..=(t / 0.25).ceil() as usize + 2 {
+                let at = k as f64 * 0.25 - 0.5;
+                proptest::prop_assert_eq!(cursor.at(at), scan(at));
+            }
+            proptest::prop_assert_eq!(cursor.at(query), scan(query));
         }
     }
 

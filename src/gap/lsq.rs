@@ -284,12 +284,21 @@ where
     Some((col, used))
 }
 
-/// The forward-difference Jacobian at `x` (stepping inwards at an upper bound).
-pub fn jacobian_at<F>(residuals_of: &F, bounds: &Bounds, x: &DVector<f64>) -> Option<DMatrix<f64>>
+/// The forward-difference Jacobian at `x` (stepping inwards at an upper bound); `at_x`, the
+/// residuals there when the caller has them, saves their evaluation.
+pub fn jacobian_at<F>(
+    residuals_of: &F,
+    bounds: &Bounds,
+    x: &DVector<f64>,
+    at_x: Option<DVector<f64>>,
+) -> Option<DMatrix<f64>>
 where
     F: Fn(&DVector<f64>) -> Option<DVector<f64>> + Sync,
 {
-    let r0 = residuals_of(x)?;
+    let r0 = match at_x {
+        Some(r) => r,
+        None => residuals_of(x)?,
+    };
     jacobian(residuals_of, bounds, x, &r0, &Cell::new(0))
 }
 

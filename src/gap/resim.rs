@@ -85,7 +85,8 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     let steps = (m.experiment.duration_s / dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut percent = Vec::with_capacity(steps + 1);
-    let mut p = m.percent_at(0.0);
+    let mut in_force = m.commands_in_order();
+    let mut p = in_force.at(0.0);
     let tables: [[f64; 11]; 4] = std::array::from_fn(|k| model.vehicle().thrusters[k].hdt_duty);
     let mut commands: [ThrusterCommand; 4] = std::array::from_fn(|k| hdt_command(&tables[k], p[k]));
     let segment_steps = c
@@ -175,7 +176,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                 *last = model.vehicle_state(&state);
             }
         }
-        let now = m.percent_at(t);
+        let now = in_force.at(t);
         if now != p {
             p = now;
             commands = std::array::from_fn(|j| hdt_command(&tables[j], p[j]));

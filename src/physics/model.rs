@@ -120,6 +120,11 @@ impl SimState {
     }
 }
 
+/// The world's down axis (z, NED) in body axes: the third row of the body-to-world rotation.
+fn down_in_body(attitude: &UnitQuaternion<f64>) -> Vector3<f64> {
+    attitude.to_rotation_matrix().matrix().row(2).transpose()
+}
+
 /// The vehicle in its world: constants precomputed from the configuration. Immutable while
 /// stepping, so one model can step many states.
 #[derive(Debug)]
@@ -252,11 +257,14 @@ impl Model {
     /// volume at the very top and bottom (a smoothstep), so buoyancy falls smoothly as the
     /// hull surfaces.
     pub fn submerged_fraction(&self, depth_m: f64, attitude: &UnitQuaternion<f64>) -> f64 {
-        let r = attitude.to_rotation_matrix();
-        let row = r.matrix().row(2);
+        self.submerged_fraction_down(depth_m, &down_in_body(attitude))
+    }
+
+    /// [`Model::submerged_fraction`] given the world's down axis in body axes.
+    fn submerged_fraction_down(&self, depth_m: f64, down_body: &Vector3<f64>) -> f64 {
         let h = &self.vehicle.half_extents_m;
-        let half_height = row[0].abs() * h.x + row[1].abs() * h.y + row[2].abs() * h.z;
-        let centre_z = depth_m + row.dot(&self.cg_to_box_m.transpose());
+        let half_height = down_body.abs().dot(h);
+        let centre_z = depth_m + down_body.dot(&self.cg_to_box_m);
         smoothstep((centre_z + half_height) / (2.0 * half_height))
     }
 
@@ -365,9 +373,9 @@ impl Model {
     }
 
     /// Generalised force of weight and buoyancy (body frame, about the CG), i.e. -g(eta).
-    fn restoring(&self, depth_m: f64, attitude: &UnitQuaternion<f64>) -> Vector6<f64> {
-        let down_body = attitude.inverse_transform_vector(&Vector3::z());
-        let b = self.buoyancy_full_n * self.submerged_fraction(depth_m, attitude);
+    /// `down_body`: the world's down axis in body axes.
+    fn restoring(&self, depth_m: f64, down_body: &Vector3<f64>) -> Vector6<f64> {
+        let b = self.buoyancy_full_n * self.submerged_fraction_down(depth_m, down_body);
         let f_b = -down_body * b;
         let force = down_body * self.weight_n + f_b;
         let moment = self.vehicle.cb_m.cross(&f_b);
@@ -416,12 +424,14 @@ impl Model {
         nu: &Vector6<f64>,
         tau: &Vector6<f64>,
     ) -> (Vector3<f64>, Quaternion<f64>, Vector6<f64>) {
-        let att = UnitQuaternion::new_normalize(*q);
+        // One rotation matrix serves the position rate and the restoring force.
+        let r = UnitQuaternion::new_normalize(*q).to_rotation_matrix();
         let v = Vector3::new(nu[0], nu[1], nu[2]);
         let w = Vector3::new(nu[3], nu[4], nu[5]);
-        let pos_dot = att * v + self.world.current_mps;
+        let pos_dot = r * v + self.world.current_mps;
         let q_dot = q * Quaternion::new(0.0, w.x, w.y, w.z) * 0.5;
-        let forces = tau + self.restoring(position_m.z, &att) - self.coriolis_and_damping(nu);
+        let down_body = r.matrix().row(2).transpose();
+        let forces = tau + self.restoring(position_m.z, &down_body) - self.coriolis_and_damping(nu);
         (pos_dot, q_dot, self.m_inv * forces)
     }
 
@@ -436,6 +446,7 @@ impl Model {
 
         // Thrusters: static curve -> lag -> fluctuation -> fade when out of the water.
         let mut tau = Vector6::zeros();
+        let down_body = down_in_body(&state.attitude);
         for (i, motor) in self.vehicle.thrusters.iter().enumerate() {
             let reverse = usize::from(commands[i].direction == Direction::Reverse);
             let target = self.static_n[i][reverse][usize::from(commands[i].duty)];
@@ -446,7 +457,7 @@ impl Model {
                 self.full_n[i],
                 &mut state.rng,
             );
-            let depth = state.position_m.z + (state.attitude * motor.position_cg_m).z;
+            let depth = state.position_m.z + down_body.dot(&motor.position_cg_m);
             let wet = smoothstep((depth + PROPELLER_RADIUS_M) / (2.0 * PROPELLER_RADIUS_M));
             state.thrust_n[i] = produced * wet;
             state.effort[i] = commands[i].effort();

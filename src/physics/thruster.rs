@@ -160,6 +160,10 @@ impl ThrusterDynamics {
             q += (target_q - q) * self.alpha(q, target_q);
             *lagged_n = full_n * q.signum() * q.abs().powf(self.lag_exponent);
         }
+        if self.rel_std == 0.0 {
+            // Without fluctuation the process would only be drawn to be multiplied by 0.
+            return *lagged_n;
+        }
         let z: f64 = rng.sample(StandardNormal);
         *fluctuation = *fluctuation * self.ou_decay + self.ou_innovation * z;
         // Relative fluctuation grows with speed (thesis fig 4.6): zero at rest, rel_std at full.
