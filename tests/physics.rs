@@ -365,6 +365,32 @@ fn wall_stops_the_vehicle_and_is_counted() {
     assert!(sim.state().velocity_body_mps.x.abs() < 0.05);
 }
 
+/// A step that trips a divergence guard leaves the state as it was, the thrust noise's
+/// stream too: the next step is the one a state that never tried the failed one takes.
+#[test]
+fn a_failed_step_leaves_the_state_as_it_was() {
+    let mut w = world();
+    w.max_speed_mps = 0.2;
+    let m = Model::new(vehicle(), w);
+    let mut state = m.initial_state(&at(12.0, 6.0, 0.5), 7);
+    let full = percent(&m, [100.0, 100.0, 0.0, 0.0]);
+    let mut failed = None;
+    for _ in 0..5000 {
+        let before = state.clone();
+        if let Err(e) = m.step(&mut state, &full) {
+            assert_eq!(state, before, "after {e}");
+            failed = Some(before);
+            break;
+        }
+    }
+    let untried = failed.expect("full thrust passes 0.2 m/s");
+    let gentle = percent(&m, [10.0, 10.0, 0.0, 0.0]);
+    let mut a = untried.clone();
+    m.step(&mut a, &gentle).expect("a gentle step");
+    m.step(&mut state, &gentle).expect("a gentle step");
+    assert_eq!(state, a);
+}
+
 #[test]
 fn dive_and_hold_reaches_the_target() {
     let m = model();

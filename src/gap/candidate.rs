@@ -350,7 +350,7 @@ fn change_cosine(a: &Candidate, b: &Candidate) -> Option<f64> {
 
 /// As [`change_cosine`], on the residuals `b`'s fit changes only: how closely `a` moves
 /// those readings as `b` does, whatever else `a` moves.
-fn change_cosine_where_changed(a: &Candidate, b: &Candidate) -> Option<f64> {
+pub(crate) fn change_cosine_where_changed(a: &Candidate, b: &Candidate) -> Option<f64> {
     if a.change.len() != b.change.len() {
         return None;
     }
@@ -363,6 +363,21 @@ fn change_cosine_where_changed(a: &Candidate, b: &Candidate) -> Option<f64> {
         }
     }
     (aa > 0.0 && bb > 0.0).then(|| dot / (aa * bb).sqrt())
+}
+
+/// How much of `b`'s change of the residuals `a`'s change carries, on the readings `b`
+/// changes: the coefficient of `a`'s change projected on `b`'s (1 when `a` moves them exactly
+/// as `b` does, whatever else it moves; 0 when it moves them across `b`'s direction).
+pub(crate) fn change_projection_where_changed(a: &Candidate, b: &Candidate) -> Option<f64> {
+    if a.change.len() != b.change.len() {
+        return None;
+    }
+    let (mut dot, mut bb) = (0.0, 0.0);
+    for (x, y) in a.change.iter().zip(&b.change) {
+        dot += x * y;
+        bb += y * y;
+    }
+    (bb > 0.0).then(|| dot / bb)
 }
 
 /// Two fits whose changes of the residuals point the same way at least this closely (the
@@ -690,6 +705,23 @@ mod tests {
         let other = with(vec![2.0, -1.5, 1.8, 0.5, -0.6, 0.0]);
         assert_eq!(other.ambiguous, None);
         assert_eq!(other.accepted[0].name, "accel_y_offset");
+    }
+
+    /// How much of a winner's change another change carries is its projection on the
+    /// winner's: a larger change holding the winner's as a part carries most of it at a low
+    /// cosine, one that moves the same readings across it carries none.
+    #[test]
+    fn a_change_carries_its_part_along_the_winners() {
+        let mut win = candidate("compass_offset", 50.0, true);
+        win.change = vec![1.0, 1.0, 0.0, 0.0];
+        let mut larger = candidate("reverse_thrust_curve", 60.0, true);
+        larger.change = vec![0.9, 0.8, 3.0, -2.5];
+        let mut across = candidate("reverse_thrust_curve", 60.0, true);
+        across.change = vec![1.0, -1.0, 0.5, 0.0];
+        let carries = |c: &Candidate| change_projection_where_changed(c, &win).unwrap();
+        assert!((carries(&larger) - 0.85).abs() < 1e-12);
+        assert!(change_cosine(&larger, &win).unwrap() < 0.3);
+        assert!(carries(&across).abs() < 1e-12);
     }
 
     /// Regression (a sensor effect named for a disagreement the dynamics explain as well): a

@@ -184,15 +184,14 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
         if held {
             model.hold(&mut state);
         } else {
-            let before = state.clone();
             let touching = state.contact_steps();
+            // A failed step leaves the state as it was: held from there.
             if let Err(e) = model.step(&mut state, &commands) {
                 divergences.push(Divergence {
                     segment_start_s,
                     t_s: t,
                     what: e.to_string(),
                 });
-                state = before;
                 model.hold(&mut state);
                 held = true;
             } else if touched.is_none() && state.contact_steps() > touching {

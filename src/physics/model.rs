@@ -436,8 +436,24 @@ impl Model {
     }
 
     /// Advances `state` by one fixed step under `commands`. Pure: the result depends only on
-    /// the state and the commands (and the model), never on a clock.
+    /// the state and the commands (and the model), never on a clock. A step that fails
+    /// (a quantity not finite, a divergence guard) leaves `state` as it was.
     pub fn step(
+        &self,
+        state: &mut SimState,
+        commands: &[ThrusterCommand; 4],
+    ) -> Result<(), PhysicsError> {
+        let rng_at = state.rng.get_word_pos();
+        let result = self.try_step(state, commands);
+        if result.is_err() {
+            state.rng.set_word_pos(rng_at);
+        }
+        result
+    }
+
+    /// [`Model::step`]: every field but the RNG's position is written only once the step
+    /// has passed its checks.
+    fn try_step(
         &self,
         state: &mut SimState,
         commands: &[ThrusterCommand; 4],
@@ -447,23 +463,24 @@ impl Model {
         // Thrusters: static curve -> lag -> fluctuation -> fade when out of the water.
         let mut tau = Vector6::zeros();
         let down_body = down_in_body(&state.attitude);
+        let mut lagged_n = state.thrust_lagged_n;
+        let mut fluctuation = state.fluctuation;
+        let mut thrust_n = [0.0; 4];
         for (i, motor) in self.vehicle.thrusters.iter().enumerate() {
             let reverse = usize::from(commands[i].direction == Direction::Reverse);
             let target = self.static_n[i][reverse][usize::from(commands[i].duty)];
             let produced = self.thruster_dynamics.step(
-                &mut state.thrust_lagged_n[i],
-                &mut state.fluctuation[i],
+                &mut lagged_n[i],
+                &mut fluctuation[i],
                 target,
                 self.full_n[i],
                 &mut state.rng,
             );
             let depth = state.position_m.z + down_body.dot(&motor.position_cg_m);
             let wet = smoothstep((depth + PROPELLER_RADIUS_M) / (2.0 * PROPELLER_RADIUS_M));
-            state.thrust_n[i] = produced * wet;
-            state.effort[i] = commands[i].effort();
-            tau += self.wrench[i] * state.thrust_n[i];
+            thrust_n[i] = produced * wet;
+            tau += self.wrench[i] * thrust_n[i];
         }
-        state.tau_thrust = tau;
 
         // RK4.
         let p0 = state.position_m;
@@ -481,8 +498,7 @@ impl Model {
         let mut position = p0 + (dp1 + (dp2 + dp3) * 2.0 + dp4) * s;
         let q = q0 + (dq1 + (dq2 + dq3) * 2.0 + dq4) * s;
         let mut nu = n0 + (dn1 + (dn2 + dn3) * 2.0 + dn4) * s;
-        state.step += 1;
-        let t_s = state.step as f64 * dt;
+        let t_s = (state.step + 1) as f64 * dt;
         if !q.coords.iter().all(|x| x.is_finite()) || q.norm() < 1e-6 {
             return Err(PhysicsError::NonFinite {
                 t_s,
@@ -494,14 +510,6 @@ impl Model {
         // Contacts with the pool.
         let nu_before_contact = nu;
         let touching = self.resolve_contacts(&mut position, &attitude, &mut nu);
-        state.contact_accel = (nu - nu_before_contact) / dt;
-        if touching && !state.in_contact {
-            state.contact_count += 1;
-        }
-        if touching {
-            state.contact_steps += 1;
-        }
-        state.in_contact = touching;
 
         // Divergence guard.
         if !position.iter().chain(nu.iter()).all(|x| x.is_finite()) {
@@ -540,6 +548,20 @@ impl Model {
                 limit: OUTSIDE_POOL_LIMIT_M,
             });
         }
+        state.step += 1;
+        state.thrust_lagged_n = lagged_n;
+        state.fluctuation = fluctuation;
+        state.thrust_n = thrust_n;
+        state.effort = commands.map(|c| c.effort());
+        state.tau_thrust = tau;
+        state.contact_accel = (nu - nu_before_contact) / dt;
+        if touching && !state.in_contact {
+            state.contact_count += 1;
+        }
+        if touching {
+            state.contact_steps += 1;
+        }
+        state.in_contact = touching;
         state.position_m = position;
         state.attitude = attitude;
         state.nu_r = nu;
