@@ -7,11 +7,18 @@ use crate::gap::candidate::{
     Candidate, change_cosine_where_changed, change_projection_where_changed,
 };
 use crate::gap::effects;
+use crate::gap::resim;
 
 /// A structural rival must take out of the winner's own signature channels at least this
 /// share of the chi-square the winner takes out of them: most of it, so that it explains the
 /// same disagreement, not another one beside it.
 pub const RIVAL_MIN_SHARE: f64 = 0.5;
+
+/// A rival whose change of the residuals has at least this cosine with the winner's makes
+/// most of the same change (the squared cosine, the share of the winner's change along the
+/// rival's, is at least a half): what the winner adds beside it is then more of the pattern
+/// the structural term's form does not quite reach, not a disagreement of its own.
+pub const RIVAL_SAME_PATTERN_COSINE: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// The structural term that explains what `win` explains, fitted alone against the setup's
 /// model and passing every guard; `None` when none does. It explains as much overall (its
@@ -24,11 +31,19 @@ pub const RIVAL_MIN_SHARE: f64 = 0.5;
 ///
 /// The share is of chi-square, not of the pattern: a rival may take it out by another change
 /// of the residuals than the winner's. The debug line reports how much of the winner's change
-/// the rival's carries (its projection on it) and their cosine. Requiring the pattern as well
-/// was tried and not kept: it named a true compass offset after a water current (the reverse
-/// thrust curve that took 67 % of its chi-square carried 0.06 of its change), and as well a
-/// surge accelerometer offset after a depth EMI that nothing hid (the spin-down took 67 %,
-/// carrying less than 0.4).
+/// the rival's carries (its projection on it) and their cosine. The pattern alone does not
+/// tell a stand-in: a surge accelerometer offset that nothing hid, named after a depth EMI,
+/// carried less than 0.4 of the spin-down's change, as a true compass offset after a water
+/// current carried 0.06 of the reverse thrust curve's.
+///
+/// Such a rival refuses the winner unless the winner explains what the rival does not, in a
+/// pattern of its own: fitted against the model with the rival in it, the winner passes every
+/// guard again (the nested test of whether it adds to the structure), and the two changes of
+/// the residuals differ (cosine below [`RIVAL_SAME_PATTERN_COSINE`]). A stand-in adds nothing
+/// once the structure it stands in for is mended, or adds only more of the rival's pattern; a
+/// real effect beside a loose structure adds its own (that compass offset, whose constant
+/// heading error no change of the thrust curve reproduces; the accelerometer offset added
+/// beside the spin-down too, but at a cosine of 0.78 with it).
 ///
 /// The earlier names of an analysis can drive the vehicle where the baseline runs never took
 /// it (a lag many times the calibrated one, a depth hold that chatters its vertical
@@ -63,7 +78,45 @@ pub fn structural_rival(setup: &Setup<'_>, win: &Candidate) -> Option<Candidate>
                 && r.guards.all()
                 && r.delta_bic_uncalibrated > win.delta_bic_uncalibrated - BIC_MARGIN
                 && takes_out(r).is_some_and(|t| t >= RIVAL_MIN_SHARE * win_takes)
+                && (change_cosine_where_changed(r, win)
+                    .is_none_or(|c| c >= RIVAL_SAME_PATTERN_COSINE)
+                    || !adds_to(setup, effect, r))
         })
+}
+
+/// Whether `effect`, fitted against the setup's model with `rival` applied, passes every
+/// guard: it explains what the rival leaves.
+pub(super) fn adds_to(
+    setup: &Setup<'_>,
+    effect: &'static effects::Effect,
+    rival: &Candidate,
+) -> bool {
+    let Some(rival_effect) = effects::by_name(&rival.name) else {
+        return false;
+    };
+    let mut base = setup.base.clone();
+    effects::apply(rival_effect, &rival.values(), &mut base);
+    let Ok(clean) = resim::simulate(&base, setup.m, None) else {
+        return false;
+    };
+    let with = Setup {
+        base,
+        clean,
+        spread: setup.spread.clone(),
+        known: setup.known.clone(),
+        ..*setup
+    };
+    let again = fit_effects(&with, &[effect], &mut |_| {});
+    let adds = again.first().is_some_and(|c| c.testable && c.guards.all());
+    tracing::debug!(
+        winner = effect.name,
+        rival = rival.name,
+        adds,
+        guards = ?again.first().map(|c| c.guards),
+        delta_bic = again.first().map(|c| c.delta_bic),
+        "the winner fitted beside its structural rival"
+    );
+    adds
 }
 
 /// The chi-square of `r` in the channels named.

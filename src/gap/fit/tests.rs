@@ -203,6 +203,61 @@ fn a_structural_term_outranks_a_later_stand_in_and_not_a_real_effect() {
     );
 }
 
+/// A real effect beside a loose structure is kept: with the lag's shape off and a thruster
+/// imbalance really there, the structural term that mends the shape explains much of the
+/// compass and track disagreement too, but the imbalance fitted beside it still passes every
+/// guard, by a change of its own; the surge added mass that stands in for the same shape
+/// error adds nothing beside it.
+#[test]
+fn a_real_effect_adds_to_its_structural_rival_and_a_stand_in_does_not() {
+    let lag = |c: &mut Configs| {
+        c.vehicle.thruster_common.lag_s = 1.5;
+        c.vehicle.thruster_common.lag_down_s = 1.5;
+        c.vehicle.thruster_common.lag_exponent = 2.0;
+    };
+    let shape = effects::by_name("thruster_lag_shape").unwrap();
+    let fitted = |truth: &dyn Fn(&mut Configs), name: &str| {
+        let (_, mut c, m) = crate::gap::resim::tests::manoeuvre_of(11, truth);
+        c.vehicle.thruster_common.lag_s = 1.5;
+        c.vehicle.thruster_common.lag_down_s = 1.5;
+        let clean = resim::simulate(&c, &m, None).unwrap();
+        let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+        let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+        let effect = effects::by_name(name).unwrap();
+        let win = fit_effects(&setup, &[effect], &mut |_| {}).remove(0);
+        let mend = fit_effects(&setup, &[shape], &mut |_| {}).remove(0);
+        assert!(
+            mend.guards.all(),
+            "{name}: the shape is off: {:?}",
+            mend.guards
+        );
+        let adds = rival::adds_to(&setup, effect, &mend);
+        let cosine = crate::gap::candidate::change_cosine_where_changed(&mend, &win);
+        (adds, cosine, win.clone(), structural_rival(&setup, &win))
+    };
+    let (stand_in_adds, _, _, _) = fitted(&lag, "added_mass");
+    assert!(!stand_in_adds, "a stand-in adds to the shape");
+    let (real_adds, cosine, real, rival) = fitted(
+        &|c: &mut Configs| {
+            lag(c);
+            c.vehicle.thrusters[0].gain *= 0.93;
+        },
+        "thruster_imbalance",
+    );
+    assert!(real.guards.all(), "{:?}", real.guards);
+    assert!(real_adds, "the real imbalance adds nothing to the shape");
+    assert!(
+        cosine.is_some_and(|c| c < rival::RIVAL_SAME_PATTERN_COSINE),
+        "{cosine:?}"
+    );
+    assert!(
+        rival.is_none(),
+        "{:?} refuses a real imbalance (delta BIC {:.1})",
+        rival.map(|r| (r.name, r.delta_bic_uncalibrated)),
+        real.delta_bic_uncalibrated
+    );
+}
+
 /// The held-out guard's second half: residuals that lower the held-out chi-square in all (the
 /// channel with the most independent samples a little better) but raise the report's gap
 /// measure (the channel with the fewest much worse) grow the held-out gap; the same residuals
