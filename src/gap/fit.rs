@@ -612,6 +612,14 @@ fn fit_mean(
     let (signature_pass, signature_text) = signature(setup, effect, r0, &train.residuals);
     let heldout =
         heldout_gain > HELDOUT_MIN_GAIN && !held_out_gap_grows(setup, r0, &train.residuals);
+    if !heldout && tracing::enabled!(tracing::Level::DEBUG) {
+        tracing::debug!(
+            effect = effect.name,
+            heldout_gain,
+            worst = ?worst_heldout_blocks(setup, r0, &train.residuals),
+            "a training fit that fails its held-out blocks"
+        );
+    }
     let mut evaluations = train.evaluations;
     let trained = train.params.clone();
     let chosen = if heldout && signature_pass {
@@ -668,6 +676,35 @@ fn fit_mean(
             Vec::new()
         },
     }
+}
+
+/// The three held-out blocks (start time s, channel) whose chi-square `after` raises most over
+/// `before`, with the rise: where a fit that fails its held-out blocks fails them.
+fn worst_heldout_blocks(
+    setup: &Setup<'_>,
+    before: &Residuals,
+    after: &Residuals,
+) -> Vec<(f64, String, f64)> {
+    let mut rise: std::collections::BTreeMap<(i64, usize), f64> = Default::default();
+    for (i, v) in after.part(false) {
+        let (Some(b), Some(t), Some(o)) =
+            (before.values.get(i), after.times.get(i), after.owner.get(i))
+        else {
+            continue;
+        };
+        let block = (t / setup.split.block_s).floor() as i64;
+        *rise.entry((block, *o)).or_default() += v * v - b * b;
+    }
+    let mut out: Vec<(f64, String, f64)> = rise
+        .into_iter()
+        .map(|((block, o), r)| {
+            let name = setup.m.channels.get(o).map_or("?", |c| c.name.as_str());
+            (block as f64 * setup.split.block_s, name.to_string(), r)
+        })
+        .collect();
+    out.sort_by(|a, b| b.2.total_cmp(&a.2));
+    out.truncate(3);
+    out
 }
 
 fn names(effect: &Effect) -> impl Iterator<Item = String> + '_ {
