@@ -618,18 +618,10 @@ fn fit_mean(
         })
         .flatten()
         .filter(|run| run.contacts != setup.clean.contacts);
-    let masked = |r: &Residuals| -> Residuals {
-        let mut r = r.clone();
-        if let Some(run) = &touched {
-            for (v, t) in r.values.iter_mut().zip(&r.times) {
-                if run.in_contact(*t) {
-                    *v = 0.0;
-                }
-            }
-        }
-        r
-    };
-    let (held_before, held_after) = (masked(r0), masked(&train.residuals));
+    let (held_before, held_after) = (
+        left_out_where_touched(r0, touched.as_ref()),
+        left_out_where_touched(&train.residuals, touched.as_ref()),
+    );
     let heldout_chi2_before = held_before.chi2(false);
     let heldout_chi2_after = held_after.chi2(false);
     let heldout_gain = (heldout_chi2_before - heldout_chi2_after) / train.scale;
@@ -700,6 +692,20 @@ fn fit_mean(
             Vec::new()
         },
     }
+}
+
+/// `r` with every sample where `run` touched the pool ([`Run::in_contact`]) set to zero, as the
+/// setup leaves out those where its base run touched.
+pub(crate) fn left_out_where_touched(r: &Residuals, run: Option<&Run>) -> Residuals {
+    let mut r = r.clone();
+    if let Some(run) = run {
+        for (v, t) in r.values.iter_mut().zip(&r.times) {
+            if run.in_contact(*t) {
+                *v = 0.0;
+            }
+        }
+    }
+    r
 }
 
 /// The three held-out blocks (start time s, channel) whose chi-square `after` raises most over
