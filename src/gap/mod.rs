@@ -389,6 +389,37 @@ pub fn analyse(
 /// ([`fit::constancy`]): "most" of what is left.
 pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
 
+/// An effect named after others must explain at least this share of the excess of the gap
+/// measure's channel mean over 1 that the earlier names left, and there must be an excess.
+/// The gap measure counts every channel once, so a true second effect takes a large part of
+/// what is left; a name that takes a sliver of it beside a larger rest left unexplained is a
+/// symptom of the structure the earlier names exposed (a hull driven where the baseline runs
+/// never took it), not a cause of its own.
+pub const LATER_NAME_FLOOR_SHARE: f64 = 0.1;
+
+/// Why an effect named after others, with the gap measure's channel mean `without` it and
+/// `with` it, takes too little of what the earlier names left to be named; `None` when it
+/// takes enough.
+pub(crate) fn too_small_a_share(without: f64, with: f64) -> Option<String> {
+    if without <= 1.0 {
+        return Some(format!(
+            "the effects named before it leave the channels' mean chi-square at {without:.3}, \
+             at or below the known levels: no disagreement is left for another effect"
+        ));
+    }
+    let share = (without - with) / (without - 1.0);
+    (share < LATER_NAME_FLOOR_SHARE).then(|| {
+        format!(
+            "it explains {:.0} % of the disagreement the effects named before it left (the \
+             channels' mean chi-square over their known levels {without:.3} -> {with:.3}); an \
+             effect named after others must explain at least {:.0} %: a sliver beside a larger \
+             rest is the structure the earlier names exposed, not a cause of its own",
+            100.0 * share,
+            100.0 * LATER_NAME_FLOOR_SHARE
+        )
+    })
+}
+
 /// As [`analyse`], with explicit options.
 pub fn analyse_with(
     model: &GapModel,
@@ -544,6 +575,13 @@ pub fn analyse_with(
             } else {
                 1.0
             };
+            if let Some((effect, _, _)) = named.last()
+                && named.len() > 1
+                && effect.kind == effects::Kind::Mean
+                && let Some(why) = too_small_a_share(without, mean)
+            {
+                return Ok(Some(why));
+            }
             // A winner in place of one refused in the same round must explain most of what
             // is left: the refusal says the round's disagreement is where the model's form is
             // loose, and there a small share is the first sign of a stand-in.
@@ -733,6 +771,25 @@ pub fn analyse_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A later name must take a real part of what the earlier names left, and something must
+    /// be left: a sliver of a large rest, or anything once the gap is at its known levels, is
+    /// refused; a tenth or more passes.
+    #[test]
+    fn a_later_name_must_take_a_real_share_of_what_is_left() {
+        // An accelerometer offset after an EMI: 1.242 -> 1.223 is 8 % of the 0.242 left.
+        let sliver = too_small_a_share(1.242, 1.223).expect("a sliver is refused");
+        assert!(sliver.contains("8 %"), "{sliver}");
+        assert!(
+            too_small_a_share(0.98, 0.96).is_some(),
+            "nothing left to explain"
+        );
+        assert!(too_small_a_share(1.0, 0.9).is_some(), "at the known levels");
+        // A compass offset beside a current: 5.66 -> 4.79 is 19 % of what is left.
+        assert_eq!(too_small_a_share(5.66, 4.79), None);
+        assert_eq!(too_small_a_share(2.0, 1.9), None, "exactly a tenth passes");
+        assert_eq!(too_small_a_share(1.5, 1.0), None);
+    }
 
     /// The gap measure is the mean over channels of chi2 over the known level, less 1: a run
     /// as far off as the baseline runs has no gap, each channel counts once, and a known
