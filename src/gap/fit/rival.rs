@@ -72,16 +72,32 @@ pub fn structural_rival(setup: &Setup<'_>, win: &Candidate) -> Option<Candidate>
                 winner_delta_bic = win.delta_bic_uncalibrated,
                 carries,
                 cosine = change_cosine_where_changed(r, win),
+                guards = ?r.guards,
+                heldout_gain = r.heldout_gain,
                 "a structural rival"
             );
-            r.testable
-                && r.guards.all()
+            stands(r)
                 && r.delta_bic_uncalibrated > win.delta_bic_uncalibrated - BIC_MARGIN
                 && takes_out(r).is_some_and(|t| t >= RIVAL_MIN_SHARE * win_takes)
                 && (change_cosine_where_changed(r, win)
                     .is_none_or(|c| c >= RIVAL_SAME_PATTERN_COSINE)
                     || !adds_to(setup, effect, r))
         })
+}
+
+/// Whether a structural term's fit can stand as the rival of a name: it passes every guard a
+/// name must pass, except that its held-out blocks need only not get worse (gain at least 0)
+/// rather than confirm it by [`super::HELDOUT_MIN_GAIN`]. The rival is not named; it only has
+/// to show that the base model's own structure, set otherwise, accounts for the disagreement.
+/// A loose structure driven where the baseline runs never took it is fitted in the training
+/// blocks to the regime it met there, and the other blocks meet the regime at other moments:
+/// a thruster's lag shape fitted to a depth hold that chatters on a noisy reading (structure
+/// seed 132049, seed 121061, case 26) gains 3309.5 in delta BIC and only 2.4 on the held-out
+/// blocks.
+pub(super) fn stands(r: &Candidate) -> bool {
+    let mut rest = r.guards;
+    rest.heldout = None;
+    r.testable && rest.all() && r.heldout_gain.is_none_or(|g| g >= 0.0)
 }
 
 /// Whether `effect`, fitted against the setup's model with `rival` applied, passes every

@@ -440,3 +440,33 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
     );
     assert_eq!(left_out_where_touched(&after, None).values, after.values);
 }
+
+/// A structural rival is not named, so its held-out blocks need not confirm it; they must
+/// only not get worse. Every other guard still holds it.
+#[test]
+fn a_structural_rival_needs_held_out_blocks_that_do_not_get_worse() {
+    let shape = effects::by_name("thruster_lag_shape").unwrap();
+    let rival = |gain: f64, interval: bool| {
+        let mut c = crate::gap::candidate::Candidate::untestable(shape, 100.0, "");
+        c.testable = true;
+        c.guards = crate::gap::candidate::Guards {
+            inside_bounds: true,
+            interval_excludes_zero: interval,
+            significant: true,
+            signature: true,
+            heldout: Some(gain > HELDOUT_MIN_GAIN),
+        };
+        c.heldout_gain = Some(gain);
+        c
+    };
+    assert!(rival::stands(&rival(2.4, true)), "a small held-out gain");
+    assert!(rival::stands(&rival(40.0, true)), "a confirmed one");
+    assert!(!rival::stands(&rival(-0.5, true)), "a held-out loss");
+    assert!(
+        !rival::stands(&rival(2.4, false)),
+        "an interval that holds no effect"
+    );
+    let mut untested = rival(2.4, true);
+    untested.testable = false;
+    assert!(!rival::stands(&untested));
+}
