@@ -390,7 +390,8 @@ pub fn analyse(
 pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
 
 /// An effect named after others must explain at least this share of the excess of the gap
-/// measure's channel mean over 1 that the earlier names left, and there must be an excess.
+/// measure's channel mean over 1 that the earlier names left, there must be an excess, and
+/// it must take the mean down more above 1 than below it.
 /// The gap measure counts every channel once, so a true second effect takes a large part of
 /// what is left; a name that takes a sliver of it beside a larger rest left unexplained is a
 /// symptom of the structure the earlier names exposed (a hull driven where the baseline runs
@@ -405,6 +406,18 @@ pub(crate) fn too_small_a_share(without: f64, with: f64) -> Option<String> {
         return Some(format!(
             "the effects named before it leave the channels' mean chi-square at {without:.3}, \
              at or below the known levels: no disagreement is left for another effect"
+        ));
+    }
+    // Of the drop the name makes, the part above the known levels is the excess it explains;
+    // the part below them is disagreement the calibration's own runs show as well.
+    let above = without - with.max(1.0);
+    let below = (1.0 - with).max(0.0);
+    if below > above {
+        return Some(format!(
+            "it takes the channels' mean chi-square over their known levels from {without:.3} \
+             to {with:.3}: {below:.3} of that below the known levels against {above:.3} above \
+             them. It fits more of the disagreement the calibration's own runs show than of \
+             what the effects named before it left"
         ));
     }
     let share = (without - with) / (without - 1.0);
@@ -773,8 +786,8 @@ mod tests {
     use super::*;
 
     /// A later name must take a real part of what the earlier names left, and something must
-    /// be left: a sliver of a large rest, or anything once the gap is at its known levels, is
-    /// refused; a tenth or more passes.
+    /// be left: a sliver of a large rest, anything once the gap is at its known levels, or a
+    /// drop mostly below them is refused; a tenth or more, above them, passes.
     #[test]
     fn a_later_name_must_take_a_real_share_of_what_is_left() {
         // An accelerometer offset after an EMI: 1.242 -> 1.223 is 8 % of the 0.242 left.
@@ -789,6 +802,12 @@ mod tests {
         assert_eq!(too_small_a_share(5.66, 4.79), None);
         assert_eq!(too_small_a_share(2.0, 1.9), None, "exactly a tenth passes");
         assert_eq!(too_small_a_share(1.5, 1.0), None);
+        // A drag mismatch after a thruster imbalance: 1.018 -> 0.841 is 0.018 above the
+        // known levels and 0.159 below them.
+        let below = too_small_a_share(1.018, 0.841).expect("mostly below the known levels");
+        assert!(below.contains("0.159 of that below"), "{below}");
+        // A coupling after a compass offset: 1.86 -> 0.99 is nearly all above them.
+        assert_eq!(too_small_a_share(1.86, 0.99), None);
     }
 
     /// The gap measure is the mean over channels of chi2 over the known level, less 1: a run
