@@ -392,6 +392,7 @@ pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
 /// An effect named after others must explain at least this share of the excess of the gap
 /// measure's channel mean over 1 that the earlier names left, there must be an excess, and
 /// it must take the mean down more above 1 than below it.
+///
 /// The gap measure counts every channel once, so a true second effect takes a large part of
 /// what is left; a name that takes a sliver of it beside a larger rest left unexplained is a
 /// symptom of the structure the earlier names exposed (a hull driven where the baseline runs
