@@ -19,7 +19,8 @@
 //!
 //! **Size in sigma** (post hoc, for the >= 3 sigma split): |truth| in the library effect's
 //! parameters over the standard error (95 % half-width / 1.96) of the candidate of the right
-//! name in round 1, accepted or not; for two parameters the norm of the per-parameter ratios.
+//! name in round 1, accepted or not; for two parameters the norm of the per-parameter ratios;
+//! for a case with two hidden effects the smaller of the two effects' sizes.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -31,6 +32,7 @@ use crate::gap::bench::{
     BenchOptions, CalibrationGap, CaseResult, MODEL, Outcome, Progress, Shard,
 };
 use crate::gap::calibrate::{self, Run};
+use crate::gap::candidate::Candidate;
 use crate::gap::effects::Effect;
 use crate::gap::format::Measurement;
 use crate::gap::model::GapModel;
@@ -193,6 +195,21 @@ pub fn post_hoc_sigma(truth: &[f64], ci95: &[[f64; 2]]) -> Option<f64> {
         sum += (t / se).powi(2);
     }
     Some(sum.sqrt())
+}
+
+/// A case's size in sigma: each hidden effect's truth against the interval of the candidate
+/// of its name in `round` (the first round, accepted or not), the smallest of them; `None`
+/// when an effect has no such candidate or no size.
+pub fn case_size(round: &[Candidate], hidden: &[(&Hidden, Vec<f64>)]) -> Option<f64> {
+    let sizes: Option<Vec<f64>> = hidden
+        .iter()
+        .map(|(h, size)| {
+            let c = round.iter().find(|c| Some(c.name.as_str()) == h.library)?;
+            let ci: Vec<[f64; 2]> = c.ci95.iter().map(|(_, c)| *c).collect();
+            post_hoc_sigma(&library_truth(h, size), &ci)
+        })
+        .collect();
+    sizes?.into_iter().reduce(f64::min)
 }
 
 pub fn io(path: &Path) -> impl FnOnce(std::io::Error) -> GapError + '_ {
@@ -419,18 +436,14 @@ pub fn run(
 
         let first = a.accepted.first();
         let named = first.map(|w| w.name.clone());
-        // A pair case is scored on both names; its truth, size and fit are the first
-        // effect's.
+        // A pair case is scored on both names; its truth and fit are the first effect's, its
+        // size the smaller of the two effects' sizes: a pair is named whole only where its
+        // weaker effect shows.
         let main = p.hidden.first();
         let expected = main.and_then(|(h, _)| h.library);
         let expected_second = p.hidden.get(1).and_then(|(h, _)| h.library);
         let truth = main.map_or(Vec::new(), |(h, size)| library_truth(h, size));
-        // The right candidate's interval in round 1, accepted or not.
-        let size_sigma = expected.and_then(|name| {
-            let c = a.rounds.first()?.iter().find(|c| c.name == name)?;
-            let ci: Vec<[f64; 2]> = c.ci95.iter().map(|(_, c)| *c).collect();
-            post_hoc_sigma(&truth, &ci)
-        });
+        let size_sigma = case_size(a.rounds.first().map_or(&[][..], Vec::as_slice), &p.hidden);
         out.push(CaseResult {
             index: p.index,
             effect: main.map(|_| label.clone()),
@@ -498,6 +511,55 @@ mod tests {
         assert_eq!(
             physical_size(&wc, &[0.02, -0.015], 2.0, true),
             vec![0.04, -0.03]
+        );
+    }
+
+    /// A case with two hidden effects is as large as its weaker effect: the smaller of the two
+    /// sizes, each read from its own candidate's interval; an effect without a candidate
+    /// leaves the case without a size.
+    #[test]
+    fn a_pair_is_as_large_as_its_weaker_effect() {
+        let hidden = |name: &'static str| Hidden {
+            name,
+            library: Some(name),
+            signed: true,
+            scale: false,
+        };
+        let (current, offset) = (hidden("water_current"), hidden("compass_offset"));
+        let candidate = |name: &str, half: f64| {
+            let mut c = Candidate::untestable(
+                crate::gap::effects::by_name(name).expect("a library effect"),
+                0.0,
+                "",
+            );
+            c.ci95 = c
+                .ci95
+                .iter()
+                .map(|(n, _)| (n.clone(), [-half, half]))
+                .collect();
+            c
+        };
+        // 1.96 / 1.96 = 1 per unit of truth: the current 10 sigma, the offset 1 sigma.
+        let round = [
+            candidate("water_current", 1.96),
+            candidate("compass_offset", 1.96),
+        ];
+        let pair = [(&current, vec![10.0, 0.0]), (&offset, vec![1.0])];
+        let size = case_size(&round, &pair).expect("both have candidates");
+        assert!(
+            (size - 1.0).abs() < 1e-12,
+            "the weaker effect's size, got {size}"
+        );
+        let one = [(&current, vec![10.0, 0.0])];
+        let size = case_size(&round, &one).expect("a candidate");
+        assert!(
+            (size - 10.0).abs() < 1e-12,
+            "one effect's own size, got {size}"
+        );
+        assert_eq!(
+            case_size(&round[..1], &pair),
+            None,
+            "the offset has no candidate"
         );
     }
 
