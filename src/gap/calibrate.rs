@@ -374,17 +374,26 @@ fn apparent_spread(
     Ok((spread, unidentified))
 }
 
-/// Where the joint fit starts: the model as given, and one more start per effect with a
-/// second start ([`Fitted::JointTwoStarts`]). The thrust curve's scale (`thrust_gain`)
-/// and shape (`thrust_curve`) trade off against each other, and from the linear curve alone
-/// the fit can stop at half the exponent a propeller's thrust has (thrust ~ rpm^2, rpm less
-/// than linear in duty), with a larger gap left on the baseline runs.
+/// Where the joint fit starts: the model as given, and one more start per further value of
+/// an effect's first parameter ([`Fitted::JointTwoStarts`], [`Fitted::DiscrepancyStarts`]).
+/// The thrust curve's scale (`thrust_gain`) and shape (`thrust_curve`) trade off against
+/// each other, and from the linear curve alone the fit can stop at half the exponent a
+/// propeller's thrust has (thrust ~ rpm^2, rpm less than linear in duty), with a larger gap
+/// left on the baseline runs. The camera marker's position and a sway in spins
+/// (`sway_from_yaw`) trade off too: a marker ahead of the centre moves sideways in a spin as
+/// a swaying hull does, and from the marker as stated the fit can end with the marker on the
+/// wrong side of the centre and a sway the hull does not have.
 fn starts(chosen: &[&'static Effect]) -> Vec<DVector<f64>> {
     let dims = chosen.iter().map(|e| e.parameters.len()).sum();
     let mut out = vec![DVector::zeros(dims)];
     let mut k = 0;
     for e in chosen {
-        if let Fitted::JointTwoStarts(_, start) = e.calibration {
+        let values: &[f64] = match &e.calibration {
+            Fitted::JointTwoStarts(_, start) => std::slice::from_ref(start),
+            Fitted::DiscrepancyStarts(_, starts) => starts,
+            _ => &[],
+        };
+        for start in values {
             let mut x = DVector::zeros(dims);
             x[k] = start / e.scales[0];
             out.push(x);
@@ -686,9 +695,10 @@ fn choose_effects(measured: &[&str]) -> (Vec<&'static Effect>, Vec<String>) {
     let mut joint: Vec<(u8, &'static Effect)> = effects::LIBRARY
         .iter()
         .filter_map(|e| match e.calibration {
-            Fitted::Joint(k) | Fitted::JointTwoStarts(k, _) | Fitted::Discrepancy(k) => {
-                Some((k, e))
-            }
+            Fitted::Joint(k)
+            | Fitted::JointTwoStarts(k, _)
+            | Fitted::Discrepancy(k)
+            | Fitted::DiscrepancyStarts(k, _) => Some((k, e)),
             _ => None,
         })
         .collect();

@@ -145,6 +145,11 @@ pub enum Calibration {
     /// vehicle's own coefficients a different hull has differently), so that what a vehicle
     /// of another structure does differently lands here and not in the named effects' values.
     Discrepancy(u8),
+    /// As `Discrepancy`, and the joint fit also starts from each of these values of its first
+    /// parameter: a term that trades off against another, so that the start from the model as
+    /// given can stop in the other's minimum (a camera marker ahead of the centre moves
+    /// sideways in a spin as a hull that sways in spins does).
+    DiscrepancyStarts(u8, &'static [f64]),
     /// A structural term of the base model that the calibration leaves as given and `gap`
     /// never names: tried only as a rival of an effect named after others
     /// ([`structural_rivals`]). Baseline runs seldom tell it (a lag's shape shows only after
@@ -159,7 +164,7 @@ impl Effect {
     pub fn candidate(&self) -> bool {
         !matches!(
             self.calibration,
-            Calibration::Discrepancy(_) | Calibration::Rival
+            Calibration::Discrepancy(_) | Calibration::DiscrepancyStarts(..) | Calibration::Rival
         )
     }
 }

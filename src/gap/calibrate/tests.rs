@@ -95,3 +95,55 @@ fn the_robust_residual_squares_to_hubers_loss() {
     assert!((huber(k + 1e-9, k) - k).abs() < 1e-6);
     assert!((huber(30.0, k).powi(2) - 171.0).abs() < 1e-9);
 }
+
+/// The joint fit starts from the model as given, from the steeper thrust curve, and from the
+/// camera marker 0.1 m ahead of and behind where it is stated, each start changing one
+/// parameter alone: the marker and a sway in spins trade off, and from the stated marker
+/// alone the fit can end with the marker on the wrong side of the centre.
+#[test]
+fn the_joint_fit_starts_from_the_marker_on_both_sides_of_the_centre() {
+    let (chosen, _) = choose_effects(&[
+        "x_m",
+        "y_m",
+        "surge_mps",
+        "compass_deg",
+        "depth_adc",
+        "accel_x_adc",
+        "accel_y_adc",
+        "accel_z_adc",
+        "paddle_speed_mps",
+    ]);
+    let all = starts(&chosen);
+    let offset = |name: &str| {
+        let mut k = 0;
+        for e in &chosen {
+            if e.name == name {
+                return (k, e.scales[0]);
+            }
+            k += e.parameters.len();
+        }
+        panic!("{name} is not calibrated");
+    };
+    assert!(
+        all[0].iter().all(|v| *v == 0.0),
+        "the first start is the model as given"
+    );
+    let (marker, scale) = offset("camera_marker_position");
+    let (curve, curve_scale) = offset("thrust_curve");
+    let moved: Vec<(usize, f64)> = all[1..]
+        .iter()
+        .map(|x| {
+            let nonzero: Vec<usize> = (0..x.len()).filter(|&i| x[i] != 0.0).collect();
+            assert_eq!(nonzero.len(), 1, "each further start moves one parameter");
+            (nonzero[0], x[nonzero[0]])
+        })
+        .collect();
+    assert_eq!(
+        moved,
+        vec![
+            (curve, 0.3 / curve_scale),
+            (marker, 0.1 / scale),
+            (marker, -0.1 / scale)
+        ]
+    );
+}
