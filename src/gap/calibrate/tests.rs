@@ -102,17 +102,7 @@ fn the_robust_residual_squares_to_hubers_loss() {
 /// alone the fit can end with the marker on the wrong side of the centre.
 #[test]
 fn the_joint_fit_starts_from_the_marker_on_both_sides_of_the_centre() {
-    let (chosen, _) = choose_effects(&[
-        "x_m",
-        "y_m",
-        "surge_mps",
-        "compass_deg",
-        "depth_adc",
-        "accel_x_adc",
-        "accel_y_adc",
-        "accel_z_adc",
-        "paddle_speed_mps",
-    ]);
+    let (chosen, _) = choose_effects(&crate::gap::resim::MODELLED);
     let all = starts(&chosen);
     let offset = |name: &str| {
         let mut k = 0;
