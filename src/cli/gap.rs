@@ -423,6 +423,17 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
             known.join(", ")
         );
     }
+    if !c.run_bounds.is_empty() {
+        let bounds: Vec<String> = c
+            .run_bounds
+            .iter()
+            .map(|(ch, v)| format!("{ch} {v:.2}"))
+            .collect();
+        outln!(
+            "a run with nothing new stays under (chi2 per sample, 95 % for all channels together, from how the validation and spread runs scatter): {}",
+            bounds.join(", ")
+        );
+    }
     for r in &c.runs {
         outln!(
             "{} {}: gap {:.2} -> {:.2} ({:.0} % smaller)",

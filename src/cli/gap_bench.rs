@@ -280,7 +280,11 @@ fn verdict(r: &CaseResult) -> String {
         &expected
     };
     match &r.effect {
-        None if r.named.is_none() => "null, nothing named: right".to_string(),
+        None if !r.false_alarm() => "null, nothing named: right".to_string(),
+        None if r.named.is_none() => format!(
+            "null, {}: false alarm",
+            r.verdict.as_deref().unwrap_or("unexplained")
+        ),
         None => format!("null, named {named}: false alarm"),
         Some(_) if r.correct() && !r.wrong() => format!("named {named}: right"),
         Some(_) if r.wrong() => format!("named {named}, expected {expected}: wrong"),

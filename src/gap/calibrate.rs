@@ -37,6 +37,7 @@
 //! and still free to be found again by `gap` as a change in a later run. Calibration reports
 //! its gap before and after on runs it was not fitted to (`--validate`).
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use nalgebra::DVector;
@@ -158,6 +159,9 @@ pub struct Calibration {
     /// the validation runs (the baseline runs when there are none): what `gap` later
     /// measures a run's gap against.
     pub discrepancy: Vec<(String, f64)>,
+    /// Per channel, the chi-square per sample one more run with nothing new stays under, from
+    /// how the validation and spread runs scatter ([`run_bounds`]); empty with fewer than two.
+    pub run_bounds: Vec<(String, f64)>,
     #[serde(skip)]
     pub model: GapModel,
 }
@@ -267,28 +271,63 @@ fn excess(per_channel: &[(usize, f64)]) -> f64 {
     crate::gap::excess(per_channel.iter().map(|(_, c)| (*c, 1.0)))
 }
 
-/// The calibrated model's chi-square per sample by channel, as `gap` will see it (the
-/// calibrated model's own noise floor, re-anchored segments), averaged over `runs`.
-fn discrepancy(calibrated: &GapModel, runs: &[&Run]) -> Result<Vec<(String, f64)>, GapError> {
-    let mut sums: Vec<(String, f64, usize)> = Vec::new();
+/// The calibrated model's chi-square per sample by channel on each of `runs`, as `gap` will
+/// see it (the calibrated model's own noise floor, re-anchored segments).
+fn channel_chi2_per_run(
+    calibrated: &GapModel,
+    runs: &[&Run],
+) -> Result<BTreeMap<String, Vec<f64>>, GapError> {
+    let mut out: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     for r in runs {
         let p = prepare(calibrated, r)?;
         let s = p.setup()?;
         for (i, chi2) in channel_chi2(&p, &s, &p.base).unwrap_or_default() {
-            let channel = &r.m.channels[i].name;
-            match sums.iter_mut().find(|(c, _, _)| c == channel) {
-                Some(e) => {
-                    e.1 += chi2;
-                    e.2 += 1;
-                }
-                None => sums.push((channel.clone(), chi2, 1)),
-            }
+            out.entry(r.m.channels[i].name.clone())
+                .or_default()
+                .push(chi2);
         }
     }
-    Ok(sums
+    Ok(out)
+}
+
+/// The mean of each channel's chi-square per sample over the runs.
+fn discrepancy(per_run: &BTreeMap<String, Vec<f64>>) -> Vec<(String, f64)> {
+    per_run
+        .iter()
+        .map(|(c, v)| (c.clone(), v.iter().sum::<f64>() / v.len().max(1) as f64))
+        .collect()
+}
+
+/// Family-wise level of the run bounds: a run with nothing new exceeds one of its channels'
+/// bounds with at most this probability.
+pub const RUN_BOUND_LEVEL: f64 = 0.05;
+
+/// Per channel measured on two or more runs with nothing new, the chi-square per sample one
+/// more such run stays under: the upper prediction bound of a log-normal sample,
+/// `exp(m + t * s * sqrt(1 + 1/k))` with `m` and `s` the mean and standard deviation of the
+/// `k` runs' log chi-squares and `t` Student's t quantile with `k - 1` degrees of freedom at
+/// `1 - RUN_BOUND_LEVEL / channels` (Bonferroni over the channels, since a run disagrees when
+/// any of them does). A model's error is not the same on every run: the same programme from
+/// another start, or with other noise, meets it otherwise, and runs of the calibrated Mako
+/// with nothing new scatter by a factor of two and more in one channel.
+fn run_bounds(per_run: &BTreeMap<String, Vec<f64>>) -> Vec<(String, f64)> {
+    use statrs::distribution::{ContinuousCDF, StudentsT};
+    let measured: Vec<(&String, Vec<f64>)> = per_run
+        .iter()
+        .filter(|(_, v)| v.len() >= 2 && v.iter().all(|c| c.is_finite() && *c > 0.0))
+        .map(|(c, v)| (c, v.iter().map(|x| x.ln()).collect()))
+        .collect();
+    let q = 1.0 - RUN_BOUND_LEVEL / measured.len().max(1) as f64;
+    measured
         .into_iter()
-        .map(|(c, s, n)| (c, s / n as f64))
-        .collect())
+        .filter_map(|(channel, logs)| {
+            let k = logs.len() as f64;
+            let m = logs.iter().sum::<f64>() / k;
+            let s = (logs.iter().map(|l| (l - m).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+            let t = StudentsT::new(0.0, 1.0, k - 1.0).ok()?.inverse_cdf(q);
+            Some((channel.clone(), (m + t * s * (1.0 + 1.0 / k).sqrt()).exp()))
+        })
+        .collect()
 }
 
 /// The mean of per-run fitted values and its 95 % interval: from the between-run spread for
@@ -492,6 +531,17 @@ fn joint_fit(
                 )
             })
             .sum::<f64>();
+        tracing::debug!(
+            start = i + 1,
+            gap,
+            objective = fit.chi2(),
+            values = ?chosen
+                .iter()
+                .map(|e| e.name)
+                .zip(effects::joint_values(chosen, &x))
+                .collect::<Vec<_>>(),
+            "calibration start done"
+        );
         if best.as_ref().is_none_or(|(b, _, _)| gap < *b) {
             best = Some((gap, x, fit));
         }
@@ -628,14 +678,21 @@ pub fn calibrate(
     progress("scoring");
     let runs = score_runs(model, baseline, validate, &chosen, &x)?;
     progress("discrepancy");
-    let known: Vec<&Run> = if validate.is_empty() {
-        baseline.iter().collect()
-    } else {
-        validate.iter().collect()
-    };
     let mut calibrated = out.model;
-    let discrepancy = discrepancy(&calibrated, &known)?;
+    // The known level: on the validation runs (the baseline runs when there are none). How
+    // runs with nothing new scatter about it: on every run the calibration was not fitted to,
+    // the validation runs and the spread runs.
+    let validation = if validate.is_empty() {
+        baseline
+    } else {
+        validate
+    };
+    let unfitted: Vec<&Run> = validate.iter().chain(spread_from).collect();
+    let levels = channel_chi2_per_run(&calibrated, &validation.iter().collect::<Vec<_>>())?;
+    let discrepancy = discrepancy(&levels);
+    let bounds = run_bounds(&channel_chi2_per_run(&calibrated, &unfitted)?);
     calibrated.discrepancy = discrepancy.iter().cloned().collect();
+    calibrated.discrepancy_bound = bounds.iter().cloned().collect();
     Ok(Calibration {
         parameters: out.parameters,
         runs,
@@ -654,6 +711,7 @@ pub fn calibrate(
         spread_unidentified,
         shrunk,
         discrepancy,
+        run_bounds: bounds,
         model: calibrated,
     })
 }

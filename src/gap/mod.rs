@@ -99,6 +99,18 @@ pub enum Verdict {
     Ambiguous,
 }
 
+impl Verdict {
+    /// The verdict's word, as reports write it.
+    pub fn word(self) -> &'static str {
+        match self {
+            Verdict::Effect => "effect",
+            Verdict::None => "none",
+            Verdict::Unexplained => "unexplained",
+            Verdict::Ambiguous => "ambiguous",
+        }
+    }
+}
+
 /// Where a gap nothing explains lies: one channel, its regimes and windows.
 #[derive(Debug, Clone, Serialize)]
 pub struct Unexplained {
@@ -202,7 +214,7 @@ fn stats_for(
                 &unit,
                 run,
                 (0.0, rms),
-                model.known_chi2(&ch.name),
+                model.known(&ch.name),
             ));
             continue;
         }
@@ -230,7 +242,7 @@ fn stats_for(
             floor,
             run,
             best,
-            model.known_chi2(&ch.name),
+            model.known(&ch.name),
         ));
     }
     out

@@ -44,6 +44,8 @@ struct RawModel {
     spread_dof: Option<u32>,
     #[serde(default)]
     discrepancy: BTreeMap<String, f64>,
+    #[serde(default)]
+    discrepancy_bound: BTreeMap<String, f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -92,6 +94,11 @@ pub struct GapModel {
     /// sample on baseline runs (written by `gap calibrate`; 1 = as the noise floor expects).
     /// `gap` measures what is new against it: a channel's gap is its chi-square over this.
     pub discrepancy: BTreeMap<String, f64>,
+    /// Per channel, the chi-square per sample one more run with nothing new stays under (the
+    /// upper 95 % prediction bound from how the calibration's runs with nothing new scatter
+    /// from run to run, written by `gap calibrate` from two or more such runs). A run's
+    /// channel disagrees only above it: the model's error is not the same on every run.
+    pub discrepancy_bound: BTreeMap<String, f64>,
 }
 
 /// Reads `name` relative to `base` if such a file exists, else from the embedded configs
@@ -127,13 +134,18 @@ impl GapModel {
                 )
                 .into());
         }
-        for (channel, v) in &raw.discrepancy {
+        let levels = raw.discrepancy.iter().map(|e| ("discrepancy", e));
+        let bounds = raw
+            .discrepancy_bound
+            .iter()
+            .map(|e| ("discrepancy_bound", e));
+        for (table, (channel, v)) in levels.chain(bounds) {
             if !crate::gap::resim::MODELLED.contains(&channel.as_str())
                 && crate::gap::sonar::index(channel).is_none()
             {
                 return Err(doc
                     .invalid(
-                        &format!("discrepancy.{channel}"),
+                        &format!("{table}.{channel}"),
                         format!(
                             "`{channel}` is not a re-simulated channel; they are {} and sonar1_m..sonar4_m",
                             crate::gap::resim::MODELLED.join(", ")
@@ -144,7 +156,7 @@ impl GapModel {
             if !v.is_finite() || *v <= 0.0 {
                 return Err(doc
                     .invalid(
-                        &format!("discrepancy.{channel}"),
+                        &format!("{table}.{channel}"),
                         format!("expected a chi-square per sample > 0, got {v}"),
                     )
                     .into());
@@ -161,6 +173,7 @@ impl GapModel {
             spread,
             spread_dof: raw.spread_dof,
             discrepancy: raw.discrepancy,
+            discrepancy_bound: raw.discrepancy_bound,
         })
     }
 
@@ -187,6 +200,15 @@ impl GapModel {
             .copied()
             .unwrap_or(1.0)
             .max(1.0)
+    }
+
+    /// What `channel`'s disagreement is judged against: its known level and the bound a run
+    /// with nothing new stays under.
+    pub fn known(&self, channel: &str) -> crate::gap::residuals::Known {
+        crate::gap::residuals::Known {
+            level: self.known_chi2(channel),
+            run_bound: self.discrepancy_bound.get(channel).copied(),
+        }
     }
 
     /// The base configurations (no effects), with the experiment's world and sensors unless
@@ -298,6 +320,16 @@ impl GapModel {
                 "\n[discrepancy]   # chi-square per sample by channel on runs with nothing new"
             );
             for (channel, v) in &self.discrepancy {
+                let _ = writeln!(s, "{channel} = {}", exact(*v));
+            }
+        }
+        if !self.discrepancy_bound.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n[discrepancy_bound]   # chi-square per sample one more such run stays under \
+                 (95 %, all channels together)"
+            );
+            for (channel, v) in &self.discrepancy_bound {
                 let _ = writeln!(s, "{channel} = {}", exact(*v));
             }
         }
@@ -441,6 +473,32 @@ mod tests {
             "{e}"
         );
         assert!(model("[discrepancy]\ny_m = nan\n").is_err());
+    }
+
+    /// The bound a run with nothing new stays under is read per channel, written back
+    /// unchanged and refused, with the key named, for a channel `gap` cannot re-simulate or a
+    /// value that is not a positive number; a channel without one has none.
+    #[test]
+    fn the_run_bound_round_trips_and_rejects_bad_entries() {
+        let m =
+            model("[discrepancy]\nx_m = 2.5\n[discrepancy_bound]\nx_m = 6.25\n").expect("loads");
+        assert_eq!(m.known("x_m").run_bound, Some(6.25));
+        assert_eq!(m.known("x_m").level, 2.5);
+        assert_eq!(m.known("y_m").run_bound, None);
+        let again = GapModel::from_text(
+            "again.toml",
+            &m.to_toml("test", Path::new(".")),
+            PathBuf::new(),
+        )
+        .expect("written model loads");
+        assert_eq!(again.discrepancy_bound, m.discrepancy_bound);
+        let e = model("[discrepancy_bound]\nspeed = 2.0\n").expect_err("unknown channel");
+        assert!(e.to_string().contains("discrepancy_bound.speed"), "{e}");
+        let e = model("[discrepancy_bound]\ny_m = 0.0\n").expect_err("zero bound");
+        assert!(
+            e.to_string().contains("discrepancy_bound.y_m") && e.to_string().contains("> 0"),
+            "{e}"
+        );
     }
 
     /// Every number the analysis reads back from a written model (calibrated and effect

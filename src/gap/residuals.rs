@@ -29,7 +29,12 @@ pub struct ChannelStats {
     /// The calibrated model's known chi2 per sample for this channel on baseline runs (1
     /// without a calibration): what is new is judged against it.
     pub known_chi2_per_sample: f64,
-    /// True when chi2 over the known level exceeds 1 by more than 3 standard deviations.
+    /// The largest chi2 per sample a run with nothing new reaches, as the calibration's runs
+    /// with nothing new scatter ([`crate::gap::model::GapModel::run_bound`]; `None`: not
+    /// measured).
+    pub run_bound: Option<f64>,
+    /// True when chi2 over the known level exceeds 1 by more than 3 standard deviations of
+    /// the noise, and chi2 exceeds the run bound.
     pub significant: bool,
     pub ljung_box_q: f64,
     pub ljung_box_critical_95: f64,
@@ -194,9 +199,26 @@ fn excess(chi2: f64, n: usize, tau: f64) -> bool {
     chi2 > 1.0 + 3.0 * (2.0 / n_eff).sqrt()
 }
 
+/// What a channel's disagreement is judged against: the calibrated model's known level
+/// (1 = the noise floor alone) and, when the calibration measured how its runs with nothing
+/// new scatter, the bound one such run stays under.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Known {
+    pub level: f64,
+    pub run_bound: Option<f64>,
+}
+
+/// Whether a whole channel's chi-square per sample `chi2` over `n` samples (`tau` samples
+/// per independent one) disagrees: above its known level by more than 3 standard deviations
+/// of the noise, and above the bound a run with nothing new stays under, when known.
+pub fn disagrees(chi2: f64, n: usize, tau: f64, known: Known) -> bool {
+    excess(chi2 / known.level.max(1.0), n, tau) && known.run_bound.is_none_or(|b| chi2 > b)
+}
+
 /// Statistics of one channel's residuals `r` at times `t` against the floor; significance
-/// (whole channel, regimes, windows) is judged on chi2 over `known`, the calibrated model's
-/// known level (1 = the noise floor alone).
+/// (whole channel, regimes, windows) is judged on chi2 over `known.level`; the whole channel
+/// is significant only above `known.run_bound` too (a regime or a window is a share of the
+/// run, which the bound does not speak for).
 pub fn channel_stats(
     name: &str,
     t: &[f64],
@@ -204,9 +226,10 @@ pub fn channel_stats(
     floor: &Floor,
     run: &Run,
     lag: (f64, f64),
-    known: f64,
+    known: Known,
 ) -> ChannelStats {
-    let known = known.max(1.0);
+    let Known { level, run_bound } = known;
+    let known = level.max(1.0);
     let n = r.len();
     let nf = n.max(1) as f64;
     let z: Vec<f64> = r.iter().zip(&floor.sigma).map(|(a, s)| a / s).collect();
@@ -278,7 +301,8 @@ pub fn channel_stats(
         chi2_per_sample: chi2,
         tau_samples: floor.tau,
         known_chi2_per_sample: known,
-        significant: excess(chi2 / known, n, floor.tau),
+        run_bound,
+        significant: disagrees(chi2, n, floor.tau, Known { level, run_bound }),
         ljung_box_q: q,
         ljung_box_critical_95: crit,
         white: q <= crit,
@@ -293,6 +317,31 @@ pub fn channel_stats(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A channel disagrees above its known level by more than the noise allows, unless runs
+    /// with nothing new reach that far too: then only above their bound.
+    #[test]
+    fn a_channel_disagrees_only_beyond_the_scatter_of_runs_with_nothing_new() {
+        let known = |run_bound| Known {
+            level: 2.0,
+            run_bound,
+        };
+        // 10,000 independent samples: 3 sigma of the noise is 4.2 % of the level.
+        let (n, tau) = (10_000, 1.0);
+        assert!(!disagrees(2.05, n, tau, known(None)));
+        assert!(disagrees(2.2, n, tau, known(None)));
+        assert!(disagrees(3.5, n, tau, known(None)));
+        assert!(!disagrees(3.5, n, tau, known(Some(4.0))));
+        assert!(disagrees(4.5, n, tau, known(Some(4.0))));
+        // A bound below the known level does not lower the noise criterion.
+        assert!(!disagrees(2.05, n, tau, known(Some(1.5))));
+        // Without a calibration the level is the noise floor.
+        let floor = Known {
+            level: 0.5,
+            run_bound: None,
+        };
+        assert!(disagrees(1.1, n, tau, floor));
+    }
 
     #[test]
     fn chi2_critical_matches_tables() {

@@ -473,6 +473,7 @@ pub fn run(
             held_out_grew: Some(first.is_some() && a.heldout_gap_after > a.heldout_gap_before),
             ambiguous: a.ambiguous.clone(),
             runner_up: super::runner_up(&a),
+            verdict: Some(a.verdict.word().to_string()),
             seconds,
         });
         progress(out.len(), total, &label, out.last());

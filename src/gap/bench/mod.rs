@@ -184,6 +184,10 @@ pub struct CaseResult {
     /// `ambiguous`: see `candidate::Selection::ambiguous`).
     #[serde(default)]
     pub runner_up: Option<(String, f64)>,
+    /// The analysis's verdict (`effect`, `none`, `unexplained`, `ambiguous`; `None` in part
+    /// files written before it was recorded).
+    #[serde(default)]
+    pub verdict: Option<String>,
     /// Wall time of the workflow on the training data (s).
     pub seconds: f64,
 }
@@ -220,6 +224,14 @@ impl CaseResult {
             && self.named_all.iter().any(|n| {
                 Some(n) != self.expected.as_ref() && Some(n) != self.expected_second.as_ref()
             })
+    }
+
+    /// A null case whose analysis says anything but `none`: an effect named, or the run
+    /// called `unexplained` or `ambiguous` (a user is sent looking for a cause either way).
+    /// Part files without a verdict count names only.
+    pub fn false_alarm(&self) -> bool {
+        self.effect.is_none()
+            && (self.named.is_some() || self.verdict.as_deref().is_some_and(|v| v != "none"))
     }
 
     /// A case with two hidden effects.

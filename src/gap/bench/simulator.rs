@@ -633,6 +633,7 @@ fn run_case(env: &CaseEnv<'_>, case: PlannedCase<'_>) -> Result<CaseResult, GapE
         held_out_grew: None,
         ambiguous: a.ambiguous.clone(),
         runner_up: super::runner_up(&a),
+        verdict: Some(a.verdict.word().to_string()),
         seconds,
     })
 }

@@ -55,7 +55,7 @@ impl<'a> Split<'a> {
                 hidden.len()
             ),
             pct(
-                nulls.iter().filter(|c| c.named.is_some()).count(),
+                nulls.iter().filter(|c| c.false_alarm()).count(),
                 nulls.len()
             ),
         )
@@ -256,6 +256,8 @@ pub struct CaseRow {
     /// The first round's best other passing candidate and its delta-BIC margin behind the
     /// winner, `NAME:MARGIN`.
     pub runner_up: String,
+    /// The analysis's verdict (empty: not recorded).
+    pub verdict: String,
     pub seconds: f64,
 }
 
@@ -288,6 +290,7 @@ impl From<&CaseResult> for CaseRow {
                 .runner_up
                 .as_ref()
                 .map_or(String::new(), |(n, m)| format!("{n}:{m:.1}")),
+            verdict: r.verdict.clone().unwrap_or_default(),
             seconds: r.seconds,
         }
     }
@@ -334,6 +337,7 @@ mod tests {
             held_out_grew: None,
             ambiguous: None,
             runner_up: None,
+            verdict: Some(if effect.is_some() { "effect" } else { "none" }.to_string()),
             seconds: 1.0,
         }
     }
@@ -358,6 +362,28 @@ mod tests {
         assert!(group.contains("| 3.0 % |"), "{group}");
         let overall = t.lines().find(|l| l.starts_with("| overall |")).unwrap();
         assert!(overall.contains("| 4 |"), "{overall}");
+    }
+
+    /// A null case is a false alarm when it names an effect or ends `unexplained`: either
+    /// sends the user after a cause that is not there. A part file without a verdict counts
+    /// its names only.
+    #[test]
+    fn a_null_called_unexplained_is_a_false_alarm() {
+        let verdict = |v: Option<&str>| CaseResult {
+            verdict: v.map(str::to_string),
+            ..case(None, None)
+        };
+        let nulls = [
+            verdict(Some("none")),
+            verdict(Some("unexplained")),
+            verdict(Some("ambiguous")),
+            verdict(None),
+        ];
+        let alarms: Vec<bool> = nulls.iter().map(CaseResult::false_alarm).collect();
+        assert_eq!(alarms, [false, true, true, false]);
+        let t = simulator_table(&nulls);
+        let row = t.lines().find(|l| l.starts_with("| overall |")).unwrap();
+        assert!(row.contains("| 50 % (2/4) |"), "{row}");
     }
 
     /// The per-case CSV reads back through `csv::Reader` as the rows that were written,
@@ -385,6 +411,7 @@ mod tests {
             held_out_grew: Some(false),
             ambiguous: None,
             runner_up: Some(("yaw_damping".into(), 12.5)),
+            verdict: Some("effect".into()),
             seconds: 17.25,
         };
         let results = [case(0, Some("sway_drag")), case(1, None)];

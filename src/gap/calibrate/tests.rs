@@ -137,3 +137,51 @@ fn the_joint_fit_starts_from_the_marker_on_both_sides_of_the_centre() {
         ]
     );
 }
+
+fn per_run(channels: &[(&str, &[f64])]) -> BTreeMap<String, Vec<f64>> {
+    channels
+        .iter()
+        .map(|(c, v)| (c.to_string(), v.to_vec()))
+        .collect()
+}
+
+/// The bound one more run with nothing new stays under is the log-normal prediction bound
+/// of the runs' chi-squares: exp(mean + t s sqrt(1 + 1/k)) of their logs, with Student's t
+/// for k - 1 degrees of freedom at 1 - 0.05 / channels. Here one channel of four runs, so t is
+/// t(0.95; 3) = 2.353 (tables), and the bound lies above every run's value.
+#[test]
+fn the_run_bound_is_the_log_normal_prediction_bound_of_the_runs() {
+    let runs = [1.52, 2.21, 1.31, 1.37];
+    let bounds = run_bounds(&per_run(&[("x_m", &runs)]));
+    let logs: Vec<f64> = runs.iter().map(|v: &f64| v.ln()).collect();
+    let m = logs.iter().sum::<f64>() / 4.0;
+    let s = (logs.iter().map(|l| (l - m).powi(2)).sum::<f64>() / 3.0).sqrt();
+    let want = (m + 2.353 * s * (1.25_f64).sqrt()).exp();
+    assert_eq!(bounds.len(), 1);
+    assert_eq!(bounds[0].0, "x_m");
+    assert!(
+        (bounds[0].1 - want).abs() < 1e-3 * want,
+        "{bounds:?} against {want}"
+    );
+    assert!(bounds[0].1 > 2.21);
+}
+
+/// More channels judged at once widen each one's bound (a run disagrees when any channel
+/// does); a channel measured on one run has no scatter and so no bound; runs that agree
+/// exactly bound at their common value.
+#[test]
+fn the_run_bound_covers_all_channels_together_and_needs_two_runs() {
+    let runs: &[f64] = &[1.52, 2.21, 1.31, 1.37];
+    let alone = run_bounds(&per_run(&[("x_m", runs)]));
+    let four = run_bounds(&per_run(&[
+        ("x_m", runs),
+        ("y_m", runs),
+        ("depth_adc", runs),
+        ("compass_deg", &[3.0]),
+    ]));
+    let x = |b: &[(String, f64)]| b.iter().find(|(c, _)| c == "x_m").map(|(_, v)| *v);
+    assert!(x(&four) > x(&alone), "{four:?} against {alone:?}");
+    assert!(four.iter().all(|(c, _)| c != "compass_deg"), "{four:?}");
+    let same = run_bounds(&per_run(&[("y_m", &[2.0, 2.0, 2.0])]));
+    assert!((same[0].1 - 2.0).abs() < 1e-12, "{same:?}");
+}
