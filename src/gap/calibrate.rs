@@ -292,9 +292,11 @@ fn channel_chi2_per_run(
 
 /// The mean of each channel's chi-square per sample over the runs.
 fn discrepancy(per_run: &BTreeMap<String, Vec<f64>>) -> Vec<(String, f64)> {
+    use statrs::statistics::Statistics;
     per_run
         .iter()
-        .map(|(c, v)| (c.clone(), v.iter().sum::<f64>() / v.len().max(1) as f64))
+        .filter(|(_, v)| !v.is_empty())
+        .map(|(c, v)| (c.clone(), v.iter().mean()))
         .collect()
 }
 
@@ -312,6 +314,7 @@ pub const RUN_BOUND_LEVEL: f64 = 0.05;
 /// with nothing new scatter by a factor of two and more in one channel.
 fn run_bounds(per_run: &BTreeMap<String, Vec<f64>>) -> Vec<(String, f64)> {
     use statrs::distribution::{ContinuousCDF, StudentsT};
+    use statrs::statistics::Statistics;
     let measured: Vec<(&String, Vec<f64>)> = per_run
         .iter()
         .filter(|(_, v)| v.len() >= 2 && v.iter().all(|c| c.is_finite() && *c > 0.0))
@@ -322,8 +325,7 @@ fn run_bounds(per_run: &BTreeMap<String, Vec<f64>>) -> Vec<(String, f64)> {
         .into_iter()
         .filter_map(|(channel, logs)| {
             let k = logs.len() as f64;
-            let m = logs.iter().sum::<f64>() / k;
-            let s = (logs.iter().map(|l| (l - m).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+            let (m, s) = (logs.iter().mean(), logs.iter().std_dev());
             let t = StudentsT::new(0.0, 1.0, k - 1.0).ok()?.inverse_cdf(q);
             Some((channel.clone(), (m + t * s * (1.0 + 1.0 / k).sqrt()).exp()))
         })
@@ -337,9 +339,10 @@ fn mean_level(levels: &[(f64, [f64; 2])]) -> Option<(f64, [f64; 2])> {
         [] => None,
         [one] => Some(*one),
         _ => {
+            use statrs::statistics::Statistics;
             let n = levels.len() as f64;
-            let mean = levels.iter().map(|l| l.0).sum::<f64>() / n;
-            let var = levels.iter().map(|l| (l.0 - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            let mean = levels.iter().map(|l| l.0).mean();
+            let var = levels.iter().map(|l| l.0).variance();
             let half = 1.96 * (var / n).sqrt();
             Some((mean, [mean - half, mean + half]))
         }
