@@ -421,10 +421,10 @@ fn apparent_spread(
 /// The thrust curve's scale (`thrust_gain`) and shape (`thrust_curve`) trade off against
 /// each other, and from the linear curve alone the fit can stop at half the exponent a
 /// propeller's thrust has (thrust ~ rpm^2, rpm less than linear in duty), with a larger gap
-/// left on the baseline runs. The camera marker's position and a sway in spins
-/// (`sway_from_yaw`) trade off too: a marker ahead of the centre moves sideways in a spin as
-/// a swaying hull does, and from the marker as stated the fit can end with the marker on the
-/// wrong side of the centre and a sway the hull does not have.
+/// left on the baseline runs. The camera marker's position and the hull's sway in spins
+/// (its sway damping and added mass) trade off too: a marker ahead of the centre moves
+/// sideways in a spin as a swaying hull does, and from the marker as stated the fit can end
+/// with the marker on the wrong side of the centre and a sway the hull does not have.
 fn starts(chosen: &[&'static Effect]) -> Vec<DVector<f64>> {
     let dims = chosen.iter().map(|e| e.parameters.len()).sum();
     let mut out = vec![DVector::zeros(dims)];

@@ -185,3 +185,21 @@ fn the_run_bound_covers_all_channels_together_and_needs_two_runs() {
     let same = run_bounds(&per_run(&[("y_m", &[2.0, 2.0, 2.0])]));
     assert!((same[0].1 - 2.0).abs() < 1e-12, "{same:?}");
 }
+
+/// The sway a turn makes (`Y_r`) is left as given: in a spin it moves the tracked marker as a
+/// marker ahead of the centre of mass does, so the baseline runs would set it against the
+/// marker's position and give the base model a sway in turns the hull does not have. The
+/// marker itself is calibrated, and `Y_r` stays a structural rival of later names.
+#[test]
+fn the_sway_from_a_turn_is_left_to_the_marker_and_to_the_rivals() {
+    let (chosen, _) = choose_effects(&crate::gap::resim::MODELLED);
+    let names: Vec<&str> = chosen.iter().map(|e| e.name).collect();
+    assert!(!names.contains(&"sway_from_yaw"), "{names:?}");
+    assert!(names.contains(&"camera_marker_position"), "{names:?}");
+    let coupling = effects::by_name("sway_yaw_coupling").unwrap();
+    let rivals: Vec<&str> = effects::structural_rivals(coupling)
+        .iter()
+        .map(|e| e.name)
+        .collect();
+    assert!(rivals.contains(&"sway_from_yaw"), "{rivals:?}");
+}
