@@ -407,12 +407,14 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
             c.shrunk
         );
     }
-    if !c.discrepancy.is_empty() {
-        let known: Vec<String> = c
-            .discrepancy
-            .iter()
+    // Per-channel figures as `x_m 1.52, y_m 2.65`.
+    let per_channel = |v: &[(String, f64)]| {
+        v.iter()
             .map(|(ch, v)| format!("{ch} {v:.2}"))
-            .collect();
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if !c.discrepancy.is_empty() {
         outln!(
             "known disagreement (chi2 per sample of the calibrated model, on the {} runs): {}",
             if c.runs.iter().any(|r| !r.fitted) {
@@ -420,18 +422,13 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
             } else {
                 "baseline"
             },
-            known.join(", ")
+            per_channel(&c.discrepancy)
         );
     }
     if !c.run_bounds.is_empty() {
-        let bounds: Vec<String> = c
-            .run_bounds
-            .iter()
-            .map(|(ch, v)| format!("{ch} {v:.2}"))
-            .collect();
         outln!(
             "a run with nothing new stays under (chi2 per sample, 95 % for all channels together, from how the validation and spread runs scatter): {}",
-            bounds.join(", ")
+            per_channel(&c.run_bounds)
         );
     }
     for r in &c.runs {

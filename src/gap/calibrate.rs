@@ -690,10 +690,16 @@ pub fn calibrate(
     } else {
         validate
     };
-    let unfitted: Vec<&Run> = validate.iter().chain(spread_from).collect();
     let levels = channel_chi2_per_run(&calibrated, &validation.iter().collect::<Vec<_>>())?;
     let discrepancy = discrepancy(&levels);
-    let bounds = run_bounds(&channel_chi2_per_run(&calibrated, &unfitted)?);
+    // Each run is re-simulated once: the validation runs' chi-squares serve both.
+    let mut unfitted = channel_chi2_per_run(&calibrated, &spread_from.iter().collect::<Vec<_>>())?;
+    if !validate.is_empty() {
+        for (channel, values) in &levels {
+            unfitted.entry(channel.clone()).or_default().extend(values);
+        }
+    }
+    let bounds = run_bounds(&unfitted);
     calibrated.discrepancy = discrepancy.iter().cloned().collect();
     calibrated.discrepancy_bound = bounds.iter().cloned().collect();
     Ok(Calibration {
