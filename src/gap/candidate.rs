@@ -228,6 +228,7 @@ pub fn select(
                 continue 'rounds;
             };
             accepted.pop();
+            tracing::debug!(round, winner = name, why, "a round's winner refused");
             refused.push(Refused { round, name, why });
             refused_here += 1;
             if refused_here >= REFUSALS_PER_ROUND {

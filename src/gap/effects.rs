@@ -100,8 +100,13 @@ pub struct Effect {
     /// leaves them, and an effect whose fit ends on a bound is not named.
     pub bounds: &'static [(f64, f64)],
     pub signature: &'static str,
-    /// Channels the signature lives in.
+    /// Channels the signature lives in: the effect's pattern is tested against the
+    /// disagreement there.
     pub channels: &'static [&'static str],
+    /// Further channels the effect moves at first order without a pattern of its own there
+    /// (a thruster imbalance's spot turn creeps ahead or astern): its gain there counts as
+    /// gain in its signature channels, its correlation is not read there.
+    pub also_moves: &'static [&'static str],
     pub kind: Kind,
     /// True when the extension changes the physics (the trajectory must be re-run).
     pub physics: bool,

@@ -389,11 +389,19 @@ pub fn interval_excludes_zero(
 /// corrected correlation stays at most about 1.
 fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals) -> (bool, String) {
     let in_sig = |i: usize| effect.channels.contains(&setup.m.channels[i].name.as_str());
+    let moves = |i: usize| {
+        effect
+            .also_moves
+            .contains(&setup.m.channels[i].name.as_str())
+    };
     let (mut dot, mut dd, mut rr, mut gain_sig, mut gain_all) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for (idx, a) in r0.part(true) {
         let b = r1.values[idx];
         let g = a * a - b * b;
         gain_all += g;
+        if moves(r0.owner[idx]) {
+            gain_sig += g;
+        }
         if in_sig(r0.owner[idx]) {
             gain_sig += g;
             let d = a - b; // = predicted change of the effect, normalised
@@ -421,9 +429,14 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
         corr >= SIGNATURE_MIN_CORRELATION && share >= SIGNATURE_MIN_SHARE,
         format!(
             "{}: correlation with the disagreement beyond the noise floor in {} = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}), \
-             share of the improvement there = {:.0} % (>= {:.0} %)",
+             share of the improvement there{} = {:.0} % (>= {:.0} %)",
             effect.signature,
             effect.channels.join("/"),
+            if effect.also_moves.is_empty() {
+                String::new()
+            } else {
+                format!(" and in {}", effect.also_moves.join("/"))
+            },
             share * 100.0,
             SIGNATURE_MIN_SHARE * 100.0
         ),

@@ -37,6 +37,7 @@ const STRUCTURAL: Effect = Effect {
     bounds: &[],
     signature: "",
     channels: &[],
+    also_moves: &[],
     kind: Kind::Mean,
     physics: true,
     extend: |_, _| {},
@@ -55,8 +56,11 @@ pub const LIBRARY: [Effect; 41] = [
         parameters: &["differential_gain"],
         scales: &[0.05],
         bounds: &[(-0.5, 0.5)],
-        signature: "yaw bias that grows with thrust: heading and track curve the same way at every heading",
+        signature: "yaw bias that grows with thrust: heading and track curve the same way at \
+                    every heading",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        // A spot turn's opposed thrusts no longer cancel: it creeps ahead or astern.
+        also_moves: &["paddle_speed_mps", "accel_x_adc"],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
@@ -97,6 +101,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-1.0, 2.0)],
         signature: "track and heading disagree only while a horizontal thruster runs in reverse",
         channels: &["x_m", "y_m", "compass_deg", "accel_x_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
@@ -119,6 +124,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-0.9, 5.0), (-0.9, 5.0)],
         signature: "speed error that grows with speed; along-track position error",
         channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps", "accel_x_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| scale_damping(&mut c.vehicle, 0, 1.0 + at(p, 0), 1.0 + at(p, 1)),
@@ -136,6 +142,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-30.0, 100.0)],
         signature: "along-track error only after thrust steps (acceleration), none at steady speed",
         channels: &["x_m", "y_m", "paddle_speed_mps", "surge_mps", "accel_x_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
@@ -162,6 +169,7 @@ pub const LIBRARY: [Effect; 41] = [
             "accel_y_adc",
             "depth_adc",
         ],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
@@ -188,6 +196,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-0.3, 0.3), (-0.3, 0.3)],
         signature: "drift fixed to the world, independent of heading",
         channels: &["x_m", "y_m"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
@@ -218,6 +227,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-50.0, 50.0), (-50.0, 50.0)],
         signature: "compass error once per turn (first harmonic of heading)",
         channels: &["compass_deg", "x_m", "y_m"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| {
@@ -248,6 +258,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-0.3, 0.3), (-0.3, 0.3)],
         signature: "compass error twice per turn (second harmonic of heading)",
         channels: &["compass_deg", "x_m", "y_m"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| {
@@ -271,6 +282,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-45.0, 45.0)],
         signature: "compass error only while tilted, depending on heading",
         channels: &["compass_deg", "x_m", "y_m"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| {
@@ -291,6 +303,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-1.0, 2.0)],
         signature: "compass error proportional to the turn rate",
         channels: &["compass_deg", "x_m", "y_m"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| {
@@ -322,6 +335,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(0.0, 1.0)],
         signature: "depth variance grows with the stern motor's duty",
         channels: &["depth_adc"],
+        also_moves: &[],
         kind: Kind::Variance,
         physics: false,
         extend: |p, c| {
@@ -353,6 +367,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-0.9, 5.0)],
         signature: "paddle speed off by a constant factor at every speed",
         channels: &["paddle_speed_mps"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| {
@@ -384,6 +399,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-90.0, 90.0)],
         signature: "sonar readings missing when the wall is seen obliquely",
         channels: &["sonar1_m", "sonar2_m", "sonar3_m", "sonar4_m"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| {
@@ -409,6 +425,7 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "every motor stronger or weaker alike, the vertical pair too: speed, turn rate, \
                     acceleration at thrust steps and depth response off in proportion to thrust",
         channels: &ALL_THRUSTERS,
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
@@ -446,6 +463,7 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "thrust off in a proportion that changes with the command: part-power legs and \
                     depth holds disagree more or less than full-power spins and dives",
         channels: &ALL_THRUSTERS,
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| {
@@ -468,6 +486,7 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "compass reads a constant angle off at every heading: the track runs at that \
                     angle to the heading the compass reports, and the surface heading is off",
         channels: &["compass_deg", "x_m", "y_m"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.sensors.compass.errors.bias += at(p, 0),
@@ -491,6 +510,7 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "depth reads a constant distance off: visible where the vehicle floats at the \
                     surface, whose depth the buoyancy fixes",
         channels: &["depth_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.sensors.depth.errors.bias += at(p, 0),
@@ -514,6 +534,7 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "depth changes read too large or too small in proportion: dives and climbs \
                     off by a constant factor",
         channels: &["depth_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| {
@@ -545,6 +566,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-200.0, 200.0)],
         signature: "surge accelerometer code off by a constant at every speed and thrust",
         channels: &["accel_x_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.analog.accel_offset_lsb[0] += at(p, 0),
@@ -562,6 +584,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-200.0, 200.0)],
         signature: "sway accelerometer code off by a constant in straight runs and turns alike",
         channels: &["accel_y_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.analog.accel_offset_lsb[1] += at(p, 0),
@@ -579,6 +602,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-200.0, 200.0)],
         signature: "heave accelerometer code off by a constant (the 1 g reading shifted)",
         channels: &["accel_z_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.analog.accel_offset_lsb[2] += at(p, 0),
@@ -596,6 +620,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-0.5, 0.5)],
         signature: "surge accelerometer swings too large or small around its zero-g code",
         channels: &["accel_x_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.analog.accel_gain_scale[0] += at(p, 0),
@@ -613,6 +638,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-0.5, 0.5)],
         signature: "sway accelerometer swings too large or small around its zero-g code",
         channels: &["accel_y_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.analog.accel_gain_scale[1] += at(p, 0),
@@ -630,6 +656,7 @@ pub const LIBRARY: [Effect; 41] = [
         bounds: &[(-0.5, 0.5)],
         signature: "heave accelerometer's 1 g reading too far from or near its zero-g code",
         channels: &["accel_z_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: false,
         extend: |p, c| c.analog.accel_gain_scale[2] += at(p, 0),
@@ -648,6 +675,7 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "turn rate off for a given thrust couple: spins too fast or slow, heading \
                     overshoots or lags after a turn command",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| scale_damping(&mut c.vehicle, 5, 1.0 + at(p, 0), 1.0 + at(p, 0)),
@@ -676,6 +704,7 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "fast spins too fast or slow while gentle turns match: the part of the yaw \
                     damping that grows with the turn rate is off",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| scale_damping(&mut c.vehicle, 5, 1.0, 1.0 + at(p, 0)),
@@ -695,6 +724,7 @@ pub const LIBRARY: [Effect; 41] = [
                     hull's sway in a turn adds a yaw moment, so heading and track disagree only \
                     when turn and speed come together",
         channels: &["compass_deg", "x_m", "y_m", "accel_y_adc"],
+        also_moves: &[],
         kind: Kind::Mean,
         physics: true,
         extend: |p, c| c.vehicle.damping_sway_yaw[1] += at(p, 0),
