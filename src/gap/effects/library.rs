@@ -867,6 +867,9 @@ pub const LIBRARY: [Effect; 41] = [
         signature: "depth readings follow the pitch: a port away from the centre of mass reads \
                     deeper when its end dips",
         channels: &["depth_adc"],
+        // The depth it anchors each segment at moves the hull's heave and pitch there, and
+        // with them the surge and heave accelerometers.
+        also_moves: &["accel_x_adc", "accel_z_adc"],
         physics: false,
         extend: |p, c| c.sensors.depth.position_body_m[0] += at(p, 0),
         moves_anchors: true,
