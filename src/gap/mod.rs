@@ -418,7 +418,8 @@ pub(crate) fn too_small_a_share(without: f64, with: f64) -> Option<String> {
     if without <= 1.0 {
         return Some(format!(
             "the effects named before it leave the channels' mean chi-square at {without:.3}, \
-             at or below the known levels: no disagreement is left for another effect"
+             at or below the known levels on the samples the fits see (wall contacts left out): \
+             no disagreement is left for another effect"
         ));
     }
     // Of the drop the name makes, the part above the known levels is the excess it explains;

@@ -90,16 +90,8 @@ fn every_effect_shows_in_its_signature_channels() {
 #[test]
 fn every_effect_makes_most_of_its_change_in_its_signature_channels() {
     let (base, m) = benchmark_manoeuvre();
-    let run0 = resim::simulate(&base, &m, None).expect("runs");
-    let floors = resim::noise_floor(&base, &m, &run0).expect("floor");
-    let setup = crate::gap::fit::setup(
-        &m,
-        base.clone(),
-        &floors,
-        crate::gap::fit::Split::DEFAULT,
-        &[],
-    )
-    .expect("setup");
+    let (floors, run0) = floors_of(&base, &m);
+    let setup = setup_of(&m, &base, &floors);
     let r0 = setup.residuals(&base, &run0);
     let mut short = Vec::new();
     for effect in LIBRARY.iter().filter(|e| e.kind == Kind::Mean) {
@@ -130,6 +122,32 @@ fn every_effect_makes_most_of_its_change_in_its_signature_channels() {
         "effects making most of their change outside their signature channels: {}",
         short.join(", ")
     );
+}
+
+/// The noise floor of `base` on `m`, and its re-simulation.
+fn floors_of(
+    base: &Configs,
+    m: &crate::gap::format::Measurement,
+) -> (Vec<Option<resim::Floor>>, resim::Run) {
+    let run0 = resim::simulate(base, m, None).expect("runs");
+    let floors = resim::noise_floor(base, m, &run0).expect("floor");
+    (floors, run0)
+}
+
+/// The fit setup of `base` on `m`, judged against `floors`.
+fn setup_of<'a>(
+    m: &'a crate::gap::format::Measurement,
+    base: &Configs,
+    floors: &'a [Option<resim::Floor>],
+) -> crate::gap::fit::Setup<'a> {
+    crate::gap::fit::setup(
+        m,
+        base.clone(),
+        floors,
+        crate::gap::fit::Split::DEFAULT,
+        &[],
+    )
+    .expect("setup")
 }
 
 /// Channel by channel, the squared change of `setup`'s normalised residuals that `effect` at
@@ -170,16 +188,8 @@ fn share_in(m: &crate::gap::format::Measurement, per_channel: &[f64], lists: &[&
 #[test]
 fn a_thruster_imbalance_in_a_spot_turn_moves_the_surge_channels() {
     let (base, m) = manoeuvre("experiments/spot-turn-clockwise.toml");
-    let run0 = resim::simulate(&base, &m, None).expect("runs");
-    let floors = resim::noise_floor(&base, &m, &run0).expect("floor");
-    let setup = crate::gap::fit::setup(
-        &m,
-        base.clone(),
-        &floors,
-        crate::gap::fit::Split::DEFAULT,
-        &[],
-    )
-    .expect("setup");
+    let (floors, run0) = floors_of(&base, &m);
+    let setup = setup_of(&m, &base, &floors);
     let r0 = setup.residuals(&base, &run0);
     let imbalance = by_name("thruster_imbalance").expect("in the library");
     let per_channel = change_per_channel(&setup, &r0, imbalance);
