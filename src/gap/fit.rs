@@ -399,11 +399,10 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
         let b = r1.values[idx];
         let g = a * a - b * b;
         gain_all += g;
-        if moves(r0.owner[idx]) {
+        if in_sig(r0.owner[idx]) || moves(r0.owner[idx]) {
             gain_sig += g;
         }
         if in_sig(r0.owner[idx]) {
-            gain_sig += g;
             let d = a - b; // = predicted change of the effect, normalised
             dot += d * a;
             dd += d * d;
