@@ -27,7 +27,9 @@ pub const RIVAL_SAME_PATTERN_COSINE: f64 = std::f64::consts::FRAC_1_SQRT_2;
 /// signature channels, it takes out at least [`RIVAL_MIN_SHARE`]. A term that gains only
 /// elsewhere is no rival of a winner whose disagreement it leaves (a thruster spin-down that
 /// makes the compass fit worse, of a compass offset). Only the terms acting on a channel of
-/// `win`'s signature are tried ([`effects::structural_rivals`]).
+/// `win`'s signature are tried ([`effects::structural_rivals`]). A twin of `win`'s form
+/// ([`effects::FORM_TWINS`]) must explain more than `win` by the margin: the two tie on runs
+/// that hold the state they differ by fixed, and a tie is no sign of a stand-in.
 ///
 /// The share is of chi-square, not of the pattern: a rival may take it out by another change
 /// of the residuals than the winner's. The debug line reports how much of the winner's change
@@ -76,8 +78,15 @@ pub fn structural_rival(setup: &Setup<'_>, win: &Candidate) -> Option<Candidate>
                 heldout_gain = r.heldout_gain,
                 "a structural rival"
             );
+            // A twin of the winner's form ties with it on most runs: it is a rival only
+            // where the data prefer its form.
+            let margin = if effects::by_name(&r.name).is_some_and(|t| effects::twins(effect, t)) {
+                -BIC_MARGIN
+            } else {
+                BIC_MARGIN
+            };
             stands(r)
-                && r.delta_bic_uncalibrated > win.delta_bic_uncalibrated - BIC_MARGIN
+                && r.delta_bic_uncalibrated > win.delta_bic_uncalibrated - margin
                 && takes_out(r).is_some_and(|t| t >= RIVAL_MIN_SHARE * win_takes)
                 && (change_cosine_where_changed(r, win)
                     .is_none_or(|c| c >= RIVAL_SAME_PATTERN_COSINE)
