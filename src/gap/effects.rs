@@ -179,19 +179,6 @@ pub fn candidates() -> impl Iterator<Item = &'static Effect> {
     LIBRARY.iter().filter(|e| e.candidate())
 }
 
-/// Candidates and structural terms of one form on a pool's runs: each pair differs only by a
-/// state most runs hold fixed, so the two make much the same change of the residuals. A yaw
-/// moment in sway, `N_v v` (`sway_yaw_coupling`), and the Munk moment in surge times sway,
-/// `N_uv u v` (`munk_moment`), differ by the surge speed, and the turns under way of a run
-/// are mostly made at the speed its programme cruises at.
-///
-/// The calibration sets the base model's share of the two jointly. A change of either after
-/// it is the candidate's to name, first or later: its twin refuses a later name as its
-/// structural rival only where the data prefer the twin's form, by more than the delta-BIC
-/// margin (`fit::structural_rival`). A tie would otherwise refuse every later name of the
-/// form while the same form is named first.
-pub const FORM_TWINS: &[(&str, &str)] = &[("sway_yaw_coupling", "munk_moment")];
-
 /// Whether `a` and `b` are twins of one form ([`FORM_TWINS`]).
 pub fn twins(a: &Effect, b: &Effect) -> bool {
     FORM_TWINS
@@ -231,7 +218,7 @@ impl PartialEq for Effect {
 }
 
 mod library;
-pub use library::LIBRARY;
+pub use library::{FORM_TWINS, LIBRARY};
 
 /// Looks an effect up by name.
 pub fn by_name(name: &str) -> Option<&'static Effect> {

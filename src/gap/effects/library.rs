@@ -27,6 +27,19 @@ const ALL_THRUSTERS: [&str; 9] = [
     "accel_z_adc",
 ];
 
+/// Candidates and structural terms of one form on a pool's runs: each pair differs only by a
+/// state most runs hold fixed, so the two make much the same change of the residuals. A yaw
+/// moment in sway, `N_v v` (`sway_yaw_coupling`), and the Munk moment in surge times sway,
+/// `N_uv u v` (`munk_moment`), differ by the surge speed, and the turns under way of a run
+/// are mostly made at the speed its programme cruises at.
+///
+/// The calibration sets the base model's share of the two jointly. A change of either after
+/// it is the candidate's to name, first or later: its twin refuses a later name as its
+/// structural rival only where the data prefer the twin's form, by more than the delta-BIC
+/// margin (`fit::structural_rival`). A tie would otherwise refuse every later name of the
+/// form while the same form is named first.
+pub const FORM_TWINS: &[(&str, &str)] = &[("sway_yaw_coupling", "munk_moment")];
+
 /// What a structural term of the base model (a calibration discrepancy term or a
 /// structural rival) has unless its entry says otherwise: a mean-type physics effect that
 /// moves no anchor, has no summary behaviour and is never hidden by the benchmarks.
