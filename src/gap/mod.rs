@@ -927,7 +927,7 @@ mod tests {
             nothing_off_that_it_moves(&model, &m, depth, &base, &floors)
                 .unwrap()
                 .is_some(),
-            "the depth channel is off"
+            "a depth offset finds its channel off, which the imbalance leaves alone"
         );
     }
 
