@@ -403,7 +403,7 @@ pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
 
 /// An effect named after others must explain at least this share of the excess of the gap
 /// measure's channel mean over 1 that the earlier names left, there must be an excess, and
-/// it must take the mean down more above 1 than below it.
+/// it must take the channels down more above their known levels than below them.
 ///
 /// The gap measure counts every channel once, so a true second effect takes a large part of
 /// what is left; a name that takes a sliver of it beside a larger rest left unexplained is a
@@ -411,34 +411,43 @@ pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
 /// never took it), not a cause of its own.
 pub const LATER_NAME_FLOOR_SHARE: f64 = 0.1;
 
-/// Why an effect named after others, with the gap measure's channel mean `without` it and
-/// `with` it, takes too little of what the earlier names left to be named; `None` when it
-/// takes enough.
-pub(crate) fn too_small_a_share(without: f64, with: f64) -> Option<String> {
-    if without <= 1.0 {
+/// Why an effect named after others, with each channel's chi-square over its known level
+/// `without` it and `with` it (the terms the gap measure's channel mean averages, channel by
+/// channel in the same order), takes too little of what the earlier names left to be named;
+/// `None` when it takes enough.
+pub(crate) fn too_small_a_share(without: &[f64], with: &[f64]) -> Option<String> {
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let (before, after) = (mean(without), mean(with));
+    if before <= 1.0 {
         return Some(format!(
-            "the effects named before it leave the channels' mean chi-square at {without:.3}, \
+            "the effects named before it leave the channels' mean chi-square at {before:.3}, \
              at or below the known levels on the samples the fits see (wall contacts left out): \
              no disagreement is left for another effect"
         ));
     }
-    // Of the drop the name makes, the part above the known levels is the excess it explains;
-    // the part below them is disagreement the calibration's own runs show as well.
-    let above = without - with.max(1.0);
-    let below = (1.0 - with).max(0.0);
+    // Of the drop the name makes, channel by channel, the part above that channel's known
+    // level is the excess it explains; the part below it is disagreement the calibration's
+    // own runs show as well. A channel far off beside channels the model fits better than
+    // the calibration's runs is an excess, whatever the channels' mean.
+    let n = without.len().max(1) as f64;
+    let (mut above, mut below) = (0.0, 0.0);
+    for (b, a) in without.iter().zip(with) {
+        above += (b.max(1.0) - a.max(1.0)) / n;
+        below += (b.min(1.0) - a.min(1.0)) / n;
+    }
     if below > above {
         return Some(format!(
-            "it takes the channels' mean chi-square over their known levels from {without:.3} \
-             to {with:.3}: {below:.3} of that below the known levels against {above:.3} above \
-             them. It fits more of the disagreement the calibration's own runs show than of \
-             what the effects named before it left"
+            "it takes the channels' mean chi-square over their known levels from {before:.3} \
+             to {after:.3}: {below:.3} of that below the channels' known levels against \
+             {above:.3} above them. It fits more of the disagreement the calibration's own \
+             runs show than of what the effects named before it left"
         ));
     }
-    let share = (without - with) / (without - 1.0);
+    let share = (before - after) / (before - 1.0);
     (share < LATER_NAME_FLOOR_SHARE).then(|| {
         format!(
             "it explains {:.0} % of the disagreement the effects named before it left (the \
-             channels' mean chi-square over their known levels {without:.3} -> {with:.3}); an \
+             channels' mean chi-square over their known levels {before:.3} -> {after:.3}); an \
              effect named after others must explain at least {:.0} %: a sliver beside a larger \
              rest is the structure the earlier names exposed, not a cause of its own",
             100.0 * share,
@@ -540,7 +549,8 @@ pub fn analyse_with(
     // (depth EMI) is named, the model's with it. Against the old floor, the named noise would
     // stay in the residuals as disagreement for the next round's candidates to fit.
     let current_floors = std::cell::RefCell::new(floors.clone());
-    let mean_of = |c: &Configs, run: &resim::Run| {
+    // Each channel's chi-square over its known level, the terms of the gap measure's mean.
+    let levels_of = |c: &Configs, run: &resim::Run| -> Vec<f64> {
         let floors = current_floors.borrow();
         let judged = fit::Setup {
             floors: &floors,
@@ -550,9 +560,13 @@ pub fn analyse_with(
             known: first.known.clone(),
             ..first
         };
-        channel_mean(part_channels(&judged, c, run, false, None).into_iter()).unwrap_or(0.0)
+        part_channels(&judged, c, run, false, None)
+            .into_iter()
+            .map(|(chi2, known)| chi2 / known.max(1.0))
+            .collect()
     };
-    let current_mean = std::cell::Cell::new(mean_of(&start, &clean0));
+    let mean_of = |levels: &[f64]| channel_mean(levels.iter().map(|&q| (q, 1.0))).unwrap_or(0.0);
+    let current = std::cell::RefCell::new(levels_of(&start, &clean0));
     // The configurations with the effects accepted so far, which each round's setup fits
     // against.
     let round_configs = || configs.borrow().clone();
@@ -626,21 +640,24 @@ pub fn analyse_with(
             // of many samples with a worse fit of others trades disagreement, as a stand-in for
             // a term the library lacks does.
             let run = resim::simulate(&c, m, None)?;
-            let mean = mean_of(&c, &run);
+            let levels = levels_of(&c, &run);
+            let mean = mean_of(&levels);
+            let without = mean_of(&current.borrow());
             tracing::debug!(
                 effect = named.last().map(|n| n.0.name),
                 mean,
-                without = current_mean.get(),
+                without,
+                ?levels,
+                before = ?current.borrow(),
                 "the gap's channel mean with the newest effect"
             );
             if let Some((effect, _, _)) = named.last()
                 && effect.kind == effects::Kind::Mean
-                && mean >= current_mean.get()
+                && mean >= without
             {
                 return Ok(Some(format!(
                     "with it, the channels' mean chi-square over their known levels is \
-                     {mean:.3}, against {:.3} without it: it does not shrink the gap",
-                    current_mean.get()
+                     {mean:.3}, against {without:.3} without it: it does not shrink the gap"
                 )));
             }
             // An effect named after others is refused as a stand-in when it explains only a
@@ -650,7 +667,6 @@ pub fn analyse_with(
             // Either sign alone is no proof: on a vehicle of another structure a right effect's
             // value depends on the regime too, and a right effect may be a small part of a
             // disagreement that is mostly structure.
-            let without = current_mean.get();
             let share = if without > 1.0 {
                 (without - mean) / (without - 1.0)
             } else {
@@ -659,7 +675,7 @@ pub fn analyse_with(
             if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
-                && let Some(why) = too_small_a_share(without, mean)
+                && let Some(why) = too_small_a_share(&current.borrow(), &levels)
             {
                 return Ok(Some(why));
             }
@@ -771,7 +787,7 @@ pub fn analyse_with(
                     )));
                 }
             }
-            current_mean.set(mean);
+            *current.borrow_mut() = levels;
             let mut model_with = model.clone();
             for ((a, (effect, _, _)), (values, ci)) in accepted.iter_mut().zip(&named).zip(joint) {
                 for ((_, v), new) in a.parameters.iter_mut().zip(&values) {
@@ -878,27 +894,35 @@ mod tests {
 
     /// A later name must take a real part of what the earlier names left, and something must
     /// be left: a sliver of a large rest, anything once the gap is at its known levels, or a
-    /// drop mostly below them is refused; a tenth or more, above them, passes.
+    /// drop mostly below the channels' known levels is refused; a tenth or more, above them,
+    /// passes. Above and below are read channel by channel: a channel far off, brought to its
+    /// known level beside channels the model fits better than the calibration's runs, is an
+    /// excess explained, though the channels' mean ends below 1.
     #[test]
     fn a_later_name_must_take_a_real_share_of_what_is_left() {
+        let one = |without: f64, with: f64| too_small_a_share(&[without], &[with]);
         // An accelerometer offset after an EMI: 1.242 -> 1.223 is 8 % of the 0.242 left.
-        let sliver = too_small_a_share(1.242, 1.223).expect("a sliver is refused");
+        let sliver = one(1.242, 1.223).expect("a sliver is refused");
         assert!(sliver.contains("8 %"), "{sliver}");
-        assert!(
-            too_small_a_share(0.98, 0.96).is_some(),
-            "nothing left to explain"
-        );
-        assert!(too_small_a_share(1.0, 0.9).is_some(), "at the known levels");
+        assert!(one(0.98, 0.96).is_some(), "nothing left to explain");
+        assert!(one(1.0, 0.9).is_some(), "at the known levels");
         // A compass offset beside a current: 5.66 -> 4.79 is 19 % of what is left.
-        assert_eq!(too_small_a_share(5.66, 4.79), None);
-        assert_eq!(too_small_a_share(2.0, 1.9), None, "exactly a tenth passes");
-        assert_eq!(too_small_a_share(1.5, 1.0), None);
+        assert_eq!(one(5.66, 4.79), None);
+        assert_eq!(one(2.0, 1.9), None, "exactly a tenth passes");
+        assert_eq!(one(1.5, 1.0), None);
         // A drag mismatch after a thruster imbalance: 1.018 -> 0.841 is 0.018 above the
         // known levels and 0.159 below them.
-        let below = too_small_a_share(1.018, 0.841).expect("mostly below the known levels");
+        let below = one(1.018, 0.841).expect("mostly below the known levels");
         assert!(below.contains("0.159 of that below"), "{below}");
         // A coupling after a compass offset: 1.86 -> 0.99 is nearly all above them.
-        assert_eq!(too_small_a_share(1.86, 0.99), None);
+        assert_eq!(one(1.86, 0.99), None);
+        // A depth channel at twice its known level, brought to 0.9 of it, beside a channel at
+        // 0.3 of its own: the mean goes 1.15 -> 0.6, 0.5 of that above the channels' levels
+        // and 0.05 below. Read on the mean alone, 0.4 of the drop would be below 1.
+        assert_eq!(too_small_a_share(&[2.0, 0.3], &[0.9, 0.3]), None);
+        // The same drop spread over channels already within their levels is refused.
+        let spread = too_small_a_share(&[1.2, 1.1], &[0.7, 0.8]).expect("below the levels");
+        assert!(spread.contains("0.250 of that below"), "{spread}");
     }
 
     /// A later name needs a channel it moves still off: on a run with a hidden thruster
