@@ -36,6 +36,7 @@ fn build(target: Target) -> PathBuf {
         program("missing_devices.c"),
         program("image_ops.c"),
         program("m5_demos.c"),
+        program("threads_int.c"),
     ];
     let refs: Vec<&Path> = singles.iter().map(PathBuf::as_path).collect();
     let sources = format!(
@@ -99,6 +100,7 @@ fn robios6_programs_build_unchanged_for_the_host_and_the_68k() {
             "missing_devices",
             "image_ops",
             "m5_demos",
+            "threads_int",
             "multi",
         ] {
             assert!(
@@ -364,6 +366,28 @@ fn the_latch_script_drives_osreadinlatch_in_check() {
         printed.contains("latch 1 0xFF"),
         "latch 1 keeps its idle level: {printed}"
     );
+}
+
+/// A thread function handed to `OSSpawn` cast to `int`, as RoBIOS programs written for the
+/// 68332 do, runs on the 64-bit host as on the 68k: the make line links programs at a fixed
+/// address, where the cut pointer still names the function.
+#[test]
+fn a_thread_handed_to_osspawn_as_an_int_runs_on_the_host_and_the_68k() {
+    let fixture = workspace_root().join("pty-tests/fixtures/robios6_threads_int.toml");
+    for target in [Target::Host, Target::M68k] {
+        let exe = build(target).join("threads_int");
+        let mut program = vec![exe.to_str().expect("utf-8 path").to_string()];
+        if target == Target::M68k {
+            let qemu = require_tool("qemu-m68k", "qemu-user");
+            program.insert(0, qemu.to_str().expect("utf-8 path").to_string());
+        }
+        let program: Vec<&str> = program.iter().map(String::as_str).collect();
+        let dir = TempDir::new("robios6-threads-int");
+        let o = check(&fixture, &dir.join("out"), &program);
+        assert!(o.status.success(), "{target:?}: {}", text(&o));
+        let printed = std::fs::read_to_string(dir.join("out/program.out")).expect("program.out");
+        assert_eq!(printed, "worker ran 3 times\n", "{target:?}");
+    }
 }
 
 /// A latch script the library cannot read ends the program with status 2, naming the
