@@ -34,6 +34,7 @@ pub mod effects;
 pub mod fit;
 pub mod format;
 pub mod generate;
+pub mod later;
 pub mod lsq;
 pub mod model;
 pub mod outliers;
@@ -53,6 +54,8 @@ use crate::gap::effects::Configs;
 use crate::gap::format::Measurement;
 use crate::gap::model::{EnabledEffect, GapModel};
 use crate::gap::residuals::ChannelStats;
+pub use later::{LATER_NAME_FLOOR_SHARE, LATER_NAME_MIN_SHARE};
+use later::{no_excess_left, nothing_off_that_it_moves, too_small_a_share};
 
 /// Errors of the gap workflow; each names its input.
 #[derive(Debug, thiserror::Error)]
@@ -394,135 +397,6 @@ pub fn analyse(
     progress: &mut dyn FnMut(usize, &str),
 ) -> Result<Analysis, GapError> {
     analyse_with(model, m, exp_dir, Options::default(), progress)
-}
-
-/// An effect named after others that explains less than this share of the excess of the
-/// gap measure's channel mean over 1 the earlier names left is tested for constancy
-/// ([`fit::constancy`]): "most" of what is left.
-pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
-
-/// An effect named after others must explain at least this share of the excess of the gap
-/// measure's channel mean over 1 that the earlier names left, and it must take the channels
-/// down more above their known levels than below them. Where no excess is left in the mean,
-/// a channel it moves must still be off ([`no_excess_left`]).
-///
-/// The gap measure counts every channel once, so a true second effect takes a large part of
-/// what is left; a name that takes a sliver of it beside a larger rest left unexplained is a
-/// symptom of the structure the earlier names exposed (a hull driven where the baseline runs
-/// never took it), not a cause of its own.
-pub const LATER_NAME_FLOOR_SHARE: f64 = 0.1;
-
-/// Why an effect named after others, with each channel's chi-square over its known level
-/// `without` it and `with` it (the terms the gap measure's channel mean averages, channel by
-/// channel in the same order), takes too little of what the earlier names left to be named;
-/// `None` when it takes enough.
-///
-/// Where the earlier names leave the channels' mean at or below the known levels, only the
-/// split above and below is asked: whether a channel is still off is then for
-/// [`nothing_off_that_it_moves`] to say ([`no_excess_left`]).
-pub(crate) fn too_small_a_share(without: &[f64], with: &[f64]) -> Option<String> {
-    let (before, after) = (level_mean(without), level_mean(with));
-    // Of the drop the name makes, channel by channel, the part above that channel's known
-    // level is the excess it explains; the part below it is disagreement the calibration's
-    // own runs show as well. A channel far off beside channels the model fits better than
-    // the calibration's runs is an excess, whatever the channels' mean.
-    let n = without.len().max(1) as f64;
-    let (mut above, mut below) = (0.0, 0.0);
-    for (b, a) in without.iter().zip(with) {
-        above += (b.max(1.0) - a.max(1.0)) / n;
-        below += (b.min(1.0) - a.min(1.0)) / n;
-    }
-    if below > above {
-        return Some(format!(
-            "it takes the channels' mean chi-square over their known levels from {before:.3} \
-             to {after:.3}: {below:.3} of that below the channels' known levels against \
-             {above:.3} above them. It fits more of the disagreement the calibration's own \
-             runs show than of what the effects named before it left"
-        ));
-    }
-    let share = (before - after) / (before - 1.0);
-    (before > 1.0 && share < LATER_NAME_FLOOR_SHARE).then(|| {
-        format!(
-            "it explains {:.0} % of the disagreement the effects named before it left (the \
-             channels' mean chi-square over their known levels {before:.3} -> {after:.3}); an \
-             effect named after others must explain at least {:.0} %: a sliver beside a larger \
-             rest is the structure the earlier names exposed, not a cause of its own",
-            100.0 * share,
-            100.0 * LATER_NAME_FLOOR_SHARE
-        )
-    })
-}
-
-fn level_mean(levels: &[f64]) -> f64 {
-    levels.iter().sum::<f64>() / levels.len().max(1) as f64
-}
-
-/// The earlier names leave the channels' mean chi-square over their known levels (each
-/// channel's in `levels`) at or below 1: in the gap measure nothing is left. A channel may
-/// still be off beside channels the model fits better than the calibration's runs, so a
-/// later name is then asked [`nothing_off_that_it_moves`]. `None` when the mean is above 1.
-pub(crate) fn no_excess_left(levels: &[f64]) -> Option<String> {
-    let mean = level_mean(levels);
-    (mean <= 1.0).then(|| {
-        format!(
-            "the effects named before it leave the channels' mean chi-square at {mean:.3}, at \
-             or below the known levels on the samples the fits see (wall contacts left out)"
-        )
-    })
-}
-
-/// Why an effect named after others finds no disagreement of its own left: with the
-/// earlier names in the model (`earlier`), none of the channels it moves (its signature
-/// channels and `also_moves`) is significantly off by the report's test (the chi-square over
-/// its known level beyond the noise, and over the run bound a run with nothing new reaches).
-/// `None` when one is.
-///
-/// Asked of a later name that explains less than [`LATER_NAME_MIN_SHARE`] of what the earlier
-/// ones left. Where they leave every channel it moves within what the calibration's runs show,
-/// what such a name fits is that known disagreement: on a vehicle of another structure, the
-/// mean surge acceleration a chattering depth hold makes once a depth EMI is named (an
-/// `accel_x_offset` taking 10 % of what the EMI left, its channel at 2.95 against a known
-/// 2.66 and a run bound of 4.85). A name that explains most of what is left is not asked:
-/// spread over several channels, a real effect can leave each within its run bound (a
-/// compass latency after a depth offset, 94 % of what the offset left, with track and
-/// heading each under their bounds).
-fn nothing_off_that_it_moves(
-    model: &GapModel,
-    m: &Measurement,
-    effect: &effects::Effect,
-    earlier: &Configs,
-    floors: &[Option<resim::Floor>],
-) -> Result<Option<String>, GapError> {
-    let run = resim::simulate(earlier, m, None)?;
-    let stats = stats_for(model, m, earlier, &run, floors);
-    let moved: Vec<&ChannelStats> = stats
-        .iter()
-        .filter(|s| {
-            effect.channels.contains(&s.channel.as_str())
-                || effect.also_moves.contains(&s.channel.as_str())
-        })
-        .collect();
-    if moved.is_empty() || moved.iter().any(|s| s.significant) {
-        return Ok(None);
-    }
-    let figures = moved
-        .iter()
-        .map(|s| {
-            let bound = s.run_bound.map_or_else(
-                || "no run bound".to_string(),
-                |b| format!("run bound {b:.2}"),
-            );
-            format!(
-                "{} {:.2} (known {:.2}, {bound})",
-                s.channel, s.chi2_per_sample, s.known_chi2_per_sample
-            )
-        })
-        .collect::<Vec<_>>()
-        .join(", ");
-    Ok(Some(format!(
-        "no channel it moves is off by more than runs with nothing new are (chi-square per \
-         sample: {figures}): what it would fit is disagreement the calibration's own runs show"
-    )))
 }
 
 /// As [`analyse`], with explicit options.
@@ -922,80 +796,6 @@ pub fn analyse_with(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A later name must take a real part of what the earlier names left, and something must
-    /// be left: a sliver of a large rest, anything once the gap is at its known levels, or a
-    /// drop mostly below the channels' known levels is refused; a tenth or more, above them,
-    /// passes. Above and below are read channel by channel: a channel far off, brought to its
-    /// known level beside channels the model fits better than the calibration's runs, is an
-    /// excess explained, though the channels' mean ends below 1.
-    #[test]
-    fn a_later_name_must_take_a_real_share_of_what_is_left() {
-        let one = |without: f64, with: f64| too_small_a_share(&[without], &[with]);
-        // An accelerometer offset after an EMI: 1.242 -> 1.223 is 8 % of the 0.242 left.
-        let sliver = one(1.242, 1.223).expect("a sliver is refused");
-        assert!(sliver.contains("8 %"), "{sliver}");
-        assert!(
-            one(0.98, 0.96).is_some(),
-            "all of it below the known levels"
-        );
-        assert!(one(1.0, 0.9).is_some(), "at the known levels");
-        assert!(no_excess_left(&[0.98]).is_some() && no_excess_left(&[1.0]).is_some());
-        assert_eq!(no_excess_left(&[1.02]), None);
-        // A channel at 1.72 of its known level beside one at 0.2 of its own: the mean is 0.96,
-        // nothing in the gap measure, and a name that brings the first to 0.91 takes 0.36
-        // above the levels against 0.045 below. Whether that channel is off is then asked of
-        // the channel ([`nothing_off_that_it_moves`]), not refused on the mean.
-        assert!(no_excess_left(&[1.72, 0.2]).is_some());
-        assert_eq!(too_small_a_share(&[1.72, 0.2], &[0.91, 0.2]), None);
-        // A compass offset beside a current: 5.66 -> 4.79 is 19 % of what is left.
-        assert_eq!(one(5.66, 4.79), None);
-        assert_eq!(one(2.0, 1.9), None, "exactly a tenth passes");
-        assert_eq!(one(1.5, 1.0), None);
-        // A drag mismatch after a thruster imbalance: 1.018 -> 0.841 is 0.018 above the
-        // known levels and 0.159 below them.
-        let below = one(1.018, 0.841).expect("mostly below the known levels");
-        assert!(below.contains("0.159 of that below"), "{below}");
-        // A coupling after a compass offset: 1.86 -> 0.99 is nearly all above them.
-        assert_eq!(one(1.86, 0.99), None);
-        // A depth channel at twice its known level, brought to 0.9 of it, beside a channel at
-        // 0.3 of its own: the mean goes 1.15 -> 0.6, 0.5 of that above the channels' levels
-        // and 0.05 below. Read on the mean alone, 0.4 of the drop would be below 1.
-        assert_eq!(too_small_a_share(&[2.0, 0.3], &[0.9, 0.3]), None);
-        // The same drop spread over channels already within their levels is refused.
-        let spread = too_small_a_share(&[1.2, 1.1], &[0.7, 0.8]).expect("below the levels");
-        assert!(spread.contains("0.250 of that below"), "{spread}");
-    }
-
-    /// A later name needs a channel it moves still off: on a run with a hidden thruster
-    /// imbalance, against the model without it, the imbalance's channels are off and it may be
-    /// named after others; against the model with the imbalance in it, nothing it moves is
-    /// off, and it is refused, with each channel's figures; an effect whose channels the
-    /// imbalance leaves alone (a depth offset) finds nothing off either.
-    #[test]
-    fn a_later_name_needs_a_channel_it_moves_still_off() {
-        let imbalance = effects::by_name("thruster_imbalance").unwrap();
-        let depth = effects::by_name("depth_offset").unwrap();
-        let (model, base, m) = resim::tests::manoeuvre_of(5, |c: &mut Configs| {
-            effects::apply(imbalance, &[0.15], c);
-        });
-        let clean = resim::simulate(&base, &m, None).unwrap();
-        let floors = resim::noise_floor(&base, &m, &clean).unwrap();
-        let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors).unwrap();
-        assert_eq!(off, None, "the imbalance's channels are off");
-        let mut with = base.clone();
-        effects::apply(imbalance, &[0.15], &mut with);
-        let why = nothing_off_that_it_moves(&model, &m, imbalance, &with, &floors)
-            .unwrap()
-            .expect("nothing left off once the imbalance is in the model");
-        assert!(why.contains("compass_deg") && why.contains("x_m"), "{why}");
-        assert!(
-            nothing_off_that_it_moves(&model, &m, depth, &base, &floors)
-                .unwrap()
-                .is_some(),
-            "a depth offset finds its channel off, which the imbalance leaves alone"
-        );
-    }
 
     /// The gap measure is the mean over channels of chi2 over the known level, less 1: a run
     /// as far off as the baseline runs has no gap, each channel counts once, and a known
