@@ -18,9 +18,8 @@ use super::{GapError, resim, stats_for};
 pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
 
 /// An effect named after others must explain at least this share of the excess of the gap
-/// measure's channel mean over 1 that the earlier names left, and it must take the channels
-/// down more above their known levels than below them. Where no excess is left in the mean,
-/// a channel it moves must still be off ([`no_excess_left`]).
+/// measure's channel mean over 1 that the earlier names left, there must be an excess, and it
+/// must take the channels down more above their known levels than below them.
 ///
 /// The gap measure counts every channel once, so a true second effect takes a large part of
 /// what is left; a name that takes a sliver of it beside a larger rest left unexplained is a
@@ -33,11 +32,19 @@ pub const LATER_NAME_FLOOR_SHARE: f64 = 0.1;
 /// channel in the same order), takes too little of what the earlier names left to be named;
 /// `None` when it takes enough.
 ///
-/// Where the earlier names leave the channels' mean at or below the known levels, only the
-/// split above and below is asked: whether a channel is still off is then for
-/// [`nothing_off_that_it_moves`] to say ([`no_excess_left`]).
+/// With the channels' mean at or below 1 nothing is left, even where one channel is off
+/// beside channels the model fits better than the calibration's runs: asking that channel
+/// whether it is still off ([`nothing_off_that_it_moves`]) let a water current in beside a
+/// thruster imbalance on a run of another structure, and named no hidden second effect.
 pub(crate) fn too_small_a_share(without: &[f64], with: &[f64]) -> Option<String> {
     let (before, after) = (level_mean(without), level_mean(with));
+    if before <= 1.0 {
+        return Some(format!(
+            "the effects named before it leave the channels' mean chi-square at {before:.3}, \
+             at or below the known levels on the samples the fits see (wall contacts left out): \
+             no disagreement is left for another effect"
+        ));
+    }
     // Of the drop the name makes, channel by channel, the part above that channel's known
     // level is the excess it explains; the part below it is disagreement the calibration's
     // own runs show as well. A channel far off beside channels the model fits better than
@@ -57,7 +64,7 @@ pub(crate) fn too_small_a_share(without: &[f64], with: &[f64]) -> Option<String>
         ));
     }
     let share = (before - after) / (before - 1.0);
-    (before > 1.0 && share < LATER_NAME_FLOOR_SHARE).then(|| {
+    (share < LATER_NAME_FLOOR_SHARE).then(|| {
         format!(
             "it explains {:.0} % of the disagreement the effects named before it left (the \
              channels' mean chi-square over their known levels {before:.3} -> {after:.3}); an \
@@ -71,20 +78,6 @@ pub(crate) fn too_small_a_share(without: &[f64], with: &[f64]) -> Option<String>
 
 fn level_mean(levels: &[f64]) -> f64 {
     levels.iter().sum::<f64>() / levels.len().max(1) as f64
-}
-
-/// The earlier names leave the channels' mean chi-square over their known levels (each
-/// channel's in `levels`) at or below 1: in the gap measure nothing is left. A channel may
-/// still be off beside channels the model fits better than the calibration's runs, so a
-/// later name is then asked [`nothing_off_that_it_moves`]. `None` when the mean is above 1.
-pub(crate) fn no_excess_left(levels: &[f64]) -> Option<String> {
-    let mean = level_mean(levels);
-    (mean <= 1.0).then(|| {
-        format!(
-            "the effects named before it leave the channels' mean chi-square at {mean:.3}, at \
-             or below the known levels on the samples the fits see (wall contacts left out)"
-        )
-    })
 }
 
 /// Why an effect named after others finds no disagreement of its own left: with the
@@ -157,19 +150,10 @@ mod tests {
         // An accelerometer offset after an EMI: 1.242 -> 1.223 is 8 % of the 0.242 left.
         let sliver = one(1.242, 1.223).expect("a sliver is refused");
         assert!(sliver.contains("8 %"), "{sliver}");
-        assert!(
-            one(0.98, 0.96).is_some(),
-            "all of it below the known levels"
-        );
+        assert!(one(0.98, 0.96).is_some(), "nothing left to explain");
         assert!(one(1.0, 0.9).is_some(), "at the known levels");
-        assert!(no_excess_left(&[0.98]).is_some() && no_excess_left(&[1.0]).is_some());
-        assert_eq!(no_excess_left(&[1.02]), None);
-        // A channel at 1.72 of its known level beside one at 0.2 of its own: the mean is 0.96,
-        // nothing in the gap measure, and a name that brings the first to 0.91 takes 0.36
-        // above the levels against 0.045 below. Whether that channel is off is then asked of
-        // the channel ([`nothing_off_that_it_moves`]), not refused on the mean.
-        assert!(no_excess_left(&[1.72, 0.2]).is_some());
-        assert_eq!(too_small_a_share(&[1.72, 0.2], &[0.91, 0.2]), None);
+        let hidden = too_small_a_share(&[1.72, 0.2], &[0.91, 0.2]).expect("the mean is 0.96");
+        assert!(hidden.contains("no disagreement is left"), "{hidden}");
         // A compass offset beside a current: 5.66 -> 4.79 is 19 % of what is left.
         assert_eq!(one(5.66, 4.79), None);
         assert_eq!(one(2.0, 1.9), None, "exactly a tenth passes");

@@ -55,7 +55,7 @@ use crate::gap::format::Measurement;
 use crate::gap::model::{EnabledEffect, GapModel};
 use crate::gap::residuals::ChannelStats;
 pub use later::{LATER_NAME_FLOOR_SHARE, LATER_NAME_MIN_SHARE};
-use later::{no_excess_left, nothing_off_that_it_moves, too_small_a_share};
+use later::{nothing_off_that_it_moves, too_small_a_share};
 
 /// Errors of the gap workflow; each names its input.
 #[derive(Debug, thiserror::Error)]
@@ -567,22 +567,6 @@ pub fn analyse_with(
                 && let Some(why) = too_small_a_share(&current.borrow(), &levels)
             {
                 return Ok(Some(why));
-            }
-            // Nothing left in the channels' mean: the name must find a channel it moves still
-            // off, whatever share of the rest it takes.
-            if let Some((effect, _, _)) = named.last()
-                && named.len() > 1
-                && effect.kind == effects::Kind::Mean
-                && let Some(level) = no_excess_left(&current.borrow())
-                && let Some(why) = nothing_off_that_it_moves(
-                    model,
-                    m,
-                    effect,
-                    &round_configs(),
-                    &current_floors.borrow(),
-                )?
-            {
-                return Ok(Some(format!("{level}, and {why}")));
             }
             // An effect named after others that explains less than most of what they left
             // must find a disagreement left that runs with nothing new do not show: a channel
