@@ -339,7 +339,7 @@ fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidat
 
 /// The cosine of the angle between the changes of the residuals the fits of `a` and `b` make;
 /// `None` when either is unknown or zero.
-fn change_cosine(a: &Candidate, b: &Candidate) -> Option<f64> {
+pub(crate) fn change_cosine(a: &Candidate, b: &Candidate) -> Option<f64> {
     if a.change.len() != b.change.len() {
         return None;
     }

@@ -6,7 +6,9 @@
 //! names left: its share of the excess, where its drop lies against the channels' known
 //! levels, and whether a channel it moves is still off.
 
-use super::effects::{self, Configs};
+use super::candidate::{self, Candidate};
+use super::effects::{self, Configs, Kind};
+use super::fit;
 use super::format::Measurement;
 use super::model::GapModel;
 use super::residuals::ChannelStats;
@@ -134,6 +136,150 @@ pub(crate) fn nothing_off_that_it_moves(
     )))
 }
 
+/// The named effects after an exchange ([`exchange_lookalikes`]): the candidates, with the
+/// joint values, and the configurations with them applied.
+pub(crate) struct Exchanged {
+    pub accepted: Vec<Candidate>,
+    pub configs: Configs,
+}
+
+/// Once two or more effects are named, each earlier name is exchanged for a look-alike of its
+/// round where that fits the data better with the later names in: the greedy rounds chose it
+/// before the later names changed the model. A look-alike passed every guard in the earlier
+/// name's round, is of its kind, shares a signature channel, and changed the residuals as it
+/// did (cosine at least [`candidate::SAME_CHANGE_COSINE`]): on a depth hold a depth gain and a
+/// depth offset move the reading alike, and which of them fits better can turn once a thrust
+/// gain beside them is named. The exchanged set is refitted jointly
+/// ([`fit::refit_jointly`]) from the look-alike's round values; it is kept when its
+/// chi-square, less the look-alike's extra parameters' BIC cost, is lower by more than
+/// [`fit::BIC_MARGIN`], and the look-alike's joint values lie inside its bounds with an
+/// interval clear of zero. Replacing a variance effect (a depth EMI) is not tried.
+///
+/// `setup` is the model without any named effect (its `base`); `rounds[i]` holds the round
+/// in which `accepted[i]` was named, whose values are the joint ones. `None` when nothing is
+/// exchanged.
+pub(crate) fn exchange_lookalikes(
+    setup: &fit::Setup<'_>,
+    rounds: &[Vec<Candidate>],
+    accepted: &[Candidate],
+) -> Option<Exchanged> {
+    if accepted.len() < 2 {
+        return None;
+    }
+    let effect_of = |c: &Candidate| effects::by_name(&c.name);
+    let configs_of = |named: &[(&'static effects::Effect, Vec<f64>, f64)]| {
+        let mut c = setup.base.clone();
+        for (effect, values, _) in named {
+            effects::apply(effect, values, &mut c);
+        }
+        c
+    };
+    let chi2_of = |c: &Configs| -> Option<f64> {
+        let run = resim::simulate(c, setup.m, None)
+            .ok()
+            .filter(|r| r.divergences.is_empty())?;
+        Some(setup.residuals(c, &run).all_chi2())
+    };
+    let mut current = accepted.to_vec();
+    let mut named: Vec<(&'static effects::Effect, Vec<f64>, f64)> = current
+        .iter()
+        .map(|c| Some((effect_of(c)?, c.values(), c.noise_factor)))
+        .collect::<Option<_>>()?;
+    // The named set's own joint fit, which the look-alikes' are measured against.
+    let mut chi2_now: Option<f64> = None;
+    let ln_n = setup.n_eff(None).ln();
+    let mut exchanged = false;
+    for i in 0..current.len() {
+        let (earlier, round) = (current[i].clone(), rounds.get(i)?);
+        let e = effect_of(&earlier)?;
+        if e.kind != Kind::Mean {
+            continue;
+        }
+        let lookalikes = round.iter().filter(|c| {
+            c.name != earlier.name
+                && current.iter().all(|a| a.name != c.name)
+                && c.testable
+                && c.guards.all()
+                && effect_of(c).is_some_and(|r| {
+                    r.kind == Kind::Mean
+                        && (r.physics || !e.physics)
+                        && r.channels.iter().any(|ch| e.channels.contains(ch))
+                })
+                && candidate::change_cosine(c, &earlier)
+                    .is_some_and(|cos| cos >= candidate::SAME_CHANGE_COSINE)
+        });
+        let mut best: Option<(f64, f64, Candidate, Vec<fit::Refit>)> = None;
+        for look in lookalikes {
+            let now = match chi2_now {
+                Some(chi2) => chi2,
+                None => {
+                    if let Some(refit) = fit::refit_jointly(setup, &named) {
+                        for ((_, values, _), (new, _)) in named.iter_mut().zip(&refit) {
+                            values.clone_from(new);
+                        }
+                    }
+                    let chi2 = chi2_of(&configs_of(&named))?;
+                    chi2_now = Some(chi2);
+                    chi2
+                }
+            };
+            let Some(r) = effect_of(look) else { continue };
+            let mut trial = named.clone();
+            trial[i] = (r, look.values(), look.noise_factor);
+            let Some(refit) = fit::refit_jointly(setup, &trial) else {
+                continue;
+            };
+            for ((_, values, _), (new, _)) in trial.iter_mut().zip(&refit) {
+                values.clone_from(new);
+            }
+            let Some(chi2) = chi2_of(&configs_of(&trial)) else {
+                continue;
+            };
+            let extra = r.parameters.len() as f64 - e.parameters.len() as f64;
+            let gain = now - chi2 - extra * ln_n;
+            let (values, ci) = (&refit[i].0, &refit[i].1);
+            let clear = ci.iter().any(|[lo, hi]| *lo > 0.0 || *hi < 0.0);
+            tracing::debug!(
+                earlier = earlier.name,
+                lookalike = look.name,
+                gain,
+                ?values,
+                ?ci,
+                "an earlier name against its look-alike, with the later names in"
+            );
+            if gain > fit::BIC_MARGIN
+                && clear
+                && effects::inside_bounds(r, values)
+                && best.as_ref().is_none_or(|(g, _, _, _)| gain > *g)
+            {
+                best = Some((gain, chi2, look.clone(), refit));
+            }
+        }
+        let Some((_, chi2, look, refit)) = best else {
+            continue;
+        };
+        current[i] = look;
+        named[i] = (effect_of(&current[i])?, Vec::new(), current[i].noise_factor);
+        for ((c, n), (values, ci)) in current.iter_mut().zip(named.iter_mut()).zip(refit) {
+            for ((_, v), new) in c.parameters.iter_mut().zip(&values) {
+                *v = *new;
+            }
+            if !ci.is_empty() {
+                for ((_, old), new) in c.ci95.iter_mut().zip(&ci) {
+                    *old = *new;
+                }
+            }
+            n.1 = values;
+        }
+        chi2_now = Some(chi2);
+        exchanged = true;
+    }
+    exchanged.then(|| Exchanged {
+        configs: configs_of(&named),
+        accepted: current,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -201,5 +347,56 @@ mod tests {
                 .is_some(),
             "a depth offset finds its channel off, which the imbalance leaves alone"
         );
+    }
+
+    /// An earlier name is exchanged for a look-alike of its round when the set with the
+    /// look-alike fits the data better with the later name in, and kept when it fits better
+    /// itself. On a run with a hidden depth offset and a thrust gain, a depth gain named first
+    /// (its round's change taken as the offset's, so that the two are look-alikes) gives way to
+    /// the offset; with a hidden depth gain it stays.
+    #[test]
+    fn an_earlier_name_gives_way_to_its_look_alike_when_the_later_names_say_so() {
+        let offset = effects::by_name("depth_offset").unwrap();
+        let gain = effects::by_name("depth_gain").unwrap();
+        let thrust = effects::by_name("thrust_gain").unwrap();
+        let named_after = |hidden: &'static effects::Effect, value: f64| {
+            let (_, c, m) = resim::tests::manoeuvre_of(7, move |c: &mut Configs| {
+                effects::apply(hidden, &[value], c);
+                effects::apply(thrust, &[0.15], c);
+            });
+            let clean = resim::simulate(&c, &m, None).unwrap();
+            let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+            let setup = fit::setup(&m, c, &floors, fit::Split::DEFAULT, &[]).unwrap();
+            let mut first = fit::fit_effects(&setup, &[gain, offset], &mut |_| {});
+            let named_gain = first.iter().position(|c| c.name == "depth_gain").unwrap();
+            let depth_gain = first[named_gain].clone();
+            for c in first.iter_mut() {
+                c.change.clone_from(&depth_gain.change);
+            }
+            let mut with_gain = setup.base.clone();
+            effects::apply(gain, &depth_gain.values(), &mut with_gain);
+            let later_setup = fit::setup(&m, with_gain, &floors, fit::Split::DEFAULT, &[]).unwrap();
+            let second = fit::fit_effects(&later_setup, &[thrust], &mut |_| {});
+            let accepted = vec![depth_gain, second[0].clone()];
+            let guards: Vec<bool> = first.iter().map(|c| c.guards.all()).collect();
+            let ex = exchange_lookalikes(&setup, &[first, second], &accepted);
+            (
+                ex.map(|e| {
+                    e.accepted
+                        .iter()
+                        .map(|c| c.name.clone())
+                        .collect::<Vec<_>>()
+                }),
+                guards,
+            )
+        };
+        let (names, guards) = named_after(offset, 0.2);
+        assert_eq!(
+            names,
+            Some(vec!["depth_offset".to_string(), "thrust_gain".to_string()]),
+            "guards of the first round {guards:?}"
+        );
+        let (names, _) = named_after(gain, 0.1);
+        assert_eq!(names, None, "a depth gain that is there stays");
     }
 }

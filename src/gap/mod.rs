@@ -399,6 +399,22 @@ pub fn analyse(
     analyse_with(model, m, exp_dir, Options::default(), progress)
 }
 
+/// `model` with the named effects enabled at their (joint) values and intervals.
+fn with_named(model: &GapModel, accepted: &[Candidate]) -> Result<GapModel, GapError> {
+    let mut with = model.clone();
+    for a in accepted {
+        let effect = effects::by_name(&a.name)
+            .ok_or_else(|| GapError::Data(format!("`{}` is not in the effect library", a.name)))?;
+        with.effects.push(EnabledEffect {
+            effect,
+            values: a.values(),
+            ci95: a.ci95.iter().map(|(_, c)| *c).collect(),
+            delta_bic: Some(a.delta_bic),
+        });
+    }
+    Ok(with)
+}
+
 /// As [`analyse`], with explicit options.
 pub fn analyse_with(
     model: &GapModel,
@@ -677,26 +693,31 @@ pub fn analyse_with(
                 }
             }
             *current.borrow_mut() = levels;
-            let mut model_with = model.clone();
-            for ((a, (effect, _, _)), (values, ci)) in accepted.iter_mut().zip(&named).zip(joint) {
+            for (a, (values, ci)) in accepted.iter_mut().zip(joint) {
                 for ((_, v), new) in a.parameters.iter_mut().zip(&values) {
                     *v = *new;
                 }
                 for ((_, old), new) in a.ci95.iter_mut().zip(&ci) {
                     *old = *new;
                 }
-                model_with.effects.push(EnabledEffect {
-                    effect,
-                    values,
-                    ci95: ci,
-                    delta_bic: Some(a.delta_bic),
-                });
             }
             *configs.borrow_mut() = c;
-            *fitted.borrow_mut() = model_with;
+            *fitted.borrow_mut() = with_named(model, accepted)?;
             Ok(None)
         },
     )?;
+    // An earlier name the later ones show to be its look-alike's place is exchanged for it.
+    let mut accepted = accepted;
+    if accepted.len() > 1 {
+        let floors = current_floors.borrow();
+        let setup =
+            fit::setup(m, start.clone(), &floors, options.split, &spread)?.with_known(model);
+        if let Some(ex) = later::exchange_lookalikes(&setup, &rounds, &accepted) {
+            *fitted.borrow_mut() = with_named(model, &ex.accepted)?;
+            *configs.borrow_mut() = ex.configs;
+            accepted = ex.accepted;
+        }
+    }
     let (configs, fitted) = (configs.into_inner(), fitted.into_inner());
     let clean1 = resim::simulate(&configs, m, None)?;
     // A fitted noise source (depth EMI) changes the floor the "after" residuals are judged by.
