@@ -314,16 +314,11 @@ fn unconfirmed_rival<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a 
 /// with its own signature). Only a sensor effect close behind a physics winner is no tie:
 /// the physics wins. Library effects only.
 fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidate> {
-    let w = crate::gap::effects::by_name(&win.name)?;
     round.iter().find(|c| {
         let kin = c.name != win.name
             && c.testable
             && (c.guards.all() || same_change_but_interval(c, win))
-            && crate::gap::effects::by_name(&c.name).is_some_and(|e| {
-                (e.physics || !w.physics)
-                    && e.kind == w.kind
-                    && e.channels.iter().any(|ch| w.channels.contains(ch))
-            });
+            && of_its_kind(c, win);
         if kin {
             tracing::debug!(
                 winner = win.name,
@@ -335,6 +330,21 @@ fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidat
         }
         kin && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
     })
+}
+
+/// Whether `c` could stand where `win` stands: library effects of the same kind (mean or
+/// variance), sharing a signature channel, and not a sensor effect in a physics effect's
+/// place (where both explain a residual, the physics wins).
+pub(crate) fn of_its_kind(c: &Candidate, win: &Candidate) -> bool {
+    let (Some(e), Some(w)) = (
+        crate::gap::effects::by_name(&c.name),
+        crate::gap::effects::by_name(&win.name),
+    ) else {
+        return false;
+    };
+    (e.physics || !w.physics)
+        && e.kind == w.kind
+        && e.channels.iter().any(|ch| w.channels.contains(ch))
 }
 
 /// The cosine of the angle between the changes of the residuals the fits of `a` and `b` make;

@@ -200,11 +200,7 @@ pub(crate) fn exchange_lookalikes(
                 && current.iter().all(|a| a.name != c.name)
                 && c.testable
                 && c.guards.all()
-                && effect_of(c).is_some_and(|r| {
-                    r.kind == Kind::Mean
-                        && (r.physics || !e.physics)
-                        && r.channels.iter().any(|ch| e.channels.contains(ch))
-                })
+                && candidate::of_its_kind(c, &earlier)
                 && candidate::change_cosine(c, &earlier)
                     .is_some_and(|cos| cos >= candidate::SAME_CHANGE_COSINE)
         });
