@@ -184,12 +184,15 @@ fn channel_chi2(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Option<Vec<
     let mut out = Vec::new();
     for i in setup.modelled() {
         let f = p.floors[i].as_ref()?;
+        // Over the samples the residuals keep: a wall contact is left out of the count too,
+        // as `gap` leaves it out of the statistics it judges a run by.
         let (sum, n) = r
             .values
             .iter()
             .zip(&r.owner)
-            .filter(|(_, o)| **o == i)
-            .fold((0.0, 0usize), |(s, n), (v, _)| (s + v * v, n + 1));
+            .zip(&r.times)
+            .filter(|((_, o), t)| **o == i && !setup.clean.in_contact(**t))
+            .fold((0.0, 0usize), |(s, n), ((v, _), _)| (s + v * v, n + 1));
         if n > 0 {
             out.push((i, sum / (n as f64 / f.tau)));
         }

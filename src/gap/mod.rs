@@ -192,6 +192,36 @@ pub struct Analysis {
     pub floors: Vec<Option<resim::Floor>>,
 }
 
+/// Which of the samples at times `t` lie where `run` is free of the pool: the samples every
+/// fit leaves out ([`resim::Run::in_contact`]) are left out of the statistics the verdict and
+/// the known levels read too, so a wall contact, which no effect's fit may see, is no
+/// disagreement of its own.
+fn free_of_contact(run: &resim::Run, t: &[f64]) -> Vec<bool> {
+    t.iter().map(|t| !run.in_contact(*t)).collect()
+}
+
+/// The entries of `v` that `keep` keeps (`v` as it is when it is not one per sample).
+fn kept(v: &[f64], keep: &[bool]) -> Vec<f64> {
+    if v.len() != keep.len() {
+        return v.to_vec();
+    }
+    v.iter()
+        .zip(keep)
+        .filter(|(_, k)| **k)
+        .map(|(x, _)| *x)
+        .collect()
+}
+
+/// `floor` at the samples `keep` keeps.
+fn floor_kept(floor: &resim::Floor, keep: &[bool]) -> resim::Floor {
+    resim::Floor {
+        sigma: kept(&floor.sigma, keep),
+        tau: floor.tau,
+        measurement_std: kept(&floor.measurement_std, keep),
+        null: floor.null.iter().map(|n| kept(n, keep)).collect(),
+    }
+}
+
 fn stats_for(
     model: &GapModel,
     m: &Measurement,
@@ -203,6 +233,8 @@ fn stats_for(
     for (i, ch) in m.channels.iter().enumerate() {
         let Some(floor) = &floors[i] else { continue };
         if let Some((t, r)) = sonar::stats_residuals(c, run, m.experiment.duration_s, ch) {
+            let keep = free_of_contact(run, &t);
+            let (t, r) = (kept(&t, &keep), kept(&r, &keep));
             let unit = resim::Floor {
                 sigma: vec![1.0; r.len()],
                 tau: 1.0,
@@ -224,14 +256,15 @@ fn stats_for(
         let Some(p) = resim::predict(c, run, ch, 0.0) else {
             continue;
         };
-        let r = resim::residuals(ch, &p);
         let t: Vec<f64> = ch.samples.iter().map(|(t, _)| *t).collect();
+        let keep = free_of_contact(run, &t);
+        let r = kept(&resim::residuals(ch, &p), &keep);
         // Constant lag: the shift in -1..1 s (50 ms steps) with the smallest RMS.
         let mut best = (0.0, f64::INFINITY);
         for k in -20..=20 {
             let lag = f64::from(k) * 0.05;
             if let Some(pl) = resim::predict(c, run, ch, lag) {
-                let rl = resim::residuals(ch, &pl);
+                let rl = kept(&resim::residuals(ch, &pl), &keep);
                 let rms = (rl.iter().map(|v| v * v).sum::<f64>() / rl.len().max(1) as f64).sqrt();
                 if rms < best.1 - 1e-12 {
                     best = (lag, rms);
@@ -240,9 +273,9 @@ fn stats_for(
         }
         out.push(residuals::channel_stats(
             &ch.name,
-            &t,
+            &kept(&t, &keep),
             &r,
-            floor,
+            &floor_kept(floor, &keep),
             run,
             best,
             model.known(&ch.name),
@@ -812,5 +845,46 @@ mod tests {
         assert!((excess([(2.0, 0.5)].into_iter()) - 1.0).abs() < 1e-12);
         assert_eq!(excess([(0.5, 1.0)].into_iter()), 0.0);
         assert_eq!(excess(std::iter::empty()), 0.0);
+    }
+
+    /// A wall contact is judged as the fits see it: a stretch of track far off where the
+    /// re-simulation touched the pool (and the contact's memory after it) makes the channel
+    /// disagree when the run has no contact there, and not when it has, with those samples
+    /// left out of the count.
+    #[test]
+    fn a_wall_contact_is_no_disagreement_of_its_own() {
+        let (model, c, mut m) = resim::tests::manoeuvre(11);
+        let mut c = c;
+        c.shooting = run::Shooting::DEFAULT;
+        let x = m.channels.iter().position(|ch| ch.name == "x_m").unwrap();
+        let (from, to) = (40.0, 50.0);
+        // Zero at every segment start, where the track is re-anchored to the data.
+        let segment = c.shooting.segment_s.unwrap();
+        for (t, v) in &mut m.channels[x].samples {
+            if (from..to).contains(t) {
+                *v += 0.3 * (std::f64::consts::PI * t.rem_euclid(segment) / segment).sin();
+            }
+        }
+        let mut run = resim::simulate(&c, &m, None).unwrap();
+        assert!(run.contacts.is_empty(), "{:?}", run.contacts);
+        let floors = resim::noise_floor(&c, &m, &run).unwrap();
+        let x_stats = |run: &resim::Run| {
+            stats_for(&model, &m, &c, run, &floors)
+                .into_iter()
+                .find(|s| s.channel == "x_m")
+                .unwrap()
+        };
+        let free = x_stats(&run);
+        assert!(free.significant, "chi2/n {}", free.chi2_per_sample);
+        run.contacts.push([from, to]);
+        let touched = x_stats(&run);
+        assert!(!touched.significant, "chi2/n {}", touched.chi2_per_sample);
+        let left_out = m.channels[x]
+            .samples
+            .iter()
+            .filter(|(t, _)| *t >= from && *t < to + run::CONTACT_MEMORY_S)
+            .count();
+        assert_eq!(touched.samples + left_out, free.samples);
+        assert!(touched.windows.iter().all(|w| w.1 <= from || w.0 >= to));
     }
 }

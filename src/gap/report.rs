@@ -83,6 +83,10 @@ pub fn json(a: &Analysis) -> Value {
         "before": a.clean_before.divergences,
         "after": a.clean_after.divergences,
     });
+    out["contacts_s"] = json!({
+        "before": a.clean_before.contacts,
+        "after": a.clean_after.contacts,
+    });
     out["outranked_by"] = json!(a.outranked_by);
     out["refused"] = json!(a.refused);
     out
@@ -231,6 +235,23 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
                 "- the re-simulation {when} the fit diverged in the segment from {:.1} s at \
                  {:.2} s ({}): held there to the segment's end, counted as disagreement",
                 d.segment_start_s, d.t_s, d.what
+            );
+        }
+    }
+    for (when, run) in [("before", &a.clean_before), ("after", &a.clean_after)] {
+        if !run.contacts.is_empty() {
+            let spans: Vec<String> = run
+                .contacts
+                .iter()
+                .map(|[a, b]| format!("{a:.1}-{:.1} s", b.min(m.experiment.duration_s)))
+                .collect();
+            let _ = writeln!(
+                s,
+                "- the re-simulation {when} the fit touched the pool at {}: those samples and \
+                 {:.0} s after each are left out of the fits and of the statistics above and \
+                 below (a contact impulse is no effect of the library)",
+                spans.join(", "),
+                crate::gap::run::CONTACT_MEMORY_S
             );
         }
     }

@@ -41,10 +41,14 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
     }
 }
 
-/// How far (m; deg) the data must put a run's start from its stated `[initial]` before the
-/// estimate replaces it.
-pub const START_GATE_M: f64 = 0.1;
-pub const START_GATE_DEG: f64 = 5.0;
+/// How many standard deviations of one sample's measurement noise the data must put a run's
+/// start from its stated `[initial]` before the estimate replaces it. The start is read as the
+/// median of three samples, whose noise is about two thirds of one sample's: a stated start
+/// the data agree with is kept (no estimate from noisy samples replaces a start a user
+/// measured), and one they contradict is off by at most this many sample deviations, about
+/// twice the position floor of the segment it begins, not by a fixed distance a run's floor
+/// knows nothing of.
+pub const START_GATE_SIGMAS: f64 = 3.0;
 
 /// Runs the model from the measurement's initial state under its commands. `noise_seed`
 /// `None` switches the thrust fluctuation off (the mean prediction).
@@ -53,8 +57,8 @@ pub const START_GATE_DEG: f64 = 5.0;
 /// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
 /// from the measurement through the candidate's sensor models, each read as the median of the
 /// channel's first samples, [`anchor::Read::StartMedian`]) wherever the data put it more
-/// than [`START_GATE_M`] or [`START_GATE_DEG`] from the experiment's `[initial]`, which
-/// stays the prior for what the data do not say; a depth sensor on its surface clamp at the
+/// than [`START_GATE_SIGMAS`] times the channel's noise from the experiment's `[initial]`,
+/// which stays the prior for what the data do not say; a depth sensor on its surface clamp at the
 /// start says the vehicle floats, so the start is the model's floating depth. Open loop
 /// (`segment_s = None`, for generated data) starts where the experiment says.
 ///
@@ -96,19 +100,18 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     let earth = earth_field(c);
     // An ensemble member (process noise on) also reads its anchors with the measurement
     // noise: the noise floor then holds what a noisy anchor costs.
-    let mut anchor_draw = noise_seed.map(|seed| {
-        let noise = segment_steps.map(|_| {
-            let probe = Run {
-                dt_s: dt,
-                states: vec![model.vehicle_state(&state)],
-                percent: vec![p],
-                divergences: Vec::new(),
-                contacts: Vec::new(),
-            };
-            anchor_noise(c, m, &probe)
-        });
-        (noise.unwrap_or_default(), rng::stream(seed, "gap-anchor"))
+    let noise = segment_steps.map(|_| {
+        let probe = Run {
+            dt_s: dt,
+            states: vec![model.vehicle_state(&state)],
+            percent: vec![p],
+            divergences: Vec::new(),
+            contacts: Vec::new(),
+        };
+        anchor_noise(c, m, &probe)
     });
+    let noise = noise.unwrap_or_default();
+    let mut anchor_draw = noise_seed.map(|seed| rng::stream(seed, "gap-anchor"));
     let mut anchor_at = |state: &mut crate::physics::SimState, t: f64, first: bool| {
         let here = model.vehicle_state(state);
         let read = if first {
@@ -137,12 +140,33 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                     }
                 }
             };
-            keep(&mut a.north_m, here.position_m.x, START_GATE_M, false);
-            keep(&mut a.east_m, here.position_m.y, START_GATE_M, false);
-            keep(&mut a.depth_m, here.position_m.z, START_GATE_M, false);
-            keep(&mut a.heading_rad, yaw, START_GATE_DEG, true);
+            let gate = |sigma: f64| START_GATE_SIGMAS * sigma;
+            keep(
+                &mut a.north_m,
+                here.position_m.x,
+                gate(noise.position_m),
+                false,
+            );
+            keep(
+                &mut a.east_m,
+                here.position_m.y,
+                gate(noise.position_m),
+                false,
+            );
+            keep(
+                &mut a.depth_m,
+                here.position_m.z,
+                gate(noise.depth_m),
+                false,
+            );
+            keep(
+                &mut a.heading_rad,
+                yaw,
+                gate(noise.heading_rad.to_degrees()),
+                true,
+            );
         }
-        if let Some((noise, rng)) = anchor_draw.as_mut() {
+        if let Some(rng) = anchor_draw.as_mut() {
             noise.perturb(&mut a, &mut || rng.sample(StandardNormal));
         }
         model.reanchor(state, &a);
@@ -712,5 +736,29 @@ pub(crate) mod tests {
         c.shooting = Shooting::OPEN_LOOP;
         let open = super::simulate(&c, &wrong, None).unwrap();
         assert!((open.states[0].position_m - a.position_m).norm() > 0.3);
+    }
+
+    /// A stated start is kept only where the data agree with it within their own noise: one
+    /// 0.07 m and 4 deg off (seven camera and several compass deviations, which a fixed gate of
+    /// 0.1 m and 5 deg kept) is replaced by the data's, so the first segment does not carry the
+    /// offset.
+    #[test]
+    fn a_start_off_by_more_than_the_data_s_noise_is_not_kept() {
+        let (_, mut c, m) = manoeuvre(6);
+        c.shooting = Shooting::DEFAULT;
+        let truth = super::simulate(&c, &m, None).unwrap();
+        let mut wrong = m.clone();
+        let i = &mut wrong.experiment.initial;
+        i.x_m += 0.07;
+        i.y_m -= 0.07;
+        i.heading_deg += 4.0;
+        let moved = super::simulate(&c, &wrong, None).unwrap();
+        let (a, b) = (&truth.states[0], &moved.states[0]);
+        let off = (a.position_m - b.position_m).xy().norm();
+        assert!(off < 0.03, "{:?} vs {:?}", a.position_m, b.position_m);
+        let (_, _, ya) = a.euler_rad();
+        let (_, _, yb) = b.euler_rad();
+        let heading = super::wrap_deg((ya - yb).to_degrees()).abs();
+        assert!(heading < 2.0, "heading {heading} deg off");
     }
 }
