@@ -238,22 +238,35 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
             );
         }
     }
-    for (when, run) in [("before", &a.clean_before), ("after", &a.clean_after)] {
-        if !run.contacts.is_empty() {
-            let spans: Vec<String> = run
-                .contacts
-                .iter()
-                .map(|[a, b]| format!("{a:.1}-{:.1} s", b.min(m.experiment.duration_s)))
-                .collect();
-            let _ = writeln!(
-                s,
-                "- the re-simulation {when} the fit touched the pool at {}: those samples and \
-                 {:.0} s after each are left out of the fits and of the statistics above and \
-                 below (a contact impulse is no effect of the library)",
-                spans.join(", "),
-                crate::gap::run::CONTACT_MEMORY_S
-            );
+    let spans = |run: &crate::gap::resim::Run| -> Vec<String> {
+        // Contiguous spans (a contact running on into the next segment) as one.
+        let mut merged: Vec<[f64; 2]> = Vec::new();
+        for &[from, to] in &run.contacts {
+            match merged.last_mut() {
+                Some(last) if from <= last[1] + 1e-9 => last[1] = last[1].max(to),
+                _ => merged.push([from, to]),
+            }
         }
+        merged
+            .iter()
+            .map(|[from, to]| format!("{from:.1}-{:.1} s", to.min(m.experiment.duration_s)))
+            .collect()
+    };
+    let (before, after) = (spans(&a.clean_before), spans(&a.clean_after));
+    let touched = if before == after {
+        vec![("before and after", before)]
+    } else {
+        vec![("before", before), ("after", after)]
+    };
+    for (when, list) in touched.into_iter().filter(|(_, l)| !l.is_empty()) {
+        let _ = writeln!(
+            s,
+            "- the re-simulation {when} the fit touched the pool at {}: those samples and {:.0} s \
+             after each are left out of the fits and of every chi-square in this report (a \
+             contact impulse is no effect of the library)",
+            list.join(", "),
+            crate::gap::run::CONTACT_MEMORY_S
+        );
     }
     for n in &m.notices {
         let _ = writeln!(s, "- notice: {n}");
