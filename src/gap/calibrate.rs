@@ -85,17 +85,16 @@ impl Run {
 }
 
 /// A run prepared for fitting: its base configuration and noise floor.
-struct Prepared {
-    /// The run's measurement with the start decision of the model it was prepared with.
-    m: Measurement,
+struct Prepared<'a> {
+    run: &'a Run,
     base: Configs,
     floors: Vec<Option<Floor>>,
 }
 
-impl Prepared {
+impl Prepared<'_> {
     fn setup(&self) -> Result<Setup<'_>, GapError> {
         fit::setup(
-            &self.m,
+            &self.run.m,
             self.base.clone(),
             &self.floors,
             Split::DEFAULT,
@@ -167,23 +166,18 @@ pub struct Calibration {
     pub model: GapModel,
 }
 
-fn prepare(model: &GapModel, run: &Run) -> Result<Prepared, GapError> {
+fn prepare<'a>(model: &GapModel, run: &'a Run) -> Result<Prepared<'a>, GapError> {
     let mut base = model.configs(&run.m.experiment, &run.dir)?;
     base.shooting = Shooting::DEFAULT;
     let clean = resim::simulate(&base, &run.m, None)?;
-    let m = crate::gap::settled_start(&run.m, &clean);
-    let floors = resim::noise_floor(&base, &m, &clean)?;
-    Ok(Prepared {
-        m,
-        base,
-        floors,
-    })
+    let floors = resim::noise_floor(&base, &run.m, &clean)?;
+    Ok(Prepared { run, base, floors })
 }
 
 /// Per-channel chi-square per independent sample of `c` on a prepared run.
-fn channel_chi2(p: &Prepared, setup: &Setup<'_>, c: &Configs) -> Option<Vec<(usize, f64)>> {
+fn channel_chi2(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Option<Vec<(usize, f64)>> {
     // A run that diverges is no chi-square: its evaluation fails, as a fit's does.
-    let run = resim::simulate(c, &p.m, None)
+    let run = resim::simulate(c, &p.run.m, None)
         .ok()
         .filter(|r| r.divergences.is_empty())?;
     let r = setup.residuals(c, &run);
@@ -238,9 +232,9 @@ impl ChannelWeight {
 }
 
 /// Each channel's weights on a prepared run under `c`.
-fn channel_weights(p: &Prepared, setup: &Setup<'_>, c: &Configs) -> Vec<ChannelWeight> {
-    let mut w = vec![ChannelWeight::UNIT; p.m.channels.len()];
-    let Some(run) = resim::simulate(c, &p.m, None)
+fn channel_weights(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Vec<ChannelWeight> {
+    let mut w = vec![ChannelWeight::UNIT; p.run.m.channels.len()];
+    let Some(run) = resim::simulate(c, &p.run.m, None)
         .ok()
         .filter(|r| r.divergences.is_empty())
     else {
@@ -367,7 +361,7 @@ type Spread = Vec<(&'static Effect, Vec<f64>)>;
 /// `sqrt((n - 1) / n)`, which is undone; runs it never saw are taken as they are. Needs two
 /// or more runs (none from fewer).
 fn apparent_spread(
-    runs: &[Prepared],
+    runs: &[Prepared<'_>],
     fitted_on: bool,
     chosen: &[&'static Effect],
     x: &DVector<f64>,
@@ -383,7 +377,7 @@ fn apparent_spread(
     for (i, p) in runs.iter().enumerate() {
         progress(&format!("spread: run {} of {}", i + 1, runs.len()));
         let base = effects::apply_joint(&p.base, chosen, x);
-        let s = fit::setup(&p.m, base, &p.floors, Split::DEFAULT, &[])?;
+        let s = fit::setup(&p.run.m, base, &p.floors, Split::DEFAULT, &[])?;
         for r in fit::fit_candidates(&s, &[], &[], &mut |_| {}) {
             let Some(e) = effects::by_name(&r.name) else {
                 continue;
@@ -459,7 +453,7 @@ fn starts(chosen: &[&'static Effect]) -> Vec<DVector<f64>> {
 /// smallest gap on the baseline runs is kept. Returns the point, its fit and the residual
 /// evaluations used.
 fn joint_fit(
-    prepared: &[Prepared],
+    prepared: &[Prepared<'_>],
     setups: &[Setup<'_>],
     chosen: &[&'static Effect],
     starts: Vec<DVector<f64>>,
@@ -487,7 +481,7 @@ fn joint_fit(
             let c = effects::apply_joint(&p.base, chosen, x);
             // A trial point under which a run diverges is a failed evaluation: the
             // bounded fit steps back from it.
-            let run = resim::simulate(&c, &p.m, None)
+            let run = resim::simulate(&c, &p.run.m, None)
                 .ok()
                 .filter(|r| r.divergences.is_empty())?;
             let r = s.residuals(&c, &run);
@@ -621,9 +615,9 @@ fn unidentified_effects(
 }
 
 /// True when the model with `chosen` at `x` diverges on one of the runs.
-fn diverges(prepared: &[Prepared], chosen: &[&'static Effect], x: &DVector<f64>) -> bool {
+fn diverges(prepared: &[Prepared<'_>], chosen: &[&'static Effect], x: &DVector<f64>) -> bool {
     prepared.iter().any(|p| {
-        resim::simulate(&effects::apply_joint(&p.base, chosen, x), &p.m, None)
+        resim::simulate(&effects::apply_joint(&p.base, chosen, x), &p.run.m, None)
             .map_or(true, |run| !run.divergences.is_empty())
     })
 }
@@ -642,7 +636,7 @@ pub fn calibrate(
 ) -> Result<Calibration, GapError> {
     check_runs(baseline, spread_from)?;
     progress("noise floors");
-    let prepared: Vec<Prepared> = baseline
+    let prepared: Vec<Prepared<'_>> = baseline
         .iter()
         .map(|r| prepare(model, r))
         .collect::<Result<_, _>>()?;
@@ -793,7 +787,7 @@ fn choose_effects(measured: &[&str]) -> (Vec<&'static Effect>, Vec<String>) {
 /// towards the model as given until every baseline run re-simulates to its end (or drops it
 /// altogether), and returns the factor it was shrunk by.
 fn shrink_until_stable(
-    prepared: &[Prepared],
+    prepared: &[Prepared<'_>],
     chosen: &[&'static Effect],
     x: &mut DVector<f64>,
 ) -> f64 {
@@ -866,7 +860,7 @@ fn fitted_parameters(
 /// Without them a vehicle whose depth jitters with the stern duty, whatever the cause, would
 /// report that jitter as new in every later run.
 fn fit_noise_levels(
-    prepared: &[Prepared],
+    prepared: &[Prepared<'_>],
     chosen: &[&'static Effect],
     x: &DVector<f64>,
     measured: &[&str],
@@ -880,7 +874,7 @@ fn fit_noise_levels(
         let mut levels = Vec::new();
         for p in prepared {
             let s = fit::setup(
-                &p.m,
+                &p.run.m,
                 effects::apply_joint(&p.base, chosen, x),
                 &p.floors,
                 Split::DEFAULT,
@@ -915,13 +909,13 @@ fn fit_noise_levels(
 /// the `spread_from` runs when given, else on the baseline runs (`prepared`).
 fn between_run_spread(
     model: &GapModel,
-    prepared: &[Prepared],
+    prepared: &[Prepared<'_>],
     spread_from: &[Run],
     chosen: &[&'static Effect],
     x: &DVector<f64>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<(Spread, Vec<String>), GapError> {
-    let spread_prepared: Vec<Prepared> = spread_from
+    let spread_prepared: Vec<Prepared<'_>> = spread_from
         .iter()
         .map(|r| prepare(model, r))
         .collect::<Result<_, _>>()?;

@@ -120,7 +120,6 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
         roll_deg: first.roll_rad.to_degrees(),
         pitch_deg: first.pitch_rad.to_degrees(),
         surge_mps: first.u_mps,
-        from_data: None,
     };
 
     // Decode every link and direction in order.

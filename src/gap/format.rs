@@ -105,20 +105,6 @@ pub struct Initial {
     pub roll_deg: f64,
     pub pitch_deg: f64,
     pub surge_mps: f64,
-    /// Which of the stated position, depth and heading the data replace at the start, once
-    /// decided for an analysis ([`crate::gap::resim::Run::start_from_data`]); `None`: each
-    /// re-simulation decides with its own configuration. Not read from or written to files.
-    pub from_data: Option<StartFromData>,
-}
-
-/// Which quantities of a run's start the re-simulation takes from the data rather than from the
-/// stated `[initial]`: those the data put further off than their own noise allows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-pub struct StartFromData {
-    pub north: bool,
-    pub east: bool,
-    pub depth: bool,
-    pub heading: bool,
 }
 
 /// `experiment.toml`, resolved.
@@ -412,7 +398,6 @@ fn parse_experiment(origin: &str, text: &str) -> Result<ExperimentInfo, GapError
             heading_deg: check("initial.heading_deg", i.heading_deg, -360.0, 360.0, "deg")?,
             roll_deg: check("initial.roll_deg", i.roll_deg, -90.0, 90.0, "deg")?,
             pitch_deg: check("initial.pitch_deg", i.pitch_deg, -90.0, 90.0, "deg")?,
-            from_data: None,
             surge_mps: check("initial.surge_mps", i.surge_mps, -2.0, 2.0, "m/s")?,
         },
         name: raw.name,

@@ -112,7 +112,6 @@ pub fn generate_with(
                 roll_deg: 0.0,
                 pitch_deg: 0.0,
                 surge_mps: s.surge_mps,
-                from_data: None,
             },
             camera_position_std_m,
             camera_speed_std_mps: 0.02,

@@ -222,13 +222,6 @@ fn floor_kept(floor: &resim::Floor, keep: &[bool]) -> resim::Floor {
     }
 }
 
-/// `m` with the start decision of its re-simulation `run` ([`resim::Run::start_from_data`]).
-pub(crate) fn settled_start(m: &Measurement, run: &resim::Run) -> Measurement {
-    let mut settled = m.clone();
-    settled.experiment.initial.from_data = Some(run.start_from_data);
-    settled
-}
-
 fn stats_for(
     model: &GapModel,
     m: &Measurement,
@@ -466,10 +459,6 @@ pub fn analyse_with(
     let mut start = model.configs(&m.experiment, exp_dir)?;
     start.shooting = options.shooting;
     let clean0 = resim::simulate(&start, m, None)?;
-    // Which stated start quantities the data replace is the base model's decision, kept for
-    // every candidate (decided anew, a sensor candidate moved the data across the gate).
-    let settled = settled_start(m, &clean0);
-    let m = &settled;
     let floors = resim::noise_floor(&start, m, &clean0)?;
     if floors.iter().all(Option::is_none) {
         return Err(GapError::Data(format!(

@@ -11,7 +11,7 @@ use crate::gap::GapError;
 use crate::gap::anchor;
 pub use crate::gap::anchor::{compass_heading_deg, wrap_deg};
 use crate::gap::effects::Configs;
-use crate::gap::format::{Channel, Measurement, StartFromData};
+use crate::gap::format::{Channel, Measurement};
 pub use crate::gap::run::{Divergence, ENSEMBLE, Floor, Run};
 use crate::physics::state::STERN;
 use crate::physics::{InitialState, Model, ThrusterCommand, hdt_command};
@@ -41,11 +41,10 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
     }
 }
 
-
-/// How many standard deviations of one sample's measurement noise the data must put a run's
-/// start from its stated `[initial]` before they replace it. The start is read as the median of
-/// three samples, whose noise is about two thirds of one sample's.
-pub const START_GATE_SIGMAS: f64 = 3.0;
+/// How far (m; deg) the data must put a run's start from its stated `[initial]` before the
+/// estimate replaces it.
+pub const START_GATE_M: f64 = 0.1;
+pub const START_GATE_DEG: f64 = 5.0;
 
 /// Runs the model from the measurement's initial state under its commands. `noise_seed`
 /// `None` switches the thrust fluctuation off (the mean prediction).
@@ -53,17 +52,10 @@ pub const START_GATE_SIGMAS: f64 = 3.0;
 /// **The initial state is estimated, not trusted.** With re-anchored segments the start is
 /// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
 /// from the measurement through the candidate's sensor models, each read as the median of the
-/// channel's first samples, [`anchor::Read::StartMedian`]); the experiment's `[initial]` is
-/// the prior for what the data do not say (velocities, roll, pitch, a quantity without its
-/// channel). The data replace a stated quantity only where they put it more than
-/// [`START_GATE_SIGMAS`] deviations of one sample's noise off (a start a user measured beats
-/// one read from three noisy samples; a fixed gate of 0.1 m kept a start the data put 0.089 m
-/// off, and its first segment sat 5 sigma off). Where `[initial]` carries the decision
-/// ([`crate::gap::format::Initial::from_data`], as an analysis sets it from its base model's
-/// first re-simulation, [`Run::start_from_data`]), it is kept: decided anew for every
-/// candidate, a compass offset moved the data's heading across the gate, a step its fit could
-/// not cross. A depth sensor on its surface clamp at the start says the vehicle floats, so
-/// the start is the model's floating depth. Open loop
+/// channel's first samples, [`anchor::Read::StartMedian`]) wherever the data put it more
+/// than [`START_GATE_M`] or [`START_GATE_DEG`] from the experiment's `[initial]`, which
+/// stays the prior for what the data do not say; a depth sensor on its surface clamp at the
+/// start says the vehicle floats, so the start is the model's floating depth. Open loop
 /// (`segment_s = None`, for generated data) starts where the experiment says.
 ///
 /// **A diverging segment is no error.** A step the physics refuses (the state left the pool
@@ -104,21 +96,19 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     let earth = earth_field(c);
     // An ensemble member (process noise on) also reads its anchors with the measurement
     // noise: the noise floor then holds what a noisy anchor costs.
-    let noise = segment_steps
-        .map(|_| {
+    let mut anchor_draw = noise_seed.map(|seed| {
+        let noise = segment_steps.map(|_| {
             let probe = Run {
                 dt_s: dt,
                 states: vec![model.vehicle_state(&state)],
                 percent: vec![p],
                 divergences: Vec::new(),
                 contacts: Vec::new(),
-                start_from_data: StartFromData::default(),
             };
             anchor_noise(c, m, &probe)
-        })
-        .unwrap_or_default();
-    let mut anchor_draw = noise_seed.map(|seed| rng::stream(seed, "gap-anchor"));
-    let mut start_from_data = StartFromData::default();
+        });
+        (noise.unwrap_or_default(), rng::stream(seed, "gap-anchor"))
+    });
     let mut anchor_at = |state: &mut crate::physics::SimState, t: f64, first: bool| {
         let here = model.vehicle_state(state);
         let read = if first {
@@ -131,24 +121,28 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
             if a.depth_m.is_none() && anchor::depth_on_surface_clamp(c, m, t) {
                 a.depth_m = Some(model.floating_depth_m());
             }
-            start_from_data = m
-                .experiment
-                .initial
-                .from_data
-                .unwrap_or_else(|| start_decision(&a, &here, &noise));
-            let d = start_from_data;
-            for (from_data, v) in [
-                (d.north, &mut a.north_m),
-                (d.east, &mut a.east_m),
-                (d.depth, &mut a.depth_m),
-                (d.heading, &mut a.heading_rad),
-            ] {
-                if !from_data {
-                    *v = None;
+            // The stated start is kept where the data agree with it (a start a user measured
+            // beats one read from a single noisy sample); where they put it further off than
+            // START_GATE, the data win.
+            let (_, _, yaw) = here.euler_rad();
+            let keep = |v: &mut Option<f64>, prior: f64, gate: f64, wrap: bool| {
+                if let Some(x) = *v {
+                    let d = if wrap {
+                        wrap_deg((x - prior).to_degrees())
+                    } else {
+                        x - prior
+                    };
+                    if d.abs() <= gate {
+                        *v = None;
+                    }
                 }
-            }
+            };
+            keep(&mut a.north_m, here.position_m.x, START_GATE_M, false);
+            keep(&mut a.east_m, here.position_m.y, START_GATE_M, false);
+            keep(&mut a.depth_m, here.position_m.z, START_GATE_M, false);
+            keep(&mut a.heading_rad, yaw, START_GATE_DEG, true);
         }
-        if let Some(rng) = anchor_draw.as_mut() {
+        if let Some((noise, rng)) = anchor_draw.as_mut() {
             noise.perturb(&mut a, &mut || rng.sample(StandardNormal));
         }
         model.reanchor(state, &a);
@@ -216,31 +210,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
         percent,
         divergences,
         contacts,
-        start_from_data,
     })
-}
-
-/// Which quantities of the data's start anchor `a` lie further from the stated start `here`
-/// than [`START_GATE_SIGMAS`] deviations of their channel's noise (`false` where the data say
-/// nothing).
-fn start_decision(
-    a: &crate::physics::Anchor,
-    here: &crate::physics::state::VehicleState,
-    noise: &anchor::AnchorNoise,
-) -> StartFromData {
-    let off = |v: Option<f64>, stated: f64, sigma: f64| {
-        v.is_some_and(|x| (x - stated).abs() > START_GATE_SIGMAS * sigma)
-    };
-    let (_, _, yaw) = here.euler_rad();
-    StartFromData {
-        north: off(a.north_m, here.position_m.x, noise.position_m),
-        east: off(a.east_m, here.position_m.y, noise.position_m),
-        depth: off(a.depth_m, here.position_m.z, noise.depth_m),
-        heading: a.heading_rad.is_some_and(|h| {
-            wrap_deg((h - yaw).to_degrees()).abs()
-                > START_GATE_SIGMAS * noise.heading_rad.to_degrees()
-        }),
-    }
 }
 
 /// The 1-sigma error of each anchored quantity, from the measurement noise of the channel it
@@ -742,37 +712,5 @@ pub(crate) mod tests {
         c.shooting = Shooting::OPEN_LOOP;
         let open = super::simulate(&c, &wrong, None).unwrap();
         assert!((open.states[0].position_m - a.position_m).norm() > 0.3);
-    }
-
-    /// A stated start the data put further off than their noise allows gives way to the data:
-    /// one 0.07 m and 10 deg off (seven camera deviations, which a fixed gate of 0.1 m kept)
-    /// starts where the true one does, so the first segment does not carry the offset. The
-    /// decision an analysis settles in `[initial]` holds: told to keep the stated start, the
-    /// re-simulation keeps it.
-    #[test]
-    fn a_start_off_by_more_than_the_data_s_noise_gives_way_to_them() {
-        let (_, mut c, m) = manoeuvre(6);
-        c.shooting = Shooting::DEFAULT;
-        let truth = super::simulate(&c, &m, None).unwrap();
-        assert_eq!(truth.start_from_data, super::StartFromData::default());
-        let mut wrong = m.clone();
-        let i = &mut wrong.experiment.initial;
-        i.x_m += 0.07;
-        i.y_m -= 0.07;
-        i.heading_deg += 10.0;
-        let moved = super::simulate(&c, &wrong, None).unwrap();
-        let (a, b) = (&truth.states[0], &moved.states[0]);
-        let off = (a.position_m - b.position_m).xy().norm();
-        assert!(off < 0.03, "{:?} vs {:?}", a.position_m, b.position_m);
-        let (_, _, ya) = a.euler_rad();
-        let (_, _, yb) = b.euler_rad();
-        let heading = super::wrap_deg((ya - yb).to_degrees()).abs();
-        assert!(heading < 2.0, "heading {heading} deg off");
-        let d = moved.start_from_data;
-        assert!(d.north && d.east && d.heading, "{d:?}");
-        wrong.experiment.initial.from_data = Some(super::StartFromData::default());
-        let kept = super::simulate(&c, &wrong, None).unwrap();
-        let off = (kept.states[0].position_m - a.position_m).xy().norm();
-        assert!(off > 0.09, "the stated start is kept: {off} m off the true one");
     }
 }

@@ -50,10 +50,6 @@ pub struct Run {
     /// end (s, in time order). Contact impulses start on whichever step the hull first
     /// reaches a wall, so there the residuals jump as a parameter moves by any amount.
     pub contacts: Vec<[f64; 2]>,
-    /// Which quantities of the start this re-simulation took from the data: an analysis
-    /// decides it once, on its base model, and every candidate's re-simulation keeps it
-    /// ([`crate::gap::format::Initial::from_data`]).
-    pub start_from_data: crate::gap::format::StartFromData,
 }
 
 /// A segment of a re-simulation that diverged: held from `t_s` to the segment's end.

@@ -425,7 +425,6 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
         percent: Vec::new(),
         divergences: Vec::new(),
         contacts: vec![[31.0, 33.0]],
-        start_from_data: Default::default(),
     };
     let (b, a) = (
         left_out_where_touched(&before, Some(&run)),
