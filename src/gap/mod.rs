@@ -853,8 +853,7 @@ mod tests {
     /// left out of the count.
     #[test]
     fn a_wall_contact_is_no_disagreement_of_its_own() {
-        let (model, c, mut m) = resim::tests::manoeuvre(11);
-        let mut c = c;
+        let (model, mut c, mut m) = resim::tests::manoeuvre(11);
         c.shooting = run::Shooting::DEFAULT;
         let x = m.channels.iter().position(|ch| ch.name == "x_m").unwrap();
         let (from, to) = (40.0, 50.0);
