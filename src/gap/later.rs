@@ -29,6 +29,11 @@ pub const LATER_NAME_MIN_SHARE: f64 = 0.5;
 /// never took it), not a cause of its own.
 pub const LATER_NAME_FLOOR_SHARE: f64 = 0.1;
 
+/// In an exchange of an earlier name for its look-alike, each later name is also tried in
+/// exchange for this many of its own round's rivals that passed every guard, the strongest
+/// first ([`exchange_lookalikes`]).
+pub const LATER_RIVALS: usize = 4;
+
 /// Why an effect named after others, with each channel's chi-square over its known level
 /// `without` it and `with` it (the terms the gap measure's channel mean averages, channel by
 /// channel in the same order), takes too little of what the earlier names left to be named;
@@ -143,6 +148,15 @@ pub(crate) struct Exchanged {
     pub configs: Configs,
 }
 
+/// An exchange tried: its gain over the named set (BIC cost of extra parameters paid), the
+/// chi-square with it, the names put in (index in the named set, candidate) and the joint refit.
+struct Trial {
+    gain: f64,
+    chi2: f64,
+    swap: Vec<(usize, Candidate)>,
+    refit: Vec<fit::Refit>,
+}
+
 /// Once two or more effects are named, each earlier name is exchanged for a look-alike of its
 /// round where that fits the data better with the later names in: the greedy rounds chose it
 /// before the later names changed the model. A look-alike passed every guard in the earlier
@@ -153,7 +167,12 @@ pub(crate) struct Exchanged {
 /// ([`fit::refit_jointly`]) from the look-alike's round values; it is kept when its
 /// chi-square, less the look-alike's extra parameters' BIC cost, is lower by more than
 /// [`fit::BIC_MARGIN`], and the look-alike's joint values lie inside its bounds with an
-/// interval clear of zero. Replacing a variance effect (a depth EMI) is not tried.
+/// interval clear of zero. The later rounds chose with the earlier name in, so beside the
+/// look-alike each later name is also tried exchanged for one of its own round's strongest
+/// rivals that passed every guard ([`LATER_RIVALS`]), the pair refitted and held to the same
+/// rules (each exchanged name's extra parameters paid for, each inside its bounds and clear of
+/// zero): a thrust curve named for a thrust gain leaves the yaw damping beside it to a rival
+/// the thrust curve's own form wanted. Replacing a variance effect (a depth EMI) is not tried.
 ///
 /// `setup` is the model without any named effect (its `base`); `rounds[i]` holds the round
 /// in which `accepted[i]` was named, whose values are the joint ones. `None` when nothing is
@@ -204,58 +223,103 @@ pub(crate) fn exchange_lookalikes(
                 && candidate::change_cosine(c, &earlier)
                     .is_some_and(|cos| cos >= candidate::SAME_CHANGE_COSINE)
         });
-        let mut best: Option<(f64, f64, Candidate, Vec<fit::Refit>)> = None;
+        let mut best: Option<Trial> = None;
         for look in lookalikes {
-            let now = match chi2_now {
-                Some(chi2) => chi2,
-                None => {
-                    if let Some(refit) = fit::refit_jointly(setup, &named) {
-                        for ((_, values, _), (new, _)) in named.iter_mut().zip(&refit) {
-                            values.clone_from(new);
-                        }
-                    }
-                    let chi2 = chi2_of(&configs_of(&named))?;
-                    chi2_now = Some(chi2);
-                    chi2
+            // The look-alike alone in the earlier name's place, and beside it each later name
+            // exchanged for a rival that passed every guard in its own round: the later rounds
+            // chose with the earlier name in, and with the look-alike there another of their
+            // rivals may be the later effect.
+            let mut swaps = vec![vec![(i, look)]];
+            for (j, later_round) in rounds.iter().enumerate().take(current.len()).skip(i + 1) {
+                if effect_of(&current[j]).is_none_or(|e| e.kind != Kind::Mean) {
+                    continue;
                 }
-            };
-            let Some(r) = effect_of(look) else { continue };
-            let mut trial = named.clone();
-            trial[i] = (r, look.values(), look.noise_factor);
-            let Some(refit) = fit::refit_jointly(setup, &trial) else {
-                continue;
-            };
-            for ((_, values, _), (new, _)) in trial.iter_mut().zip(&refit) {
-                values.clone_from(new);
+                let mut rivals: Vec<&Candidate> = later_round
+                    .iter()
+                    .filter(|c| {
+                        c.name != look.name
+                            && current.iter().all(|a| a.name != c.name)
+                            && c.testable
+                            && c.guards.all()
+                            && effect_of(c).is_some_and(|e| e.kind == Kind::Mean)
+                    })
+                    .collect();
+                rivals.sort_by(|a, b| {
+                    b.delta_bic_uncalibrated
+                        .total_cmp(&a.delta_bic_uncalibrated)
+                });
+                swaps.extend(
+                    rivals
+                        .into_iter()
+                        .take(LATER_RIVALS)
+                        .map(|rival| vec![(i, look), (j, rival)]),
+                );
             }
-            let Some(chi2) = chi2_of(&configs_of(&trial)) else {
-                continue;
-            };
-            let extra = r.parameters.len() as f64 - e.parameters.len() as f64;
-            let gain = now - chi2 - extra * ln_n;
-            let (values, ci) = (&refit[i].0, &refit[i].1);
-            let clear = ci.iter().any(|[lo, hi]| *lo > 0.0 || *hi < 0.0);
-            tracing::debug!(
-                earlier = earlier.name,
-                lookalike = look.name,
-                gain,
-                ?values,
-                ?ci,
-                "an earlier name against its look-alike, with the later names in"
-            );
-            if gain > fit::BIC_MARGIN
-                && clear
-                && effects::inside_bounds(r, values)
-                && best.as_ref().is_none_or(|(g, _, _, _)| gain > *g)
-            {
-                best = Some((gain, chi2, look.clone(), refit));
+            for swap in swaps {
+                let now = match chi2_now {
+                    Some(chi2) => chi2,
+                    None => {
+                        if let Some(refit) = fit::refit_jointly(setup, &named) {
+                            for ((_, values, _), (new, _)) in named.iter_mut().zip(&refit) {
+                                values.clone_from(new);
+                            }
+                        }
+                        let chi2 = chi2_of(&configs_of(&named))?;
+                        chi2_now = Some(chi2);
+                        chi2
+                    }
+                };
+                let mut trial = named.clone();
+                let mut extra = 0.0;
+                for (k, c) in &swap {
+                    let Some(r) = effect_of(c) else { continue };
+                    extra += r.parameters.len() as f64 - trial[*k].0.parameters.len() as f64;
+                    trial[*k] = (r, c.values(), c.noise_factor);
+                }
+                let Some(refit) = fit::refit_jointly(setup, &trial) else {
+                    continue;
+                };
+                for ((_, values, _), (new, _)) in trial.iter_mut().zip(&refit) {
+                    values.clone_from(new);
+                }
+                let Some(chi2) = chi2_of(&configs_of(&trial)) else {
+                    continue;
+                };
+                let gain = now - chi2 - extra * ln_n;
+                let holds = swap.iter().all(|(k, _)| {
+                    let (values, ci) = (&refit[*k].0, &refit[*k].1);
+                    ci.iter().any(|[lo, hi]| *lo > 0.0 || *hi < 0.0)
+                        && effects::inside_bounds(trial[*k].0, values)
+                });
+                tracing::debug!(
+                    earlier = earlier.name,
+                    exchanged = ?swap.iter().map(|(_, c)| c.name.as_str()).collect::<Vec<_>>(),
+                    gain,
+                    holds,
+                    values = ?swap.iter().map(|(k, _)| &refit[*k].0).collect::<Vec<_>>(),
+                    "an earlier name against its look-alike, with the later names in"
+                );
+                if gain > fit::BIC_MARGIN && holds && best.as_ref().is_none_or(|b| gain > b.gain) {
+                    let swap = swap.iter().map(|(k, c)| (*k, (*c).clone())).collect();
+                    best = Some(Trial {
+                        gain,
+                        chi2,
+                        swap,
+                        refit,
+                    });
+                }
             }
         }
-        let Some((_, chi2, look, refit)) = best else {
+        let Some(Trial {
+            chi2, swap, refit, ..
+        }) = best
+        else {
             continue;
         };
-        current[i] = look;
-        named[i] = (effect_of(&current[i])?, Vec::new(), current[i].noise_factor);
+        for (k, c) in swap {
+            named[k] = (effect_of(&c)?, Vec::new(), c.noise_factor);
+            current[k] = c;
+        }
         for ((c, n), (values, ci)) in current.iter_mut().zip(named.iter_mut()).zip(refit) {
             for ((_, v), new) in c.parameters.iter_mut().zip(&values) {
                 *v = *new;
@@ -345,54 +409,83 @@ mod tests {
         );
     }
 
+    /// The names after an exchange on a run with `hidden` at `value` and a thrust gain of
+    /// 0.15: a depth gain named first (its round's change taken as the depth offset's, so that
+    /// the two are look-alikes), then `later`'s candidates fitted with it in and the one named
+    /// `pick` taken as the later name. `None` when nothing is exchanged; with the first
+    /// round's guards. The test is of the exchange, given its rounds.
+    fn exchanged_after(
+        hidden: &'static effects::Effect,
+        value: f64,
+        later: &[&'static effects::Effect],
+        pick: &str,
+    ) -> (Option<Vec<String>>, Vec<bool>) {
+        let offset = effects::by_name("depth_offset").unwrap();
+        let gain = effects::by_name("depth_gain").unwrap();
+        let thrust = effects::by_name("thrust_gain").unwrap();
+        let (_, c, m) = resim::tests::manoeuvre_of(7, move |c: &mut Configs| {
+            effects::apply(hidden, &[value], c);
+            effects::apply(thrust, &[0.15], c);
+        });
+        let clean = resim::simulate(&c, &m, None).unwrap();
+        let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+        let setup = fit::setup(&m, c, &floors, fit::Split::DEFAULT, &[]).unwrap();
+        let mut first = fit::fit_effects(&setup, &[gain, offset], &mut |_| {});
+        let named_gain = first.iter().position(|c| c.name == "depth_gain").unwrap();
+        let depth_gain = first[named_gain].clone();
+        for c in first.iter_mut() {
+            c.change.clone_from(&depth_gain.change);
+        }
+        let mut with_gain = setup.base.clone();
+        effects::apply(gain, &depth_gain.values(), &mut with_gain);
+        let later_setup = fit::setup(&m, with_gain, &floors, fit::Split::DEFAULT, &[]).unwrap();
+        let mut second = fit::fit_effects(&later_setup, later, &mut |_| {});
+        // The later round's held-out blocks, on this short manoeuvre, are too few for a thrust
+        // gain beside a depth gain: its guards are taken as passed there, as a long run's are.
+        for c in second.iter_mut() {
+            c.guards.heldout = Some(true);
+        }
+        let picked = second.iter().find(|c| c.name == pick).unwrap().clone();
+        let accepted = vec![depth_gain, picked];
+        let guards: Vec<bool> = first.iter().map(|c| c.guards.all()).collect();
+        let ex = exchange_lookalikes(&setup, &[first, second], &accepted);
+        let names = ex.map(|e| e.accepted.iter().map(|c| c.name.clone()).collect());
+        (names, guards)
+    }
+
     /// An earlier name is exchanged for a look-alike of its round when the set with the
     /// look-alike fits the data better with the later name in, and kept when it fits better
     /// itself. On a run with a hidden depth offset and a thrust gain, a depth gain named first
-    /// (its round's change taken as the offset's, so that the two are look-alikes) gives way to
-    /// the offset; with a hidden depth gain it stays.
+    /// gives way to the offset; with a hidden depth gain it stays.
     #[test]
     fn an_earlier_name_gives_way_to_its_look_alike_when_the_later_names_say_so() {
         let offset = effects::by_name("depth_offset").unwrap();
         let gain = effects::by_name("depth_gain").unwrap();
         let thrust = effects::by_name("thrust_gain").unwrap();
-        let named_after = |hidden: &'static effects::Effect, value: f64| {
-            let (_, c, m) = resim::tests::manoeuvre_of(7, move |c: &mut Configs| {
-                effects::apply(hidden, &[value], c);
-                effects::apply(thrust, &[0.15], c);
-            });
-            let clean = resim::simulate(&c, &m, None).unwrap();
-            let floors = resim::noise_floor(&c, &m, &clean).unwrap();
-            let setup = fit::setup(&m, c, &floors, fit::Split::DEFAULT, &[]).unwrap();
-            let mut first = fit::fit_effects(&setup, &[gain, offset], &mut |_| {});
-            let named_gain = first.iter().position(|c| c.name == "depth_gain").unwrap();
-            let depth_gain = first[named_gain].clone();
-            for c in first.iter_mut() {
-                c.change.clone_from(&depth_gain.change);
-            }
-            let mut with_gain = setup.base.clone();
-            effects::apply(gain, &depth_gain.values(), &mut with_gain);
-            let later_setup = fit::setup(&m, with_gain, &floors, fit::Split::DEFAULT, &[]).unwrap();
-            let second = fit::fit_effects(&later_setup, &[thrust], &mut |_| {});
-            let accepted = vec![depth_gain, second[0].clone()];
-            let guards: Vec<bool> = first.iter().map(|c| c.guards.all()).collect();
-            let ex = exchange_lookalikes(&setup, &[first, second], &accepted);
-            (
-                ex.map(|e| {
-                    e.accepted
-                        .iter()
-                        .map(|c| c.name.clone())
-                        .collect::<Vec<_>>()
-                }),
-                guards,
-            )
-        };
-        let (names, guards) = named_after(offset, 0.2);
+        let (names, guards) = exchanged_after(offset, 0.2, &[thrust], "thrust_gain");
         assert_eq!(
             names,
             Some(vec!["depth_offset".to_string(), "thrust_gain".to_string()]),
             "guards of the first round {guards:?}"
         );
-        let (names, _) = named_after(gain, 0.1);
+        let (names, _) = exchanged_after(gain, 0.1, &[thrust], "thrust_gain");
         assert_eq!(names, None, "a depth gain that is there stays");
+    }
+
+    /// The later name the wrong earlier name led to is exchanged too: with a depth gain in
+    /// place of the hidden depth offset, a later round that took a water current (the thrust
+    /// gain its rival) still ends at the depth offset and the thrust gain, which fit the data
+    /// better together than the offset beside the current does.
+    #[test]
+    fn a_later_name_the_earlier_look_alike_led_to_gives_way_with_it() {
+        let offset = effects::by_name("depth_offset").unwrap();
+        let thrust = effects::by_name("thrust_gain").unwrap();
+        let current = effects::by_name("water_current").unwrap();
+        let (names, guards) = exchanged_after(offset, 0.2, &[thrust, current], "water_current");
+        assert_eq!(
+            names,
+            Some(vec!["depth_offset".to_string(), "thrust_gain".to_string()]),
+            "guards of the first round {guards:?}"
+        );
     }
 }
