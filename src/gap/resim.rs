@@ -42,7 +42,7 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
 }
 
 /// How far (m; deg) the data must put a run's start from its stated `[initial]` before the
-/// estimate replaces it.
+/// estimate replaces it: the horizontal distance, the depth and the heading each.
 pub const START_GATE_M: f64 = 0.1;
 pub const START_GATE_DEG: f64 = 5.0;
 
@@ -53,7 +53,8 @@ pub const START_GATE_DEG: f64 = 5.0;
 /// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
 /// from the measurement through the candidate's sensor models, each read as the median of the
 /// channel's first samples, [`anchor::Read::StartMedian`]) wherever the data put it more
-/// than [`START_GATE_M`] or [`START_GATE_DEG`] from the experiment's `[initial]`, which
+/// than [`START_GATE_M`] (horizontally, or in depth) or [`START_GATE_DEG`] from the
+/// experiment's `[initial]`, which
 /// stays the prior for what the data do not say; a depth sensor on its surface clamp at the
 /// start says the vehicle floats, so the start is the model's floating depth. Open loop
 /// (`segment_s = None`, for generated data) starts where the experiment says.
@@ -137,8 +138,13 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                     }
                 }
             };
-            keep(&mut a.north_m, here.position_m.x, START_GATE_M, false);
-            keep(&mut a.east_m, here.position_m.y, START_GATE_M, false);
+            // North and east are one reading of the camera: the gate is on the distance.
+            let off = |v: Option<f64>, prior: f64| v.map_or(0.0, |x| x - prior);
+            let horizontal =
+                off(a.north_m, here.position_m.x).hypot(off(a.east_m, here.position_m.y));
+            if horizontal <= START_GATE_M {
+                (a.north_m, a.east_m) = (None, None);
+            }
             keep(&mut a.depth_m, here.position_m.z, START_GATE_M, false);
             keep(&mut a.heading_rad, yaw, START_GATE_DEG, true);
         }
@@ -712,5 +718,21 @@ pub(crate) mod tests {
         c.shooting = Shooting::OPEN_LOOP;
         let open = super::simulate(&c, &wrong, None).unwrap();
         assert!((open.states[0].position_m - a.position_m).norm() > 0.3);
+    }
+
+    /// The start gate is on the horizontal distance: a stated start off by 0.075 m north and
+    /// 0.075 m east (0.106 m, each axis inside the 0.1 m gate) is read from the data.
+    #[test]
+    fn a_start_off_diagonally_beyond_the_gate_is_read_from_the_data() {
+        let (_, mut c, m) = manoeuvre(6);
+        c.shooting = Shooting::DEFAULT;
+        let truth = super::simulate(&c, &m, None).unwrap();
+        let mut wrong = m.clone();
+        wrong.experiment.initial.x_m += 0.075;
+        wrong.experiment.initial.y_m += 0.075;
+        let moved = super::simulate(&c, &wrong, None).unwrap();
+        let (a, b) = (&truth.states[0].position_m, &moved.states[0].position_m);
+        let horizontal = (a.x - b.x).hypot(a.y - b.y);
+        assert!(horizontal < 0.05, "{a:?} vs {b:?}: {horizontal:.3} m apart");
     }
 }
