@@ -147,6 +147,13 @@ pub enum Read {
     StartMedian,
 }
 
+/// A run's start heading is read from every compass sample while the vehicle still rests
+/// (no motor commanded), up to this long from the first sample, when there are at least
+/// [`REST_MIN_SAMPLES`] of them ([`rest_median`]).
+pub const REST_MAX_S: f64 = 5.0;
+/// ... and at least this many samples there.
+pub const REST_MIN_SAMPLES: usize = 5;
+
 /// A run's start is read from the median of this many samples per channel ...
 pub const START_SAMPLES: usize = 3;
 /// ... taken within this long of the first of them.
@@ -180,6 +187,41 @@ fn first_median(ch: &Channel, t_s: f64, wrap: bool) -> Option<(f64, f64)> {
     if first.len() < START_SAMPLES {
         return first.last().copied();
     }
+    medoid(&first, wrap)
+}
+
+/// The time from `t_s` on until which no motor is commanded: `t_s` itself when one is.
+pub fn rest_until(m: &Measurement, t_s: f64) -> f64 {
+    if m.commands_in_order().at(t_s).iter().any(|p| *p != 0.0) {
+        return t_s;
+    }
+    m.commands
+        .iter()
+        .find(|row| row.t_s > t_s && row.percent.iter().any(|p| *p != 0.0))
+        .map_or(f64::INFINITY, |row| row.t_s)
+}
+
+/// The median of `ch`'s samples from the first one at or after `t_s` until `until` (at most
+/// [`REST_MAX_S`] after that first sample), with `wrap` of angles in degrees; `None` with fewer
+/// than [`REST_MIN_SAMPLES`] there. At rest every sample says the same, and a dozen of them
+/// read the start better than the first three, of which the first is the one most often wrong.
+fn rest_median(ch: &Channel, t_s: f64, until: f64, wrap: bool) -> Option<(f64, f64)> {
+    let i = ch.samples.partition_point(|(t, _)| *t < t_s);
+    let opens = ch.samples.get(i)?.0;
+    let closes = until.min(opens + REST_MAX_S);
+    let rest: Vec<(f64, f64)> = ch.samples[i..]
+        .iter()
+        .take_while(|(t, _)| *t < closes)
+        .copied()
+        .collect();
+    if rest.len() < REST_MIN_SAMPLES {
+        return None;
+    }
+    medoid(&rest, wrap)
+}
+
+/// The sample with the least summed distance to the others (wrapped, in degrees, with `wrap`).
+fn medoid(samples: &[(f64, f64)], wrap: bool) -> Option<(f64, f64)> {
     let distance = |a: f64, b: f64| {
         if wrap {
             wrap_deg(a - b).abs()
@@ -187,10 +229,10 @@ fn first_median(ch: &Channel, t_s: f64, wrap: bool) -> Option<(f64, f64)> {
             (a - b).abs()
         }
     };
-    first
+    samples
         .iter()
         .map(|&(t, v)| {
-            let spread: f64 = first.iter().map(|&(_, w)| distance(v, w)).sum();
+            let spread: f64 = samples.iter().map(|&(_, w)| distance(v, w)).sum();
             (spread, (t, v))
         })
         .min_by(|a, b| a.0.total_cmp(&b.0))
@@ -222,7 +264,10 @@ pub fn estimate(
     if let Some(ch) = m.channel("compass_deg") {
         // The reading of a conversion finished at `tc` describes the heading at `tc - latency`.
         let latency = c.sensors.compass.errors.latency_s;
-        if let Some((tc, reading)) = read.pick(ch, t_s, 0.5, true) {
+        let at_rest = (read == Read::StartMedian)
+            .then(|| rest_median(ch, t_s, rest_until(m, t_s), true))
+            .flatten();
+        if let Some((tc, reading)) = at_rest.or_else(|| read.pick(ch, t_s, 0.5, true)) {
             let yaw = invert_compass(c, earth_ned_ut, state, reading);
             let rate = state.angular_velocity_body_radps.z;
             anchor.heading_rad = Some(yaw + rate * (t_s - (tc - latency)));
@@ -388,6 +433,30 @@ mod tests {
         assert_eq!(
             Read::StartMedian.pick(&ch("x_m", &[]), 0.0, 0.25, false),
             None
+        );
+    }
+
+    /// While the vehicle rests, the start heading is the median of every compass sample up to
+    /// the first motor command (at most 5 s): a compass that reads 348, 346 and 346 deg in its
+    /// first 1.2 s and 345 after starts at 345, not at the first three's 346. With fewer than
+    /// five samples at rest the first three are read as before.
+    #[test]
+    fn a_start_at_rest_is_read_from_every_sample_before_the_motors_run() {
+        let mut readings = vec![(0.4, 348.0), (0.8, 346.0), (1.2, 346.0)];
+        readings.extend((4..=12).map(|k| (0.4 * f64::from(k), 345.0)));
+        let compass = Channel {
+            name: "compass_deg".to_string(),
+            samples: readings,
+        };
+        assert_eq!(
+            rest_median(&compass, 0.0, 5.0, true).map(|s| s.1),
+            Some(345.0)
+        );
+        assert_eq!(first_median(&compass, 0.0, true).map(|s| s.1), Some(346.0));
+        assert_eq!(
+            rest_median(&compass, 0.0, 1.5, true),
+            None,
+            "three samples at rest"
         );
     }
 }

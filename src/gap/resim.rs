@@ -44,7 +44,10 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
 /// How far (m; deg) the data must put a run's start from its stated `[initial]` before the
 /// estimate replaces it: the horizontal distance, the depth and the heading each.
 pub const START_GATE_M: f64 = 0.1;
-pub const START_GATE_DEG: f64 = 5.0;
+pub const START_GATE_DEG: f64 = 3.0;
+/// The heading read from the data takes over from the stated one gradually, from this far
+/// off (deg) to [`START_GATE_DEG`]: a compass sample's noise is about 1 deg.
+pub const START_RAMP_DEG: f64 = 1.0;
 
 /// Runs the model from the measurement's initial state under its commands. `noise_seed`
 /// `None` switches the thrust fluctuation off (the mean prediction).
@@ -52,10 +55,11 @@ pub const START_GATE_DEG: f64 = 5.0;
 /// **The initial state is estimated, not trusted.** With re-anchored segments the start is
 /// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
 /// from the measurement through the candidate's sensor models, each read as the median of the
-/// channel's first samples, [`anchor::Read::StartMedian`]) wherever the data put it more
-/// than [`START_GATE_M`] (horizontally, or in depth) or [`START_GATE_DEG`] from the
-/// experiment's `[initial]`, which
-/// stays the prior for what the data do not say; a depth sensor on its surface clamp at the
+/// channel's first samples, [`anchor::Read::StartMedian`], the heading of every compass sample
+/// while no motor runs) wherever the data put it more than [`START_GATE_M`] (horizontally, or
+/// in depth) from the experiment's `[initial]`, and the heading on a ramp from
+/// [`START_RAMP_DEG`] to [`START_GATE_DEG`] off; `[initial]` stays the prior for what the data
+/// do not say. A depth sensor on its surface clamp at the
 /// start says the vehicle floats, so the start is the model's floating depth. Open loop
 /// (`segment_s = None`, for generated data) starts where the experiment says.
 ///
@@ -126,18 +130,6 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
             // beats one read from a single noisy sample); where they put it further off than
             // START_GATE, the data win.
             let (_, _, yaw) = here.euler_rad();
-            let keep = |v: &mut Option<f64>, prior: f64, gate: f64, wrap: bool| {
-                if let Some(x) = *v {
-                    let d = if wrap {
-                        wrap_deg((x - prior).to_degrees())
-                    } else {
-                        x - prior
-                    };
-                    if d.abs() <= gate {
-                        *v = None;
-                    }
-                }
-            };
             // North and east are one reading of the camera: the gate is on the distance.
             let off = |v: Option<f64>, prior: f64| v.map_or(0.0, |x| x - prior);
             let horizontal =
@@ -145,8 +137,20 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
             if horizontal <= START_GATE_M {
                 (a.north_m, a.east_m) = (None, None);
             }
-            keep(&mut a.depth_m, here.position_m.z, START_GATE_M, false);
-            keep(&mut a.heading_rad, yaw, START_GATE_DEG, true);
+            if a.depth_m
+                .is_some_and(|z| (z - here.position_m.z).abs() <= START_GATE_M)
+            {
+                a.depth_m = None;
+            }
+            // The heading moves from the stated one to the data's over a ramp, not at a
+            // gate: a compass candidate's fit moves the data's heading, and a jump at a gate
+            // would break its objective.
+            if let Some(x) = a.heading_rad {
+                let d = wrap_deg((x - yaw).to_degrees());
+                let w = ((d.abs() - START_RAMP_DEG) / (START_GATE_DEG - START_RAMP_DEG))
+                    .clamp(0.0, 1.0);
+                a.heading_rad = (w > 0.0).then(|| yaw + w * d.to_radians());
+            }
         }
         if let Some((noise, rng)) = anchor_draw.as_mut() {
             noise.perturb(&mut a, &mut || rng.sample(StandardNormal));
@@ -734,5 +738,31 @@ pub(crate) mod tests {
         let (a, b) = (&truth.states[0].position_m, &moved.states[0].position_m);
         let horizontal = (a.x - b.x).hypot(a.y - b.y);
         assert!(horizontal < 0.05, "{a:?} vs {b:?}: {horizontal:.3} m apart");
+    }
+
+    /// The heading moves from the stated one to the data's over a ramp: a stated heading 3.5
+    /// deg off (inside a 5 deg gate) gives the data's start; 0.5 deg off keeps the stated one.
+    #[test]
+    fn a_start_heading_a_few_degrees_off_is_read_from_the_data() {
+        let (_, mut c, m) = manoeuvre(6);
+        c.shooting = Shooting::DEFAULT;
+        let truth = super::simulate(&c, &m, None).unwrap();
+        let start_deg = |off: f64| {
+            let mut wrong = m.clone();
+            wrong.experiment.initial.heading_deg += off;
+            let run = super::simulate(&c, &wrong, None).unwrap();
+            run.states[0].euler_rad().2.to_degrees()
+        };
+        let true_deg = truth.states[0].euler_rad().2.to_degrees();
+        let far = super::wrap_deg(start_deg(3.5) - true_deg);
+        assert!(
+            far.abs() < 1.0,
+            "3.5 deg off starts {far:.2} deg from the truth"
+        );
+        let near = super::wrap_deg(start_deg(0.5) - true_deg);
+        assert!(
+            (near - 0.5).abs() < 1e-9,
+            "0.5 deg off starts {near:.3} deg from the truth"
+        );
     }
 }
