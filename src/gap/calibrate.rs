@@ -49,7 +49,7 @@ use crate::gap::effects::{self, Calibration as Fitted, Configs, Effect};
 use crate::gap::fit::{self, Setup, Split};
 use crate::gap::format::Measurement;
 use crate::gap::lsq::{self, Bounds};
-use crate::gap::model::{EnabledEffect, GapModel};
+use crate::gap::model::{EnabledEffect, GapModel, RunScatter};
 use crate::gap::resim::{self, Floor};
 
 /// Width of the prior on each parameter, in units of its typical size.
@@ -303,35 +303,23 @@ fn discrepancy(per_run: &BTreeMap<String, Vec<f64>>) -> Vec<(String, f64)> {
         .collect()
 }
 
-/// Family-wise level of the run bounds: a run with nothing new exceeds one of its channels'
-/// bounds with at most this probability.
-pub const RUN_BOUND_LEVEL: f64 = 0.05;
+/// Per channel measured on two or more runs with nothing new, how the runs scatter
+/// ([`RunScatter::of`]).
+fn run_scatter(per_run: &BTreeMap<String, Vec<f64>>) -> BTreeMap<String, RunScatter> {
+    per_run
+        .iter()
+        .filter_map(|(channel, v)| Some((channel.clone(), RunScatter::of(v)?)))
+        .collect()
+}
 
 /// Per channel measured on two or more runs with nothing new, the chi-square per sample one
-/// more such run stays under: the upper prediction bound of a log-normal sample,
-/// `exp(m + t * s * sqrt(1 + 1/k))` with `m` and `s` the mean and standard deviation of the
-/// `k` runs' log chi-squares and `t` Student's t quantile with `k - 1` degrees of freedom at
-/// `1 - RUN_BOUND_LEVEL / channels` (Bonferroni over the channels, since a run disagrees when
-/// any of them does). A model's error is not the same on every run: the same programme from
-/// another start, or with other noise, meets it otherwise, and runs of the calibrated Mako
-/// with nothing new scatter by a factor of two and more in one channel.
+/// more such run stays under with every such channel judged together
+/// ([`RunScatter::bound`]; a run disagrees when any of them does).
 fn run_bounds(per_run: &BTreeMap<String, Vec<f64>>) -> Vec<(String, f64)> {
-    use statrs::distribution::{ContinuousCDF, StudentsT};
-    use statrs::statistics::Statistics;
-    let measured: Vec<(&String, Vec<f64>)> = per_run
+    let scatter = run_scatter(per_run);
+    scatter
         .iter()
-        .filter(|(_, v)| v.len() >= 2 && v.iter().all(|c| c.is_finite() && *c > 0.0))
-        .map(|(c, v)| (c, v.iter().map(|x| x.ln()).collect()))
-        .collect();
-    let q = 1.0 - RUN_BOUND_LEVEL / measured.len().max(1) as f64;
-    measured
-        .into_iter()
-        .filter_map(|(channel, logs)| {
-            let k = logs.len() as f64;
-            let (m, s) = (logs.iter().mean(), logs.iter().std_dev());
-            let t = StudentsT::new(0.0, 1.0, k - 1.0).ok()?.inverse_cdf(q);
-            Some((channel.clone(), (m + t * s * (1.0 + 1.0 / k).sqrt()).exp()))
-        })
+        .filter_map(|(channel, s)| Some((channel.clone(), s.bound(scatter.len())?)))
         .collect()
 }
 
@@ -705,6 +693,7 @@ pub fn calibrate(
     let bounds = run_bounds(&unfitted);
     calibrated.discrepancy = discrepancy.iter().cloned().collect();
     calibrated.discrepancy_bound = bounds.iter().cloned().collect();
+    calibrated.discrepancy_scatter = run_scatter(&unfitted);
     Ok(Calibration {
         parameters: out.parameters,
         runs,

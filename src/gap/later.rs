@@ -11,7 +11,7 @@ use super::effects::{self, Configs, Kind};
 use super::fit;
 use super::format::Measurement;
 use super::model::GapModel;
-use super::residuals::ChannelStats;
+use super::residuals::{self, ChannelStats, Known};
 use super::{GapError, resim, stats_for};
 
 /// An effect named after others that explains less than this share of the excess of the
@@ -89,19 +89,25 @@ fn level_mean(levels: &[f64]) -> f64 {
 
 /// Why an effect named after others finds no disagreement of its own left: with the
 /// earlier names in the model (`earlier`), none of the channels it moves (its signature
-/// channels and `also_moves`) is significantly off by the report's test (the chi-square over
-/// its known level beyond the noise, and over the run bound a run with nothing new reaches).
-/// `None` when one is.
+/// channels and `also_moves`) is significantly off: its chi-square over its known level beyond
+/// the noise, and over the bound a run with nothing new stays under in those channels judged
+/// together ([`GapModel::run_bound_among`]). `None` when one is.
 ///
 /// Asked of a later name that explains less than [`LATER_NAME_MIN_SHARE`] of what the earlier
 /// ones left. Where they leave every channel it moves within what the calibration's runs show,
 /// what such a name fits is that known disagreement: on a vehicle of another structure, the
 /// mean surge acceleration a chattering depth hold makes once a depth EMI is named (an
 /// `accel_x_offset` taking 10 % of what the EMI left, its channel at 2.95 against a known
-/// 2.66 and a run bound of 4.85). A name that explains most of what is left is not asked:
-/// spread over several channels, a real effect can leave each within its run bound (a
-/// compass latency after a depth offset, 94 % of what the offset left, with track and
-/// heading each under their bounds).
+/// 2.66). A name that explains most of what is left is not asked: spread over several
+/// channels, a real effect can leave each within its run bound (a compass latency after a
+/// depth offset, 94 % of what the offset left, with track and heading each under their
+/// bounds).
+///
+/// The question is about the channels the name moves, not about the whole run, so the run
+/// bound is the one for those channels together: the report's bound covers every channel at
+/// once, and with three runs with nothing new it lies several times over the known level (a
+/// paddle-wheel channel at 6.08 against a known 1.65 and a report bound of 6.50, a velocity
+/// scale's own channel left off by a thrust gain named before it).
 pub(crate) fn nothing_off_that_it_moves(
     model: &GapModel,
     m: &Measurement,
@@ -118,13 +124,21 @@ pub(crate) fn nothing_off_that_it_moves(
                 || effect.also_moves.contains(&s.channel.as_str())
         })
         .collect();
-    if moved.is_empty() || moved.iter().any(|s| s.significant) {
+    let bound = |s: &ChannelStats| model.run_bound_among(&s.channel, moved.len());
+    let off = |s: &&ChannelStats| {
+        let known = Known {
+            level: s.known_chi2_per_sample,
+            run_bound: bound(s),
+        };
+        residuals::disagrees(s.chi2_per_sample, s.samples, s.tau_samples, known)
+    };
+    if moved.is_empty() || moved.iter().any(off) {
         return Ok(None);
     }
     let figures = moved
         .iter()
         .map(|s| {
-            let bound = s.run_bound.map_or_else(
+            let bound = bound(s).map_or_else(
                 || "no run bound".to_string(),
                 |b| format!("run bound {b:.2}"),
             );
@@ -407,6 +421,56 @@ mod tests {
                 .is_some(),
             "a depth offset finds its channel off, which the imbalance leaves alone"
         );
+    }
+
+    /// A later name's channels are judged against the bound a run with nothing new stays
+    /// under in those channels together, not against the report's bound for every channel at
+    /// once: on a run with a hidden thruster imbalance, against the model without it, each
+    /// channel the imbalance moves is set a report bound of twice its chi-square and a scatter
+    /// whose bound for the moved channels together is half of it (the track and heading are
+    /// far off, the surge acceleration is not). The imbalance finds its
+    /// channels off; with the scatter left out (a model written before it was kept), the
+    /// report's bound is all there is and it finds nothing off.
+    #[test]
+    fn a_later_name_is_judged_against_the_bound_for_its_own_channels() {
+        let imbalance = effects::by_name("thruster_imbalance").unwrap();
+        let (mut model, base, m) = resim::tests::manoeuvre_of(5, |c: &mut Configs| {
+            effects::apply(imbalance, &[0.15], c);
+        });
+        let clean = resim::simulate(&base, &m, None).unwrap();
+        let floors = resim::noise_floor(&base, &m, &clean).unwrap();
+        let stats = stats_for(&model, &m, &base, &clean, &floors);
+        let moved: Vec<&ChannelStats> = stats
+            .iter()
+            .filter(|s| {
+                imbalance.channels.contains(&s.channel.as_str())
+                    || imbalance.also_moves.contains(&s.channel.as_str())
+            })
+            .collect();
+        assert!(moved.iter().any(|s| s.chi2_per_sample > 4.0), "{moved:?}");
+        for s in &moved {
+            let unit = crate::gap::model::RunScatter {
+                log_mean: 0.0,
+                log_sd: 0.1,
+                runs: 3,
+            };
+            let to_half = unit.bound(moved.len()).unwrap().ln();
+            let scatter = crate::gap::model::RunScatter {
+                log_mean: (s.chi2_per_sample / 2.0).ln() - to_half,
+                ..unit
+            };
+            model
+                .discrepancy_bound
+                .insert(s.channel.clone(), 2.0 * s.chi2_per_sample);
+            model.discrepancy_scatter.insert(s.channel.clone(), scatter);
+        }
+        let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors).unwrap();
+        assert_eq!(off, None, "the moved channels lie over their own bound");
+        model.discrepancy_scatter.clear();
+        let why = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors)
+            .unwrap()
+            .expect("under the report's bound, nothing is off");
+        assert!(why.contains("run bound"), "{why}");
     }
 
     /// The names after an exchange on a run with `hidden` at `value` and a thrust gain of

@@ -46,6 +46,56 @@ struct RawModel {
     discrepancy: BTreeMap<String, f64>,
     #[serde(default)]
     discrepancy_bound: BTreeMap<String, f64>,
+    #[serde(default)]
+    discrepancy_scatter: BTreeMap<String, RunScatter>,
+}
+
+/// Family-wise level of the run bounds: a run with nothing new exceeds one of the bounds of
+/// the channels judged together with at most this probability.
+pub const RUN_BOUND_LEVEL: f64 = 0.05;
+
+/// How one channel's chi-square per sample scatters over the calibration's runs with nothing
+/// new: the mean and standard deviation of the runs' logarithms (a log-normal sample) and how
+/// many runs there were. A model's error is not the same on every run: the same programme
+/// from another start, or with other noise, meets it otherwise, and runs of the calibrated
+/// Mako with nothing new scatter by a factor of two and more in one channel.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunScatter {
+    pub log_mean: f64,
+    pub log_sd: f64,
+    pub runs: u32,
+}
+
+impl RunScatter {
+    /// The scatter of `values` (chi-squares per sample, one per run); `None` with fewer than
+    /// two, or with one not a positive number.
+    pub fn of(values: &[f64]) -> Option<Self> {
+        use statrs::statistics::Statistics;
+        if values.len() < 2 || !values.iter().all(|c| c.is_finite() && *c > 0.0) {
+            return None;
+        }
+        let logs: Vec<f64> = values.iter().map(|x| x.ln()).collect();
+        Some(Self {
+            log_mean: logs.iter().mean(),
+            log_sd: logs.iter().std_dev(),
+            runs: u32::try_from(values.len()).ok()?,
+        })
+    }
+
+    /// The chi-square per sample one more run with nothing new stays under in this channel
+    /// when `channels` channels are judged together: the upper prediction bound of a
+    /// log-normal sample, `exp(m + t * s * sqrt(1 + 1/k))` with `m` and `s` the mean and
+    /// standard deviation of the `k` runs' log chi-squares and `t` Student's t quantile with
+    /// `k - 1` degrees of freedom at `1 - RUN_BOUND_LEVEL / channels` (Bonferroni: the run
+    /// disagrees when any of the channels does).
+    pub fn bound(&self, channels: usize) -> Option<f64> {
+        use statrs::distribution::{ContinuousCDF, StudentsT};
+        let k = f64::from(self.runs);
+        let q = 1.0 - RUN_BOUND_LEVEL / channels.max(1) as f64;
+        let t = StudentsT::new(0.0, 1.0, k - 1.0).ok()?.inverse_cdf(q);
+        Some((self.log_mean + t * self.log_sd * (1.0 + 1.0 / k).sqrt()).exp())
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -99,6 +149,10 @@ pub struct GapModel {
     /// from run to run, written by `gap calibrate` from two or more such runs). A run's
     /// channel disagrees only above it: the model's error is not the same on every run.
     pub discrepancy_bound: BTreeMap<String, f64>,
+    /// Per channel, how the calibration's runs with nothing new scatter (written by `gap
+    /// calibrate` beside the bounds): a question about fewer channels than the report judges
+    /// together takes its bound from here ([`Self::run_bound_among`]).
+    pub discrepancy_scatter: BTreeMap<String, RunScatter>,
 }
 
 /// Reads `name` relative to `base` if such a file exists, else from the embedded configs
@@ -139,7 +193,16 @@ impl GapModel {
             .discrepancy_bound
             .iter()
             .map(|e| ("discrepancy_bound", e));
-        for (table, (channel, v)) in levels.chain(bounds) {
+        let scatter_names = raw
+            .discrepancy_scatter
+            .keys()
+            .map(|c| ("discrepancy_scatter", c));
+        for (table, channel) in levels
+            .clone()
+            .chain(bounds.clone())
+            .map(|(t, (c, _))| (t, c))
+            .chain(scatter_names)
+        {
             if !crate::gap::resim::MODELLED.contains(&channel.as_str())
                 && crate::gap::sonar::index(channel).is_none()
             {
@@ -153,6 +216,23 @@ impl GapModel {
                     )
                     .into());
             }
+        }
+        for (channel, sc) in &raw.discrepancy_scatter {
+            if !sc.log_mean.is_finite() || !sc.log_sd.is_finite() || sc.log_sd < 0.0 || sc.runs < 2
+            {
+                return Err(doc
+                    .invalid(
+                        &format!("discrepancy_scatter.{channel}"),
+                        format!(
+                            "expected a finite log_mean, a finite log_sd >= 0 and runs >= 2, got \
+                             log_mean = {}, log_sd = {}, runs = {}",
+                            sc.log_mean, sc.log_sd, sc.runs
+                        ),
+                    )
+                    .into());
+            }
+        }
+        for (table, (channel, v)) in levels.chain(bounds) {
             if !v.is_finite() || *v <= 0.0 {
                 return Err(doc
                     .invalid(
@@ -174,6 +254,7 @@ impl GapModel {
             spread_dof: raw.spread_dof,
             discrepancy: raw.discrepancy,
             discrepancy_bound: raw.discrepancy_bound,
+            discrepancy_scatter: raw.discrepancy_scatter,
         })
     }
 
@@ -209,6 +290,16 @@ impl GapModel {
             level: self.known_chi2(channel),
             run_bound: self.discrepancy_bound.get(channel).copied(),
         }
+    }
+
+    /// The bound a run with nothing new stays under in `channel` when `channels` channels are
+    /// judged together: from the runs' scatter where the calibration wrote it, else the bound
+    /// written for all channels together (no narrower for fewer).
+    pub fn run_bound_among(&self, channel: &str, channels: usize) -> Option<f64> {
+        self.discrepancy_scatter
+            .get(channel)
+            .and_then(|s| s.bound(channels))
+            .or_else(|| self.discrepancy_bound.get(channel).copied())
     }
 
     /// The base configurations (no effects), with the experiment's world and sensors unless
@@ -331,6 +422,22 @@ impl GapModel {
             );
             for (channel, v) in &self.discrepancy_bound {
                 let _ = writeln!(s, "{channel} = {}", exact(*v));
+            }
+        }
+        if !self.discrepancy_scatter.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n[discrepancy_scatter]   # log chi-square per sample over those runs: mean, \
+                 standard deviation, runs"
+            );
+            for (channel, v) in &self.discrepancy_scatter {
+                let _ = writeln!(
+                    s,
+                    "{channel} = {{ log_mean = {}, log_sd = {}, runs = {} }}",
+                    exact(v.log_mean),
+                    exact(v.log_sd),
+                    v.runs
+                );
             }
         }
         s
@@ -499,6 +606,50 @@ mod tests {
             e.to_string().contains("discrepancy_bound.y_m") && e.to_string().contains("> 0"),
             "{e}"
         );
+    }
+
+    /// How the runs with nothing new scatter is read per channel and written back bit for
+    /// bit; its bound is the log-normal prediction bound at 1 - 0.05 / channels judged
+    /// together (three runs: t(0.975; 2) = 4.303 for two channels, from tables), narrower
+    /// for fewer channels; without a scatter a channel's bound is the one written for all
+    /// channels together; a scatter of one run or a negative spread is refused, with the key
+    /// named.
+    #[test]
+    fn the_run_scatter_round_trips_and_bounds_the_channels_judged_together() {
+        let m = model(
+            "[discrepancy_bound]\nx_m = 9.0\ny_m = 7.5\n\
+             [discrepancy_scatter]\nx_m = { log_mean = 0.5, log_sd = 0.2, runs = 3 }\n",
+        )
+        .expect("loads");
+        let want = (0.5 + 4.303 * 0.2 * (4.0_f64 / 3.0).sqrt()).exp();
+        let two = m.run_bound_among("x_m", 2).unwrap();
+        assert!((two - want).abs() < 1e-3 * want, "{two} against {want}");
+        assert!(m.run_bound_among("x_m", 1).unwrap() < two);
+        assert!(m.run_bound_among("x_m", 8).unwrap() > two);
+        assert_eq!(m.run_bound_among("y_m", 1), Some(7.5));
+        assert_eq!(m.run_bound_among("depth_adc", 1), None);
+        let again = GapModel::from_text(
+            "again.toml",
+            &m.to_toml("test", Path::new(".")),
+            PathBuf::new(),
+        )
+        .expect("written model loads");
+        assert_eq!(again.discrepancy_scatter, m.discrepancy_scatter);
+
+        let e = model("[discrepancy_scatter]\nx_m = { log_mean = 0.5, log_sd = 0.2, runs = 1 }\n")
+            .expect_err("one run");
+        assert!(
+            e.to_string().contains("discrepancy_scatter.x_m")
+                && e.to_string().contains("runs >= 2"),
+            "{e}"
+        );
+        let e = model("[discrepancy_scatter]\nx_m = { log_mean = 0.5, log_sd = -0.2, runs = 3 }\n")
+            .expect_err("negative spread");
+        assert!(e.to_string().contains("discrepancy_scatter.x_m"), "{e}");
+        let e =
+            model("[discrepancy_scatter]\nspeed = { log_mean = 0.5, log_sd = 0.2, runs = 3 }\n")
+                .expect_err("unknown channel");
+        assert!(e.to_string().contains("discrepancy_scatter.speed"), "{e}");
     }
 
     /// Every number the analysis reads back from a written model (calibrated and effect
