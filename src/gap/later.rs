@@ -117,13 +117,7 @@ pub(crate) fn nothing_off_that_it_moves(
 ) -> Result<Option<String>, GapError> {
     let run = resim::simulate(earlier, m, None)?;
     let stats = stats_for(model, m, earlier, &run, floors);
-    let moved: Vec<&ChannelStats> = stats
-        .iter()
-        .filter(|s| {
-            effect.channels.contains(&s.channel.as_str())
-                || effect.also_moves.contains(&s.channel.as_str())
-        })
-        .collect();
+    let moved = moved_by(effect, &stats);
     let bound = |s: &ChannelStats| model.run_bound_among(&s.channel, moved.len());
     let off = |s: &&ChannelStats| {
         let known = Known {
@@ -153,6 +147,17 @@ pub(crate) fn nothing_off_that_it_moves(
         "no channel it moves is off by more than runs with nothing new are (chi-square per \
          sample: {figures}): what it would fit is disagreement the calibration's own runs show"
     )))
+}
+
+/// The statistics of the channels `effect` moves: its signature channels and `also_moves`.
+fn moved_by<'a>(effect: &effects::Effect, stats: &'a [ChannelStats]) -> Vec<&'a ChannelStats> {
+    stats
+        .iter()
+        .filter(|s| {
+            effect.channels.contains(&s.channel.as_str())
+                || effect.also_moves.contains(&s.channel.as_str())
+        })
+        .collect()
 }
 
 /// The named effects after an exchange ([`exchange_lookalikes`]): the candidates, with the
@@ -440,13 +445,7 @@ mod tests {
         let clean = resim::simulate(&base, &m, None).unwrap();
         let floors = resim::noise_floor(&base, &m, &clean).unwrap();
         let stats = stats_for(&model, &m, &base, &clean, &floors);
-        let moved: Vec<&ChannelStats> = stats
-            .iter()
-            .filter(|s| {
-                imbalance.channels.contains(&s.channel.as_str())
-                    || imbalance.also_moves.contains(&s.channel.as_str())
-            })
-            .collect();
+        let moved = moved_by(imbalance, &stats);
         assert!(moved.iter().any(|s| s.chi2_per_sample > 4.0), "{moved:?}");
         for s in &moved {
             let unit = crate::gap::model::RunScatter {
