@@ -194,6 +194,23 @@ impl Setup<'_> {
     /// selects (by index), wall contacts left out: the chi-square the noise floor alone puts
     /// there, the residuals being normalised by the floor and its correlation time.
     pub fn independent_samples(&self, part: Option<bool>, keep: impl Fn(usize) -> bool) -> f64 {
+        self.weighted_samples(part, keep, |_| 1.0)
+    }
+
+    /// The chi-square a run with nothing new puts on one part over the modelled channels
+    /// `keep` selects: [`Setup::independent_samples`] with each channel at its known level.
+    pub fn known_energy(&self, part: Option<bool>, keep: impl Fn(usize) -> bool) -> f64 {
+        self.weighted_samples(part, keep, |i| {
+            self.known.get(i).copied().unwrap_or(1.0).max(1.0)
+        })
+    }
+
+    fn weighted_samples(
+        &self,
+        part: Option<bool>,
+        keep: impl Fn(usize) -> bool,
+        weight: impl Fn(usize) -> f64,
+    ) -> f64 {
         self.modelled()
             .into_iter()
             .filter(|&i| keep(i))
@@ -205,7 +222,7 @@ impl Setup<'_> {
                     .filter(|t| part.is_none_or(|p| self.split.is_training(**t) == p))
                     .filter(|t| !self.clean.in_contact(**t))
                     .count();
-                Some(n as f64 / f.tau)
+                Some(weight(i) * n as f64 / f.tau)
             })
             .sum::<f64>()
     }
@@ -380,11 +397,14 @@ pub fn interval_excludes_zero(
 /// The signature test of a mean-type fit: correlation of the effect's change with the
 /// disagreement in the signature channels, and their share of the gain.
 ///
-/// The residual there is disagreement plus noise, and noise correlates with nothing: a true
-/// effect's correlation with the raw residual falls with the noise it carries, however well
-/// it explains the disagreement. The correlation is therefore taken against the residual's
-/// energy beyond the noise floor's ([`Setup::independent_samples`]), Spearman's correction for attenuation
-/// (1904): the observed correlation over the square root of the residual's reliability.
+/// The residual there is new disagreement plus noise plus the disagreement the calibration's
+/// own runs show (each channel's known level), and neither of the last two correlates with a
+/// new effect: a true effect's correlation with the raw residual falls with what they carry,
+/// however well it explains the new disagreement. The correlation is therefore taken against
+/// the residual's energy beyond what a run with nothing new puts there (the noise floor at
+/// each channel's known level, [`Setup::known_energy`]; the floor alone on an uncalibrated
+/// model), Spearman's correction for attenuation (1904): the observed correlation over the
+/// square root of the residual's reliability.
 /// The energy beyond the floor is never taken below what the effect explains, so the
 /// corrected correlation stays at most about 1.
 fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals) -> (bool, String) {
@@ -410,7 +430,7 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
         }
     }
     // Sonar channels' presence deviance is normalised otherwise: no floor share taken out.
-    let floor_share = setup.independent_samples(Some(true), |i| {
+    let floor_share = setup.known_energy(Some(true), |i| {
         in_sig(i) && crate::gap::sonar::index(&setup.m.channels[i].name).is_none()
     });
     let beyond_noise = (rr - floor_share).max(dd);
@@ -427,7 +447,7 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
     (
         corr >= SIGNATURE_MIN_CORRELATION && share >= SIGNATURE_MIN_SHARE,
         format!(
-            "{}: correlation with the disagreement beyond the noise floor in {} = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}), \
+            "{}: correlation with the disagreement beyond what runs with nothing new show in {} = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}), \
              share of the improvement there{} = {:.0} % (>= {:.0} %)",
             effect.signature,
             effect.channels.join("/"),

@@ -319,14 +319,15 @@ fn a_held_out_gain_bought_in_one_dense_channel_grows_the_held_out_gap() {
     assert!(!held_out_gap_grows(&known, &before, &traded));
 }
 
-/// The signature correlation is read against the disagreement beyond the noise floor. In the
-/// signature channels of a thruster imbalance, a smooth disagreement with 3 % of the noise
-/// floor's energy, under noise at exactly the floor (orthogonal to it): against the raw
-/// residual, an effect that explains the whole disagreement correlates only about 0.17 and
-/// would fail; against the disagreement it correlates fully and passes. An effect whose change
-/// is mostly elsewhere, explaining a tenth of that disagreement, still fails.
+/// The signature correlation is read against the disagreement beyond the noise floor and the
+/// channels' known levels. In the signature channels of a thruster imbalance, a smooth
+/// disagreement with 3 % of the noise floor's energy, under noise at exactly the floor
+/// (orthogonal to it): against the raw residual, an effect that explains the whole
+/// disagreement correlates only about 0.17 and would fail; against the disagreement it
+/// correlates fully and passes. An effect whose change is mostly elsewhere, explaining a tenth
+/// of that disagreement, still fails.
 #[test]
-fn signature_correlation_is_read_beyond_the_noise_floor() {
+fn signature_correlation_is_read_beyond_the_noise_floor_and_the_known_levels() {
     use rand::{RngExt, SeedableRng};
     let (_, c, m) = crate::gap::resim::tests::manoeuvre(7);
     let clean = resim::simulate(&c, &m, None).unwrap();
@@ -344,6 +345,7 @@ fn signature_correlation_is_read_beyond_the_noise_floor() {
     let pattern: Vec<f64> = sig.iter().map(|k| (base.times[*k] / 5.0).sin()).collect();
     let mut noise: Vec<f64> = sig.iter().map(&mut gauss).collect();
     let other: Vec<f64> = sig.iter().map(&mut gauss).collect();
+    let mut known_part: Vec<f64> = sig.iter().map(&mut gauss).collect();
     let training: Vec<bool> = sig.iter().map(|k| base.training[*k]).collect();
     let train_dot = |a: &[f64], b: &[f64]| -> f64 {
         a.iter()
@@ -395,6 +397,31 @@ fn signature_correlation_is_read_beyond_the_noise_floor() {
         (s.independent_samples(Some(true), in_sig) - floor_energy).abs() < 1e-9 * floor_energy,
         "the floor's share counts the signature channels' training samples"
     );
+    // The disagreement the calibration's own runs show is no more the effect's than the noise
+    // is: beside the pattern and the noise, a known part with twice the floor's energy
+    // (orthogonal to both). Read against the floor alone, the effect that explains the pattern
+    // fails; with the signature channels' known level at 3, it correlates fully.
+    for basis in [&pattern, &noise] {
+        let k = train_dot(&known_part, basis) / train_dot(basis, basis);
+        known_part
+            .iter_mut()
+            .zip(basis.iter())
+            .for_each(|(x, b)| *x -= k * b);
+    }
+    let q = (2.0 * floor_energy / train_dot(&known_part, &known_part)).sqrt();
+    known_part.iter_mut().for_each(|x| *x *= q);
+    let r0 = with(&|j| amp * pattern[j] + noise[j] + known_part[j]);
+    let explained = with(&|j| noise[j] + known_part[j]);
+    let (pass, text) = signature(&s, effect, &r0, &explained);
+    assert!(!pass, "{text}");
+    let mut s = s;
+    for (i, ch) in m.channels.iter().enumerate() {
+        if effect.channels.contains(&ch.name.as_str()) {
+            s.known[i] = 3.0;
+        }
+    }
+    let (pass, text) = signature(&s, effect, &r0, &explained);
+    assert!(pass && text.contains("= 1.00"), "{text}");
 }
 
 /// A trial point that drives the model into a wall in a held-out block makes its readings jump
