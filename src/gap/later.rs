@@ -83,6 +83,70 @@ pub(crate) fn too_small_a_share(without: &[f64], with: &[f64]) -> Option<String>
     })
 }
 
+/// The entries of `levels` (named in order by `channels`) of the channels `effect` moves: its
+/// signature channels and `also_moves`.
+fn where_it_acts(effect: &effects::Effect, channels: &[&str], levels: &[f64]) -> Vec<f64> {
+    channels
+        .iter()
+        .zip(levels)
+        .filter(|(c, _)| effect.channels.contains(c) || effect.also_moves.contains(c))
+        .map(|(_, x)| *x)
+        .collect()
+}
+
+/// [`too_small_a_share`] read in the channels `effect` moves alone (`channels` naming the
+/// entries of `without` and `with` in order): a later name must also take a real share of what
+/// is left where it acts. Read over every channel, an excess it does not touch hides that it
+/// takes only what the calibration's own runs show where it does: an `accel_y_offset` after a
+/// thruster imbalance, its own channel at 0.953 of its known level, or an imbalance after a
+/// water current that takes 10 % of the whole run's excess and 9.8 % of its own channels'
+/// (heading made worse for track). `None` when it takes enough, or moves no channel measured.
+pub(crate) fn too_small_where_it_acts(
+    effect: &effects::Effect,
+    channels: &[&str],
+    without: &[f64],
+    with: &[f64],
+) -> Option<String> {
+    let (before, after) = (
+        where_it_acts(effect, channels, without),
+        where_it_acts(effect, channels, with),
+    );
+    if before.is_empty() {
+        return None;
+    }
+    let moved: Vec<&str> = channels
+        .iter()
+        .copied()
+        .filter(|c| effect.channels.contains(c) || effect.also_moves.contains(c))
+        .collect();
+    too_small_a_share(&before, &after)
+        .map(|why| format!("in the channels it moves ({}), {why}", moved.join(", ")))
+}
+
+/// The share an effect explains of the excess over the known levels left in the channels it
+/// moves (its signature channels and `also_moves`): those channels' mean chi-square over their
+/// known levels `without` it and `with` it, `channels` naming the entries in order. 0 where
+/// nothing is left there.
+///
+/// A winner in place of one refused in its round is held to this share: the refusal says the
+/// round's disagreement is where the model's form is loose, and a stand-in for that form takes
+/// a small part of the disagreement where it acts. An effect that acts elsewhere (a paddle-wheel
+/// scale beside a depth channel a thruster lag's form left off) is judged on its own channels.
+pub(crate) fn share_where_it_acts(
+    effect: &effects::Effect,
+    channels: &[&str],
+    without: &[f64],
+    with: &[f64],
+) -> f64 {
+    let before = level_mean(&where_it_acts(effect, channels, without));
+    let after = level_mean(&where_it_acts(effect, channels, with));
+    if before > 1.0 {
+        (before - after) / (before - 1.0)
+    } else {
+        0.0
+    }
+}
+
 fn level_mean(levels: &[f64]) -> f64 {
     levels.iter().sum::<f64>() / levels.len().max(1) as f64
 }
@@ -396,6 +460,82 @@ mod tests {
         // The same drop spread over channels already within their levels is refused.
         let spread = too_small_a_share(&[1.2, 1.1], &[0.7, 0.8]).expect("below the levels");
         assert!(spread.contains("0.250 of that below"), "{spread}");
+    }
+
+    /// A winner in place of a refused one is judged on the channels it moves: a paddle-wheel
+    /// scale that takes its channel from 4.39 to 2.47 of its known level explains 57 % of what
+    /// is left there, whatever a depth channel it does not move still holds; an effect whose
+    /// channels hold nothing beyond their levels explains nothing.
+    #[test]
+    fn a_share_is_read_where_the_effect_acts() {
+        let scale = effects::by_name("velocity_sensor_scale").unwrap();
+        let names = ["x_m", "depth_adc", "paddle_speed_mps"];
+        let share = share_where_it_acts(scale, &names, &[1.5, 7.75, 4.39], &[1.5, 7.75, 2.47]);
+        assert!((share - 1.92 / 3.39).abs() < 1e-9, "{share}");
+        assert_eq!(
+            share_where_it_acts(scale, &names, &[1.5, 7.75, 0.9], &[1.5, 7.75, 0.8]),
+            0.0
+        );
+        let depth = effects::by_name("depth_offset").unwrap();
+        let lag = share_where_it_acts(depth, &names, &[1.5, 7.75, 4.39], &[1.5, 7.0, 2.47]);
+        assert!((lag - 0.75 / 6.75).abs() < 1e-9, "{lag}");
+    }
+
+    /// A later name must take a real share of what is left where it acts as well: an
+    /// accelerometer offset whose channel is below its known level takes nothing there, though
+    /// the whole run's mean drops; an imbalance that buys track with heading takes under a
+    /// tenth of its channels' excess; a right second name passes.
+    #[test]
+    fn a_later_name_must_take_a_real_share_where_it_acts() {
+        let names = [
+            "x_m",
+            "y_m",
+            "compass_deg",
+            "depth_adc",
+            "accel_x_adc",
+            "accel_y_adc",
+            "accel_z_adc",
+            "paddle_speed_mps",
+        ];
+        let offset = effects::by_name("accel_y_offset").unwrap();
+        let without = [1.054, 1.343, 0.754, 0.796, 1.041, 0.953, 1.007, 1.216];
+        let with = [1.040, 1.304, 0.758, 0.796, 1.041, 0.910, 1.007, 1.212];
+        assert_eq!(
+            too_small_a_share(&without, &with),
+            None,
+            "the whole run's mean drops"
+        );
+        let why = too_small_where_it_acts(offset, &names, &without, &with).expect("nothing left");
+        assert!(
+            why.contains("(accel_y_adc)") && why.contains("0.953"),
+            "{why}"
+        );
+        let imbalance = effects::by_name("thruster_imbalance").unwrap();
+        let without = [2.384, 3.639, 1.046, 0.623, 0.911, 0.934, 1.057, 1.939];
+        let with = [2.143, 3.182, 1.419, 0.622, 0.911, 0.929, 1.057, 1.796];
+        assert_eq!(
+            too_small_a_share(&without, &with),
+            None,
+            "10.5 % of the whole"
+        );
+        let why = too_small_where_it_acts(imbalance, &names, &without, &with).expect("a sliver");
+        assert!(
+            why.contains("explains 10 %") || why.contains("explains 9 %"),
+            "{why}"
+        );
+        // A velocity scale after a thrust gain, its paddle channel from 6.08 to 1.2.
+        let scale = effects::by_name("velocity_sensor_scale").unwrap();
+        let without = [1.2, 1.1, 0.9, 1.0, 1.0, 1.0, 1.0, 6.08];
+        let with = [1.2, 1.1, 0.9, 1.0, 1.0, 1.0, 1.0, 1.2];
+        assert_eq!(
+            too_small_where_it_acts(scale, &names, &without, &with),
+            None
+        );
+        let depth = effects::by_name("depth_offset").unwrap();
+        assert_eq!(
+            too_small_where_it_acts(depth, &names[..3], &without, &with),
+            None
+        );
     }
 
     /// A later name needs a channel it moves still off: on a run with a hidden thruster

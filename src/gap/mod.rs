@@ -503,6 +503,12 @@ pub fn analyse_with(
             .map(|(chi2, known)| chi2 / known.max(1.0))
             .collect()
     };
+    // The channels `levels_of` reads, in its order.
+    let first_setup_channels: Vec<String> = first
+        .modelled()
+        .into_iter()
+        .map(|i| m.channels[i].name.clone())
+        .collect();
     let mean_of = |levels: &[f64]| channel_mean(levels.iter().map(|&q| (q, 1.0))).unwrap_or(0.0);
     let current = std::cell::RefCell::new(levels_of(&start, &clean0));
     // The configurations with the effects accepted so far, which each round's setup fits
@@ -610,12 +616,30 @@ pub fn analyse_with(
             } else {
                 1.0
             };
+            let channel_names: Vec<&str> =
+                first_setup_channels.iter().map(String::as_str).collect();
+            // A channel without samples is left out of the levels: then the whole run's alone.
+            let named_in_order = channel_names.len() == levels.len();
             if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
-                && let Some(why) = too_small_a_share(&current.borrow(), &levels)
             {
-                return Ok(Some(why));
+                let whole = too_small_a_share(&current.borrow(), &levels);
+                let where_it_acts = || {
+                    named_in_order
+                        .then(|| {
+                            later::too_small_where_it_acts(
+                                effect,
+                                &channel_names,
+                                &current.borrow(),
+                                &levels,
+                            )
+                        })
+                        .flatten()
+                };
+                if let Some(why) = whole.or_else(where_it_acts) {
+                    return Ok(Some(why));
+                }
             }
             // An effect named after others that explains less than most of what they left
             // must find a disagreement left that runs with nothing new do not show: a channel
@@ -641,22 +665,27 @@ pub fn analyse_with(
                 )));
             }
             // A winner in place of one refused in the same round must explain most of what
-            // is left: the refusal says the round's disagreement is where the model's form is
-            // loose, and there a small share is the first sign of a stand-in.
+            // is left in the channels it moves (`later::share_where_it_acts`).
             if let Some((effect, _, _)) = named.last()
                 && let Some(first) = refused_before.first()
                 && effect.kind == effects::Kind::Mean
-                && share < LATER_NAME_MIN_SHARE
             {
-                return Ok(Some(format!(
-                    "it takes the place of `{}`, refused in the same round, and explains only \
-                     {:.0} % of the disagreement left (the channels' mean chi-square over their \
-                     known levels {without:.3} -> {mean:.3}); in place of a refused winner an \
-                     effect must explain most of it ({:.0} %)",
-                    first.name,
-                    100.0 * share,
-                    100.0 * LATER_NAME_MIN_SHARE
-                )));
+                let share = if named_in_order {
+                    later::share_where_it_acts(effect, &channel_names, &current.borrow(), &levels)
+                } else {
+                    share
+                };
+                if share < LATER_NAME_MIN_SHARE {
+                    return Ok(Some(format!(
+                        "it takes the place of `{}`, refused in the same round, and explains \
+                         only {:.0} % of the disagreement left in the channels it moves (their \
+                         mean chi-square over their known levels); in place of a refused winner \
+                         an effect must explain most of it ({:.0} %)",
+                        first.name,
+                        100.0 * share,
+                        100.0 * LATER_NAME_MIN_SHARE
+                    )));
+                }
             }
             if let Some((effect, values, noise_factor)) = named.last()
                 && named.len() > 1
