@@ -487,16 +487,11 @@ mod tests {
     /// tenth of its channels' excess; a right second name passes.
     #[test]
     fn a_later_name_must_take_a_real_share_where_it_acts() {
-        let names = [
-            "x_m",
-            "y_m",
-            "compass_deg",
-            "depth_adc",
-            "accel_x_adc",
-            "accel_y_adc",
-            "accel_z_adc",
-            "paddle_speed_mps",
-        ];
+        // The benchmark's channels: every modelled one but the surge speed.
+        let names: Vec<&str> = resim::MODELLED
+            .into_iter()
+            .filter(|c| *c != "surge_mps")
+            .collect();
         let offset = effects::by_name("accel_y_offset").unwrap();
         let without = [1.054, 1.343, 0.754, 0.796, 1.041, 0.953, 1.007, 1.216];
         let with = [1.040, 1.304, 0.758, 0.796, 1.041, 0.910, 1.007, 1.212];
