@@ -676,11 +676,16 @@ pub fn analyse_with(
                     share
                 };
                 if share < LATER_NAME_MIN_SHARE {
+                    let there = if named_in_order {
+                        "in the channels it moves"
+                    } else {
+                        "in the channels"
+                    };
                     return Ok(Some(format!(
                         "it takes the place of `{}`, refused in the same round, and explains \
-                         only {:.0} % of the disagreement left in the channels it moves (their \
-                         mean chi-square over their known levels); in place of a refused winner \
-                         an effect must explain most of it ({:.0} %)",
+                         only {:.0} % of the disagreement left {there} (their mean chi-square \
+                         over their known levels); in place of a refused winner an effect must \
+                         explain most of it ({:.0} %)",
                         first.name,
                         100.0 * share,
                         100.0 * LATER_NAME_MIN_SHARE
