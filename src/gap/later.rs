@@ -83,13 +83,18 @@ pub(crate) fn too_small_a_share(without: &[f64], with: &[f64]) -> Option<String>
     })
 }
 
+/// True when `effect` moves `channel`: one of its signature channels or `also_moves`.
+fn moves(effect: &effects::Effect, channel: &str) -> bool {
+    effect.channels.contains(&channel) || effect.also_moves.contains(&channel)
+}
+
 /// The entries of `levels` (named in order by `channels`) of the channels `effect` moves: its
 /// signature channels and `also_moves`.
 fn where_it_acts(effect: &effects::Effect, channels: &[&str], levels: &[f64]) -> Vec<f64> {
     channels
         .iter()
         .zip(levels)
-        .filter(|(c, _)| effect.channels.contains(c) || effect.also_moves.contains(c))
+        .filter(|(c, _)| moves(effect, c))
         .map(|(_, x)| *x)
         .collect()
 }
@@ -117,7 +122,7 @@ pub(crate) fn too_small_where_it_acts(
     let moved: Vec<&str> = channels
         .iter()
         .copied()
-        .filter(|c| effect.channels.contains(c) || effect.also_moves.contains(c))
+        .filter(|c| moves(effect, c))
         .collect();
     too_small_a_share(&before, &after)
         .map(|why| format!("in the channels it moves ({}), {why}", moved.join(", ")))
@@ -215,13 +220,7 @@ pub(crate) fn nothing_off_that_it_moves(
 
 /// The statistics of the channels `effect` moves: its signature channels and `also_moves`.
 fn moved_by<'a>(effect: &effects::Effect, stats: &'a [ChannelStats]) -> Vec<&'a ChannelStats> {
-    stats
-        .iter()
-        .filter(|s| {
-            effect.channels.contains(&s.channel.as_str())
-                || effect.also_moves.contains(&s.channel.as_str())
-        })
-        .collect()
+    stats.iter().filter(|s| moves(effect, &s.channel)).collect()
 }
 
 /// The named effects after an exchange ([`exchange_lookalikes`]): the candidates, with the
