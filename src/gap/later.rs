@@ -193,7 +193,7 @@ pub(crate) fn nothing_off_that_it_moves(
             level: s.known_chi2_per_sample,
             run_bound: bound(s),
         };
-        residuals::disagrees(s.chi2_per_sample, s.samples, s.tau_samples, known)
+        residuals::disagrees(s.chi2_per_sample, s.samples, s.chi2_tau_samples, known)
     };
     if moved.is_empty() || moved.iter().any(off) {
         return Ok(None);

@@ -26,6 +26,9 @@ pub struct ChannelStats {
     pub chi2_per_sample: f64,
     /// Samples per independent sample (autocorrelation of the model's process noise).
     pub tau_samples: f64,
+    /// Samples per degree of freedom of the chi-square per sample under the model's own
+    /// noise ([`crate::gap::run::chi2_tau`]): what the significance tests read.
+    pub chi2_tau_samples: f64,
     /// The calibrated model's known chi2 per sample for this channel on baseline runs (1
     /// without a calibration): what is new is judged against it.
     pub known_chi2_per_sample: f64,
@@ -33,8 +36,8 @@ pub struct ChannelStats {
     /// with nothing new scatter ([`crate::gap::model::GapModel::run_bound`]; `None`: not
     /// measured).
     pub run_bound: Option<f64>,
-    /// True when chi2 over the known level exceeds 1 by more than 3 standard deviations of
-    /// the noise, and chi2 exceeds the run bound.
+    /// True when chi2 over the known level is beyond the one-sided 3-sigma tail of the
+    /// model's own noise (a scaled chi-square, [`chi2_bound`]), and chi2 exceeds the run bound.
     pub significant: bool,
     pub ljung_box_q: f64,
     pub ljung_box_critical_95: f64,
@@ -193,10 +196,24 @@ fn regime_of(run: &Run, t: f64) -> [String; 4] {
     [quadrant, thrust, tilt, speed].map(str::to_string)
 }
 
-/// chi2 per sample is significant above 1 + 3 sqrt(2 / n_independent).
+/// The probability a normal variable stays below 3 standard deviations: the significance
+/// tests' one-sided tail.
+pub const THREE_SIGMA_CDF: f64 = 0.998_650_101_968_37;
+
+/// The chi-square per sample that noise alone exceeds with the one-sided 3-sigma tail
+/// probability, for `dof` degrees of freedom: the chi-square's quantile over `dof`. With few
+/// degrees of freedom (a position channel whose process noise wanders over the whole run) it
+/// lies far above the normal approximation `1 + 3 sqrt(2 / dof)`.
+pub fn chi2_bound(dof: f64) -> f64 {
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    let dof = dof.max(1.0);
+    ChiSquared::new(dof).map_or(f64::INFINITY, |d| d.inverse_cdf(THREE_SIGMA_CDF) / dof)
+}
+
+/// Whether chi2 per sample over `n` samples, `tau` samples per degree of freedom, is beyond
+/// what the noise reaches ([`chi2_bound`]).
 fn excess(chi2: f64, n: usize, tau: f64) -> bool {
-    let n_eff = (n as f64 / tau).max(1.0);
-    chi2 > 1.0 + 3.0 * (2.0 / n_eff).sqrt()
+    chi2 > chi2_bound(n as f64 / tau)
 }
 
 /// What a channel's disagreement is judged against: the calibrated model's known level
@@ -209,8 +226,9 @@ pub struct Known {
 }
 
 /// Whether a whole channel's chi-square per sample `chi2` over `n` samples (`tau` samples
-/// per independent one) disagrees: above its known level by more than 3 standard deviations
-/// of the noise, and above the bound a run with nothing new stays under, when known.
+/// per degree of freedom, [`crate::gap::run::chi2_tau`]) disagrees: over its known level
+/// beyond the 3-sigma tail of the noise, and above the bound a run with nothing new stays
+/// under, when known.
 pub fn disagrees(chi2: f64, n: usize, tau: f64, known: Known) -> bool {
     excess(chi2 / known.level.max(1.0), n, tau) && known.run_bound.is_none_or(|b| chi2 > b)
 }
@@ -272,7 +290,7 @@ pub fn channel_stats(
                 regime,
                 samples: k,
                 chi2_per_sample: c,
-                significant: excess(c / known, k, floor.tau),
+                significant: excess(c / known, k, floor.chi2_tau()),
             }
         })
         .collect();
@@ -286,7 +304,7 @@ pub fn channel_stats(
             .collect();
         if !idx.is_empty() {
             let c = idx.iter().map(|&i| z[i] * z[i]).sum::<f64>() / idx.len() as f64;
-            if excess(c / known, idx.len(), floor.tau) {
+            if excess(c / known, idx.len(), floor.chi2_tau()) {
                 windows.push((w0, w0 + WINDOW_S, c));
             }
         }
@@ -300,9 +318,10 @@ pub fn channel_stats(
         noise_floor_rms: (floor.sigma.iter().map(|s| s * s).sum::<f64>() / nf).sqrt(),
         chi2_per_sample: chi2,
         tau_samples: floor.tau,
+        chi2_tau_samples: floor.chi2_tau(),
         known_chi2_per_sample: known,
         run_bound,
-        significant: disagrees(chi2, n, floor.tau, Known { level, run_bound }),
+        significant: disagrees(chi2, n, floor.chi2_tau(), Known { level, run_bound }),
         ljung_box_q: q,
         ljung_box_critical_95: crit,
         white: q <= crit,
@@ -341,6 +360,24 @@ mod tests {
             run_bound: None,
         };
         assert!(disagrees(1.1, n, tau, floor));
+    }
+
+    /// The bound is the chi-square's one-sided 3-sigma quantile per degree of freedom: at
+    /// one degree, the square of the two-sided 3-sigma normal quantile 3.2049 (10.27); at many,
+    /// near the normal approximation `1 + 3 sqrt(2 / dof)` (Wilson-Hilferty 1.04297 at 10,000).
+    #[test]
+    fn the_bound_is_the_chi_square_quantile() {
+        assert!(
+            (chi2_bound(1.0) - 3.2049_f64.powi(2)).abs() < 0.01,
+            "{}",
+            chi2_bound(1.0)
+        );
+        assert!(
+            (chi2_bound(10_000.0) - 1.04297).abs() < 1e-4,
+            "{}",
+            chi2_bound(10_000.0)
+        );
+        assert!(chi2_bound(4.0) > 1.0 + 3.0 * (2.0f64 / 4.0).sqrt() + 1.0);
     }
 
     #[test]

@@ -469,6 +469,7 @@ pub fn noise_floor(
                 tau,
                 measurement_std: meas,
                 null: devs,
+                chi2_tau_once: Default::default(),
             })
         })
         .collect())

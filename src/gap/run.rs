@@ -89,6 +89,77 @@ impl Run {
     }
 }
 
+/// Samples per degree of freedom of a channel's chi-square per sample `mean(z^2)`, `z_i =
+/// (d_i + e_i) / sigma_i`, under the model's own noise: `d` process noise (one row of `null`
+/// per ensemble member), `e` white measurement noise of spread `measurement_std`. A scaled
+/// chi-square with the null's mean and variance (Satterthwaite) has `2 mean^2 / var` degrees of
+/// freedom; this returns `n` over them (1 for white noise).
+///
+/// The variance is read two ways from the ensemble, and the larger is kept:
+/// - **Gaussian**: `Var(sum z^2) = 2 sum_ij C_ij^2` for the correlations `C` of `z`; the
+///   process part of `sum C^2` is the mean squared inner product of two distinct members
+///   (unbiased, and steady with few members).
+/// - **Spread**: each member's chi-square (the white part's expectation and variance taken
+///   exactly) and the spread of those over the members. It holds what the Gaussian reading
+///   misses (runs that wander more than others, a depth clamped at the surface), but a
+///   heavy-tailed spread read from a few dozen members is more often under its value than over.
+///
+/// The mean correlation time (`tau`) is neither: process noise that wanders in one part of a
+/// run (depth after a dive) widens the chi-square's spread far beyond what the average
+/// correlation over the run says.
+pub fn chi2_tau(null: &[Vec<f64>], sigma: &[f64], measurement_std: &[f64]) -> f64 {
+    let n = sigma.len();
+    if n == 0 {
+        return 1.0;
+    }
+    let nf = n as f64;
+    let w: Vec<f64> = (0..n)
+        .map(|i| (measurement_std.get(i).copied().unwrap_or(0.0) / sigma[i]).powi(2))
+        .collect();
+    let white_mean = w.iter().sum::<f64>() / nf;
+    let white_var = 2.0 * w.iter().map(|x| x * x).sum::<f64>() / (nf * nf);
+    let members: Vec<Vec<f64>> = null
+        .iter()
+        .filter(|d| d.len() == n)
+        .map(|d| d.iter().zip(sigma).map(|(x, s)| x / s).collect())
+        .collect();
+    let tau = |mean: f64, var: f64| {
+        if mean > 0.0 && var > 0.0 {
+            (nf * var / (2.0 * mean * mean)).max(1.0)
+        } else {
+            1.0
+        }
+    };
+    let k = members.len();
+    if k < 2 {
+        return tau(white_mean, white_var);
+    }
+    let kf = k as f64;
+    // Per member: the process part of its chi-square and the cross term's variance with the
+    // white noise at the same samples.
+    let (own, cross): (Vec<f64>, Vec<f64>) = members
+        .iter()
+        .map(|u| {
+            let p = u.iter().map(|x| x * x).sum::<f64>() / nf;
+            let c = u.iter().zip(&w).map(|(x, w)| 4.0 * x * x * w).sum::<f64>();
+            (p, c / (nf * nf))
+        })
+        .unzip();
+    let process_mean = own.iter().sum::<f64>() / kf;
+    let mean = process_mean + white_mean;
+    let noise_var = white_var + cross.iter().sum::<f64>() / kf;
+    let spread = own.iter().map(|x| (x - process_mean).powi(2)).sum::<f64>() / (kf - 1.0);
+    let mut pairs = 0.0;
+    for a in 0..k {
+        for b in a + 1..k {
+            let g: f64 = members[a].iter().zip(&members[b]).map(|(x, y)| x * y).sum();
+            pairs += g * g;
+        }
+    }
+    let gaussian = 2.0 * pairs / (kf * (kf - 1.0) / 2.0) / (nf * nf);
+    tau(mean, noise_var + spread.max(gaussian))
+}
+
 /// The model's noise floor for one channel.
 #[derive(Debug, Clone)]
 pub struct Floor {
@@ -101,4 +172,49 @@ pub struct Floor {
     /// Process-noise deviations of each ensemble run from the noise-free prediction: null
     /// residuals the model itself produces (without measurement noise).
     pub null: Vec<Vec<f64>>,
+    /// [`Floor::chi2_tau`], read on first use (a floor made for a fit is never judged).
+    pub chi2_tau_once: std::sync::OnceLock<f64>,
+}
+
+impl Floor {
+    /// Samples per degree of freedom of the channel's chi-square per sample under the model's
+    /// own noise ([`chi2_tau`]): `n / chi2_tau` degrees of freedom give the scaled chi-square
+    /// with the null's spread, which the significance tests read.
+    pub fn chi2_tau(&self) -> f64 {
+        *self
+            .chi2_tau_once
+            .get_or_init(|| chi2_tau(&self.null, &self.sigma, &self.measurement_std))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// White noise has one sample per degree of freedom; a process offset constant over a
+    /// member's run, as large as the white noise, leaves `n / 4 + 3 / 4` samples per degree
+    /// (`sum C^2` is `n^2 / 4 + 3 n / 4` for `C_ij = (1 + delta_ij) / 2`), to 15 % with 400
+    /// members.
+    #[test]
+    fn samples_per_degree_of_white_noise_and_of_a_constant_offset() {
+        let n = 400;
+        let white = chi2_tau(&[], &vec![1.0; n], &vec![1.0; n]);
+        assert!((white - 1.0).abs() < 1e-12, "{white}");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let null: Vec<Vec<f64>> = (0..400)
+            .map(|_| {
+                let a: f64 = StandardNormal.sample(&mut rng);
+                vec![a; n]
+            })
+            .collect();
+        let sigma = vec![2f64.sqrt(); n];
+        let tau = chi2_tau(&null, &sigma, &vec![1.0; n]);
+        let expected = n as f64 / 4.0 + 0.75;
+        assert!(
+            (tau / expected - 1.0).abs() < 0.15,
+            "{tau} against {expected}"
+        );
+    }
 }

@@ -226,6 +226,7 @@ pub fn floor(c: &Configs, duration_s: f64, channel: &Channel) -> Option<Floor> {
         tau: 1.0,
         measurement_std: vec![1.0; n],
         null: vec![vec![0.0; n]; crate::gap::run::ENSEMBLE as usize],
+        chi2_tau_once: Default::default(),
     })
 }
 
