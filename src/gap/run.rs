@@ -178,12 +178,15 @@ pub struct Floor {
 
 impl Floor {
     /// Samples per degree of freedom of the channel's chi-square per sample under the model's
-    /// own noise ([`chi2_tau`]): `n / chi2_tau` degrees of freedom give the scaled chi-square
-    /// with the null's spread, which the significance tests read.
+    /// own noise ([`chi2_tau`]), and at least the correlation time `tau`: `n` over it gives the
+    /// scaled chi-square the significance tests read. Both readings of the ensemble under-read
+    /// a spread that wanders unequally between runs; where the mean correlation says more, it
+    /// is kept (on a calibrated vehicle of another structure the Gaussian reading alone put a
+    /// null run's depth channel off).
     pub fn chi2_tau(&self) -> f64 {
         *self
             .chi2_tau_once
-            .get_or_init(|| chi2_tau(&self.null, &self.sigma, &self.measurement_std))
+            .get_or_init(|| chi2_tau(&self.null, &self.sigma, &self.measurement_std).max(self.tau))
     }
 }
 
