@@ -345,7 +345,10 @@ pub const LIBRARY: [Effect; 41] = [
         name: "depth_pwm_emi",
         parameters: &["emi_v_rms_full_duty"],
         scales: &[0.05],
-        bounds: &[(0.0, 1.0)],
+        // The range the sensor configuration accepts (`depth.emi_v_rms_full_duty`): the level
+        // is before the depth front end's low-pass, which passes 0.089 of it at the shipped
+        // 10 Hz cutoff (2 kHz switching band), so 1 V there is 0.09 V (18 LSB) at the ADC.
+        bounds: &[(0.0, 5.0)],
         signature: "depth variance grows with the stern motor's duty",
         channels: &["depth_adc"],
         also_moves: &[],

@@ -542,3 +542,29 @@ fn a_sway_yaw_moment_and_the_munk_moment_are_twins_of_form() {
     );
     assert!(effects::twins(coupling, munk) && effects::twins(munk, coupling));
 }
+
+/// A depth EMI the low-pass passes at 0.13 V rms (1.5 V before it, at full stern duty) is
+/// inside the library's range: fitted beyond 1 V with every guard passed. The range is the
+/// sensor configuration's, before the filter; with a range of 1 V there the fit ended on its
+/// bound, and an EMI of 20 LSB at the ADC could never be named.
+#[test]
+fn a_strong_depth_emi_is_fitted_inside_its_range() {
+    let emi = effects::LIBRARY
+        .iter()
+        .find(|e| e.kind == Kind::Variance)
+        .expect("the library has a noise source");
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(23, |t: &mut Configs| {
+        t.sensors.depth.emi_v_rms_full_duty += 1.5;
+    });
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+    let fitted = fit_emi(&setup, emi).expect("the depth channel is measured");
+    let value = fitted.parameters[0].1;
+    assert!(fitted.guards.all(), "{:?}", fitted.guards);
+    assert!(
+        value > 1.0,
+        "fitted {value:.3} {:?}, hidden 1.5",
+        fitted.ci95[0].1
+    );
+}
