@@ -64,6 +64,12 @@ pub struct AdcSettings {
     pub channels: [Option<AdcSource>; 8],
 }
 
+impl DepthSettings {
+    /// The largest EMI level a configuration accepts (V rms at full stern duty, before the
+    /// front end's low-pass).
+    pub const EMI_V_RMS_FULL_DUTY_MAX: f64 = 5.0;
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct DepthSettings {
     pub position_body_m: [f64; 3],

@@ -7,6 +7,7 @@ use super::{Behaviour, Calibration, Effect, Hiding, Kind};
 use crate::gap::edit::{Change, File::*, edit};
 use crate::physics::VehicleConfig;
 use crate::physics::state::{PORT, STARBOARD};
+use crate::sensors::config::DepthSettings;
 
 /// Parameter `i` of `params`, 0 ("no change") where it is missing.
 fn at(params: &[f64], i: usize) -> f64 {
@@ -348,7 +349,7 @@ pub const LIBRARY: [Effect; 41] = [
         // The range the sensor configuration accepts (`depth.emi_v_rms_full_duty`): the level
         // is before the depth front end's low-pass, which passes 0.089 of it at the shipped
         // 10 Hz cutoff (2 kHz switching band), so 1 V there is 0.09 V (18 LSB) at the ADC.
-        bounds: &[(0.0, 5.0)],
+        bounds: &[(0.0, DepthSettings::EMI_V_RMS_FULL_DUTY_MAX)],
         signature: "depth variance grows with the stern motor's duty",
         channels: &["depth_adc"],
         also_moves: &[],

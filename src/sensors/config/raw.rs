@@ -284,7 +284,7 @@ impl RawDepth {
                 "depth.emi_v_rms_full_duty",
                 d.emi_v_rms_full_duty,
                 0.0,
-                5.0,
+                DepthSettings::EMI_V_RMS_FULL_DUTY_MAX,
                 "V",
             )?,
             low_pass_cutoff_hz: match d.low_pass_cutoff_hz {
