@@ -119,14 +119,28 @@ pub struct Setup<'a> {
 }
 
 impl Setup<'_> {
-    /// The setup with `model`'s known disagreement as the level of each channel.
+    /// The setup with `model`'s known disagreement as the level of each channel, measured
+    /// against the floors `base` (the model's own) and read against the setup's floors
+    /// ([`crate::gap::residuals::known_weight`]: a named noise source raises them).
     #[must_use]
-    pub fn with_known(mut self, model: &crate::gap::model::GapModel) -> Self {
+    pub fn with_known(
+        mut self,
+        model: &crate::gap::model::GapModel,
+        base: &[Option<Floor>],
+    ) -> Self {
+        let floors = self.floors;
         self.known = self
             .m
             .channels
             .iter()
-            .map(|c| model.known_chi2(&c.name))
+            .enumerate()
+            .map(|(i, c)| {
+                let w = match (base.get(i), floors.get(i)) {
+                    (Some(Some(b)), Some(Some(f))) => crate::gap::residuals::known_weight(b, f),
+                    _ => 1.0,
+                };
+                model.known(&c.name).under(w).level
+            })
             .collect();
         self
     }

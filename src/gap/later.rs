@@ -183,11 +183,24 @@ pub(crate) fn nothing_off_that_it_moves(
     effect: &effects::Effect,
     earlier: &Configs,
     floors: &[Option<resim::Floor>],
+    base: &[Option<resim::Floor>],
 ) -> Result<Option<String>, GapError> {
     let run = resim::simulate(earlier, m, None)?;
-    let stats = stats_for(model, m, earlier, &run, floors);
+    let stats = stats_for(model, m, earlier, &run, floors, base);
     let moved = moved_by(effect, &stats);
-    let bound = |s: &ChannelStats| model.run_bound_among(&s.channel, moved.len());
+    // The run bound, like the known level, read against `floors`.
+    let weight = |channel: &str| {
+        let i = m.channels.iter().position(|c| c.name == channel);
+        match i.map(|i| (base.get(i), floors.get(i))) {
+            Some((Some(Some(b)), Some(Some(f)))) => residuals::known_weight(b, f),
+            _ => 1.0,
+        }
+    };
+    let bound = |s: &ChannelStats| {
+        model
+            .run_bound_among(&s.channel, moved.len())
+            .map(|b| residuals::level_under(b, weight(&s.channel)))
+    };
     let off = |s: &&ChannelStats| {
         let known = Known {
             level: s.known_chi2_per_sample,
@@ -546,16 +559,17 @@ mod tests {
         });
         let clean = resim::simulate(&base, &m, None).unwrap();
         let floors = resim::noise_floor(&base, &m, &clean).unwrap();
-        let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors).unwrap();
+        let off =
+            nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &floors).unwrap();
         assert_eq!(off, None, "the imbalance's channels are off");
         let mut with = base.clone();
         effects::apply(imbalance, &[0.15], &mut with);
-        let why = nothing_off_that_it_moves(&model, &m, imbalance, &with, &floors)
+        let why = nothing_off_that_it_moves(&model, &m, imbalance, &with, &floors, &floors)
             .unwrap()
             .expect("nothing left off once the imbalance is in the model");
         assert!(why.contains("compass_deg") && why.contains("x_m"), "{why}");
         assert!(
-            nothing_off_that_it_moves(&model, &m, depth, &base, &floors)
+            nothing_off_that_it_moves(&model, &m, depth, &base, &floors, &floors)
                 .unwrap()
                 .is_some(),
             "a depth offset finds its channel off, which the imbalance leaves alone"
@@ -578,7 +592,7 @@ mod tests {
         });
         let clean = resim::simulate(&base, &m, None).unwrap();
         let floors = resim::noise_floor(&base, &m, &clean).unwrap();
-        let stats = stats_for(&model, &m, &base, &clean, &floors);
+        let stats = stats_for(&model, &m, &base, &clean, &floors, &floors);
         let moved = moved_by(imbalance, &stats);
         assert!(moved.iter().any(|s| s.chi2_per_sample > 4.0), "{moved:?}");
         for s in &moved {
@@ -597,10 +611,11 @@ mod tests {
                 .insert(s.channel.clone(), 2.0 * s.chi2_per_sample);
             model.discrepancy_scatter.insert(s.channel.clone(), scatter);
         }
-        let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors).unwrap();
+        let off =
+            nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &floors).unwrap();
         assert_eq!(off, None, "the moved channels lie over their own bound");
         model.discrepancy_scatter.clear();
-        let why = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors)
+        let why = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &floors)
             .unwrap()
             .expect("under the report's bound, nothing is off");
         assert!(why.contains("run bound"), "{why}");

@@ -228,16 +228,26 @@ fn floor_kept<'a>(floor: &'a resim::Floor, keep: &[bool]) -> std::borrow::Cow<'a
     })
 }
 
+/// Each channel's statistics of `run` against `floors`, judged against the model's known
+/// levels, which were measured against `base` (the model's own floors) and are read against
+/// `floors` ([`residuals::known_weight`]).
 fn stats_for(
     model: &GapModel,
     m: &Measurement,
     c: &Configs,
     run: &resim::Run,
     floors: &[Option<resim::Floor>],
+    base: &[Option<resim::Floor>],
 ) -> Vec<ChannelStats> {
     let mut out = Vec::new();
     for (i, ch) in m.channels.iter().enumerate() {
         let Some(floor) = &floors[i] else { continue };
+        let known = match base.get(i) {
+            Some(Some(b)) => model
+                .known(&ch.name)
+                .under(residuals::known_weight(b, floor)),
+            _ => model.known(&ch.name),
+        };
         if let Some((t, r)) = sonar::stats_residuals(c, run, m.experiment.duration_s, ch) {
             let keep = free_of_contact(run, &t);
             let (t, r) = (kept(&t, &keep), kept(&r, &keep));
@@ -256,7 +266,7 @@ fn stats_for(
                 &unit,
                 run,
                 (0.0, rms),
-                model.known(&ch.name),
+                known,
             ));
             continue;
         }
@@ -285,7 +295,7 @@ fn stats_for(
             &floor_kept(floor, &keep),
             run,
             best,
-            model.known(&ch.name),
+            known,
         ));
     }
     out
@@ -395,7 +405,7 @@ fn shares(
             }
         }
         let run = resim::simulate(&c, m, None)?;
-        let without = stats_excess(&stats_for(model, m, &c, &run, floors), false);
+        let without = stats_excess(&stats_for(model, m, &c, &run, floors, floors), false);
         growth.push((without - after).max(0.0));
     }
     let total: f64 = growth.iter().sum();
@@ -480,10 +490,12 @@ pub fn analyse_with(
         .filter(|(_, f)| f.is_none())
         .map(|(c, _)| c.name.clone())
         .collect();
-    let before = stats_for(model, m, &start, &clean0, &floors);
+    let before = stats_for(model, m, &start, &clean0, &floors, &floors);
+    let own_floors: &[Option<resim::Floor>] = &floors;
 
     let spread = model.predictive_spread();
-    let first = fit::setup(m, start.clone(), &floors, options.split, &spread)?.with_known(model);
+    let first = fit::setup(m, start.clone(), &floors, options.split, &spread)?
+        .with_known(model, own_floors);
     let heldout_before = heldout_excess(&first, &start, &clean0, false);
     let heldout_raw_before = heldout_excess(&first, &start, &clean0, true);
     // The model with the accepted effects: what each round fits against, and its gap
@@ -502,9 +514,10 @@ pub fn analyse_with(
             base: first.base.clone(),
             clean: first.clean.clone(),
             spread: first.spread.clone(),
-            known: first.known.clone(),
+            known: Vec::new(),
             ..first
-        };
+        }
+        .with_known(model, own_floors);
         part_channels(&judged, c, run, false, None)
             .into_iter()
             .map(|(chi2, known)| chi2 / known.max(1.0))
@@ -533,8 +546,8 @@ pub fn analyse_with(
         fit::MAX_EFFECTS,
         &mut |round, accepted, refused| {
             let floors = current_floors.borrow();
-            let setup =
-                fit::setup(m, round_configs(), &floors, options.split, &spread)?.with_known(model);
+            let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
+                .with_known(model, own_floors);
             let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
             skip.extend(refused.iter().map(|r| r.name.as_str()));
             skip.extend(model.effects.iter().map(|e| e.effect.name));
@@ -572,7 +585,7 @@ pub fn analyse_with(
             if named.len() > 1 {
                 let floors = current_floors.borrow();
                 let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
-                    .with_known(model);
+                    .with_known(model, own_floors);
                 if let Some(refit) = fit::refit_jointly(&setup, &named) {
                     for ((values, ci), (new_values, new_ci)) in joint.iter_mut().zip(refit) {
                         *values = new_values;
@@ -662,6 +675,7 @@ pub fn analyse_with(
                     effect,
                     &round_configs(),
                     &current_floors.borrow(),
+                    own_floors,
                 )?
             {
                 return Ok(Some(format!(
@@ -706,7 +720,7 @@ pub fn analyse_with(
             {
                 let floors = current_floors.borrow();
                 let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
-                    .with_known(model);
+                    .with_known(model, own_floors);
                 let strong = fit::strong_blocks(
                     &first.residuals(&start, &clean0),
                     &setup.residuals(&setup.base, &setup.clean),
@@ -754,7 +768,7 @@ pub fn analyse_with(
             {
                 let floors = current_floors.borrow();
                 let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
-                    .with_known(model);
+                    .with_known(model, own_floors);
                 if let Some(rival) = fit::structural_rival(&setup, win) {
                     return Ok(Some(format!(
                         "`{}`, a term of the base model's structure, explains the same \
@@ -784,8 +798,8 @@ pub fn analyse_with(
     let mut accepted = accepted;
     if accepted.len() > 1 {
         let floors = current_floors.borrow();
-        let setup =
-            fit::setup(m, start.clone(), &floors, options.split, &spread)?.with_known(model);
+        let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
+            .with_known(model, own_floors);
         if let Some(ex) = later::exchange_lookalikes(&setup, &rounds, &accepted) {
             *fitted.borrow_mut() = with_named(model, &ex.accepted)?;
             *configs.borrow_mut() = ex.configs;
@@ -800,12 +814,13 @@ pub fn analyse_with(
     } else {
         resim::noise_floor(&configs, m, &clean1)?
     };
-    let after = stats_for(model, m, &configs, &clean1, &floors_after);
+    let after = stats_for(model, m, &configs, &clean1, &floors_after, &floors);
     // Judged against the floor the model's named noise sources give, as the whole run is.
     let judged = fit::Setup {
         floors: &floors_after,
         ..first
-    };
+    }
+    .with_known(model, &floors);
     let heldout_after = heldout_excess(&judged, &configs, &clean1, false);
     let heldout_raw_after = heldout_excess(&judged, &configs, &clean1, true);
     let (eb, ea) = (stats_excess(&before, false), stats_excess(&after, false));
@@ -909,7 +924,7 @@ mod tests {
         assert!(run.contacts.is_empty(), "{:?}", run.contacts);
         let floors = resim::noise_floor(&c, &m, &run).unwrap();
         let x_stats = |run: &resim::Run| {
-            stats_for(&model, &m, &c, run, &floors)
+            stats_for(&model, &m, &c, run, &floors, &floors)
                 .into_iter()
                 .find(|s| s.channel == "x_m")
                 .unwrap()
@@ -943,7 +958,7 @@ mod tests {
             let (_, _, m) = resim::tests::manoeuvre(seed);
             let run = resim::simulate(&c, &m, None).unwrap();
             let floors = floors.get_or_insert_with(|| resim::noise_floor(&c, &m, &run).unwrap());
-            let off: Vec<String> = stats_for(&model, &m, &c, &run, floors)
+            let off: Vec<String> = stats_for(&model, &m, &c, &run, floors, floors)
                 .into_iter()
                 .filter(|s| s.significant)
                 .map(|s| format!("{} {:.2}", s.channel, s.chi2_per_sample))

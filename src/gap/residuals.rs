@@ -225,6 +225,49 @@ pub struct Known {
     pub run_bound: Option<f64>,
 }
 
+impl Known {
+    /// The same disagreement judged against another noise floor: the excess of the level and
+    /// of the run bound over the floor scaled by `w` ([`known_weight`]). `w = 1` (the floor the
+    /// levels were measured on) leaves them as they are.
+    #[must_use]
+    pub fn under(self, w: f64) -> Self {
+        Self {
+            level: level_under(self.level, w),
+            run_bound: self.run_bound.map(|b| level_under(b, w)),
+        }
+    }
+}
+
+/// A chi-square per sample `level` over the noise floor with its excess over 1 scaled by `w`
+/// ([`known_weight`]); `level` itself for `w = 1`.
+pub fn level_under(level: f64, w: f64) -> f64 {
+    if w == 1.0 {
+        level
+    } else {
+        1.0 + (level - 1.0).max(0.0) * w
+    }
+}
+
+/// How much of a channel's known disagreement shows against the noise floor `now` when it was
+/// measured against the floor `base` (the calibrated model's). A channel's level is its mean
+/// `r^2 / sigma^2` over the samples (the chi-square per independent sample: the residuals are
+/// normalised by the floor's `sigma` and correlation time, and counted per independent
+/// sample), so a residual `d` the model's runs share reads `sum(d^2 / sigma^2) / n` of excess
+/// over 1, and against a floor with more noise (a named depth EMI raises `sigma` where the
+/// stern motor runs) `sum(1 / sigma_now^2)` over `sum(1 / sigma_base^2)` of it, for a `d` of
+/// one size throughout. Against the old level, the chi-square a disagreement the calibration's
+/// own runs show keeps under the new floor looks below the known level, and a real second
+/// effect there looks like a fit of known disagreement. 1 for identical floors, or where the
+/// two do not describe the same samples.
+pub fn known_weight(base: &Floor, now: &Floor) -> f64 {
+    if base.sigma.len() != now.sigma.len() || base.sigma.is_empty() {
+        return 1.0;
+    }
+    let precision = |f: &Floor| f.sigma.iter().map(|s| 1.0 / (s * s)).sum::<f64>();
+    let w = precision(now) / precision(base);
+    if w.is_finite() && w > 0.0 { w } else { 1.0 }
+}
+
 /// Whether a whole channel's chi-square per sample `chi2` over `n` samples (`tau` samples
 /// per degree of freedom, [`crate::gap::run::chi2_tau`]) disagrees: over its known level
 /// beyond the 3-sigma tail of the noise, and above the bound a run with nothing new stays

@@ -568,3 +568,64 @@ fn a_strong_depth_emi_is_fitted_inside_its_range() {
         fitted.ci95[0].1
     );
 }
+
+/// A disagreement the model's runs share (here a depth reading off by a constant) reads as a
+/// smaller chi-square per independent sample once a named depth EMI raises the floor it is
+/// judged against; the known level measured without the EMI, read through
+/// [`crate::gap::residuals::known_weight`], predicts the level it keeps. Left at its old
+/// value, the known level put the depth channel of a calibrated vehicle below it after an EMI
+/// (0.46 of it with a real depth gain fitted), and a hidden second effect there was refused
+/// as a fit of known disagreement.
+#[test]
+fn a_known_level_is_read_against_the_floor_a_named_emi_raises() {
+    use crate::gap::residuals::{known_weight, level_under};
+    let bias = |t: &mut Configs| t.sensors.depth.errors.bias += 0.015;
+    let emi = |t: &mut Configs| t.sensors.depth.emi_v_rms_full_duty += 3.0;
+    let level = |c: &Configs, m: &Measurement| {
+        let clean = resim::simulate(c, m, None).unwrap();
+        let floors = resim::noise_floor(c, m, &clean).unwrap();
+        let setup = setup(m, c.clone(), &floors, Split::DEFAULT, &[]).unwrap();
+        let depth = m
+            .channels
+            .iter()
+            .position(|ch| ch.name == "depth_adc")
+            .unwrap();
+        let r = setup.residuals(c, &clean);
+        let chi2 = setup
+            .part_levels(&r, None)
+            .into_iter()
+            .find(|(i, _)| *i == depth)
+            .map(|(_, l)| l)
+            .unwrap();
+        (chi2, floors[depth].clone().unwrap())
+    };
+    // The calibration's runs: the shared disagreement, no EMI, judged by the model's floor.
+    let (_, mut c, m0) = crate::gap::resim::tests::manoeuvre_of(31, bias);
+    c.shooting = crate::gap::anchor::Shooting::OPEN_LOOP;
+    let (known, floor0) = level(&c, &m0);
+    // A case: the same disagreement with an EMI, judged by the floor of the model with it.
+    let (_, _, m1) = crate::gap::resim::tests::manoeuvre_of(31, |t| {
+        bias(t);
+        emi(t);
+    });
+    let mut with_emi = c.clone();
+    emi(&mut with_emi);
+    let (shown, floor1) = level(&with_emi, &m1);
+    let w = known_weight(&floor0, &floor1);
+    let read = level_under(known, w);
+    // The manoeuvre runs its stern motor in about an eighth of its samples: there the EMI
+    // floor is many times the old one, elsewhere the same.
+    assert!(known > 2.0, "the shared disagreement shows: {known:.3}");
+    assert!(w < 0.95, "the EMI raises the floor: w = {w:.3}");
+    let close = |x: f64| (x - shown).abs() < 0.05 * (known - 1.0);
+    assert!(
+        close(read),
+        "read {read:.3} against {shown:.3} shown (known {known:.3}, w {w:.3})"
+    );
+    assert!(
+        !close(known),
+        "the old level {known:.3} is not what shows, {shown:.3}"
+    );
+    assert_eq!(known_weight(&floor0, &floor0), 1.0);
+    assert_eq!(level_under(known, 1.0), known);
+}
