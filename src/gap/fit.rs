@@ -119,26 +119,18 @@ pub struct Setup<'a> {
 }
 
 impl Setup<'_> {
-    /// The setup with `model`'s known disagreement as the level of each channel, measured
-    /// against the floors `base` (the model's own) and read against the setup's floors
-    /// ([`crate::gap::residuals::known_weight`]: a named noise source raises them).
+    /// The setup with `model`'s known disagreement as the level of each channel, its excess
+    /// over the floor scaled by `weights` (by channel index; [`known_weights`]: 1 where no
+    /// named noise source raised the floor).
     #[must_use]
-    pub fn with_known(
-        mut self,
-        model: &crate::gap::model::GapModel,
-        base: &[Option<Floor>],
-    ) -> Self {
-        let floors = self.floors;
+    pub fn with_known(mut self, model: &crate::gap::model::GapModel, weights: &[f64]) -> Self {
         self.known = self
             .m
             .channels
             .iter()
             .enumerate()
             .map(|(i, c)| {
-                let w = match (base.get(i), floors.get(i)) {
-                    (Some(Some(b)), Some(Some(f))) => crate::gap::residuals::known_weight(b, f),
-                    _ => 1.0,
-                };
+                let w = weights.get(i).copied().unwrap_or(1.0);
                 model.known(&c.name).under(w).level
             })
             .collect();
@@ -354,6 +346,19 @@ impl Setup<'_> {
             Some(self.residuals(&c, &self.clean))
         }
     }
+}
+
+/// Channel by channel (index), how much of a known level's excess shows against the floors
+/// `now` when it was measured against `base` ([`crate::gap::residuals::known_weight`]); 1
+/// where either has no floor.
+pub fn known_weights(base: &[Option<Floor>], now: &[Option<Floor>]) -> Vec<f64> {
+    base.iter()
+        .zip(now)
+        .map(|(b, f)| match (b, f) {
+            (Some(b), Some(f)) => crate::gap::residuals::known_weight(b, f),
+            _ => 1.0,
+        })
+        .collect()
 }
 
 /// The mean chi-square gain of a linearised fit along Jacobian `j` (covariance `ainv`) on

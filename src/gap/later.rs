@@ -183,18 +183,19 @@ pub(crate) fn nothing_off_that_it_moves(
     effect: &effects::Effect,
     earlier: &Configs,
     floors: &[Option<resim::Floor>],
-    base: &[Option<resim::Floor>],
+    weights: &[f64],
 ) -> Result<Option<String>, GapError> {
     let run = resim::simulate(earlier, m, None)?;
-    let stats = stats_for(model, m, earlier, &run, floors, base);
+    let stats = stats_for(model, m, earlier, &run, floors, weights);
     let moved = moved_by(effect, &stats);
-    // The run bound, like the known level, read against `floors`.
+    // The run bound, like the known level, read against `floors` (`weights`, by channel
+    // index: `fit::known_weights`).
     let weight = |channel: &str| {
-        let i = m.channels.iter().position(|c| c.name == channel);
-        match i.map(|i| (base.get(i), floors.get(i))) {
-            Some((Some(Some(b)), Some(Some(f)))) => residuals::known_weight(b, f),
-            _ => 1.0,
-        }
+        m.channels
+            .iter()
+            .position(|c| c.name == channel)
+            .and_then(|i| weights.get(i).copied())
+            .unwrap_or(1.0)
     };
     let bound = |s: &ChannelStats| {
         model
@@ -559,17 +560,16 @@ mod tests {
         });
         let clean = resim::simulate(&base, &m, None).unwrap();
         let floors = resim::noise_floor(&base, &m, &clean).unwrap();
-        let off =
-            nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &floors).unwrap();
+        let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[]).unwrap();
         assert_eq!(off, None, "the imbalance's channels are off");
         let mut with = base.clone();
         effects::apply(imbalance, &[0.15], &mut with);
-        let why = nothing_off_that_it_moves(&model, &m, imbalance, &with, &floors, &floors)
+        let why = nothing_off_that_it_moves(&model, &m, imbalance, &with, &floors, &[])
             .unwrap()
             .expect("nothing left off once the imbalance is in the model");
         assert!(why.contains("compass_deg") && why.contains("x_m"), "{why}");
         assert!(
-            nothing_off_that_it_moves(&model, &m, depth, &base, &floors, &floors)
+            nothing_off_that_it_moves(&model, &m, depth, &base, &floors, &[])
                 .unwrap()
                 .is_some(),
             "a depth offset finds its channel off, which the imbalance leaves alone"
@@ -592,7 +592,7 @@ mod tests {
         });
         let clean = resim::simulate(&base, &m, None).unwrap();
         let floors = resim::noise_floor(&base, &m, &clean).unwrap();
-        let stats = stats_for(&model, &m, &base, &clean, &floors, &floors);
+        let stats = stats_for(&model, &m, &base, &clean, &floors, &[]);
         let moved = moved_by(imbalance, &stats);
         assert!(moved.iter().any(|s| s.chi2_per_sample > 4.0), "{moved:?}");
         for s in &moved {
@@ -611,11 +611,10 @@ mod tests {
                 .insert(s.channel.clone(), 2.0 * s.chi2_per_sample);
             model.discrepancy_scatter.insert(s.channel.clone(), scatter);
         }
-        let off =
-            nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &floors).unwrap();
+        let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[]).unwrap();
         assert_eq!(off, None, "the moved channels lie over their own bound");
         model.discrepancy_scatter.clear();
-        let why = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &floors)
+        let why = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[])
             .unwrap()
             .expect("under the report's bound, nothing is off");
         assert!(why.contains("run bound"), "{why}");

@@ -229,25 +229,22 @@ fn floor_kept<'a>(floor: &'a resim::Floor, keep: &[bool]) -> std::borrow::Cow<'a
 }
 
 /// Each channel's statistics of `run` against `floors`, judged against the model's known
-/// levels, which were measured against `base` (the model's own floors) and are read against
-/// `floors` ([`residuals::known_weight`]).
+/// levels with their excess over the floor scaled by `weights` (by channel index,
+/// [`fit::known_weights`]: 1 where no named noise source raised the floor; empty: 1 for all).
 fn stats_for(
     model: &GapModel,
     m: &Measurement,
     c: &Configs,
     run: &resim::Run,
     floors: &[Option<resim::Floor>],
-    base: &[Option<resim::Floor>],
+    weights: &[f64],
 ) -> Vec<ChannelStats> {
     let mut out = Vec::new();
     for (i, ch) in m.channels.iter().enumerate() {
         let Some(floor) = &floors[i] else { continue };
-        let known = match base.get(i) {
-            Some(Some(b)) => model
-                .known(&ch.name)
-                .under(residuals::known_weight(b, floor)),
-            _ => model.known(&ch.name),
-        };
+        let known = model
+            .known(&ch.name)
+            .under(weights.get(i).copied().unwrap_or(1.0));
         if let Some((t, r)) = sonar::stats_residuals(c, run, m.experiment.duration_s, ch) {
             let keep = free_of_contact(run, &t);
             let (t, r) = (kept(&t, &keep), kept(&r, &keep));
@@ -405,7 +402,7 @@ fn shares(
             }
         }
         let run = resim::simulate(&c, m, None)?;
-        let without = stats_excess(&stats_for(model, m, &c, &run, floors, floors), false);
+        let without = stats_excess(&stats_for(model, m, &c, &run, floors, &[]), false);
         growth.push((without - after).max(0.0));
     }
     let total: f64 = growth.iter().sum();
@@ -490,12 +487,14 @@ pub fn analyse_with(
         .filter(|(_, f)| f.is_none())
         .map(|(c, _)| c.name.clone())
         .collect();
-    let before = stats_for(model, m, &start, &clean0, &floors, &floors);
-    let own_floors: &[Option<resim::Floor>] = &floors;
+    let before = stats_for(model, m, &start, &clean0, &floors, &[]);
+    // Each channel's known level read against the floor the named noise sources give
+    // (`fit::known_weights`): the model's own floor until one is named.
+    let noise_weights = |now: &[Option<resim::Floor>]| fit::known_weights(&floors, now);
 
     let spread = model.predictive_spread();
-    let first = fit::setup(m, start.clone(), &floors, options.split, &spread)?
-        .with_known(model, own_floors);
+    let first =
+        fit::setup(m, start.clone(), &floors, options.split, &spread)?.with_known(model, &[]);
     let heldout_before = heldout_excess(&first, &start, &clean0, false);
     let heldout_raw_before = heldout_excess(&first, &start, &clean0, true);
     // The model with the accepted effects: what each round fits against, and its gap
@@ -517,7 +516,7 @@ pub fn analyse_with(
             known: Vec::new(),
             ..first
         }
-        .with_known(model, own_floors);
+        .with_known(model, &noise_weights(&floors));
         part_channels(&judged, c, run, false, None)
             .into_iter()
             .map(|(chi2, known)| chi2 / known.max(1.0))
@@ -547,7 +546,7 @@ pub fn analyse_with(
         &mut |round, accepted, refused| {
             let floors = current_floors.borrow();
             let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
-                .with_known(model, own_floors);
+                .with_known(model, &noise_weights(&floors));
             let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
             skip.extend(refused.iter().map(|r| r.name.as_str()));
             skip.extend(model.effects.iter().map(|e| e.effect.name));
@@ -585,7 +584,7 @@ pub fn analyse_with(
             if named.len() > 1 {
                 let floors = current_floors.borrow();
                 let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
-                    .with_known(model, own_floors);
+                    .with_known(model, &noise_weights(&floors));
                 if let Some(refit) = fit::refit_jointly(&setup, &named) {
                     for ((values, ci), (new_values, new_ci)) in joint.iter_mut().zip(refit) {
                         *values = new_values;
@@ -675,7 +674,7 @@ pub fn analyse_with(
                     effect,
                     &round_configs(),
                     &current_floors.borrow(),
-                    own_floors,
+                    &noise_weights(&current_floors.borrow()),
                 )?
             {
                 return Ok(Some(format!(
@@ -720,7 +719,7 @@ pub fn analyse_with(
             {
                 let floors = current_floors.borrow();
                 let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
-                    .with_known(model, own_floors);
+                    .with_known(model, &noise_weights(&floors));
                 let strong = fit::strong_blocks(
                     &first.residuals(&start, &clean0),
                     &setup.residuals(&setup.base, &setup.clean),
@@ -768,7 +767,7 @@ pub fn analyse_with(
             {
                 let floors = current_floors.borrow();
                 let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
-                    .with_known(model, own_floors);
+                    .with_known(model, &noise_weights(&floors));
                 if let Some(rival) = fit::structural_rival(&setup, win) {
                     return Ok(Some(format!(
                         "`{}`, a term of the base model's structure, explains the same \
@@ -799,7 +798,7 @@ pub fn analyse_with(
     if accepted.len() > 1 {
         let floors = current_floors.borrow();
         let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
-            .with_known(model, own_floors);
+            .with_known(model, &noise_weights(&floors));
         if let Some(ex) = later::exchange_lookalikes(&setup, &rounds, &accepted) {
             *fitted.borrow_mut() = with_named(model, &ex.accepted)?;
             *configs.borrow_mut() = ex.configs;
@@ -814,13 +813,14 @@ pub fn analyse_with(
     } else {
         resim::noise_floor(&configs, m, &clean1)?
     };
-    let after = stats_for(model, m, &configs, &clean1, &floors_after, &floors);
+    let weights_after = noise_weights(&current_floors.borrow());
+    let after = stats_for(model, m, &configs, &clean1, &floors_after, &weights_after);
     // Judged against the floor the model's named noise sources give, as the whole run is.
     let judged = fit::Setup {
         floors: &floors_after,
         ..first
     }
-    .with_known(model, &floors);
+    .with_known(model, &weights_after);
     let heldout_after = heldout_excess(&judged, &configs, &clean1, false);
     let heldout_raw_after = heldout_excess(&judged, &configs, &clean1, true);
     let (eb, ea) = (stats_excess(&before, false), stats_excess(&after, false));
@@ -924,7 +924,7 @@ mod tests {
         assert!(run.contacts.is_empty(), "{:?}", run.contacts);
         let floors = resim::noise_floor(&c, &m, &run).unwrap();
         let x_stats = |run: &resim::Run| {
-            stats_for(&model, &m, &c, run, &floors, &floors)
+            stats_for(&model, &m, &c, run, &floors, &[])
                 .into_iter()
                 .find(|s| s.channel == "x_m")
                 .unwrap()
@@ -958,7 +958,7 @@ mod tests {
             let (_, _, m) = resim::tests::manoeuvre(seed);
             let run = resim::simulate(&c, &m, None).unwrap();
             let floors = floors.get_or_insert_with(|| resim::noise_floor(&c, &m, &run).unwrap());
-            let off: Vec<String> = stats_for(&model, &m, &c, &run, floors, floors)
+            let off: Vec<String> = stats_for(&model, &m, &c, &run, floors, &[])
                 .into_iter()
                 .filter(|s| s.significant)
                 .map(|s| format!("{} {:.2}", s.channel, s.chi2_per_sample))
