@@ -333,18 +333,7 @@ impl Setup<'_> {
 
     /// Residuals with `effect` applied at `params`.
     pub fn eval(&self, effect: &Effect, params: &[f64]) -> Option<Residuals> {
-        let mut c = self.base.clone();
-        effects::apply(effect, params, &mut c);
-        if self.resimulates(effect) {
-            // A trial point under which the run diverges is a failed evaluation: the bounded
-            // fit steps back from it.
-            let run = resim::simulate(&c, self.m, None)
-                .ok()
-                .filter(|r| r.divergences.is_empty())?;
-            Some(self.residuals(&c, &run))
-        } else {
-            Some(self.residuals(&c, &self.clean))
-        }
+        self.evaluate(effect, params).map(|e| e.residuals)
     }
 }
 
@@ -507,6 +496,7 @@ fn fit_part(
     r0: &Residuals,
     part: Option<bool>,
     starts: &[DVector<f64>],
+    evaluations: &memo::Evaluations<'_, '_>,
 ) -> Option<Scored> {
     let k = effect.parameters.len();
     let scales = effect.scales;
@@ -518,17 +508,8 @@ fn fit_part(
             None => DVector::from_column_slice(&r.values),
         }
     };
-    // Every evaluation's full residuals, kept so the fitted point's (the fit selects one
-    // part) need not be re-simulated.
-    let evaluated: std::sync::Mutex<Vec<(Vec<f64>, Residuals)>> = Default::default();
     let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
-        let params = to_params(x);
-        let r = setup.eval(effect, &params)?;
-        let selected = select(&r);
-        if let Ok(mut kept) = evaluated.lock() {
-            kept.push((params, r));
-        }
-        Some(selected)
+        Some(select(&evaluations.at(&to_params(x))?.residuals))
     };
     let bounds = Bounds::scaled(effect.bounds, scales);
     let fit = lsq::minimize(&objective, &bounds, starts)?;
@@ -541,14 +522,8 @@ fn fit_part(
         "fit finished"
     );
     let params = to_params(&fit.x);
-    let kept = evaluated.lock().ok().and_then(|mut kept| {
-        let at = kept.iter().position(|(p, _)| *p == params)?;
-        Some(kept.swap_remove(at).1)
-    });
-    let r1 = match kept {
-        Some(r) => r,
-        None => setup.eval(effect, &params)?,
-    };
+    // The fitted point's full residuals (the fit selects one part).
+    let r1 = evaluations.at(&params)?.residuals;
     let (chi2_before, chi2_after) = match part {
         Some(_) => (r0.chi2(true), r1.chi2(true)),
         None => (r0.all_chi2(), r1.all_chi2()),
@@ -650,7 +625,8 @@ fn fit_mean(
         }
         _ => lsq::axis_scan(k, &START_SCAN),
     };
-    let Some(train) = fit_part(setup, effect, r0, Some(true), &starts) else {
+    let kept = memo::Evaluations::new(setup, effect, r0);
+    let Some(train) = fit_part(setup, effect, r0, Some(true), &starts, &kept) else {
         return Candidate::untestable(
             effect,
             r0.chi2(true),
@@ -660,18 +636,13 @@ fn fit_mean(
     // Where the trained point's re-simulation touches the pool and the base's does not, contact
     // impulses make the readings jump as they do where the base touches (left out of every
     // fit): the held-out comparison leaves those samples out too.
-    let touched = setup
-        .resimulates(effect)
-        .then(|| {
-            let mut c = setup.base.clone();
-            effects::apply(effect, &train.params, &mut c);
-            resim::simulate(&c, setup.m, None).ok()
-        })
-        .flatten()
-        .filter(|run| run.contacts != setup.clean.contacts);
+    let touched = kept
+        .at(&train.params)
+        .and_then(|e| e.contacts)
+        .filter(|contacts| *contacts != setup.clean.contacts);
     let (held_before, held_after) = (
-        left_out_where_touched(r0, touched.as_ref()),
-        left_out_where_touched(&train.residuals, touched.as_ref()),
+        left_out_where_touched(r0, touched.as_deref()),
+        left_out_where_touched(&train.residuals, touched.as_deref()),
     );
     let heldout_chi2_before = held_before.chi2(false);
     let heldout_chi2_after = held_after.chi2(false);
@@ -694,7 +665,7 @@ fn fit_mean(
             k,
             train.params.iter().zip(effect.scales).map(|(p, s)| p / s),
         );
-        match fit_part(setup, effect, r0, None, &[start]) {
+        match fit_part(setup, effect, r0, None, &[start], &kept) {
             Some(all) => {
                 evaluations += all.evaluations;
                 all
@@ -745,13 +716,13 @@ fn fit_mean(
     }
 }
 
-/// `r` with every sample where `run` touched the pool ([`Run::in_contact`]) set to zero, as the
-/// setup leaves out those where its base run touched.
-pub(crate) fn left_out_where_touched(r: &Residuals, run: Option<&Run>) -> Residuals {
+/// `r` with every sample where a run with `contacts` touched the pool ([`Run::in_contact`]) set
+/// to zero, as the setup leaves out those where its base run touched.
+pub(crate) fn left_out_where_touched(r: &Residuals, contacts: Option<&[[f64; 2]]>) -> Residuals {
     let mut r = r.clone();
-    if let Some(run) = run {
+    if let Some(contacts) = contacts {
         for (v, t) in r.values.iter_mut().zip(&r.times) {
-            if run.in_contact(*t) {
+            if resim::touching(contacts, *t) {
                 *v = 0.0;
             }
         }
@@ -986,6 +957,7 @@ pub fn setup<'a>(
 }
 
 mod emi;
+mod memo;
 pub use emi::{EMI_WINDOW_S, fit_emi};
 mod constancy;
 pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, strong_blocks};

@@ -12,7 +12,7 @@ use crate::gap::anchor;
 pub use crate::gap::anchor::{compass_heading_deg, wrap_deg};
 use crate::gap::effects::Configs;
 use crate::gap::format::{Channel, Measurement};
-pub use crate::gap::run::{Divergence, ENSEMBLE, Floor, Run};
+pub use crate::gap::run::{Divergence, ENSEMBLE, Floor, Run, touching};
 use crate::physics::state::STERN;
 use crate::physics::{InitialState, Model, ThrusterCommand, hdt_command};
 use crate::sensors::accelerometer::G0_MPS2;

@@ -69,12 +69,18 @@ pub struct Divergence {
 /// 3.3 N/(m/s) against a hull of tens of kilograms gives a time constant of several seconds.
 pub const CONTACT_MEMORY_S: f64 = 10.0;
 
+/// True when `t_s` lies in one of the contact intervals `contacts` ([`Run::contacts`]) or
+/// within [`CONTACT_MEMORY_S`] after it.
+pub fn touching(contacts: &[[f64; 2]], t_s: f64) -> bool {
+    contacts
+        .iter()
+        .any(|[a, b]| *a <= t_s && t_s < *b + CONTACT_MEMORY_S)
+}
+
 impl Run {
     /// True when `t_s` lies where the hull touched the pool ([`Run::contacts`]).
     pub fn in_contact(&self, t_s: f64) -> bool {
-        self.contacts
-            .iter()
-            .any(|[a, b]| *a <= t_s && t_s < *b + CONTACT_MEMORY_S)
+        touching(&self.contacts, t_s)
     }
 
     /// The state nearest `t_s` (clamped to the run).

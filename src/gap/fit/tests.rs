@@ -454,8 +454,8 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
         contacts: vec![[31.0, 33.0]],
     };
     let (b, a) = (
-        left_out_where_touched(&before, Some(&run)),
-        left_out_where_touched(&after, Some(&run)),
+        left_out_where_touched(&before, Some(&run.contacts)),
+        left_out_where_touched(&after, Some(&run.contacts)),
     );
     assert!(b.chi2(false) > a.chi2(false), "left out, the gain shows");
     let kept = |r: &Residuals| r.values.iter().filter(|v| **v != 0.0).count();
