@@ -505,6 +505,8 @@ pub fn analyse_with(
     // (depth EMI) is named, the model's with it. Against the old floor, the named noise would
     // stay in the residuals as disagreement for the next round's candidates to fit.
     let current_floors = std::cell::RefCell::new(floors.clone());
+    // The configuration `current_floors` is the floor of.
+    let floors_of = std::cell::RefCell::new(start.clone());
     // Each channel's chi-square over its known level, the terms of the gap measure's mean.
     let levels_of = |c: &Configs, run: &resim::Run| -> Vec<f64> {
         let floors = current_floors.borrow();
@@ -580,6 +582,7 @@ pub fn analyse_with(
                 }
                 let clean = resim::simulate(&noisy, m, None)?;
                 *current_floors.borrow_mut() = resim::noise_floor(&noisy, m, &clean)?;
+                *floors_of.borrow_mut() = noisy;
             }
             if named.len() > 1 {
                 let floors = current_floors.borrow();
@@ -808,8 +811,11 @@ pub fn analyse_with(
     let (configs, fitted) = (configs.into_inner(), fitted.into_inner());
     let clean1 = resim::simulate(&configs, m, None)?;
     // A fitted noise source (depth EMI) changes the floor the "after" residuals are judged by.
+    // The floor is a function of the configuration: one already made is not made again.
     let floors_after = if configs == start {
         floors.clone()
+    } else if configs == *floors_of.borrow() {
+        current_floors.borrow().clone()
     } else {
         resim::noise_floor(&configs, m, &clean1)?
     };
