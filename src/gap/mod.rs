@@ -761,8 +761,9 @@ pub fn analyse_with(
                     )));
                 }
             }
-            // A later name is refused when a term of the base model's structure explains the
-            // same disagreement as well or better (`fit::structural_rival`).
+            // A later name is refused when the earlier names moved its channels somewhere new
+            // and a term of the base model's structure explains the same disagreement as well
+            // or better there (`fit::structural_rival`).
             if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
@@ -771,7 +772,10 @@ pub fn analyse_with(
                 let floors = current_floors.borrow();
                 let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
                     .with_known(model, &noise_weights(&floors));
-                if let Some(rival) = fit::structural_rival(&setup, win) {
+                let unnamed = setup.residuals(&start, &clean0);
+                if fit::moved_to_new_regime(&setup, &unnamed, win)
+                    && let Some(rival) = fit::structural_rival(&setup, win)
+                {
                     return Ok(Some(format!(
                         "`{}`, a term of the base model's structure, explains the same \
                          disagreement as well or better (delta BIC {:.1} \

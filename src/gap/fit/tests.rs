@@ -629,3 +629,33 @@ fn a_known_level_is_read_against_the_floor_a_named_emi_raises() {
     assert_eq!(known_weight(&floor0, &floor0), 1.0);
     assert_eq!(level_under(known, 1.0), known);
 }
+
+/// The earlier names take a later winner somewhere new only where they move the readings of
+/// its channels by a share of what the winner moves them: a depth offset named first leaves
+/// the heading and track a sway-yaw coupling changes nearly as they were, a thruster lag of
+/// 1.5 s more than the model's moves them.
+#[test]
+fn an_earlier_depth_offset_leaves_a_coupling_in_its_regime_and_a_lag_does_not() {
+    let coupling = effects::by_name("sway_yaw_coupling").unwrap();
+    let moved = |earlier: &str, value: f64| {
+        let earlier = effects::by_name(earlier).unwrap();
+        let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(13, |t| {
+            effects::apply(coupling, &[2.0], t);
+            effects::apply(earlier, &[value], t);
+        });
+        let clean0 = resim::simulate(&c, &m, None).unwrap();
+        let mut named = c.clone();
+        effects::apply(earlier, &[value], &mut named);
+        let clean = resim::simulate(&named, &m, None).unwrap();
+        let floors = resim::noise_floor(&named, &m, &clean).unwrap();
+        let setup = setup(&m, named, &floors, Split::DEFAULT, &[]).unwrap();
+        let win = fit_effects(&setup, &[coupling], &mut |_| {}).remove(0);
+        assert!(win.guards.all(), "after {}: {:?}", earlier.name, win.guards);
+        moved_to_new_regime(&setup, &setup.residuals(&c, &clean0), &win)
+    };
+    assert!(
+        !moved("depth_offset", 0.1),
+        "a depth offset moves the turns"
+    );
+    assert!(moved("thruster_lag", 1.5), "a lag leaves the turns");
+}
