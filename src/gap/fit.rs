@@ -829,6 +829,8 @@ fn fit_warm(
             delta_bic = result.delta_bic,
             heldout_gain = result.heldout_gain,
             guards = ?result.guards,
+            parameters = ?result.parameters,
+            ci95 = ?result.ci95,
             "candidate fitted"
         );
         result

@@ -633,20 +633,55 @@ pub fn analyse_with(
             // Either sign alone is no proof: on a vehicle of another structure a right effect's
             // value depends on the regime too, and a right effect may be a small part of a
             // disagreement that is mostly structure.
-            let share = if without > 1.0 {
-                (without - mean) / (without - 1.0)
-            } else {
-                1.0
-            };
             let channel_names: Vec<&str> =
                 first_setup_channels.iter().map(String::as_str).collect();
             // A channel without samples is left out of the levels: then the whole run's alone.
             let named_in_order = channel_names.len() == levels.len();
+            // The earlier names can leave the whole run at or below its known levels while the
+            // channels a later name moves still hold an excess: channels the model fits better
+            // than the calibration's runs hide it in the mean. Such a name is judged in the
+            // channels it moves: its share there, and a channel it moves still off.
+            let excess_where_it_acts = named.len() > 1
+                && named.last().is_some_and(|(effect, _, _)| {
+                    effect.kind == effects::Kind::Mean
+                        && later::excess_only_where_it_acts(
+                            effect,
+                            &channel_names,
+                            &current.borrow(),
+                        )
+                });
+            let share = if without > 1.0 {
+                (without - mean) / (without - 1.0)
+            } else if let Some((effect, _, _)) = named.last()
+                && excess_where_it_acts
+            {
+                later::share_where_it_acts(effect, &channel_names, &current.borrow(), &levels)
+            } else {
+                1.0
+            };
+            // A first name must take an excess where it acts, as a later one must
+            // (`later::first_name_without_excess`).
+            if let Some((effect, _, _)) = named.last()
+                && named.len() == 1
+                && effect.kind == effects::Kind::Mean
+                && let Some(why) = later::first_name_without_excess(
+                    effect,
+                    &channel_names,
+                    &current.borrow(),
+                    &levels,
+                )
+            {
+                return Ok(Some(why));
+            }
             if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
             {
-                let whole = too_small_a_share(&current.borrow(), &levels);
+                let whole = if excess_where_it_acts {
+                    None
+                } else {
+                    too_small_a_share(&current.borrow(), &levels)
+                };
                 let where_it_acts = || {
                     named_in_order
                         .then(|| {
@@ -661,6 +696,28 @@ pub fn analyse_with(
                 };
                 if let Some(why) = whole.or_else(where_it_acts) {
                     return Ok(Some(why));
+                }
+                if excess_where_it_acts {
+                    if let Some(why) = nothing_off_that_it_moves(
+                        model,
+                        m,
+                        effect,
+                        &round_configs(),
+                        &current_floors.borrow(),
+                        &noise_weights(&current_floors.borrow()),
+                    )? {
+                        return Ok(Some(format!(
+                            "the effects named before it leave the channels' mean chi-square \
+                             at {without:.3}, at or below the known levels, and {why}"
+                        )));
+                    }
+                    tracing::debug!(
+                        effect = effect.name,
+                        without,
+                        share,
+                        "a later name judged in the channels it moves: the whole run at or \
+                         below its known levels, those channels above theirs"
+                    );
                 }
             }
             // An effect named after others that explains less than most of what they left
