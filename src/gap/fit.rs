@@ -964,7 +964,7 @@ pub use emi::{EMI_WINDOW_S, fit_emi};
 mod constancy;
 pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, strong_blocks};
 mod rival;
-pub use rival::{moved_to_new_regime, structural_rival};
+pub use rival::{earlier_change_dynamics, moved_to_new_regime, structural_rival};
 
 #[cfg(test)]
 mod tests;

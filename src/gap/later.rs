@@ -153,32 +153,25 @@ pub(crate) fn share_where_it_acts(
 }
 
 /// Why an effect named first fits only what the calibration's own runs show where it acts:
-/// in the channels it moves (its signature channels and `also_moves`), their mean chi-square
-/// over their known levels `without` it is at or below 1, or its drop there lies more below
-/// those levels than above them (`channels` naming the entries of `without` and `with` in
-/// order). `None` when it takes an excess there, or moves no channel measured.
+/// the channels it moves (its signature channels and `also_moves`) hold no excess, their mean
+/// chi-square over their known levels `without` it at or below 1 (`channels` naming the
+/// entries of `without` in order). `None` when they hold one, or it moves no channel measured.
 ///
 /// The whole run's excess says nothing of the channels a first name fits: on a null run of a
 /// vehicle of another structure, an accelerometer gain took its channel from 0.850 to 0.836 of
-/// its known level while the track and compass held the run's excess, and was named.
+/// its known level while the track and compass held the run's excess, and was named. Where its
+/// channels do hold an excess, a first name's drop is not split above and below their levels as
+/// a later name's is: a weak true effect fits part of the known disagreement beside its own
+/// (a sway-yaw coupling of 1.7 sigma on bridge seed 141209, case 60: 0.139 below against 0.101
+/// above).
 pub(crate) fn first_name_without_excess(
     effect: &effects::Effect,
     channels: &[&str],
     without: &[f64],
-    with: &[f64],
 ) -> Option<String> {
-    let (before, after) = (
-        where_it_acts(effect, channels, without),
-        where_it_acts(effect, channels, with),
-    );
+    let before = where_it_acts(effect, channels, without);
     if before.is_empty() || channels.len() != without.len() {
         return None;
-    }
-    let n = before.len() as f64;
-    let (mut above, mut below) = (0.0, 0.0);
-    for (b, a) in before.iter().zip(&after) {
-        above += (b.max(1.0) - a.max(1.0)) / n;
-        below += (b.min(1.0) - a.min(1.0)) / n;
     }
     let moved = channels
         .iter()
@@ -187,20 +180,11 @@ pub(crate) fn first_name_without_excess(
         .collect::<Vec<_>>()
         .join(", ");
     let mean = level_mean(&before);
-    if mean <= 1.0 {
-        return Some(format!(
+    (mean <= 1.0).then(|| {
+        format!(
             "the channels it moves ({moved}) hold no disagreement beyond their known levels \
              (their mean chi-square over those levels {mean:.3}): what it would fit is \
              disagreement the calibration's own runs show"
-        ));
-    }
-    (below > above).then(|| {
-        format!(
-            "in the channels it moves ({moved}) it takes the mean chi-square over their known \
-             levels from {mean:.3} to {:.3}: {below:.3} of that below those levels against \
-             {above:.3} above them. It fits more of the disagreement the calibration's own runs \
-             show than of an excess",
-            level_mean(&after)
         )
     })
 }
@@ -579,12 +563,12 @@ mod tests {
         assert!(!excess_only_where_it_acts(current, &names[..7], &left));
     }
 
-    /// A first name must take an excess where it acts: an accelerometer gain whose channel is
+    /// A first name must find an excess where it acts: an accelerometer gain whose channel is
     /// at 0.850 of its known level (a null run of structure seed 204563, case 65) is refused
-    /// whatever the track holds; one whose drop there is mostly below the known level is
-    /// refused; a compass offset that takes its channels' excess passes.
+    /// whatever the track holds; with its channel at 1.05 it is not, nor is a compass offset
+    /// whose channels hold the run's excess.
     #[test]
-    fn a_first_name_must_take_an_excess_where_it_acts() {
+    fn a_first_name_must_find_an_excess_where_it_acts() {
         let names = [
             "x_m",
             "y_m",
@@ -597,23 +581,14 @@ mod tests {
         ];
         let gain = effects::by_name("accel_x_gain").unwrap();
         let before = [0.610, 1.247, 1.440, 1.436, 0.850, 0.939, 0.934, 0.938];
-        let mut after = before;
-        after[4] = 0.836;
-        let why = first_name_without_excess(gain, &names, &before, &after).expect("refused");
+        let why = first_name_without_excess(gain, &names, &before).expect("refused");
         assert!(why.contains("0.850"), "{why}");
         let mut high = before;
         high[4] = 1.05;
-        let mut low = high;
-        low[4] = 0.8;
-        let why = first_name_without_excess(gain, &names, &high, &low).expect("mostly below");
-        assert!(why.contains("0.200 of that below"), "{why}");
+        assert_eq!(first_name_without_excess(gain, &names, &high), None);
         let offset = effects::by_name("compass_offset").unwrap();
-        let mut fitted = before;
-        fitted[2] = 0.9;
-        assert_eq!(
-            first_name_without_excess(offset, &names, &before, &fitted),
-            None
-        );
+        assert_eq!(first_name_without_excess(offset, &names, &before), None);
+        assert_eq!(first_name_without_excess(gain, &names[..7], &before), None);
     }
 
     /// A winner in place of a refused one is judged on the channels it moves: a paddle-wheel

@@ -659,17 +659,13 @@ pub fn analyse_with(
             } else {
                 1.0
             };
-            // A first name must take an excess where it acts, as a later one must
+            // A first name must find an excess where it acts, as a later one must
             // (`later::first_name_without_excess`).
             if let Some((effect, _, _)) = named.last()
                 && named.len() == 1
                 && effect.kind == effects::Kind::Mean
-                && let Some(why) = later::first_name_without_excess(
-                    effect,
-                    &channel_names,
-                    &current.borrow(),
-                    &levels,
-                )
+                && let Some(why) =
+                    later::first_name_without_excess(effect, &channel_names, &current.borrow())
             {
                 return Ok(Some(why));
             }
@@ -818,12 +814,16 @@ pub fn analyse_with(
                     )));
                 }
             }
-            // A later name is refused when the earlier names moved its channels somewhere new
-            // and a term of the base model's structure explains the same disagreement as well
-            // or better there (`fit::structural_rival`).
+            // A later name is refused when the earlier names changed the vehicle's dynamics
+            // (`fit::earlier_change_dynamics`), moved its channels somewhere new, and a term of
+            // the base model's structure explains the same disagreement as well or better
+            // there (`fit::structural_rival`).
+            let before_it: Vec<&effects::Effect> =
+                named.iter().rev().skip(1).map(|n| n.0).collect();
             if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
+                && fit::earlier_change_dynamics(&before_it)
                 && let Some(win) = accepted.last()
             {
                 let floors = current_floors.borrow();

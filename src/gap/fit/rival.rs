@@ -144,6 +144,22 @@ pub(super) fn adds_to(
     adds
 }
 
+/// Whether the effects named before a later winner (`earlier`) change the vehicle's dynamics
+/// at all: one changes the physics, or is a noise source (the floor it raises reads as a move
+/// of every channel it touches). Sensor effects of the mean type (a hard iron, a compass or
+/// depth offset, a paddle-wheel scale) change only how readings map to states: the re-simulation
+/// replays the recorded commands, so they move the vehicle's states through the anchors alone,
+/// its speeds and turn rates not at all, and the structure the baseline runs pinned at those
+/// speeds and rates stays pinned. Read on the readings alone, a hard iron named first moved a
+/// coupling's channels by 3964 against the coupling's own 813 (structure seed 134059, seed
+/// 123067, case 73) and a compass latency's by more than a quarter (208577, seed 191413, case
+/// 79), and both were refused for a structural term.
+pub fn earlier_change_dynamics(earlier: &[&effects::Effect]) -> bool {
+    earlier
+        .iter()
+        .any(|e| e.physics || e.kind != effects::Kind::Mean)
+}
+
 /// The earlier names take the vehicle somewhere new for a later winner only where they move
 /// the re-simulated readings of its signature channels by at least this share of the
 /// chi-square the winner's own change makes there.

@@ -659,3 +659,23 @@ fn an_earlier_depth_offset_leaves_a_coupling_in_its_regime_and_a_lag_does_not() 
     );
     assert!(moved("thruster_lag", 1.5), "a lag leaves the turns");
 }
+
+/// Sensor effects of the mean type named first leave the vehicle's dynamics as they were; a
+/// physics effect or a noise source among them does not.
+#[test]
+fn only_physics_or_noise_named_first_changes_the_dynamics() {
+    let e = |name| effects::by_name(name).unwrap();
+    assert!(!earlier_change_dynamics(&[e("compass_hard_iron")]));
+    assert!(!earlier_change_dynamics(&[
+        e("compass_offset"),
+        e("depth_offset"),
+        e("velocity_sensor_scale"),
+        e("sensor_latency"),
+    ]));
+    assert!(earlier_change_dynamics(&[e("thruster_lag")]));
+    assert!(earlier_change_dynamics(&[e("depth_pwm_emi")]));
+    assert!(earlier_change_dynamics(&[
+        e("compass_hard_iron"),
+        e("water_current")
+    ]));
+}
