@@ -538,16 +538,11 @@ mod tests {
     /// while the whole run still holds an excess (then the whole run's share is read).
     #[test]
     fn an_excess_hidden_in_the_mean_is_read_where_the_effect_acts() {
-        let names = [
-            "x_m",
-            "y_m",
-            "compass_deg",
-            "depth_adc",
-            "accel_x_adc",
-            "accel_y_adc",
-            "accel_z_adc",
-            "paddle_speed_mps",
-        ];
+        // The benchmark's channels: every modelled one but the surge speed.
+        let names: Vec<&str> = resim::MODELLED
+            .into_iter()
+            .filter(|c| *c != "surge_mps")
+            .collect();
         let left = [1.096, 4.105, 0.278, 0.683, 0.417, 0.308, 0.376, 0.142];
         let current = effects::by_name("water_current").unwrap();
         assert!(
@@ -569,16 +564,11 @@ mod tests {
     /// whose channels hold the run's excess.
     #[test]
     fn a_first_name_must_find_an_excess_where_it_acts() {
-        let names = [
-            "x_m",
-            "y_m",
-            "compass_deg",
-            "depth_adc",
-            "accel_x_adc",
-            "accel_y_adc",
-            "accel_z_adc",
-            "paddle_speed_mps",
-        ];
+        // The benchmark's channels: every modelled one but the surge speed.
+        let names: Vec<&str> = resim::MODELLED
+            .into_iter()
+            .filter(|c| *c != "surge_mps")
+            .collect();
         let gain = effects::by_name("accel_x_gain").unwrap();
         let before = [0.610, 1.247, 1.440, 1.436, 0.850, 0.939, 0.934, 0.938];
         let why = first_name_without_excess(gain, &names, &before).expect("refused");
