@@ -155,7 +155,8 @@ pub(crate) fn share_where_it_acts(
 /// Why an effect named first fits only what the calibration's own runs show where it acts:
 /// the channels it moves (its signature channels and `also_moves`) hold no excess, their mean
 /// chi-square over their known levels `without` it at or below 1 (`channels` naming the
-/// entries of `without` in order). `None` when they hold one, or it moves no channel measured.
+/// entries of `without` in order). `None` when they hold one, or it moves no re-simulated
+/// channel measured (a sonar effect: a sonar channel's level is its echoes' likelihood).
 ///
 /// The whole run's excess says nothing of the channels a first name fits: on a null run of a
 /// vehicle of another structure, an accelerometer gain took its channel from 0.850 to 0.836 of
@@ -169,16 +170,21 @@ pub(crate) fn first_name_without_excess(
     channels: &[&str],
     without: &[f64],
 ) -> Option<String> {
-    let before = where_it_acts(effect, channels, without);
-    if before.is_empty() || channels.len() != without.len() {
+    if channels.len() != without.len() {
         return None;
     }
-    let moved = channels
+    // The re-simulated channels' levels are chi-square over a known level; a sonar channel's
+    // is the likelihood of its echoes, whose level says nothing of an excess.
+    let (moved, before): (Vec<&str>, Vec<f64>) = channels
         .iter()
-        .copied()
-        .filter(|c| moves(effect, c))
-        .collect::<Vec<_>>()
-        .join(", ");
+        .zip(without)
+        .filter(|(c, _)| moves(effect, c) && resim::MODELLED.contains(c))
+        .map(|(c, x)| (*c, *x))
+        .unzip();
+    if before.is_empty() {
+        return None;
+    }
+    let moved = moved.join(", ");
     let mean = level_mean(&before);
     (mean <= 1.0).then(|| {
         format!(
@@ -579,6 +585,16 @@ mod tests {
         let offset = effects::by_name("compass_offset").unwrap();
         assert_eq!(first_name_without_excess(offset, &names, &before), None);
         assert_eq!(first_name_without_excess(gain, &names[..7], &before), None);
+        // A sonar channel's level is its echoes' likelihood: the fixture of a hidden incidence
+        // cut puts it at 0.41 and 0.52 with the cut in the data.
+        let sonar = effects::by_name("sonar_incidence_dropout").unwrap();
+        let with_sonar: Vec<&str> = names
+            .iter()
+            .copied()
+            .chain(["sonar1_m", "sonar2_m"])
+            .collect();
+        let levels: Vec<f64> = before.iter().copied().chain([0.41, 0.52]).collect();
+        assert_eq!(first_name_without_excess(sonar, &with_sonar, &levels), None);
     }
 
     /// A winner in place of a refused one is judged on the channels it moves: a paddle-wheel
