@@ -758,6 +758,7 @@ pub(crate) mod fake {
                 angular_velocity_body_radps: Vector3::zeros(),
                 velocity_water_body_mps: Vector3::zeros(),
                 specific_force_body_mps2: Vector3::new(0.0, 0.0, -9.81),
+                angular_accel_body_radps2: Vector3::zeros(),
                 thruster_force_n: [0.0; 4],
                 thruster_effort: [0.0; 4],
                 in_contact: false,

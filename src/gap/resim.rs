@@ -301,8 +301,9 @@ pub fn predict(c: &Configs, run: &Run, channel: &Channel, lag_s: f64) -> Option<
             let lsb = AdcBoard::new(&c.sensors.adc, 0).lsb_v();
             let lat = a.errors.latency_s;
             let zero = a.zero_g_v / lsb + c.sensors.adc.offset_lsb;
+            let at_m = Vector3::from(a.position_body_m);
             ts.map(|t| {
-                let f = run.at(t - lag_s - lat).specific_force_body_mps2[axis];
+                let f = run.at(t - lag_s - lat).specific_force_at(&at_m)[axis];
                 let v = (a.zero_g_v + a.sensitivity_v_per_g * f / G0_MPS2).clamp(a.min_v, a.max_v);
                 c.analog
                     .accel_code(axis, v / lsb + c.sensors.adc.offset_lsb, zero)

@@ -693,6 +693,11 @@ impl Model {
             angular_velocity_body_radps: w,
             velocity_water_body_mps: v_r,
             specific_force_body_mps2: accel - gravity_body,
+            angular_accel_body_radps2: Vector3::new(
+                nu_dot[3] + state.contact_accel[3],
+                nu_dot[4] + state.contact_accel[4],
+                nu_dot[5] + state.contact_accel[5],
+            ),
             thruster_force_n: state.thrust_n,
             thruster_effort: state.effort,
             in_contact: state.in_contact,

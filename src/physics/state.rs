@@ -32,6 +32,9 @@ pub struct VehicleState {
     /// Specific force at the centre of mass in the body frame: the kinematic acceleration
     /// minus gravity, i.e. what an ideal accelerometer reads (at rest, level: (0, 0, -g)).
     pub specific_force_body_mps2: Vector3<f64>,
+    /// Body-frame angular acceleration (p, q, r rates of change), for the specific force at a
+    /// point away from the centre of mass.
+    pub angular_accel_body_radps2: Vector3<f64>,
     /// Thrust each thruster produces now, after its lag (N; + = forward / down).
     pub thruster_force_n: [f64; 4],
     /// Signed PWM on-fraction commanded to each motor driver (-1..1; sign = direction).
@@ -46,6 +49,17 @@ impl VehicleState {
     /// clockwise seen from above).
     pub fn euler_rad(&self) -> (f64, f64, f64) {
         self.attitude.euler_angles()
+    }
+
+    /// Specific force at a body-frame point (m from the centre of mass) in the body frame:
+    /// the centre's plus the point's tangential and centripetal accelerations of the rigid
+    /// hull, `w_dot x p + w x (w x p)`. An accelerometer ahead of the centre reads a spin's
+    /// angular acceleration in its sway axis.
+    pub fn specific_force_at(&self, point_body_m: &Vector3<f64>) -> Vector3<f64> {
+        let w = self.angular_velocity_body_radps;
+        self.specific_force_body_mps2
+            + self.angular_accel_body_radps2.cross(point_body_m)
+            + w.cross(&w.cross(point_body_m))
     }
 
     /// Depth of a body-frame point below the surface (m).
@@ -73,4 +87,28 @@ pub trait RayCaster {
         direction: &Unit<Vector3<f64>>,
         max_range_m: f64,
     ) -> Option<RayHit>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sensors::scene::at_rest;
+
+    /// A point 0.1 m ahead of the centre of mass, in a spin at 1 rad/s that speeds up at
+    /// 2 rad/s^2, reads the centre's specific force plus its centripetal acceleration
+    /// (-r^2 x = -0.1 m/s^2, towards the centre) in surge and its tangential acceleration
+    /// (r_dot x = 0.2 m/s^2) in sway; the centre itself reads only the centre's.
+    #[test]
+    fn a_point_ahead_of_the_centre_reads_the_spins_accelerations() {
+        let mut s = at_rest(0.0, Vector3::new(5.0, 5.0, 1.0), UnitQuaternion::identity());
+        s.angular_velocity_body_radps = Vector3::new(0.0, 0.0, 1.0);
+        s.angular_accel_body_radps2 = Vector3::new(0.0, 0.0, 2.0);
+        let centre = s.specific_force_at(&Vector3::zeros());
+        assert_eq!(centre, s.specific_force_body_mps2);
+        let ahead = s.specific_force_at(&Vector3::new(0.1, 0.0, 0.0)) - centre;
+        assert!(
+            (ahead - Vector3::new(-0.1, 0.2, 0.0)).norm() < 1e-12,
+            "{ahead}"
+        );
+    }
 }

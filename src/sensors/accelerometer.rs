@@ -1,11 +1,14 @@
 //! Accelerometer: Freescale MMA7260Q at the 1.5 g range (thesis 3.3.1, 4.6, table 4.1).
 //!
-//! Each axis measures the body-frame specific force (`VehicleState::specific_force_body_mps2`:
-//! gravity projection plus motion; at rest and level (0, 0, -g)). The sensor axes are the body
+//! Each axis measures the body-frame specific force at the part's position
+//! (`VehicleState::specific_force_at`: gravity projection plus motion, plus the tangential and
+//! centripetal accelerations of a point away from the centre of mass; at rest and level
+//! (0, 0, -g)). The sensor axes are the body
 //! axes (forward, starboard, down). Chain per axis: one-pole low-pass (the part's internal
 //! filter) -> noise package (m/s^2) -> `zero_g_v + sensitivity * f / g0` -> output noise
 //! (4.7 mV rms) -> clipping to the output swing 0.45..2.85 V -> the ADC.
 
+use nalgebra::Vector3;
 use rand::RngExt;
 use rand_distr::StandardNormal;
 
@@ -36,8 +39,9 @@ impl Accelerometer {
     }
 
     pub fn update(&mut self, state: &VehicleState) {
+        let specific = state.specific_force_at(&Vector3::from(self.s.position_body_m));
         for axis in 0..3 {
-            let f = self.filters[axis].update(state.t_s, state.specific_force_body_mps2[axis]);
+            let f = self.filters[axis].update(state.t_s, specific[axis]);
             self.errors[axis].push(state.t_s, f);
         }
     }

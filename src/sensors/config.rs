@@ -96,6 +96,9 @@ pub struct VelocitySettings {
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct AccelerometerSettings {
+    /// Where the part sits in the body frame (m from the centre of mass): it reads the
+    /// specific force there.
+    pub position_body_m: [f64; 3],
     pub zero_g_v: f64,
     pub sensitivity_v_per_g: f64,
     pub min_v: f64,

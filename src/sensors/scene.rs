@@ -141,6 +141,7 @@ pub fn at_rest(
         angular_velocity_body_radps: Vector3::zeros(),
         velocity_water_body_mps: Vector3::zeros(),
         specific_force_body_mps2: attitude.inverse_transform_vector(&g),
+        angular_accel_body_radps2: Vector3::zeros(),
         thruster_force_n: [0.0; 4],
         thruster_effort: [0.0; 4],
         in_contact: false,

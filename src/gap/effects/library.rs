@@ -64,7 +64,7 @@ const STRUCTURAL: Effect = Effect {
 };
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 41] = [
+pub const LIBRARY: [Effect; 42] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -891,6 +891,20 @@ pub const LIBRARY: [Effect; 41] = [
         extend: |p, c| c.sensors.depth.position_body_m[0] += at(p, 0),
         moves_anchors: true,
         calibration: Calibration::Discrepancy(27),
+        ..STRUCTURAL
+    },
+    Effect {
+        name: "accel_position",
+        parameters: &["forward_m"],
+        scales: &[0.05],
+        bounds: &[(-0.4, 0.4)],
+        signature: "the sway accelerometer swings with every change of turn rate, the heave one \
+                    with every change of pitch rate, and the surge one dips in fast spins: the \
+                    part sits ahead of or behind the centre of mass",
+        channels: &["accel_x_adc", "accel_y_adc", "accel_z_adc"],
+        physics: false,
+        extend: |p, c| c.sensors.accelerometer.position_body_m[0] += at(p, 0),
+        calibration: Calibration::Discrepancy(33),
         ..STRUCTURAL
     },
     Effect {

@@ -89,6 +89,8 @@ struct RawVelocity {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawAccelerometer {
+    #[serde(default)]
+    position_body_m: [f64; 3],
     zero_g_v: f64,
     sensitivity_v_per_g: f64,
     min_v: f64,
@@ -372,6 +374,7 @@ impl RawAccelerometer {
     fn resolve(&self, doc: &Document<'_>) -> Result<AccelerometerSettings, ConfigError> {
         let a = self;
         let r = AccelerometerSettings {
+            position_body_m: finite3(doc, "accelerometer.position_body_m", a.position_body_m, 2.0)?,
             zero_g_v: positive(doc, "accelerometer.zero_g_v", a.zero_g_v, 5.0, "V")?,
             sensitivity_v_per_g: positive(
                 doc,
