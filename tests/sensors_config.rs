@@ -38,6 +38,19 @@ fn out_of_range_value_names_line_and_key() {
 }
 
 #[test]
+fn an_accelerometer_outside_the_hull_is_rejected_by_key() {
+    let err = with(
+        "position_body_m = [0.0, 0.0, 0.0]   # m, where the part sits",
+        "position_body_m = [3.0, 0.0, 0.0]   # m, where the part sits",
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("accelerometer.position_body_m.0"),
+        "{err}"
+    );
+}
+
+#[test]
 fn unknown_key_is_rejected_with_its_line() {
     let err = with("[compass]\n", "[compass]\nfeild_ut = 3.0\n").unwrap_err();
     assert!(matches!(err, ConfigError::Syntax { .. }), "{err}");

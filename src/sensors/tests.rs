@@ -71,6 +71,39 @@ fn ideal_suite_returns_the_ideal_quantised_values() {
     }
 }
 
+/// An accelerometer mounted 0.2 m ahead of the centre of mass reads a spin's angular
+/// acceleration in its sway axis (2 rad/s^2 x 0.2 m = 0.4 m/s^2, about 6.7 codes at 0.8 V/g)
+/// and the spin's centripetal acceleration in surge; one at the centre reads neither.
+#[test]
+fn an_accelerometer_ahead_of_the_centre_reads_the_spin() {
+    let mut cfg = config().ideal();
+    let code = |cfg: &SensorsConfig, src| {
+        let mut suite = SensorSuite::new(cfg, 9);
+        let mut st = at_rest(1.0, pos(), yaw(0.0));
+        st.angular_velocity_body_radps.z = 1.0;
+        st.angular_accel_body_radps2.z = 2.0;
+        suite.update(&st, &OpenWater);
+        suite.read_source(src, 1.0).map(f64::from)
+    };
+    let centre_y = code(&cfg, AdcSource::AccelY).expect("a reading");
+    let centre_x = code(&cfg, AdcSource::AccelX).expect("a reading");
+    cfg.accelerometer.position_body_m = [0.2, 0.0, 0.0];
+    let lsb = SensorSuite::new(&cfg, 9).adc.lsb_v();
+    let per_mps2 = 0.8 / super::accelerometer::G0_MPS2 / lsb;
+    let ahead_y = code(&cfg, AdcSource::AccelY).expect("a reading");
+    let ahead_x = code(&cfg, AdcSource::AccelX).expect("a reading");
+    assert!(
+        (ahead_y - centre_y - 0.4 * per_mps2).abs() <= 1.0,
+        "sway {centre_y} -> {ahead_y}, expected +{:.1} codes",
+        0.4 * per_mps2
+    );
+    assert!(
+        (ahead_x - centre_x + 0.2 * per_mps2).abs() <= 1.0,
+        "surge {centre_x} -> {ahead_x}, expected -{:.1} codes",
+        0.2 * per_mps2
+    );
+}
+
 #[test]
 fn depth_clamps_at_the_surface() {
     let cfg = config().ideal();
