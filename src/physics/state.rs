@@ -92,7 +92,6 @@ pub trait RayCaster {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sensors::scene::at_rest;
 
     /// A point 0.1 m ahead of the centre of mass, in a spin at 1 rad/s that speeds up at
     /// 2 rad/s^2, reads the centre's specific force plus its centripetal acceleration
@@ -100,9 +99,19 @@ mod tests {
     /// (r_dot x = 0.2 m/s^2) in sway; the centre itself reads only the centre's.
     #[test]
     fn a_point_ahead_of_the_centre_reads_the_spins_accelerations() {
-        let mut s = at_rest(0.0, Vector3::new(5.0, 5.0, 1.0), UnitQuaternion::identity());
-        s.angular_velocity_body_radps = Vector3::new(0.0, 0.0, 1.0);
-        s.angular_accel_body_radps2 = Vector3::new(0.0, 0.0, 2.0);
+        let s = VehicleState {
+            t_s: 0.0,
+            position_m: Vector3::new(5.0, 5.0, 1.0),
+            attitude: UnitQuaternion::identity(),
+            velocity_body_mps: Vector3::zeros(),
+            angular_velocity_body_radps: Vector3::new(0.0, 0.0, 1.0),
+            velocity_water_body_mps: Vector3::zeros(),
+            specific_force_body_mps2: Vector3::new(0.0, 0.0, -9.81),
+            angular_accel_body_radps2: Vector3::new(0.0, 0.0, 2.0),
+            thruster_force_n: [0.0; 4],
+            thruster_effort: [0.0; 4],
+            in_contact: false,
+        };
         let centre = s.specific_force_at(&Vector3::zeros());
         assert_eq!(centre, s.specific_force_body_mps2);
         let ahead = s.specific_force_at(&Vector3::new(0.1, 0.0, 0.0)) - centre;
