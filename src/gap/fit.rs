@@ -508,8 +508,13 @@ fn fit_part(
             None => DVector::from_column_slice(&r.values),
         }
     };
+    // The search leaves out, beside what the base leaves out, where its start point's
+    // re-simulation touches the pool ([`search_contacts`]); the figures the fit is scored by
+    // leave out what the base leaves out, the same samples for every candidate.
+    let contacts = search_contacts(setup, starts, |x| evaluations.at(&to_params(x)), select);
+    let mask = |r: &Residuals| left_out_where_touched(r, contacts.as_deref());
     let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
-        Some(select(&evaluations.at(&to_params(x))?.residuals))
+        Some(select(&mask(&evaluations.at(&to_params(x))?.residuals)))
     };
     let bounds = Bounds::scaled(effect.bounds, scales);
     let fit = lsq::minimize(&objective, &bounds, starts)?;
@@ -540,11 +545,16 @@ fn fit_part(
         (Some(j), Some(ai)) => null_factor(j, ai, &null, &white),
         _ => 1.0,
     };
-    let at_start = lsq::jacobian_at(&objective, &bounds, &DVector::zeros(k), Some(select(r0)))
-        .and_then(|j| {
-            let a = (j.transpose() * &j).try_inverse()?;
-            Some(null_factor(&j, &a, &null, &white))
-        });
+    let at_start = lsq::jacobian_at(
+        &objective,
+        &bounds,
+        &DVector::zeros(k),
+        Some(select(&mask(r0))),
+    )
+    .and_then(|j| {
+        let a = (j.transpose() * &j).try_inverse()?;
+        Some(null_factor(&j, &a, &null, &white))
+    });
     let noise_factor = at_start.map_or(at_fit, |f| f.max(at_fit));
     let variance_factor = (chi2_after / (n_eff - k as f64).max(1.0)).max(1.0);
     let scale = noise_factor * variance_factor;
@@ -730,6 +740,29 @@ pub(crate) fn left_out_where_touched(r: &Residuals, contacts: Option<&[[f64; 2]]
     r
 }
 
+/// Where the best of `starts` (by the chi-square of its `select`ed residuals) touches the pool
+/// and the setup's base run does not: the samples a fit's search leaves out beside the base's.
+/// A start away from "no effect" can ride a wall the base does not reach, and there a step far
+/// below the Jacobian's moves the first touch by a physics step and the chi-square by hundreds
+/// (one accelerometer sample at the impulse): on a vehicle riding a wall, a hard iron's search
+/// stopped on its scan start and the tilt of the field was named in its place.
+fn search_contacts(
+    setup: &Setup<'_>,
+    starts: &[DVector<f64>],
+    at: impl Fn(&DVector<f64>) -> Option<memo::Evaluated>,
+    select: impl Fn(&Residuals) -> DVector<f64>,
+) -> Option<Vec<[f64; 2]>> {
+    starts
+        .iter()
+        .filter_map(|x| {
+            let e = at(x)?;
+            Some((select(&e.residuals).norm_squared(), e))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .and_then(|(_, e)| e.contacts)
+        .filter(|contacts| *contacts != setup.clean.contacts)
+}
+
 /// The three held-out blocks (start time s, channel) whose chi-square `after` raises most over
 /// `before`, with the rise: where a fit that fails its held-out blocks fails them.
 fn worst_heldout_blocks(
@@ -887,12 +920,12 @@ pub fn refit_jointly(
     for (effect, values, _) in accepted.iter().filter(|a| a.0.kind != Kind::Mean) {
         effects::apply(effect, values, &mut held);
     }
-    let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
+    let run_at = |x: &DVector<f64>| {
         let c = effects::apply_joint(&held, &chosen, x);
         let run = resim::simulate(&c, setup.m, None)
             .ok()
             .filter(|r| r.divergences.is_empty())?;
-        Some(DVector::from_vec(setup.residuals(&c, &run).values))
+        Some((c, run))
     };
     let start = DVector::from_iterator(
         scales.len(),
@@ -904,6 +937,16 @@ pub fn refit_jointly(
                 .map(|(v, s)| v / s)
         }),
     );
+    // Where the start's re-simulation touches the pool and the base's does not, left out of
+    // the search as in a candidate's own fit ([`search_contacts`]).
+    let start_contacts = run_at(&start)
+        .map(|(_, run)| run.contacts)
+        .filter(|contacts| *contacts != setup.clean.contacts);
+    let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
+        let (c, run) = run_at(x)?;
+        let r = left_out_where_touched(&setup.residuals(&c, &run), start_contacts.as_deref());
+        Some(DVector::from_vec(r.values))
+    };
     let fit = lsq::minimize(&objective, &Bounds::scaled(&bounds, &scales), &[start])?;
     let chi2 = fit.residuals.norm_squared();
     let n_eff = setup.n_eff(None);

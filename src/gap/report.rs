@@ -261,10 +261,11 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
     for (when, list) in touched.into_iter().filter(|(_, l)| !l.is_empty()) {
         let _ = writeln!(
             s,
-            "- the re-simulation {when} the fit touched the pool at {}: those samples and {:.0} s \
-             after each are left out of the fits and of every chi-square in this report (a \
-             contact impulse is no effect of the library)",
+            "- the re-simulation {when} the fit touched the pool at {}: those samples, {:.0} s \
+             before and {:.0} s after each are left out of the fits and of every chi-square in \
+             this report (a contact impulse is no effect of the library)",
             list.join(", "),
+            crate::gap::run::CONTACT_LEAD_S,
             crate::gap::run::CONTACT_MEMORY_S
         );
     }

@@ -611,7 +611,8 @@ pub(crate) mod tests {
     /// because contact impulses begin on whichever step the hull first reaches a wall and the
     /// chi-square jumped by tens as the parameter moved by 1e-9): a re-simulation that runs
     /// into a wall records where, and a fit's residuals leave those samples out, with the
-    /// contact's memory after them, for every candidate alike.
+    /// contact's memory after them and a lead before them (a candidate near the base touches a
+    /// step earlier), for every candidate alike.
     #[test]
     fn wall_contacts_are_recorded_and_left_out_of_fits() {
         let (_, mut c, m) = manoeuvre(7);
@@ -668,17 +669,22 @@ pub(crate) mod tests {
             .collect();
         assert_eq!(values.len(), times.len());
         let [from, to] = walled.contacts[0];
+        let lead = from - crate::gap::run::CONTACT_LEAD_S;
         for (t, v) in times.iter().zip(&values) {
-            if *t >= from && *t < to + crate::gap::run::CONTACT_MEMORY_S {
-                assert_eq!(*v, 0.0, "x_m at {t} s is in contact");
+            if *t >= lead && *t < to + crate::gap::run::CONTACT_MEMORY_S {
+                assert_eq!(*v, 0.0, "x_m at {t} s is in contact or just before it");
             }
         }
+        assert!(
+            times.iter().any(|t| *t >= lead && *t < from),
+            "samples just before the contact"
+        );
         assert!(
             values
                 .iter()
                 .zip(&times)
-                .any(|(v, t)| *t < from && *v != 0.0),
-            "samples before the contact count"
+                .any(|(v, t)| *t < lead && *v != 0.0),
+            "samples before the contact's lead count"
         );
         let mut open = setup;
         open.clean.contacts.clear();

@@ -46,7 +46,7 @@ fn a_wall_contact_is_no_disagreement_of_its_own() {
     let left_out = m.channels[x]
         .samples
         .iter()
-        .filter(|(t, _)| *t >= from && *t < to + run::CONTACT_MEMORY_S)
+        .filter(|(t, _)| *t >= from - run::CONTACT_LEAD_S && *t < to + run::CONTACT_MEMORY_S)
         .count();
     assert_eq!(touched.samples + left_out, free.samples);
     assert!(touched.windows.iter().all(|w| w.1 <= from || w.0 >= to));

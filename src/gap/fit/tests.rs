@@ -460,10 +460,11 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
     assert!(b.chi2(false) > a.chi2(false), "left out, the gain shows");
     let kept = |r: &Residuals| r.values.iter().filter(|v| **v != 0.0).count();
     let memory = (crate::gap::run::CONTACT_MEMORY_S * 10.0) as usize;
+    let lead = (crate::gap::run::CONTACT_LEAD_S * 10.0) as usize;
     assert_eq!(
         kept(&b),
-        times.len() - 20 - memory,
-        "the contact and its memory only"
+        times.len() - lead - 20 - memory,
+        "the contact, its lead and its memory only"
     );
     assert_eq!(left_out_where_touched(&after, None).values, after.values);
 }
@@ -678,4 +679,67 @@ fn only_physics_or_noise_named_first_changes_the_dynamics() {
         e("compass_hard_iron"),
         e("water_current")
     ]));
+}
+
+/// A fit whose start rides a wall the base run does not reach leaves the start's contacts out
+/// of its search ([`search_contacts`]); a start that touches nothing new leaves nothing more
+/// out. The figures the fit is scored by leave out only what the base leaves out.
+#[test]
+fn a_start_that_touches_where_the_base_does_not_is_left_out_of_its_search() {
+    let (_, mut c, m) = crate::gap::resim::tests::manoeuvre(7);
+    c.shooting = crate::gap::anchor::Shooting::DEFAULT;
+    let effect = effects::by_name("thrust_gain").unwrap();
+    let stronger = [5.0 * effect.scales[0]];
+    // The far wall of the axis the track runs furthest along, moved in from the far end of
+    // the track until twice the thrust reaches it and the base still does not.
+    let reach = |name: &str| {
+        let ch = m.channel(name).unwrap();
+        ch.samples.iter().map(|s| s.1).fold(f64::MIN, f64::max)
+    };
+    let (axis, far) = [reach("x_m"), reach("y_m")]
+        .into_iter()
+        .enumerate()
+        .map(|(k, r)| {
+            (
+                k,
+                r,
+                r - [m.experiment.initial.x_m, m.experiment.initial.y_m][k],
+            )
+        })
+        .max_by(|a, b| a.2.total_cmp(&b.2))
+        .map(|(k, r, _)| (k, r))
+        .unwrap();
+    let touches = |cfg: &Configs| !resim::simulate(cfg, &m, None).unwrap().contacts.is_empty();
+    let walled = (0..30)
+        .map(|i| {
+            let mut w = c.clone();
+            w.world.pool_m[axis] = far + 1.5 - 0.05 * f64::from(i);
+            w
+        })
+        .find(|w| {
+            let mut s = w.clone();
+            effects::apply(effect, &stronger, &mut s);
+            !touches(w) && touches(&s)
+        })
+        .expect("a wall the stronger thrust reaches and the base does not");
+    let clean = resim::simulate(&walled, &m, None).unwrap();
+    let floors = resim::noise_floor(&walled, &m, &clean).unwrap();
+    let setup = setup(&m, walled, &floors, Split::DEFAULT, &[]).unwrap();
+    let r0 = setup.residuals(&setup.base, &setup.clean);
+    let kept = memo::Evaluations::new(&setup, effect, &r0);
+    let at = |x: &DVector<f64>| kept.at(&[x[0] * effect.scales[0]]);
+    let select = |r: &Residuals| r.training_vector();
+    let touching = kept.at(&stronger).and_then(|e| e.contacts).unwrap();
+    let from_stronger = [DVector::from_element(1, 5.0)];
+    assert_eq!(
+        search_contacts(&setup, &from_stronger, at, select),
+        Some(touching)
+    );
+    let from_zero = [
+        DVector::from_element(1, 0.0),
+        DVector::from_element(1, 0.25),
+    ];
+    assert_eq!(search_contacts(&setup, &from_zero, at, select), None);
+    let scored = fit_part(&setup, effect, &r0, Some(true), &from_stronger, &kept).unwrap();
+    assert_eq!(scored.chi2_before, r0.chi2(true));
 }
