@@ -743,3 +743,56 @@ fn a_start_that_touches_where_the_base_does_not_is_left_out_of_its_search() {
     let scored = fit_part(&setup, effect, &r0, Some(true), &from_stronger, &kept).unwrap();
     assert_eq!(scored.chi2_before, r0.chi2(true));
 }
+
+/// Re-anchored, a fit is scored where neither the base nor its fitted point touched the pool:
+/// a hidden thrust gain drives the vehicle into a wall the base model does not reach, and the
+/// right fit reaches it too; the contact's samples are left out of its chi-square before and
+/// after alike, as they are of its held-out blocks.
+#[test]
+fn a_fit_is_scored_where_neither_the_base_nor_its_point_touched() {
+    let effect = effects::by_name("thrust_gain").unwrap();
+    let (_, _, plain) = crate::gap::resim::tests::manoeuvre(7);
+    let reach = |name: &str| {
+        let ch = plain.channel(name).unwrap();
+        ch.samples.iter().map(|s| s.1).fold(f64::MIN, f64::max)
+    };
+    let start = [plain.experiment.initial.x_m, plain.experiment.initial.y_m];
+    let (axis, far) = [reach("x_m"), reach("y_m")]
+        .into_iter()
+        .enumerate()
+        .max_by(|a, b| (a.1 - start[a.0]).total_cmp(&(b.1 - start[b.0])))
+        .unwrap();
+    let wall = far + 0.5;
+    let (_, mut c, m) = crate::gap::resim::tests::manoeuvre_of(7, |t| {
+        t.world.pool_m[axis] = wall;
+        effects::apply(effect, &[1.0], t);
+    });
+    c.world.pool_m[axis] = wall;
+    c.shooting = crate::gap::anchor::Shooting::DEFAULT;
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+    let r0 = setup.residuals(&setup.base, &setup.clean);
+    let kept = memo::Evaluations::new(&setup, effect, &r0);
+    let scored = fit_part(
+        &setup,
+        effect,
+        &r0,
+        Some(true),
+        &lsq::axis_scan(1, &START_SCAN),
+        &kept,
+    )
+    .unwrap();
+    let touched = kept.at(&scored.params).and_then(|e| e.contacts).unwrap();
+    assert_ne!(
+        touched, setup.clean.contacts,
+        "the fitted point reaches the wall"
+    );
+    let left_out = left_out_where_touched(&r0, Some(&touched)).chi2(true);
+    assert!(
+        left_out < r0.chi2(true),
+        "the contact holds training samples"
+    );
+    assert_eq!(scored.chi2_before, left_out);
+    assert!((scored.params[0] - 1.0).abs() < 0.2, "{:?}", scored.params);
+}
