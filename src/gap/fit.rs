@@ -29,7 +29,7 @@ use crate::gap::model::EnabledEffect;
 use crate::gap::resim::{self, Floor, Run};
 
 pub(crate) use contacts::left_out_where_touched;
-use contacts::search_contacts;
+use contacts::{beyond_base, search_contacts};
 
 /// A candidate must beat "no effect" by this much BIC to be named (Kass and Raftery 1995:
 /// a BIC difference above 10 is "very strong" evidence).
@@ -512,12 +512,12 @@ fn fit_part(
         }
     };
     // The search leaves out, beside what the base leaves out, where its start point's
-    // re-simulation touches the pool ([`search_contacts`]); the figures the fit is scored by
-    // leave out what the base leaves out, the same samples for every candidate.
+    // re-simulation touches the pool ([`search_contacts`]); the figures it is scored by are
+    // masked below.
     let contacts = search_contacts(setup, starts, |x| evaluations.at(&to_params(x)), select);
-    let mask = |r: &Residuals| left_out_where_touched(r, contacts.as_deref());
     let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
-        Some(select(&mask(&evaluations.at(&to_params(x))?.residuals)))
+        let r = evaluations.at(&to_params(x))?.residuals;
+        Some(select(&left_out_where_touched(&r, contacts.as_deref())))
     };
     let bounds = Bounds::scaled(effect.bounds, scales);
     let fit = lsq::minimize(&objective, &bounds, starts)?;
@@ -539,9 +539,8 @@ fn fit_part(
     // fitted right gained 4990 in its search and lost 1044 in delta BIC to the accelerometer
     // samples of a wall its point reaches and the base does not). Open loop, a contact lasts
     // to the run's end, and what the fit would leave out is most of what tells it apart.
-    let touched = fitted
-        .contacts
-        .filter(|c| setup.base.shooting.segment_s.is_some() && *c != setup.clean.contacts);
+    let touched =
+        beyond_base(setup, fitted.contacts).filter(|_| setup.base.shooting.segment_s.is_some());
     let (s0, s1) = (
         left_out_where_touched(r0, touched.as_deref()),
         left_out_where_touched(&r1, touched.as_deref()),
@@ -566,7 +565,7 @@ fn fit_part(
         &objective,
         &bounds,
         &DVector::zeros(k),
-        Some(select(&mask(r0))),
+        Some(select(&left_out_where_touched(r0, contacts.as_deref()))),
     )
     .and_then(|j| {
         let a = (j.transpose() * &j).try_inverse()?;
@@ -663,10 +662,7 @@ fn fit_mean(
     // Where the trained point's re-simulation touches the pool and the base's does not, contact
     // impulses make the readings jump as they do where the base touches (left out of every
     // fit): the held-out comparison leaves those samples out too.
-    let touched = kept
-        .at(&train.params)
-        .and_then(|e| e.contacts)
-        .filter(|contacts| *contacts != setup.clean.contacts);
+    let touched = beyond_base(setup, kept.at(&train.params).and_then(|e| e.contacts));
     let (held_before, held_after) = (
         left_out_where_touched(r0, touched.as_deref()),
         left_out_where_touched(&train.residuals, touched.as_deref()),
@@ -919,13 +915,12 @@ pub fn refit_jointly(
     );
     // Where the start's re-simulation touches the pool and the base's does not, left out of
     // the search as in a candidate's own fit ([`search_contacts`]).
-    let start_contacts = run_at(&start)
-        .map(|(_, run)| run.contacts)
-        .filter(|contacts| *contacts != setup.clean.contacts);
+    let start_contacts = beyond_base(setup, run_at(&start).map(|(_, run)| run.contacts));
     let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
         let (c, run) = run_at(x)?;
-        let r = left_out_where_touched(&setup.residuals(&c, &run), start_contacts.as_deref());
-        Some(DVector::from_vec(r.values))
+        let r = setup.residuals(&c, &run);
+        let r = left_out_where_touched(&r, start_contacts.as_deref());
+        Some(DVector::from_column_slice(&r.values))
     };
     let fit = lsq::minimize(&objective, &Bounds::scaled(&bounds, &scales), &[start])?;
     let chi2 = fit.residuals.norm_squared();

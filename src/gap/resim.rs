@@ -523,6 +523,23 @@ pub(crate) mod tests {
         manoeuvre_of(seed, |_| {})
     }
 
+    /// The pool axis (0 for x, 1 for y) the measured track runs furthest along from its start,
+    /// with the start and the furthest reading on it: where a test moves a wall in to meet the
+    /// track.
+    pub(crate) fn furthest_axis(m: &crate::gap::format::Measurement) -> (usize, f64, f64) {
+        let start = [m.experiment.initial.x_m, m.experiment.initial.y_m];
+        ["x_m", "y_m"]
+            .into_iter()
+            .enumerate()
+            .map(|(k, name)| {
+                let ch = m.channel(name).unwrap();
+                let reach = ch.samples.iter().map(|s| s.1).fold(f64::MIN, f64::max);
+                (k, start[k], reach)
+            })
+            .max_by(|a, b| (a.2 - a.1).total_cmp(&(b.2 - b.1)))
+            .unwrap()
+    }
+
     /// As [`manoeuvre`], measured on the bench model changed by `truth`; the configurations
     /// returned are the bench model's, unchanged.
     pub(crate) fn manoeuvre_of(
@@ -621,22 +638,7 @@ pub(crate) mod tests {
         assert!(free.contacts.is_empty(), "{:?}", free.contacts);
         // A pool wall across the track: the far wall of the axis the track runs furthest
         // along from the start, moved halfway in.
-        let (axis, start, reach) = [
-            ("x_m", m.experiment.initial.x_m),
-            ("y_m", m.experiment.initial.y_m),
-        ]
-        .into_iter()
-        .enumerate()
-        .map(|(k, (name, start))| {
-            let ch = m.channel(name).unwrap();
-            (
-                k,
-                start,
-                ch.samples.iter().map(|s| s.1).fold(f64::MIN, f64::max),
-            )
-        })
-        .max_by(|a, b| (a.2 - a.1).total_cmp(&(b.2 - b.1)))
-        .unwrap();
+        let (axis, start, reach) = furthest_axis(&m);
         assert!(
             reach > start + 1.0,
             "the track runs away from its start: {start} -> {reach}"

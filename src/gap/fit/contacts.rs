@@ -2,23 +2,39 @@
 //! out: the contacts of another run (a trained point's, for its held-out comparison), and those
 //! of a search's start point ([`search_contacts`]).
 
+use std::borrow::Cow;
+
 use nalgebra::DVector;
 
 use super::{Residuals, Setup, memo};
 use crate::gap::resim;
 
 /// `r` with every sample where a run with `contacts` touched the pool ([`resim::Run::in_contact`]) set
-/// to zero, as the setup leaves out those where its base run touched.
-pub(crate) fn left_out_where_touched(r: &Residuals, contacts: Option<&[[f64; 2]]>) -> Residuals {
+/// to zero, as the setup leaves out those where its base run touched; `r` itself, uncopied, when
+/// there are none.
+pub(crate) fn left_out_where_touched<'r>(
+    r: &'r Residuals,
+    contacts: Option<&[[f64; 2]]>,
+) -> Cow<'r, Residuals> {
+    let Some(contacts) = contacts.filter(|c| !c.is_empty()) else {
+        return Cow::Borrowed(r);
+    };
     let mut r = r.clone();
-    if let Some(contacts) = contacts {
-        for (v, t) in r.values.iter_mut().zip(&r.times) {
-            if resim::touching(contacts, *t) {
-                *v = 0.0;
-            }
+    for (v, t) in r.values.iter_mut().zip(&r.times) {
+        if resim::touching(contacts, *t) {
+            *v = 0.0;
         }
     }
-    r
+    Cow::Owned(r)
+}
+
+/// A run's `contacts` when they are not the setup's base run's: what a fit leaves out beside
+/// what the base leaves out, or `None`.
+pub(super) fn beyond_base(
+    setup: &Setup<'_>,
+    contacts: Option<Vec<[f64; 2]>>,
+) -> Option<Vec<[f64; 2]>> {
+    contacts.filter(|c| *c != setup.clean.contacts)
 }
 
 /// Where the best of `starts` (by the chi-square of its `select`ed residuals) touches the pool
@@ -33,13 +49,12 @@ pub(super) fn search_contacts(
     at: impl Fn(&DVector<f64>) -> Option<memo::Evaluated>,
     select: impl Fn(&Residuals) -> DVector<f64>,
 ) -> Option<Vec<[f64; 2]>> {
-    starts
+    let best = starts
         .iter()
         .filter_map(|x| {
             let e = at(x)?;
             Some((select(&e.residuals).norm_squared(), e))
         })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .and_then(|(_, e)| e.contacts)
-        .filter(|contacts| *contacts != setup.clean.contacts)
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    beyond_base(setup, best.and_then(|(_, e)| e.contacts))
 }

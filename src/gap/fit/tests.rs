@@ -683,7 +683,7 @@ fn only_physics_or_noise_named_first_changes_the_dynamics() {
 
 /// A fit whose start rides a wall the base run does not reach leaves the start's contacts out
 /// of its search ([`search_contacts`]); a start that touches nothing new leaves nothing more
-/// out. The figures the fit is scored by leave out only what the base leaves out.
+/// out. Its fitted point, back within the base's reach, is scored on what the base leaves out.
 #[test]
 fn a_start_that_touches_where_the_base_does_not_is_left_out_of_its_search() {
     let (_, mut c, m) = crate::gap::resim::tests::manoeuvre(7);
@@ -692,23 +692,7 @@ fn a_start_that_touches_where_the_base_does_not_is_left_out_of_its_search() {
     let stronger = [5.0 * effect.scales[0]];
     // The far wall of the axis the track runs furthest along, moved in from the far end of
     // the track until twice the thrust reaches it and the base still does not.
-    let reach = |name: &str| {
-        let ch = m.channel(name).unwrap();
-        ch.samples.iter().map(|s| s.1).fold(f64::MIN, f64::max)
-    };
-    let (axis, far) = [reach("x_m"), reach("y_m")]
-        .into_iter()
-        .enumerate()
-        .map(|(k, r)| {
-            (
-                k,
-                r,
-                r - [m.experiment.initial.x_m, m.experiment.initial.y_m][k],
-            )
-        })
-        .max_by(|a, b| a.2.total_cmp(&b.2))
-        .map(|(k, r, _)| (k, r))
-        .unwrap();
+    let (axis, _, far) = crate::gap::resim::tests::furthest_axis(&m);
     let touches = |cfg: &Configs| !resim::simulate(cfg, &m, None).unwrap().contacts.is_empty();
     let walled = (0..30)
         .map(|i| {
@@ -752,16 +736,7 @@ fn a_start_that_touches_where_the_base_does_not_is_left_out_of_its_search() {
 fn a_fit_is_scored_where_neither_the_base_nor_its_point_touched() {
     let effect = effects::by_name("thrust_gain").unwrap();
     let (_, _, plain) = crate::gap::resim::tests::manoeuvre(7);
-    let reach = |name: &str| {
-        let ch = plain.channel(name).unwrap();
-        ch.samples.iter().map(|s| s.1).fold(f64::MIN, f64::max)
-    };
-    let start = [plain.experiment.initial.x_m, plain.experiment.initial.y_m];
-    let (axis, far) = [reach("x_m"), reach("y_m")]
-        .into_iter()
-        .enumerate()
-        .max_by(|a, b| (a.1 - start[a.0]).total_cmp(&(b.1 - start[b.0])))
-        .unwrap();
+    let (axis, _, far) = crate::gap::resim::tests::furthest_axis(&plain);
     let wall = far + 0.5;
     let (_, mut c, m) = crate::gap::resim::tests::manoeuvre_of(7, |t| {
         t.world.pool_m[axis] = wall;
