@@ -511,16 +511,19 @@ fn fit_part(
             None => DVector::from_column_slice(&r.values),
         }
     };
+    // The starts inside the box, as the search takes them: the contacts below are the ones
+    // of the start it begins from.
+    let bounds = Bounds::scaled(effect.bounds, scales);
+    let starts: Vec<DVector<f64>> = starts.iter().map(|s| bounds.clamp(s)).collect();
     // The search leaves out, beside what the base leaves out, where its start point's
     // re-simulation touches the pool ([`search_contacts`]); the figures it is scored by are
     // masked below.
-    let contacts = search_contacts(setup, starts, |x| evaluations.at(&to_params(x)), select);
+    let contacts = search_contacts(setup, &starts, |x| evaluations.at(&to_params(x)), select);
     let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
         let r = evaluations.at(&to_params(x))?.residuals;
         Some(select(&left_out_where_touched(&r, contacts.as_deref())))
     };
-    let bounds = Bounds::scaled(effect.bounds, scales);
-    let fit = lsq::minimize(&objective, &bounds, starts)?;
+    let fit = lsq::minimize(&objective, &bounds, &starts)?;
     tracing::debug!(
         effect = effect.name,
         part = ?part,

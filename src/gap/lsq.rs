@@ -126,7 +126,8 @@ impl Bounds {
         }
     }
 
-    fn clamp(&self, x: &DVector<f64>) -> DVector<f64> {
+    /// `x` projected into the box.
+    pub fn clamp(&self, x: &DVector<f64>) -> DVector<f64> {
         DVector::from_iterator(
             x.len(),
             x.iter()

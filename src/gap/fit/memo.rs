@@ -68,6 +68,15 @@ impl<'s, 'a> Evaluations<'s, 'a> {
         }
         made
     }
+
+    /// Every point evaluated so far, in the order first asked.
+    #[cfg(test)]
+    pub fn points(&self) -> Vec<Vec<f64>> {
+        self.kept
+            .lock()
+            .map(|kept| kept.iter().map(|(p, _)| p.clone()).collect())
+            .unwrap_or_default()
+    }
 }
 
 impl Setup<'_> {

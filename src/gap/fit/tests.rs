@@ -771,3 +771,40 @@ fn a_fit_is_scored_where_neither_the_base_nor_its_point_touched() {
     assert_eq!(scored.chi2_before, left_out);
     assert!((scored.params[0] - 1.0).abs() < 0.2, "{:?}", scored.params);
 }
+
+/// A fit evaluates its starts as its search takes them, inside the box: a scan point beyond an
+/// effect's bound is clamped onto it before the contacts of the best start are read, so the
+/// contacts left out are those of the point the search begins from, and no run is made at a
+/// point the effect's bounds exclude.
+#[test]
+fn a_fit_evaluates_its_starts_inside_the_bounds() {
+    let effect = effects::by_name("thrust_curve").unwrap();
+    let starts = lsq::axis_scan(1, &START_SCAN);
+    let (low, high) = effect.bounds[0];
+    assert!(
+        starts
+            .iter()
+            .any(|x| !(low..=high).contains(&(x[0] * effect.scales[0]))),
+        "the scan reaches beyond the bounds of {}",
+        effect.name
+    );
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(7, |t| {
+        effects::apply(effect, &[0.3], t);
+    });
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+    let r0 = setup.residuals(&setup.base, &setup.clean);
+    let kept = memo::Evaluations::new(&setup, effect, &r0);
+    let scored = fit_part(&setup, effect, &r0, Some(true), &starts, &kept).unwrap();
+    let outside: Vec<Vec<f64>> = kept
+        .points()
+        .into_iter()
+        .filter(|p| !(low..=high).contains(&p[0]))
+        .collect();
+    assert!(
+        outside.is_empty(),
+        "evaluated outside [{low}, {high}]: {outside:?}"
+    );
+    assert!((scored.params[0] - 0.3).abs() < 0.15, "{:?}", scored.params);
+}
