@@ -77,8 +77,8 @@ pub enum GapCommand {
     Convert(ConvertArgs),
     /// Fit the base model's continuous parameters on baseline runs (thrust curve, drag,
     /// added mass, yaw damping, sensor offsets and gains, and as model discrepancy the hull's
-    /// own sway, yaw-inertia, yaw-under-way, heave and buoyancy terms and its thruster balance
-    /// and reverse curve) and write a calibrated model.
+    /// own sway, yaw-inertia, yaw-under-way, heave, buoyancy and float-depth terms and its
+    /// thruster balance and reverse curve) and write a calibrated model.
     Calibrate(CalibrateArgs),
 }
 

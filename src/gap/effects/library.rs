@@ -64,7 +64,7 @@ const STRUCTURAL: Effect = Effect {
 };
 
 /// The library. Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 42] = [
+pub const LIBRARY: [Effect; 43] = [
     Effect {
         name: "thruster_imbalance",
         parameters: &["differential_gain"],
@@ -874,6 +874,19 @@ pub const LIBRARY: [Effect; 42] = [
         // From the marker as stated and 0.1 m ahead of it and behind it: the marker and the
         // hull's sway in spins trade off, and one start can end in the other's minimum.
         calibration: Calibration::DiscrepancyStarts(29, &[0.1, -0.1]),
+        ..STRUCTURAL
+    },
+    Effect {
+        name: "float_depth",
+        parameters: &["deeper_m"],
+        scales: &[0.02],
+        bounds: &[(-0.15, 0.15)],
+        signature: "at the surface the vehicle floats deeper or higher than modelled while \
+                    submerged depths match: the hull's top sits another height above the \
+                    centre of mass",
+        channels: &["depth_adc"],
+        extend: |p, c| c.vehicle.cg_from_box_centre_m.z += at(p, 0),
+        calibration: Calibration::Discrepancy(34),
         ..STRUCTURAL
     },
     Effect {

@@ -286,3 +286,29 @@ fn bounds_hold_no_effect_and_reject_their_edges() {
         assert!(inside_bounds(e, &mid), "{}", e.name);
     }
 }
+
+/// The float depth moves where the hull floats at rest by its value and leaves the buoyancy
+/// submerged and the weight as they are: what a vehicle of another freeboard does at the
+/// surface goes there, not into the depth sensor's offset and gain, which move every
+/// submerged reading too.
+#[test]
+fn the_float_depth_moves_where_the_hull_floats_and_nothing_submerged() {
+    let (c, _) = benchmark_manoeuvre();
+    let effect = by_name("float_depth").expect("in the library");
+    let model = |c: &Configs| crate::physics::Model::new(c.vehicle.clone(), c.world.clone());
+    let shipped = model(&c);
+    for deeper in [-0.05, 0.04] {
+        let mut moved = c.clone();
+        apply(effect, &[deeper], &mut moved);
+        let moved = model(&moved);
+        let change = moved.floating_depth_m() - shipped.floating_depth_m();
+        assert!(
+            (change - deeper).abs() < 1e-3,
+            "floats {change:.4} m deeper for {deeper} m"
+        );
+        assert_eq!(
+            moved.buoyancy_and_weight_n(),
+            shipped.buoyancy_and_weight_n()
+        );
+    }
+}
