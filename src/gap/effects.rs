@@ -218,6 +218,7 @@ impl PartialEq for Effect {
 }
 
 mod library;
+mod structural;
 pub use library::{FORM_TWINS, LIBRARY};
 
 /// Looks an effect up by name.
