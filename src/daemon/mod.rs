@@ -540,15 +540,18 @@ impl<M: Model> Daemon<M> {
     }
 
     /// In lockstep, where simulated time stands still while the bridge waits for a request,
-    /// a partial message is dropped once its line has been silent for the idle limit of wall
-    /// time (PROTOCOL.md section 3). In realtime the engine does this in simulated time.
+    /// a partial frame on a line that carries the sensor link is dropped once the line has
+    /// been silent for its idle limit of wall time (PROTOCOL.md section 3). A sonar-only
+    /// line, and every line in realtime, is flushed by the engine in simulated time.
     fn flush_idle_lockstep(&mut self) -> Result<(), DaemonError> {
         if self.pacing.map.is_some() {
             return Ok(());
         }
         for index in 0..self.lines.len() {
-            if self.engine.holds_partial(index)
-                && self.lines[index].last_rx_wall.elapsed() >= self.engine.idle_limit(index)
+            let Some(limit) = self.engine.lockstep_wall_idle_limit(index) else {
+                continue;
+            };
+            if self.engine.holds_partial(index) && self.lines[index].last_rx_wall.elapsed() >= limit
             {
                 self.engine.flush_line(index).map_err(model_error)?;
             }
@@ -556,7 +559,7 @@ impl<M: Model> Daemon<M> {
         Ok(())
     }
 
-    /// In lockstep: when the next line with a partial message reaches its idle limit.
+    /// In lockstep: when the next line with a partial frame reaches its wall-clock idle limit.
     fn next_idle_flush_lockstep(&self) -> Option<Instant> {
         if self.pacing.map.is_some() {
             return None;
@@ -565,7 +568,9 @@ impl<M: Model> Daemon<M> {
             .iter()
             .enumerate()
             .filter(|(index, _)| self.engine.holds_partial(*index))
-            .map(|(index, line)| line.last_rx_wall + self.engine.idle_limit(index))
+            .filter_map(|(index, line)| {
+                Some(line.last_rx_wall + self.engine.lockstep_wall_idle_limit(index)?)
+            })
             .min()
     }
 

@@ -378,3 +378,49 @@ async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
     }
     assert!(!dir.join("pid").exists());
 }
+
+/// In lockstep a client may write a select a byte at a time (RoBIOS's `OSSendCharRS232`)
+/// and the host may deschedule it between the writes for longer than the sonar line's
+/// idle limit. Simulated time stands still meanwhile, so the select is whole and is
+/// acknowledged: what the client gets does not depend on the host's scheduling.
+/// Regression: the sonar-only line was also flushed after 200 ms of wall time, which
+/// dropped the select's first bytes when the client was slow (qemu under load).
+#[tokio::test]
+async fn lockstep_select_written_slowly_byte_by_byte_is_acknowledged() {
+    let (_tmp, config) = scratch("daemon-slow-select", TimeMode::Lockstep);
+    let run_dir = config.run_dir.clone();
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let (ready_tx, mut ready_rx) = mpsc::unbounded_channel();
+    let daemon = spawn_run(config, RunOptions::default(), stop_rx, move |r| {
+        let _ = ready_tx.send(r);
+    });
+    while let Readiness::Link { .. } = ready_rx.recv().await.expect("daemon reports readiness") {}
+    let mut sensor = sensor_client(&run_dir.join("sensor"));
+    let mut sonar = serial::open(
+        &run_dir.join("sonar"),
+        &crate::transport::LineSettings::n81(4800),
+    )
+    .unwrap();
+    assert!(matches!(
+        ask(&mut sensor, Message::Hello { client_version: 1 }).await,
+        Message::HelloReply { .. }
+    ));
+    let mut select = BytesMut::new();
+    SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
+    let pause =
+        Duration::from_nanos(crate::engine::SONAR_IDLE_FLUSH_NS) + Duration::from_millis(150);
+    for byte in select.iter() {
+        sonar.write_all(&[*byte]).await.unwrap();
+        tokio::time::sleep(pause).await;
+    }
+    let time = ask(&mut sensor, Message::TimeAdvance { ticks: 150 }).await;
+    assert!(matches!(time, Message::Time { ticks: 150, .. }), "{time:?}");
+    let (mut buf, mut decoder) = (BytesMut::new(), LineDecoder::new());
+    let first = read_item(&mut sonar, &mut buf, &mut decoder).await;
+    assert!(
+        matches!(first, LineItem::Sonar(SonarCommand::Ack(_))),
+        "the slow select is acknowledged, got {first:?}"
+    );
+    stop_tx.send(true).unwrap();
+    let _ = tokio::time::timeout(Duration::from_secs(1), daemon).await;
+}

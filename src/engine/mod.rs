@@ -564,19 +564,22 @@ impl<M: Model> Engine<M> {
             .is_some_and(|l| !l.inbox.is_empty() || l.garbage_pending)
     }
 
-    /// The idle limit of `line` (PROTOCOL.md section 3): 50 ms on a line that carries the
-    /// sensor link, 200 ms on a sonar-only line.
-    pub fn idle_limit(&self, line: usize) -> std::time::Duration {
-        std::time::Duration::from_nanos(
-            self.lines
-                .get(line)
-                .map_or(SENSOR_IDLE_FLUSH_NS, |l| l.idle_flush_ns),
-        )
+    /// The wall-clock idle limit of `line` in lockstep (PROTOCOL.md section 3): 50 ms on a
+    /// line that carries the sensor link, where a partial frame would otherwise wait for the
+    /// CRC rescan of the next request. `None` on a sonar-only line: there the limit runs in
+    /// simulated time only, so a select the client writes a byte at a time is never cut by
+    /// how the host scheduled the writes.
+    pub fn lockstep_wall_idle_limit(&self, line: usize) -> Option<std::time::Duration> {
+        self.lines
+            .get(line)
+            .filter(|l| l.carries.sensor)
+            .map(|l| std::time::Duration::from_nanos(l.idle_flush_ns))
     }
 
     /// Drops the partial message `line` holds now, at the current simulated time: what the
-    /// daemon does in lockstep once the line has been silent for its idle limit of wall
-    /// time (simulated time stands still while the bridge waits for a request).
+    /// daemon does in lockstep once a line that carries the sensor link has been silent for
+    /// its idle limit of wall time (simulated time stands still while the bridge waits for
+    /// a request).
     pub fn flush_line(&mut self, line: usize) -> Result<(), M::Error> {
         let Some(l) = self.lines.get_mut(line) else {
             return Ok(());
