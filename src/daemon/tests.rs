@@ -109,6 +109,28 @@ async fn ask(sensor: &mut SensorClient, message: Message) -> Message {
         .expect("the reply within 5 s")
 }
 
+/// Opens the sensor and sonar links in `run_dir` and says hello on the sensor link.
+async fn hello_on_both_links(run_dir: &Path) -> (SensorClient, tokio_serial::SerialStream) {
+    let mut sensor = sensor_client(&run_dir.join("sensor"));
+    let sonar = serial::open(
+        &run_dir.join("sonar"),
+        &crate::transport::LineSettings::n81(4800),
+    )
+    .unwrap();
+    assert!(matches!(
+        ask(&mut sensor, Message::Hello { client_version: 1 }).await,
+        Message::HelloReply { .. }
+    ));
+    (sensor, sonar)
+}
+
+/// The select of transducer 1 as it crosses the sonar line.
+fn select_transducer_1() -> BytesMut {
+    let mut select = BytesMut::new();
+    SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
+    select
+}
+
 /// The daemon in-process, in lockstep, over ptys: a client says hello, advances time,
 /// selects a transducer; the sonar line delivers the ack and a sentence; status reports
 /// the time; shutdown removes the links and finishes the recording.
@@ -296,18 +318,8 @@ async fn lockstep_daemon_serves_ptys_and_shuts_down_cleanly() {
     );
     assert!(dir.join("pid").exists());
 
-    let mut sensor = sensor_client(&run_dir.join("sensor"));
-    let mut sonar = serial::open(
-        &run_dir.join("sonar"),
-        &crate::transport::LineSettings::n81(4800),
-    )
-    .unwrap();
-    assert!(matches!(
-        ask(&mut sensor, Message::Hello { client_version: 1 }).await,
-        Message::HelloReply { .. }
-    ));
-    let mut select = BytesMut::new();
-    SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
+    let (mut sensor, mut sonar) = hello_on_both_links(&run_dir).await;
+    let select = select_transducer_1();
     sonar.write_all(&select).await.unwrap();
     // Give the select time to cross its pty before time moves on.
     tokio::time::sleep(Duration::from_millis(100)).await;
@@ -395,18 +407,8 @@ async fn lockstep_select_written_slowly_byte_by_byte_is_acknowledged() {
         let _ = ready_tx.send(r);
     });
     while let Readiness::Link { .. } = ready_rx.recv().await.expect("daemon reports readiness") {}
-    let mut sensor = sensor_client(&run_dir.join("sensor"));
-    let mut sonar = serial::open(
-        &run_dir.join("sonar"),
-        &crate::transport::LineSettings::n81(4800),
-    )
-    .unwrap();
-    assert!(matches!(
-        ask(&mut sensor, Message::Hello { client_version: 1 }).await,
-        Message::HelloReply { .. }
-    ));
-    let mut select = BytesMut::new();
-    SonarCommand::Select(Transducer::new(1).unwrap()).encode(&mut select);
+    let (mut sensor, mut sonar) = hello_on_both_links(&run_dir).await;
+    let select = select_transducer_1();
     let pause =
         Duration::from_nanos(crate::engine::SONAR_IDLE_FLUSH_NS) + Duration::from_millis(150);
     for byte in select.iter() {
