@@ -42,8 +42,13 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
 }
 
 /// How far (m; deg) the data must put a run's start from its stated `[initial]` before the
-/// estimate replaces it: the horizontal distance, the depth and the heading each.
+/// estimate replaces it: the horizontal distance (the camera's position noise is 0.015 m
+/// per fix) and the heading.
 pub const START_GATE_M: f64 = 0.1;
+/// The same in depth (m). The depth sensor reads a median depth to about 2 mm (an ADC code
+/// is 4.9 mm, its noise 1.5 mm), far better than a user can state a start under water: a
+/// start the data put further off than this is the data's.
+pub const START_GATE_DEPTH_M: f64 = 0.02;
 pub const START_GATE_DEG: f64 = 3.0;
 /// The heading read from the data takes over from the stated one gradually, from this far
 /// off (deg) to [`START_GATE_DEG`]: a compass sample's noise is about 1 deg.
@@ -56,8 +61,8 @@ pub const START_RAMP_DEG: f64 = 1.0;
 /// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
 /// from the measurement through the candidate's sensor models, each read as the median of the
 /// channel's first samples, [`anchor::Read::StartMedian`], the heading of every compass sample
-/// while no motor runs) wherever the data put it more than [`START_GATE_M`] (horizontally, or
-/// in depth) from the experiment's `[initial]`, and the heading on a ramp from
+/// while no motor runs) wherever the data put it more than [`START_GATE_M`] (horizontally) or
+/// [`START_GATE_DEPTH_M`] (in depth) from the experiment's `[initial]`, and the heading on a ramp from
 /// [`START_RAMP_DEG`] to [`START_GATE_DEG`] off; `[initial]` stays the prior for what the data
 /// do not say. A depth sensor on its surface clamp at the
 /// start says the vehicle floats, so the start is the model's floating depth. Open loop
@@ -138,7 +143,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                 (a.north_m, a.east_m) = (None, None);
             }
             if a.depth_m
-                .is_some_and(|z| (z - here.position_m.z).abs() <= START_GATE_M)
+                .is_some_and(|z| (z - here.position_m.z).abs() <= START_GATE_DEPTH_M)
             {
                 a.depth_m = None;
             }
@@ -748,6 +753,35 @@ pub(crate) mod tests {
         let (a, b) = (&truth.states[0].position_m, &moved.states[0].position_m);
         let horizontal = (a.x - b.x).hypot(a.y - b.y);
         assert!(horizontal < 0.05, "{a:?} vs {b:?}: {horizontal:.3} m apart");
+    }
+
+    /// The depth gate is the depth sensor's precision, not the camera's: a stated start 0.06 m
+    /// too deep (inside the 0.1 m horizontal gate) is read from the data, and one 0.005 m off
+    /// (inside the sensor's few millimetres) is kept as stated.
+    #[test]
+    fn a_start_a_few_centimetres_off_in_depth_is_read_from_the_data() {
+        let (_, mut c, m) = manoeuvre(6);
+        c.shooting = Shooting::DEFAULT;
+        let truth = super::simulate(&c, &m, None).unwrap();
+        let z0 = truth.states[0].position_m.z;
+        let start_z = |off: f64| {
+            let mut wrong = m.clone();
+            let i = &mut wrong.experiment.initial;
+            i.z_m = Some(i.z_m.unwrap_or(z0) + off);
+            super::simulate(&c, &wrong, None).unwrap().states[0]
+                .position_m
+                .z
+        };
+        let read = start_z(0.06);
+        assert!(
+            (read - z0).abs() < 0.01,
+            "stated 0.06 m deeper: {read:.3} vs {z0:.3}"
+        );
+        let kept = start_z(0.005);
+        assert!(
+            (kept - (z0 + 0.005)).abs() < 1e-9,
+            "stated 0.005 m deeper: {kept:.4}"
+        );
     }
 
     /// The heading moves from the stated one to the data's over a ramp: a stated heading 3.5
