@@ -250,8 +250,13 @@ pub(crate) fn nothing_off_that_it_moves(
     let run = resim::simulate(earlier, m, None)?;
     let stats = stats_for(model, m, earlier, &run, floors, weights);
     let moved = moved_by(effect, &stats);
-    // The run bound, like the known level, read against `floors` (`weights`, by channel
-    // index: `fit::known_weights`).
+    // The run bound read against `floors` (`weights`, by channel index:
+    // `fit::known_weights`), or as the calibration measured it, whichever is larger. The
+    // weight assumes the known disagreement spread evenly over the samples; where it lies
+    // where a named noise source leaves the floor as it was (the surfacing with the motors
+    // off, for a stern-duty EMI), it keeps its whole size, and a later name fitting it there
+    // is a stand-in (a `thrust_curve` after a depth EMI, on every EMI case of structure
+    // 306059, seed 251677, once the start depth was read from the data).
     let weight = |channel: &str| {
         m.channels
             .iter()
@@ -262,7 +267,7 @@ pub(crate) fn nothing_off_that_it_moves(
     let bound = |s: &ChannelStats| {
         model
             .run_bound_among(&s.channel, moved.len())
-            .map(|b| residuals::level_under(b, weight(&s.channel)))
+            .map(|b| residuals::level_under(b, weight(&s.channel)).max(b))
     };
     let off = |s: &&ChannelStats| {
         let known = Known {
