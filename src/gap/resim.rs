@@ -42,9 +42,12 @@ pub fn accel_axis(channel: &str) -> Option<usize> {
 }
 
 /// How far (m; deg) the data must put a run's start from its stated `[initial]` before the
-/// estimate replaces it: the horizontal distance (the camera's position noise is 0.015 m
-/// per fix) and the heading.
+/// estimate replaces it: the horizontal distance, at most this far (m)...
 pub const START_GATE_M: f64 = 0.1;
+/// ...and beyond this many times the camera's position noise per fix
+/// (`[camera] position_std_m`), which the median of the first fixes reads to about 0.7 of
+/// that per axis: a stated start the camera contradicts at 3 sigma is the data's.
+pub const START_GATE_SIGMAS: f64 = 3.0;
 /// The same in depth (m). The depth sensor reads a median depth to about 2 mm (an ADC code
 /// is 4.9 mm, its noise 1.5 mm), far better than a user can state a start under water: a
 /// start the data put further off than this is the data's.
@@ -61,7 +64,8 @@ pub const START_RAMP_DEG: f64 = 1.0;
 /// anchored like every segment start ([`anchor::estimate`]: heading, depth, north and east
 /// from the measurement through the candidate's sensor models, each read as the median of the
 /// channel's first samples, [`anchor::Read::StartMedian`], the heading of every compass sample
-/// while no motor runs) wherever the data put it more than [`START_GATE_M`] (horizontally) or
+/// while no motor runs) wherever the data put it more than [`START_GATE_SIGMAS`] camera sigmas, at most
+/// [`START_GATE_M`] (horizontally), or
 /// [`START_GATE_DEPTH_M`] (in depth) from the experiment's `[initial]`, and the heading on a ramp from
 /// [`START_RAMP_DEG`] to [`START_GATE_DEG`] off; `[initial]` stays the prior for what the data
 /// do not say. A depth sensor on its surface clamp at the
@@ -139,7 +143,8 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
             let off = |v: Option<f64>, prior: f64| v.map_or(0.0, |x| x - prior);
             let horizontal =
                 off(a.north_m, here.position_m.x).hypot(off(a.east_m, here.position_m.y));
-            if horizontal <= START_GATE_M {
+            let gate = (START_GATE_SIGMAS * m.experiment.camera_position_std_m).min(START_GATE_M);
+            if horizontal <= gate {
                 (a.north_m, a.east_m) = (None, None);
             }
             if a.depth_m
@@ -753,6 +758,22 @@ pub(crate) mod tests {
         let (a, b) = (&truth.states[0].position_m, &moved.states[0].position_m);
         let horizontal = (a.x - b.x).hypot(a.y - b.y);
         assert!(horizontal < 0.05, "{a:?} vs {b:?}: {horizontal:.3} m apart");
+    }
+
+    /// The horizontal gate is three of the camera's sigmas: a stated start 0.06 m north of the
+    /// true one (inside 0.1 m, beyond 3 x 0.015 m) is read from the data.
+    #[test]
+    fn a_start_a_few_centimetres_off_horizontally_is_read_from_the_data() {
+        let (_, mut c, m) = manoeuvre(6);
+        c.shooting = Shooting::DEFAULT;
+        assert!(m.experiment.camera_position_std_m <= 0.015);
+        let truth = super::simulate(&c, &m, None).unwrap();
+        let mut wrong = m.clone();
+        wrong.experiment.initial.x_m += 0.06;
+        let moved = super::simulate(&c, &wrong, None).unwrap();
+        let (a, b) = (&truth.states[0].position_m, &moved.states[0].position_m);
+        let horizontal = (a.x - b.x).hypot(a.y - b.y);
+        assert!(horizontal < 0.03, "{a:?} vs {b:?}: {horizontal:.3} m apart");
     }
 
     /// The depth gate is the depth sensor's precision, not the camera's: a stated start 0.06 m
