@@ -748,32 +748,31 @@ pub(crate) mod tests {
     /// 0.075 m east (0.106 m, each axis inside the 0.1 m gate) is read from the data.
     #[test]
     fn a_start_off_diagonally_beyond_the_gate_is_read_from_the_data() {
+        let horizontal = start_moved_by(0.075, 0.075);
+        assert!(horizontal < 0.05, "{horizontal:.3} m from the true start");
+    }
+
+    /// How far (m) the estimated start of manoeuvre 6 lies from its true start when its stated
+    /// start is moved `north_m` and `east_m` off.
+    fn start_moved_by(north_m: f64, east_m: f64) -> f64 {
         let (_, mut c, m) = manoeuvre(6);
         c.shooting = Shooting::DEFAULT;
+        assert!(m.experiment.camera_position_std_m <= 0.015);
         let truth = super::simulate(&c, &m, None).unwrap();
         let mut wrong = m.clone();
-        wrong.experiment.initial.x_m += 0.075;
-        wrong.experiment.initial.y_m += 0.075;
+        wrong.experiment.initial.x_m += north_m;
+        wrong.experiment.initial.y_m += east_m;
         let moved = super::simulate(&c, &wrong, None).unwrap();
         let (a, b) = (&truth.states[0].position_m, &moved.states[0].position_m);
-        let horizontal = (a.x - b.x).hypot(a.y - b.y);
-        assert!(horizontal < 0.05, "{a:?} vs {b:?}: {horizontal:.3} m apart");
+        (a.x - b.x).hypot(a.y - b.y)
     }
 
     /// The horizontal gate is three of the camera's sigmas: a stated start 0.06 m north of the
     /// true one (inside 0.1 m, beyond 3 x 0.015 m) is read from the data.
     #[test]
     fn a_start_a_few_centimetres_off_horizontally_is_read_from_the_data() {
-        let (_, mut c, m) = manoeuvre(6);
-        c.shooting = Shooting::DEFAULT;
-        assert!(m.experiment.camera_position_std_m <= 0.015);
-        let truth = super::simulate(&c, &m, None).unwrap();
-        let mut wrong = m.clone();
-        wrong.experiment.initial.x_m += 0.06;
-        let moved = super::simulate(&c, &wrong, None).unwrap();
-        let (a, b) = (&truth.states[0].position_m, &moved.states[0].position_m);
-        let horizontal = (a.x - b.x).hypot(a.y - b.y);
-        assert!(horizontal < 0.03, "{a:?} vs {b:?}: {horizontal:.3} m apart");
+        let horizontal = start_moved_by(0.06, 0.0);
+        assert!(horizontal < 0.03, "{horizontal:.3} m from the true start");
     }
 
     /// The depth gate is the depth sensor's precision, not the camera's: a stated start 0.06 m
