@@ -870,95 +870,6 @@ fn fit_warm(
     out
 }
 
-/// One effect's values and 95 % intervals from a joint refit (no intervals: held as it was).
-pub type Refit = (Vec<f64>, Vec<[f64; 2]>);
-
-/// The accepted effects refitted together on all the data, from their values when named.
-/// Each was fitted with only the effects named before it in the model, so an earlier one has
-/// taken part of a later one's disagreement; fitted together, the later rounds fit against
-/// what is really left. `accepted` holds each effect with its values and its round's
-/// `noise_factor`; variance-type effects (EMI) are applied as they are and not refitted.
-/// Returns, per effect in order, the values and their 95 % intervals: the joint covariance
-/// times the largest noise factor and the joint fit's own variance factor, plus the between-run
-/// spread. `None` when no mean-type effect is accepted or the joint fit fails (the round values
-/// stand). The guards are not taken again at the joint values.
-pub fn refit_jointly(
-    setup: &Setup<'_>,
-    accepted: &[(&'static Effect, Vec<f64>, f64)],
-) -> Option<Vec<Refit>> {
-    let free: Vec<usize> = (0..accepted.len())
-        .filter(|&i| accepted[i].0.kind == Kind::Mean)
-        .collect();
-    if free.is_empty() {
-        return None;
-    }
-    let chosen: Vec<&'static Effect> = free.iter().map(|&i| accepted[i].0).collect();
-    let (scales, bounds) = effects::joint_scales_and_bounds(&chosen);
-    // The variance-type effects held as they are; the others at the joint point.
-    let mut held = setup.base.clone();
-    for (effect, values, _) in accepted.iter().filter(|a| a.0.kind != Kind::Mean) {
-        effects::apply(effect, values, &mut held);
-    }
-    let run_at = |x: &DVector<f64>| {
-        let c = effects::apply_joint(&held, &chosen, x);
-        let run = resim::simulate(&c, setup.m, None)
-            .ok()
-            .filter(|r| r.divergences.is_empty())?;
-        Some((c, run))
-    };
-    let start = DVector::from_iterator(
-        scales.len(),
-        free.iter().flat_map(|&i| {
-            accepted[i]
-                .1
-                .iter()
-                .zip(accepted[i].0.scales)
-                .map(|(v, s)| v / s)
-        }),
-    );
-    // Where the start's re-simulation touches the pool and the base's does not, left out of
-    // the search as in a candidate's own fit ([`search_contacts`]).
-    let start_contacts = beyond_base(setup, run_at(&start).map(|(_, run)| run.contacts));
-    let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
-        let (c, run) = run_at(x)?;
-        let r = setup.residuals(&c, &run);
-        let r = left_out_where_touched(&r, start_contacts.as_deref());
-        Some(DVector::from_column_slice(&r.values))
-    };
-    let fit = lsq::minimize(&objective, &Bounds::scaled(&bounds, &scales), &[start])?;
-    let chi2 = fit.residuals.norm_squared();
-    let n_eff = setup.n_eff(None);
-    let variance_factor = (chi2 / (n_eff - scales.len() as f64).max(1.0)).max(1.0);
-    let noise_factor = free.iter().map(|&i| accepted[i].2).fold(1.0_f64, f64::max);
-    let spread: Vec<f64> = free
-        .iter()
-        .flat_map(|&i| setup.spread_variance(accepted[i].0))
-        .collect();
-    let cov = fit.covariance().map(|c| {
-        let mut total = c * (noise_factor * variance_factor);
-        for (j, v) in spread.iter().enumerate() {
-            total[(j, j)] += v;
-        }
-        total
-    });
-    let ci = lsq::intervals(&fit.x, cov.as_ref(), &scales, 1.0);
-    let mut fitted = effects::joint_values(&chosen, &fit.x).into_iter();
-    let mut k = 0;
-    Some(
-        accepted
-            .iter()
-            .map(|(effect, values, _)| {
-                if effect.kind != Kind::Mean {
-                    return (values.clone(), Vec::new());
-                }
-                let n = effect.parameters.len();
-                k += n;
-                (fitted.next().unwrap_or_default(), ci[k - n..k].to_vec())
-            })
-            .collect(),
-    )
-}
-
 /// Builds a setup for the given configs.
 pub fn setup<'a>(
     m: &'a Measurement,
@@ -984,7 +895,9 @@ mod emi;
 mod memo;
 pub use emi::{EMI_WINDOW_S, fit_emi};
 mod constancy;
+mod joint;
 pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, strong_blocks};
+pub use joint::{Refit, refit_jointly, with_earlier_free};
 mod rival;
 pub use rival::{earlier_change_dynamics, moved_to_new_regime, structural_rival};
 

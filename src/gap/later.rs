@@ -218,6 +218,54 @@ fn level_mean(levels: &[f64]) -> f64 {
     levels.iter().sum::<f64>() / levels.len().max(1) as f64
 }
 
+/// Rescores the candidates of a later round that the earlier names may have left too little
+/// of their own: those that passed every guard fitted alone the round before (`previous`) and
+/// now pass their signature, their held-out blocks and their bounds but not their
+/// significance or their interval, fitted with the earlier names (`accepted`) held. Each is
+/// fitted again with those names free ([`fit::with_earlier_free`]) and the round ranked anew.
+/// `setup` makes the setup of the model without the named effects, asked for only when a
+/// candidate is rescored.
+pub(crate) fn rescore_with_earlier_free<'a>(
+    results: &mut [Candidate],
+    previous: &[Candidate],
+    accepted: &[Candidate],
+    setup: impl FnOnce() -> Result<fit::Setup<'a>, GapError>,
+) -> Result<(), GapError> {
+    use rayon::prelude::*;
+    let strong_alone = |name: &str| {
+        previous
+            .iter()
+            .any(|p| p.name == name && p.testable && p.guards.all())
+    };
+    let held_back = |c: &Candidate| {
+        let g = c.guards;
+        c.testable
+            && g.signature
+            && g.heldout == Some(true)
+            && g.inside_bounds
+            && !(g.significant && g.interval_excludes_zero)
+            && strong_alone(&c.name)
+    };
+    if accepted.is_empty() || !results.iter().any(held_back) {
+        return Ok(());
+    }
+    let setup = setup()?;
+    let mut named = Vec::new();
+    for c in accepted {
+        let effect = effects::by_name(&c.name)
+            .ok_or_else(|| GapError::Data(format!("`{}` is not in the effect library", c.name)))?;
+        named.push((effect, c.values(), c.noise_factor));
+    }
+    results
+        .par_iter_mut()
+        .filter(|c| held_back(c))
+        .for_each(|c| {
+            fit::with_earlier_free(&setup, &named, c);
+        });
+    candidate::rank(results);
+    Ok(())
+}
+
 /// Why an effect named after others finds no disagreement of its own left: with the
 /// earlier names in the model (`earlier`), none of the channels it moves (its signature
 /// channels and `also_moves`) is significantly off: its chi-square over its known level beyond

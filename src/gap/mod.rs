@@ -552,8 +552,14 @@ pub fn analyse_with(
             let mut skip: Vec<&str> = accepted.iter().map(|a| a.name.as_str()).collect();
             skip.extend(refused.iter().map(|r| r.name.as_str()));
             skip.extend(model.effects.iter().map(|e| e.effect.name));
-            let results =
+            let mut results =
                 fit::fit_candidates(&setup, &skip, &previous, &mut |name| progress(round, name));
+            later::rescore_with_earlier_free(&mut results, &previous, accepted, || {
+                Ok(
+                    fit::setup(m, start.clone(), &floors, options.split, &spread)?
+                        .with_known(model, &noise_weights(&floors)),
+                )
+            })?;
             previous.clone_from(&results);
             Ok(Some(results))
         },
@@ -601,6 +607,20 @@ pub fn analyse_with(
             for ((effect, _, _), (values, _)) in named.iter().zip(&joint) {
                 effects::apply(effect, values, &mut c);
             }
+            // The earlier names as the joint fit has them beside the newest: what a later
+            // name is judged against. Held at their own rounds' values they keep the share of
+            // its disagreement they took before it was in the model (a thruster lag fitted
+            // 2.7 s long where it stood in for a compass latency), and the newest then looks
+            // like a stand-in for what they lack.
+            let mut earlier = start.clone();
+            for ((effect, _, _), (values, _)) in named.iter().zip(&joint).rev().skip(1).rev() {
+                effects::apply(effect, values, &mut earlier);
+            }
+            let newest_values = joint.last().map(|(v, _)| v.clone()).unwrap_or_default();
+            tracing::debug!(
+                joint = ?joint.iter().map(|(v, _)| v).collect::<Vec<_>>(),
+                "the named effects' values, refitted together"
+            );
             // A mean effect must bring the model closer to the data by the measure the gap is
             // reported in, every channel counted once: a fit that buys chi-square in a channel
             // of many samples with a worse fit of others trades disagreement, as a stand-in for
@@ -698,7 +718,7 @@ pub fn analyse_with(
                         model,
                         m,
                         effect,
-                        &round_configs(),
+                        &earlier,
                         &current_floors.borrow(),
                         &noise_weights(&current_floors.borrow()),
                     )? {
@@ -728,7 +748,7 @@ pub fn analyse_with(
                     model,
                     m,
                     effect,
-                    &round_configs(),
+                    &earlier,
                     &current_floors.borrow(),
                     &noise_weights(&current_floors.borrow()),
                 )?
@@ -768,20 +788,20 @@ pub fn analyse_with(
                     )));
                 }
             }
-            if let Some((effect, values, noise_factor)) = named.last()
+            if let Some((effect, _, noise_factor)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
                 && share < LATER_NAME_MIN_SHARE
             {
                 let floors = current_floors.borrow();
-                let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
+                let setup = fit::setup(m, earlier.clone(), &floors, options.split, &spread)?
                     .with_known(model, &noise_weights(&floors));
                 let strong = fit::strong_blocks(
                     &first.residuals(&start, &clean0),
                     &setup.residuals(&setup.base, &setup.clean),
                     options.split.block_s,
                 );
-                let test = fit::constancy(&setup, effect, values, *noise_factor, &strong);
+                let test = fit::constancy(&setup, effect, &newest_values, *noise_factor, &strong);
                 tracing::debug!(
                     effect = effect.name,
                     share,

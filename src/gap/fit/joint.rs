@@ -1,0 +1,241 @@
+//! Effects fitted together: the named effects refitted jointly once another is named
+//! ([`refit_jointly`]), and a later round's candidate fitted with the effects named before it
+//! free ([`with_earlier_free`]).
+//!
+//! A later round fits each candidate against the model with the earlier names held at their
+//! values. An earlier name fitted alone has taken the share of the disagreement it can explain
+//! of a correlated effect's too (a thruster lag fitted 1.2 s long where it stood in for part of
+//! a compass latency), so held, it leaves the later effect less than its own. Forward stepwise
+//! regression scores a term added to a model with the terms already in it re-estimated; a
+//! candidate that explained the disagreement on its own the round before is scored that way.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::{Setup, beyond_base, interval_excludes_zero, left_out_where_touched};
+use crate::gap::candidate::{Candidate, Refitted};
+use crate::gap::effects::{self, Effect, Kind};
+use crate::gap::lsq::{self, Bounds};
+use crate::gap::resim;
+
+/// One effect's values and 95 % intervals from a joint refit (no intervals: held as it was).
+pub type Refit = (Vec<f64>, Vec<[f64; 2]>);
+
+/// The mean-type effects of a set fitted together on all the data.
+struct Joint {
+    /// Indices of the set's mean-type effects, and those effects.
+    free: Vec<usize>,
+    chosen: Vec<&'static Effect>,
+    scales: Vec<f64>,
+    fit: lsq::Fit,
+    /// The chi-square of the set's start values with the last effect at no effect, on the
+    /// samples the fit saw.
+    without_last: Option<f64>,
+    n_eff: f64,
+    /// The joint covariance (units of the scales) times each parameter's effect's noise factor
+    /// and the fit's own variance factor, plus the between-run spread.
+    cov: Option<DMatrix<f64>>,
+    /// The 95 % intervals, in the parameters' units.
+    ci: Vec<[f64; 2]>,
+}
+
+/// Fits the mean-type effects of `set` (each with its start values and its round's
+/// `noise_factor`) together against `setup`, whose base holds none of them; the variance-type
+/// ones are applied as they are. `None` when none is mean-type or the fit fails.
+fn fit_joint(setup: &Setup<'_>, set: &[(&'static Effect, Vec<f64>, f64)]) -> Option<Joint> {
+    let free: Vec<usize> = (0..set.len())
+        .filter(|&i| set[i].0.kind == Kind::Mean)
+        .collect();
+    if free.is_empty() {
+        return None;
+    }
+    let chosen: Vec<&'static Effect> = free.iter().map(|&i| set[i].0).collect();
+    let (scales, bounds) = effects::joint_scales_and_bounds(&chosen);
+    let mut held = setup.base.clone();
+    for (effect, values, _) in set.iter().filter(|a| a.0.kind != Kind::Mean) {
+        effects::apply(effect, values, &mut held);
+    }
+    let run_at = |x: &DVector<f64>| {
+        let c = effects::apply_joint(&held, &chosen, x);
+        let run = resim::simulate(&c, setup.m, None)
+            .ok()
+            .filter(|r| r.divergences.is_empty())?;
+        Some((c, run))
+    };
+    let start = DVector::from_iterator(
+        scales.len(),
+        free.iter()
+            .flat_map(|&i| set[i].1.iter().zip(set[i].0.scales).map(|(v, s)| v / s)),
+    );
+    // Where the start's re-simulation touches the pool and the base's does not, left out of
+    // the search as in a candidate's own fit.
+    let start_contacts = beyond_base(setup, run_at(&start).map(|(_, run)| run.contacts));
+    let objective = |x: &DVector<f64>| -> Option<DVector<f64>> {
+        let (c, run) = run_at(x)?;
+        let r = setup.residuals(&c, &run);
+        let r = left_out_where_touched(&r, start_contacts.as_deref());
+        Some(DVector::from_column_slice(&r.values))
+    };
+    let without_last = free.last().and_then(|&i| {
+        let mut x = start.clone();
+        let k = set[i].0.parameters.len();
+        let n = x.len();
+        x.rows_mut(n - k, k).fill(0.0);
+        objective(&x).map(|r| r.norm_squared())
+    });
+    let fit = lsq::minimize(&objective, &Bounds::scaled(&bounds, &scales), &[start])?;
+    let n_eff = setup.n_eff(None);
+    let variance_factor = (fit.chi2() / (n_eff - scales.len() as f64).max(1.0)).max(1.0);
+    // Each parameter's noise factor is its own effect's: the covariance scaled by their
+    // square roots on both sides, so each variance carries its own effect's factor.
+    let noise: Vec<f64> = free
+        .iter()
+        .flat_map(|&i| std::iter::repeat_n(set[i].2.max(1.0).sqrt(), set[i].0.parameters.len()))
+        .collect();
+    let spread: Vec<f64> = free
+        .iter()
+        .flat_map(|&i| setup.spread_variance(set[i].0))
+        .collect();
+    let cov = fit.covariance().map(|c| {
+        let mut total = DMatrix::from_fn(c.nrows(), c.ncols(), |a, b| {
+            c[(a, b)] * noise[a] * noise[b] * variance_factor
+        });
+        for (j, v) in spread.iter().enumerate() {
+            total[(j, j)] += v;
+        }
+        total
+    });
+    let ci = lsq::intervals(&fit.x, cov.as_ref(), &scales, 1.0);
+    Some(Joint {
+        free,
+        chosen,
+        scales,
+        fit,
+        without_last,
+        n_eff,
+        cov,
+        ci,
+    })
+}
+
+/// The accepted effects refitted together on all the data, from their values when named.
+/// Each was fitted with only the effects named before it in the model, so an earlier one has
+/// taken part of a later one's disagreement; fitted together, the later rounds fit against
+/// what is really left. `accepted` holds each effect with its values and its round's
+/// `noise_factor`; variance-type effects (EMI) are applied as they are and not refitted.
+/// Returns, per effect in order, the values and their 95 % intervals: the joint covariance
+/// times each effect's noise factor and the joint fit's own variance factor, plus the
+/// between-run spread. `None` when no mean-type effect is accepted or the joint fit fails (the round values
+/// stand). The guards are not taken again at the joint values.
+pub fn refit_jointly(
+    setup: &Setup<'_>,
+    accepted: &[(&'static Effect, Vec<f64>, f64)],
+) -> Option<Vec<Refit>> {
+    let joint = fit_joint(setup, accepted)?;
+    let mut fitted = effects::joint_values(&joint.chosen, &joint.fit.x).into_iter();
+    let mut k = 0;
+    Some(
+        accepted
+            .iter()
+            .map(|(effect, values, _)| {
+                if effect.kind != Kind::Mean {
+                    return (values.clone(), Vec::new());
+                }
+                let n = effect.parameters.len();
+                k += n;
+                (
+                    fitted.next().unwrap_or_default(),
+                    joint.ci[k - n..k].to_vec(),
+                )
+            })
+            .collect(),
+    )
+}
+
+/// A later round's candidate fitted with the effects named before it (`named`, as
+/// [`refit_jointly`] takes them) free, against `setup`, whose base holds none of them: its
+/// values, intervals, delta BIC and the guards those decide (bounds, interval, significance)
+/// from the joint fit, scored against the named effects' own fit on the same samples. The
+/// held-out and signature guards stay those of its fit with them held. Asked of a candidate
+/// that passed every guard the round before; returns whether the candidate was rescored (only
+/// where the joint fit explains more than the held one did).
+pub fn with_earlier_free(
+    setup: &Setup<'_>,
+    named: &[(&'static Effect, Vec<f64>, f64)],
+    candidate: &mut Candidate,
+) -> bool {
+    let Some(effect) = effects::by_name(&candidate.name).filter(|e| e.kind == Kind::Mean) else {
+        return false;
+    };
+    if named.iter().all(|n| n.0.kind != Kind::Mean) {
+        return false;
+    }
+    let mut set = named.to_vec();
+    set.push((effect, candidate.values(), candidate.noise_factor));
+    let Some(joint) = fit_joint(setup, &set) else {
+        return false;
+    };
+    let Some(before) = joint.without_last else {
+        return false;
+    };
+    let (k, n) = (effect.parameters.len(), joint.scales.len());
+    let x = joint.fit.x.rows(n - k, k).into_owned();
+    let values: Vec<f64> = x.iter().zip(effect.scales).map(|(v, s)| v * s).collect();
+    let cov = joint
+        .cov
+        .as_ref()
+        .map(|c| c.view((n - k, n - k), (k, k)).into_owned());
+    let ci = joint.ci[n - k..].to_vec();
+    let gain = before - joint.fit.chi2();
+    let variance_factor = (joint.fit.chi2() / (joint.n_eff - n as f64).max(1.0)).max(1.0);
+    let scale = candidate.noise_factor * variance_factor;
+    let penalty = k as f64 * joint.n_eff.ln();
+    let delta_bic = gain / scale - penalty;
+    tracing::debug!(
+        effect = effect.name,
+        delta_bic,
+        held = candidate.delta_bic,
+        ?values,
+        ?ci,
+        "a candidate fitted with the earlier names free"
+    );
+    if delta_bic <= candidate.delta_bic {
+        return false;
+    }
+    let earlier_inside = joint
+        .chosen
+        .iter()
+        .zip(effects::joint_values(&joint.chosen, &joint.fit.x))
+        .all(|(e, v)| effects::inside_bounds(e, &v));
+    candidate.guards.inside_bounds = earlier_inside && !joint.fit.at_bound;
+    candidate.guards.interval_excludes_zero = interval_excludes_zero(&ci, &x, cov.as_ref(), 1.0);
+    candidate.guards.significant = delta_bic > super::BIC_MARGIN;
+    candidate.delta_bic = delta_bic;
+    candidate.delta_bic_uncalibrated = gain - penalty;
+    candidate.chi2_before = before;
+    candidate.chi2_after = joint.fit.chi2();
+    candidate.variance_factor = variance_factor;
+    for ((_, v), new) in candidate.parameters.iter_mut().zip(&values) {
+        *v = *new;
+    }
+    for ((_, c), new) in candidate.ci95.iter_mut().zip(&ci) {
+        *c = *new;
+    }
+    let mut k0 = 0;
+    candidate.refitted = joint
+        .free
+        .iter()
+        .zip(effects::joint_values(&joint.chosen, &joint.fit.x))
+        .take(joint.free.len() - 1)
+        .map(|(&i, values)| {
+            let e = set[i].0;
+            let m = e.parameters.len();
+            k0 += m;
+            Refitted {
+                name: e.name.to_string(),
+                values,
+                ci95: joint.ci[k0 - m..k0].to_vec(),
+            }
+        })
+        .collect();
+    true
+}
