@@ -613,7 +613,8 @@ pub fn analyse_with(
             // 2.7 s long where it stood in for a compass latency), and the newest then looks
             // like a stand-in for what they lack.
             let mut earlier = start.clone();
-            for ((effect, _, _), (values, _)) in named.iter().zip(&joint).rev().skip(1).rev() {
+            let earlier_count = named.len().saturating_sub(1);
+            for ((effect, _, _), (values, _)) in named.iter().zip(&joint).take(earlier_count) {
                 effects::apply(effect, values, &mut earlier);
             }
             let newest_values = joint.last().map(|(v, _)| v.clone()).unwrap_or_default();
