@@ -691,6 +691,23 @@ pub fn analyse_with(
                 return Ok(Some(why));
             }
             if let Some((effect, _, _)) = named.last()
+                && named.len() == 1
+                && effect.kind == effects::Kind::Mean
+                && let Some(why) = later::first_name_within_the_scatter(
+                    model,
+                    m,
+                    effect,
+                    &channel_names,
+                    &current.borrow(),
+                    &levels,
+                    &earlier,
+                    &current_floors.borrow(),
+                    &noise_weights(&current_floors.borrow()),
+                )?
+            {
+                return Ok(Some(why));
+            }
+            if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
             {
