@@ -225,7 +225,8 @@ fn level_mean(levels: &[f64]) -> f64 {
 /// the model as given, `start`). The rule a later name meets: on a null run of structure 322133
 /// (seed 267713, case 65) the depth channel sat at 2.36 of its known level, under what the
 /// calibration's runs scatter to, and a `depth_offset` of 0.018 m took it to 2.06 and was named.
-/// `None` when it explains most of that excess, or a channel it moves is off.
+/// `None` when it explains most of that excess, a channel it moves is off, or it moves no
+/// re-simulated channel (a sonar effect).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn first_name_within_the_scatter(
     model: &GapModel,
@@ -241,7 +242,20 @@ pub(crate) fn first_name_within_the_scatter(
     if channels.len() != without.len() || channels.len() != with.len() {
         return Ok(None);
     }
-    let share = share_where_it_acts(effect, channels, without, with);
+    // The re-simulated channels alone, as `first_name_without_excess` reads them: a sonar
+    // channel's level is the likelihood of its echoes, whose level says nothing of an excess.
+    let (mut kept, mut before, mut after) = (Vec::new(), Vec::new(), Vec::new());
+    for ((c, b), a) in channels.iter().zip(without).zip(with) {
+        if resim::MODELLED.contains(c) {
+            kept.push(*c);
+            before.push(*b);
+            after.push(*a);
+        }
+    }
+    if where_it_acts(effect, &kept, &before).is_empty() {
+        return Ok(None);
+    }
+    let share = share_where_it_acts(effect, &kept, &before, &after);
     if share >= LATER_NAME_MIN_SHARE {
         return Ok(None);
     }
