@@ -302,12 +302,7 @@ pub(crate) fn rescore_with_earlier_free<'a>(
         return Ok(());
     }
     let setup = setup()?;
-    let mut named = Vec::new();
-    for c in accepted {
-        let effect = effects::by_name(&c.name)
-            .ok_or_else(|| GapError::Data(format!("`{}` is not in the effect library", c.name)))?;
-        named.push((effect, c.values(), c.noise_factor));
-    }
+    let named = fit::named(accepted)?;
     results
         .par_iter_mut()
         .filter(|c| held_back(c))
@@ -449,7 +444,7 @@ pub(crate) fn exchange_lookalikes(
         return None;
     }
     let effect_of = |c: &Candidate| effects::by_name(&c.name);
-    let configs_of = |named: &[(&'static effects::Effect, Vec<f64>, f64)]| {
+    let configs_of = |named: &[fit::Named]| {
         let mut c = setup.base.clone();
         for (effect, values, _) in named {
             effects::apply(effect, values, &mut c);
@@ -463,7 +458,7 @@ pub(crate) fn exchange_lookalikes(
         Some(setup.residuals(c, &run).all_chi2())
     };
     let mut current = accepted.to_vec();
-    let mut named: Vec<(&'static effects::Effect, Vec<f64>, f64)> = current
+    let mut named: Vec<fit::Named> = current
         .iter()
         .map(|c| Some((effect_of(c)?, c.values(), c.noise_factor)))
         .collect::<Option<_>>()?;

@@ -564,13 +564,7 @@ pub fn analyse_with(
             Ok(Some(results))
         },
         &mut |accepted, refused_before| {
-            let mut named = Vec::new();
-            for c in accepted.iter() {
-                let effect = effects::by_name(&c.name).ok_or_else(|| {
-                    GapError::Data(format!("`{}` is not in the effect library", c.name))
-                })?;
-                named.push((effect, c.values(), c.noise_factor));
-            }
+            let named = fit::named(accepted)?;
             // With two or more named, each is refitted alongside the others.
             let mut joint: Vec<(Vec<f64>, Vec<[f64; 2]>)> = accepted
                 .iter()

@@ -12,6 +12,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::{Setup, beyond_base, interval_excludes_zero, left_out_where_touched};
+use crate::gap::GapError;
 use crate::gap::candidate::{Candidate, Refitted};
 use crate::gap::effects::{self, Effect, Kind};
 use crate::gap::lsq::{self, Bounds};
@@ -19,6 +20,23 @@ use crate::gap::resim;
 
 /// One effect's values and 95 % intervals from a joint refit (no intervals: held as it was).
 pub type Refit = (Vec<f64>, Vec<[f64; 2]>);
+
+/// One named effect as the joint fits take it: the library effect, its values and its round's
+/// noise factor.
+pub type Named = (&'static Effect, Vec<f64>, f64);
+
+/// The accepted candidates as the joint fits take them.
+pub fn named(accepted: &[Candidate]) -> Result<Vec<Named>, GapError> {
+    accepted
+        .iter()
+        .map(|c| {
+            let effect = effects::by_name(&c.name).ok_or_else(|| {
+                GapError::Data(format!("`{}` is not in the effect library", c.name))
+            })?;
+            Ok((effect, c.values(), c.noise_factor))
+        })
+        .collect()
+}
 
 /// The mean-type effects of a set fitted together on all the data.
 struct Joint {
@@ -41,7 +59,7 @@ struct Joint {
 /// Fits the mean-type effects of `set` (each with its start values and its round's
 /// `noise_factor`) together against `setup`, whose base holds none of them; the variance-type
 /// ones are applied as they are. `None` when none is mean-type or the fit fails.
-fn fit_joint(setup: &Setup<'_>, set: &[(&'static Effect, Vec<f64>, f64)]) -> Option<Joint> {
+fn fit_joint(setup: &Setup<'_>, set: &[Named]) -> Option<Joint> {
     let free: Vec<usize> = (0..set.len())
         .filter(|&i| set[i].0.kind == Kind::Mean)
         .collect();
@@ -126,10 +144,7 @@ fn fit_joint(setup: &Setup<'_>, set: &[(&'static Effect, Vec<f64>, f64)]) -> Opt
 /// times each effect's noise factor and the joint fit's own variance factor, plus the
 /// between-run spread. `None` when no mean-type effect is accepted or the joint fit fails (the round values
 /// stand). The guards are not taken again at the joint values.
-pub fn refit_jointly(
-    setup: &Setup<'_>,
-    accepted: &[(&'static Effect, Vec<f64>, f64)],
-) -> Option<Vec<Refit>> {
+pub fn refit_jointly(setup: &Setup<'_>, accepted: &[Named]) -> Option<Vec<Refit>> {
     let joint = fit_joint(setup, accepted)?;
     let mut fitted = effects::joint_values(&joint.chosen, &joint.fit.x).into_iter();
     let mut k = 0;
@@ -158,11 +173,7 @@ pub fn refit_jointly(
 /// held-out and signature guards stay those of its fit with them held. Asked of a candidate
 /// that passed every guard the round before; returns whether the candidate was rescored (only
 /// where the joint fit explains more than the held one did).
-pub fn with_earlier_free(
-    setup: &Setup<'_>,
-    named: &[(&'static Effect, Vec<f64>, f64)],
-    candidate: &mut Candidate,
-) -> bool {
+pub fn with_earlier_free(setup: &Setup<'_>, named: &[Named], candidate: &mut Candidate) -> bool {
     let Some(effect) = effects::by_name(&candidate.name).filter(|e| e.kind == Kind::Mean) else {
         return false;
     };
