@@ -208,6 +208,16 @@ pub struct VehicleConfig {
     /// way than on the spot, where only the viscous part acts.
     /// Zero unless the vehicle file sets `damping.yaw_ur`.
     pub damping_yaw_ur: f64,
+    /// Waterplane area of the hull's top (m^2): buoyancy lost in proportion to how far the top
+    /// of the hull box rises out of the water, `rho g A e`, beside the box's own volume, which
+    /// the model spreads like a pair of horizontal cylinders and so loses only slowly near the
+    /// top. A deck or superstructure that cuts the surface with some area holds the hull at
+    /// its float more stiffly. Zero unless calibrated (`surface_stiffness`).
+    pub surface_waterplane_m2: f64,
+    /// Heave damping while the top of the hull box is out of the water (N per m/s, along the
+    /// world vertical): the waves a hull bobbing at the surface makes. Zero unless calibrated
+    /// (`surface_damping`).
+    pub surface_damping_nspm: f64,
     pub thruster_common: ThrusterCommon,
     pub thrusters: [ThrusterConfig; 4],
 }
@@ -257,6 +267,8 @@ fn resolve_vehicle(doc: &Document<'_>, raw: RawVehicle) -> Result<VehicleConfig,
         damping_sway_yaw: damping.sway_yaw,
         damping_yaw_uv: damping.yaw_uv,
         damping_yaw_ur: damping.yaw_ur,
+        surface_waterplane_m2: 0.0,
+        surface_damping_nspm: 0.0,
         thruster_common,
         thrusters,
     })

@@ -36,6 +36,9 @@ pub const PHYSICS_RNG_STREAM: u64 = 0x5048_5953; // "PHYS"
 const CONTACT_PREDICTION_M: f64 = 0.002;
 /// Propeller radius over which a thruster's thrust fades as it leaves the water.
 const PROPELLER_RADIUS_M: f64 = 0.05;
+/// How far (m) the top of the hull rises out of the water before the surface's heave damping
+/// acts in full: a smooth onset keeps the force continuous for the integrator and the fits.
+const SURFACE_BAND_M: f64 = 0.005;
 /// Divergence guard for angular rate.
 const MAX_ANGULAR_RATE_RADPS: f64 = 50.0;
 /// How far outside the pool the centre of mass may be before the run counts as diverged.
@@ -140,6 +143,8 @@ pub struct Model {
     m_inv: Matrix6<f64>,
     weight_n: f64,
     buoyancy_full_n: f64,
+    /// `rho g` times [`VehicleConfig::surface_waterplane_m2`] (N/m).
+    waterplane_n_per_m: f64,
     /// From the CG to the centre of the hull box (body frame).
     cg_to_box_m: Vector3<f64>,
     thruster_dynamics: ThrusterDynamics,
@@ -215,6 +220,7 @@ impl Model {
             m_inv,
             weight_n: mass_kg * g,
             buoyancy_full_n: world.water_density_kgpm3 * g * vehicle.displaced_volume_m3,
+            waterplane_n_per_m: world.water_density_kgpm3 * g * vehicle.surface_waterplane_m2,
             cg_to_box_m: -vehicle.cg_from_box_centre_m,
             full_n,
             wrench,
@@ -268,6 +274,45 @@ impl Model {
         smoothstep((centre_z + half_height) / (2.0 * half_height))
     }
 
+    /// How far the top of the hull box stands out of the water (m, 0 submerged, at most the
+    /// box's height).
+    fn top_emergence_m(&self, depth_m: f64, down_body: &Vector3<f64>) -> f64 {
+        let half_height = down_body.abs().dot(&self.vehicle.half_extents_m);
+        let centre_z = depth_m + down_body.dot(&self.cg_to_box_m);
+        (half_height - centre_z).clamp(0.0, 2.0 * half_height)
+    }
+
+    /// Buoyancy (N) at a CG depth and attitude: the submerged fraction of the full buoyancy,
+    /// less what the top's waterplane loses once it is out of the water
+    /// ([`VehicleConfig::surface_waterplane_m2`]), never below zero.
+    fn buoyancy_n(&self, depth_m: f64, down_body: &Vector3<f64>) -> f64 {
+        let b = self.buoyancy_full_n * self.submerged_fraction_down(depth_m, down_body);
+        if self.waterplane_n_per_m == 0.0 {
+            return b;
+        }
+        (b - self.waterplane_n_per_m * self.top_emergence_m(depth_m, down_body)).max(0.0)
+    }
+
+    /// The heave damping of a hull whose top is out of the water
+    /// ([`VehicleConfig::surface_damping_nspm`]) as a generalised force (body frame, at the
+    /// CG): it opposes the world-vertical speed, and fades in over the first
+    /// [`SURFACE_BAND_M`] the top rises.
+    fn surface_damping(
+        &self,
+        depth_m: f64,
+        down_body: &Vector3<f64>,
+        nu: &Vector6<f64>,
+    ) -> Vector6<f64> {
+        let c = self.vehicle.surface_damping_nspm;
+        if c == 0.0 {
+            return Vector6::zeros();
+        }
+        let out = smoothstep(self.top_emergence_m(depth_m, down_body) / SURFACE_BAND_M);
+        let down_speed = down_body.dot(&Vector3::new(nu[0], nu[1], nu[2]));
+        let f = -down_body * (c * out * down_speed);
+        Vector6::new(f.x, f.y, f.z, 0.0, 0.0, 0.0)
+    }
+
     /// The CG depth at which the vehicle floats level at rest (buoyancy equals weight), or
     /// the depth with the hull just submerged if it is heavier than the water it displaces.
     pub fn floating_depth_m(&self) -> f64 {
@@ -275,7 +320,7 @@ impl Model {
         let (mut lo, mut hi) = (-2.0 * self.vehicle.half_extents_m.z, 2.0);
         for _ in 0..80 {
             let mid = 0.5 * (lo + hi);
-            if self.buoyancy_full_n * self.submerged_fraction(mid, &level) < self.weight_n {
+            if self.buoyancy_n(mid, &down_in_body(&level)) < self.weight_n {
                 lo = mid;
             } else {
                 hi = mid;
@@ -375,8 +420,7 @@ impl Model {
     /// Generalised force of weight and buoyancy (body frame, about the CG), i.e. -g(eta).
     /// `down_body`: the world's down axis in body axes.
     fn restoring(&self, depth_m: f64, down_body: &Vector3<f64>) -> Vector6<f64> {
-        let b = self.buoyancy_full_n * self.submerged_fraction_down(depth_m, down_body);
-        let f_b = -down_body * b;
+        let f_b = -down_body * self.buoyancy_n(depth_m, down_body);
         let force = down_body * self.weight_n + f_b;
         let moment = self.vehicle.cb_m.cross(&f_b);
         Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z)
@@ -431,7 +475,8 @@ impl Model {
         let pos_dot = r * v + self.world.current_mps;
         let q_dot = q * Quaternion::new(0.0, w.x, w.y, w.z) * 0.5;
         let down_body = r.matrix().row(2).transpose();
-        let forces = tau + self.restoring(position_m.z, &down_body) - self.coriolis_and_damping(nu);
+        let forces = tau + self.restoring(position_m.z, &down_body) - self.coriolis_and_damping(nu)
+            + self.surface_damping(position_m.z, &down_body, nu);
         (pos_dot, q_dot, self.m_inv * forces)
     }
 

@@ -44,7 +44,7 @@ pub const FORM_TWINS: &[(&str, &str)] = &[("sway_yaw_coupling", "munk_moment")];
 
 /// The library: the candidates, then the calibration's structural terms
 /// ([`structural::TERMS`]). Its order is the order candidates are fitted and reported in.
-pub const LIBRARY: [Effect; 43] = concat(CANDIDATES, structural::TERMS);
+pub const LIBRARY: [Effect; 45] = concat(CANDIDATES, structural::TERMS);
 
 /// `a` then `b`, in a constant.
 const fn concat<const A: usize, const B: usize, const C: usize>(

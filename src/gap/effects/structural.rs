@@ -29,7 +29,7 @@ const STRUCTURAL: Effect = Effect {
 };
 
 /// The structural terms, in the order they are calibrated and reported after the candidates.
-pub(super) const TERMS: [Effect; 16] = [
+pub(super) const TERMS: [Effect; 18] = [
     Effect {
         name: "sway_damping",
         parameters: &["scale"],
@@ -160,6 +160,41 @@ pub(super) const TERMS: [Effect; 16] = [
         channels: &["depth_adc"],
         extend: |p, c| c.vehicle.cg_from_box_centre_m.z += at(p, 0),
         calibration: Calibration::Discrepancy(34),
+        ..STRUCTURAL
+    },
+    Effect {
+        name: "surface_stiffness",
+        parameters: &["waterplane_m2"],
+        scales: &[0.01],
+        bounds: &[(0.0, 0.3)],
+        signature: "afloat the hull bobs faster and settles sooner, or plunges deeper when \
+                    released above its float, than modelled: its top cuts the surface with \
+                    another area",
+        channels: &["depth_adc"],
+        // Bobbing heaves and pitches the hull: the heave and surge accelerometers feel it.
+        also_moves: &["accel_x_adc", "accel_z_adc"],
+        extend: |p, c| {
+            let a = &mut c.vehicle.surface_waterplane_m2;
+            *a = (*a + at(p, 0)).max(0.0);
+        },
+        calibration: Calibration::Discrepancy(35),
+        ..STRUCTURAL
+    },
+    Effect {
+        name: "surface_damping",
+        parameters: &["n_s_per_m"],
+        scales: &[20.0],
+        bounds: &[(0.0, 500.0)],
+        signature: "afloat the hull's bobbing dies out sooner or later than modelled, while \
+                    submerged climbs and dives match",
+        channels: &["depth_adc"],
+        // Bobbing heaves and pitches the hull: the heave and surge accelerometers feel it.
+        also_moves: &["accel_x_adc", "accel_z_adc"],
+        extend: |p, c| {
+            let d = &mut c.vehicle.surface_damping_nspm;
+            *d = (*d + at(p, 0)).max(0.0);
+        },
+        calibration: Calibration::Discrepancy(36),
         ..STRUCTURAL
     },
     Effect {

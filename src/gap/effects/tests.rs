@@ -313,3 +313,69 @@ fn the_float_depth_moves_where_the_hull_floats_and_nothing_submerged() {
         );
     }
 }
+
+/// The surface terms act only where the top of the hull is out of the water: released 3 cm
+/// above where it floats, the hull plunges deeper with the top's waterplane (below its float
+/// only the reserve buoyancy pulls it back) and its bobbing dies out sooner with the surface's
+/// damping, while a hull released a metre down rises exactly as
+/// without them until its top breaks the surface.
+#[test]
+fn the_surface_terms_act_afloat_and_nothing_submerged() {
+    use crate::physics::{InitialState, Model, ThrusterCommand};
+    use nalgebra::{UnitQuaternion, Vector3};
+    let (c, _) = benchmark_manoeuvre();
+    // Depths of the CG every 0.1 s over `seconds`, released at rest at `depth_m`.
+    let track = |c: &Configs, depth_m: f64, seconds: f64| -> Vec<f64> {
+        let model = Model::new(c.vehicle.clone(), c.world.clone());
+        let initial = InitialState {
+            position_m: Vector3::new(5.0, 5.0, depth_m),
+            attitude: UnitQuaternion::identity(),
+            velocity_body_mps: Vector3::zeros(),
+            angular_velocity_body_radps: Vector3::zeros(),
+        };
+        let mut state = model.initial_state(&initial, 0);
+        let every = (0.1 / model.step_s()).round() as usize;
+        let steps = (seconds / model.step_s()).round() as usize;
+        let mut out = Vec::new();
+        for k in 0..steps {
+            model.step(&mut state, &[ThrusterCommand::OFF; 4]).unwrap();
+            if k % every == 0 {
+                out.push(model.vehicle_state(&state).position_m.z);
+            }
+        }
+        out
+    };
+    let swing = |z: &[f64], from: usize| {
+        let tail = &z[from..];
+        tail.iter().cloned().fold(f64::MIN, f64::max)
+            - tail.iter().cloned().fold(f64::MAX, f64::min)
+    };
+    let with = |name: &str, value: f64| {
+        let mut moved = c.clone();
+        apply(by_name(name).expect("in the library"), &[value], &mut moved);
+        moved
+    };
+    let stiff = with("surface_stiffness", 0.08);
+    let damped = with("surface_damping", 150.0);
+    let released = |c: &Configs| {
+        let float = Model::new(c.vehicle.clone(), c.world.clone()).floating_depth_m();
+        track(c, float - 0.03, 20.0)
+    };
+    let (shipped, stiffer, calmer) = (released(&c), released(&stiff), released(&damped));
+    assert!(
+        swing(&stiffer, 0) > 1.5 * swing(&shipped, 0),
+        "the waterplane pushes the hull released above its float down harder: {:.4} against \
+         {:.4} m",
+        swing(&stiffer, 0),
+        swing(&shipped, 0)
+    );
+    assert!(
+        swing(&calmer, 100) < 0.5 * swing(&shipped, 100),
+        "the surface's damping stills the bobbing: {:.4} against {:.4} m after 10 s",
+        swing(&calmer, 100),
+        swing(&shipped, 100)
+    );
+    let deep = |c: &Configs| track(c, 1.0, 2.0);
+    assert_eq!(deep(&c), deep(&stiff));
+    assert_eq!(deep(&c), deep(&damped));
+}
