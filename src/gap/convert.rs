@@ -129,8 +129,17 @@ pub fn convert(dir: &Path, opts: &ConvertOptions) -> Result<Conversion, GapError
         mut commands,
         mut samples,
         velocity_codes,
-        notices,
+        mut notices,
     } = decode(&chunks, t0, &tables, &sensors);
+    if let Some(compass) = samples.get_mut("compass_deg") {
+        let merged = first_read_of_each_conversion(compass);
+        if merged > 0 {
+            notices.push(format!(
+                "{merged} compass readings repeated the reading before them (the compass's \
+                 last conversion read again) and were merged into its first read"
+            ));
+        }
+    }
     if let Some(speed) = paddle_speed(&velocity_codes, &sensors) {
         samples.insert("paddle_speed_mps".into(), speed);
     }
@@ -281,6 +290,22 @@ fn decode(
         velocity_codes,
         notices,
     }
+}
+
+/// Keeps, of each run of equal consecutive compass readings (in time order), the first, and
+/// returns how many it removed. The compass converts on its own clock (the Vector 2X in
+/// continuous mode, `[compass] continuous_period_s`), and a program that reads it faster is
+/// given its last conversion again. A repeat is no new measurement: kept, forty reads of one
+/// conversion would count as forty samples, and stamped at their read times they would say
+/// the heading was still what the conversion saw up to a period later, a sawtooth of delay
+/// that no latency of the model reproduces. The first read of a new value comes within one
+/// read interval of the conversion. Two conversions that happen to read the same (a vehicle at
+/// rest) merge too: the later one only repeats what the first said.
+fn first_read_of_each_conversion(readings: &mut Samples) -> usize {
+    readings.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let before = readings.len();
+    readings.dedup_by(|later, first| later.1 == first.1);
+    before - readings.len()
 }
 
 /// What the conversion left out, one notice per kind that occurred.

@@ -370,4 +370,46 @@ mod recording {
             "{err}"
         );
     }
+    /// A program that reads the compass faster than it converts gets its last conversion
+    /// again: each run of equal readings is one measurement, at its first read.
+    #[test]
+    fn repeated_compass_readings_are_one_conversion_at_its_first_read() {
+        let scratch = crate::scratch::dir("gap-convert");
+        let dir = scratch.path().join("rec");
+        let heading = |deg: u16| {
+            frame(Message::CompassHeading {
+                word: HeadingWord::encode(deg, HeadingFormat::Binary).unwrap(),
+            })
+        };
+        let mut bytes = row(
+            0.0,
+            "sensor",
+            "rx",
+            &frame(Message::Hello { client_version: 1 }),
+        );
+        for (t, deg) in [
+            (1.2, 123),
+            (1.21, 123),
+            (1.22, 123),
+            (1.6, 125),
+            (1.61, 125),
+            (2.0, 123),
+        ] {
+            bytes += &row(t, "sensor", "tx", &heading(deg));
+        }
+        write(&dir, &bytes);
+        let c = convert(&dir, &ConvertOptions::default()).unwrap();
+        let compass = c.measurement.channel("compass_deg").unwrap();
+        assert_eq!(
+            compass.samples,
+            vec![(1.2, 123.0), (1.6, 125.0), (2.0, 123.0)]
+        );
+        assert!(
+            c.notices
+                .iter()
+                .any(|n| n.starts_with("3 compass readings repeated")),
+            "{:?}",
+            c.notices
+        );
+    }
 }
