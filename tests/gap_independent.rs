@@ -73,44 +73,34 @@ fn generate_vehicle(
 /// static is never dropped, so it must not hold a temporary directory).
 fn calibrated() -> &'static Calibration {
     static CAL: OnceLock<Calibration> = OnceLock::new();
-    CAL.get_or_init(|| {
-        let dir = TempDir::new("gap-calibration");
-        let base: Vec<Run> = [7301, 7302]
-            .iter()
-            .map(|s| {
-                let d = generate(dir.path(), &format!("base-{s}"), *s, "none", None);
-                Run::load(&d).expect("baseline loads")
-            })
-            .collect();
-        let v = generate(dir.path(), "validate-7303", 7303, "none", None);
-        let validate = vec![Run::load(&v).expect("validation run loads")];
-        let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
-        calibrate::calibrate(&model, &base, &validate, &[], &mut |_| {}).expect("calibrates")
-    })
+    CAL.get_or_init(|| calibration(&[]))
 }
 
 /// The calibration as the README's protocol has it: as [`calibrated`], and the between-run
 /// spread measured on two null runs of the programme the cases run (`--spread-from`).
 fn calibrated_with_spread() -> &'static Calibration {
     static CAL: OnceLock<Calibration> = OnceLock::new();
-    CAL.get_or_init(|| {
-        let dir = TempDir::new("gap-calibration-spread");
-        let load = |name: &str, seed: u64| {
-            let d = generate(dir.path(), name, seed, "none", None);
-            Run::load(&d).expect("run loads")
-        };
-        let base: Vec<Run> = [7301, 7302]
+    CAL.get_or_init(|| calibration(&[7305, 7306]))
+}
+
+/// Calibrates on baseline runs 7301 and 7302, validated on 7303, with the between-run
+/// spread from null runs of `spread_seeds` (none: from the baseline runs).
+fn calibration(spread_seeds: &[u64]) -> Calibration {
+    let dir = TempDir::new("gap-calibration");
+    let runs = |prefix: &str, seeds: &[u64]| -> Vec<Run> {
+        seeds
             .iter()
-            .map(|s| load(&format!("base-{s}"), *s))
-            .collect();
-        let validate = vec![load("validate-7303", 7303)];
-        let spread: Vec<Run> = [7305, 7306]
-            .iter()
-            .map(|s| load(&format!("spread-{s}"), *s))
-            .collect();
-        let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
-        calibrate::calibrate(&model, &base, &validate, &spread, &mut |_| {}).expect("calibrates")
-    })
+            .map(|s| {
+                let d = generate(dir.path(), &format!("{prefix}-{s}"), *s, "none", None);
+                Run::load(&d).expect("run loads")
+            })
+            .collect()
+    };
+    let base = runs("base", &[7301, 7302]);
+    let validate = runs("validate", &[7303]);
+    let spread = runs("spread", spread_seeds);
+    let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
+    calibrate::calibrate(&model, &base, &validate, &spread, &mut |_| {}).expect("calibrates")
 }
 
 /// `gap` with the calibrated model on a fresh run.
@@ -273,13 +263,13 @@ fn calibration_shrinks_the_gap_of_a_vehicle_of_another_structure_by_60_percent()
 /// sample once the surface's stiffness and damping are calibrated, reads as still off.
 #[test]
 fn a_null_run_after_calibration_names_nothing() {
-    let a = discover("null-7304", 7304, "none", None);
-    assert!(a.accepted.is_empty(), "null run named {:?}", names(&a));
-    let scratch = TempDir::new("gap-discover-spread");
+    let scratch = TempDir::new("gap-discover");
     let dir = generate(scratch.path(), "null-7304", 7304, "none", None);
     let m = Measurement::load(&dir).expect("run loads");
-    let a =
-        gap::analyse(&calibrated_with_spread().model, &m, &dir, &mut |_, _| {}).expect("gap runs");
+    let analyse = |c: &Calibration| gap::analyse(&c.model, &m, &dir, &mut |_, _| {});
+    let a = analyse(calibrated()).expect("gap runs");
+    assert!(a.accepted.is_empty(), "null run named {:?}", names(&a));
+    let a = analyse(calibrated_with_spread()).expect("gap runs");
     assert!(a.accepted.is_empty(), "null run named {:?}", names(&a));
     // The calibration's discrepancy terms are never candidates.
     for c in a.rounds.iter().flatten() {
