@@ -118,6 +118,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                 percent: vec![p],
                 divergences: Vec::new(),
                 contacts: Vec::new(),
+                segment_steps: None,
             };
             anchor_noise(c, m, &probe)
         });
@@ -230,6 +231,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
         percent,
         divergences,
         contacts,
+        segment_steps,
     })
 }
 
@@ -286,8 +288,11 @@ pub fn predict(c: &Configs, run: &Run, channel: &Channel, lag_s: f64) -> Option<
         "compass_deg" => {
             let earth = earth_field(c);
             let lat = c.sensors.compass.errors.latency_s;
-            ts.map(|t| compass_at(c, &earth, run, t - lag_s - lat))
-                .collect()
+            ts.map(|t| match run.seen_before(t, t - lag_s - lat) {
+                Some(s) => compass_heading_deg(c, &earth, &s),
+                None => compass_at(c, &earth, run, t - lag_s - lat),
+            })
+            .collect()
         }
         "depth_adc" => {
             let d = &c.sensors.depth;
@@ -632,6 +637,51 @@ pub(crate) mod tests {
         let clean = super::simulate(&c, &m, None).unwrap();
         let floors = super::noise_floor(&c, &m, &clean).expect("the floor of a diverging model");
         assert!(floors.iter().any(Option::is_some));
+    }
+
+    /// Regression (compass latency fits stopped on multiples of the 0.4 s conversion period:
+    /// fitted 0.80 s against 1.08 s hidden): a compass reading whose latency reaches back
+    /// before its segment's start read the previous segment's drifted end, so the prediction
+    /// jumped as the latency moved the lookup across a re-anchored start. The reading now
+    /// reads its own segment, carried back from the anchored start, and moves smoothly.
+    #[test]
+    fn a_latency_moves_a_reading_smoothly_across_a_segment_start() {
+        // A truth with a fifth more thrust: each segment drifts, and its start is re-anchored.
+        let (_, mut c, m) = manoeuvre_of(11, |t| t.vehicle.thruster_common.forward_max_n *= 1.2);
+        c.shooting = Shooting::DEFAULT;
+        let run = super::simulate(&c, &m, None).unwrap();
+        let earth = super::earth_field(&c);
+        let compass = m.channel("compass_deg").unwrap();
+        let (mut smooth, mut old_jump) = (0.0_f64, 0.0_f64);
+        let mut crossings = 0;
+        for &(t, _) in &compass.samples {
+            let start = run.segment_start_index(t) as f64 * run.dt_s;
+            let into = t - start;
+            if start == 0.0 || !(0.05..2.0).contains(&into) {
+                continue;
+            }
+            crossings += 1;
+            let one = super::Channel {
+                name: "compass_deg".into(),
+                samples: vec![(t, 0.0)],
+            };
+            let at = |latency_s: f64| {
+                let mut c = c.clone();
+                c.sensors.compass.errors.latency_s = latency_s;
+                super::predict(&c, &run, &one, 0.0).unwrap()[0]
+            };
+            let (before, after) = (at(into - 1e-4), at(into + 1e-4));
+            smooth = smooth.max(super::wrap_deg(after - before).abs());
+            let old = |latency_s: f64| super::compass_at(&c, &earth, &run, t - latency_s);
+            old_jump = old_jump.max(super::wrap_deg(old(into + 1e-4) - old(into - 1e-4)).abs());
+        }
+        assert!(crossings > 10, "{crossings} readings reach across a start");
+        // 2e-4 s at the manoeuvre's turn rates moves a heading by far less than 0.01 deg.
+        assert!(smooth < 0.01, "a reading jumped by {smooth} deg");
+        assert!(
+            old_jump > 10.0 * smooth.max(0.01),
+            "reading the previous segment jumps: {old_jump} deg"
+        );
     }
 
     /// Regression (fits that could not move: a thruster imbalance stayed on its start point,

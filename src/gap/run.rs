@@ -4,6 +4,8 @@
 
 use serde::Serialize;
 
+use nalgebra::UnitQuaternion;
+
 use crate::physics::state::VehicleState;
 
 /// How the re-simulation is cut.
@@ -50,6 +52,9 @@ pub struct Run {
     /// end (s, in time order). Contact impulses start on whichever step the hull first
     /// reaches a wall, so there the residuals jump as a parameter moves by any amount.
     pub contacts: Vec<[f64; 2]>,
+    /// Steps per re-anchored segment (`None`: one open-loop run). The state at each multiple
+    /// is the anchored start of a new segment.
+    pub segment_steps: Option<usize>,
 }
 
 /// A segment of a re-simulation that diverged: held from `t_s` to the segment's end.
@@ -94,6 +99,35 @@ impl Run {
     pub fn at(&self, t_s: f64) -> &VehicleState {
         let i = (t_s / self.dt_s).round().max(0.0) as usize;
         &self.states[i.min(self.states.len() - 1)]
+    }
+
+    /// The index of the first state of the segment that a sample taken at `t_s` belongs to
+    /// (0 for an open-loop run). A sample at a segment start belongs to the new segment.
+    pub fn segment_start_index(&self, t_s: f64) -> usize {
+        let last = self.states.len().saturating_sub(1);
+        let i = ((t_s / self.dt_s + 1e-6).floor().max(0.0) as usize).min(last);
+        self.segment_steps.map_or(0, |n| i - i % n)
+    }
+
+    /// The state a reading taken at `sample_s` senses when it describes the vehicle at the
+    /// earlier `seen_s` (a latency or lag): inside the sample's own segment the state there;
+    /// before the segment's start that start's state carried back along its velocities and
+    /// rates. The previous segment's end is not used: re-anchoring makes the states jump at
+    /// each start, and a latency moving a lookup across that jump made the fit's objective
+    /// jump too, so latency fits stopped wherever a conversion time lined up with a segment
+    /// start.
+    pub fn seen_before(&self, sample_s: f64, seen_s: f64) -> Option<VehicleState> {
+        let i = self.segment_start_index(sample_s);
+        let start = self.states.get(i)?;
+        let back = seen_s - i as f64 * self.dt_s;
+        if back >= 0.0 {
+            return None;
+        }
+        let mut s = *start;
+        s.position_m += s.attitude * s.velocity_body_mps * back;
+        s.attitude *= UnitQuaternion::from_scaled_axis(s.angular_velocity_body_radps * back);
+        s.t_s += back;
+        Some(s)
     }
 
     pub fn percent_at(&self, t_s: f64) -> [f64; 4] {

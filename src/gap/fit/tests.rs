@@ -452,6 +452,7 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
         percent: Vec::new(),
         divergences: Vec::new(),
         contacts: vec![[31.0, 33.0]],
+        segment_steps: None,
     };
     let (b, a) = (
         left_out_where_touched(&before, Some(&run.contacts)),
