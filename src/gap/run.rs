@@ -113,9 +113,8 @@ impl Run {
     /// earlier `seen_s` (a latency or lag): inside the sample's own segment the state there;
     /// before the segment's start that start's state carried back along its velocities and
     /// rates. The previous segment's end is not used: re-anchoring makes the states jump at
-    /// each start, and a latency moving a lookup across that jump made the fit's objective
-    /// jump too, so latency fits stopped wherever a conversion time lined up with a segment
-    /// start.
+    /// each start, and a lookup across that jump would make a latency fit's objective jump
+    /// wherever a sample's time minus the latency meets a segment start.
     pub fn seen_before(&self, sample_s: f64, seen_s: f64) -> Option<VehicleState> {
         let i = self.segment_start_index(sample_s);
         let start = self.states.get(i)?;
