@@ -58,6 +58,18 @@ pub fn c_source_dir() -> PathBuf {
     crate::workspace_root().join("firmware-protocol").join("c")
 }
 
+/// Runs one `make` of the C library at a time in this test binary: tests run on threads and
+/// share output directories (one build of the examples for several runs), and make is not safe
+/// to run twice at once on one `OUT` (one run's `rm -f libeyebot.a` under another's link
+/// leaves every library call undefined). Every make of a test goes through here.
+pub fn run_make(make: &mut Command) -> std::process::Output {
+    static MAKE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one_at_a_time = MAKE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    make.output().expect("run make")
+}
+
 /// Builds libeyebot and the examples (plus the `extra` programs) for `target` into
 /// `TMP/eyebot-c/<name>-<target>/` and returns that directory; `tmp` is the test's
 /// `env!("CARGO_TARGET_TMPDIR")`. `name` keeps tests that build at the same time out of each
@@ -94,15 +106,7 @@ pub fn build(
         make.arg(format!("PROG={}", progs.join(" ")));
     }
     make.args(make_args);
-    // Tests of one binary run on threads and may share an output directory (one build of
-    // the examples for several runs): make is not safe to run twice at once on one `OUT`.
-    static MAKE: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let output = {
-        let _one_at_a_time = MAKE
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        make.output().expect("run make")
-    };
+    let output = run_make(&mut make);
     assert!(
         output.status.success(),
         "make failed for {target:?}:\n{}\n{}",
