@@ -15,6 +15,12 @@ pub(super) struct LineRuntime {
     pub(super) backlog_limit: usize,
     /// When bytes last arrived (lockstep's wall-clock idle limit).
     pub(super) last_rx_wall: Instant,
+    /// A duplicate of a pty's master, read by the loop itself in lockstep: what the EyeBot
+    /// side wrote on this line before a request on another line is taken before that
+    /// request ([`super::Daemon::take_earlier_input`]).
+    pub(super) peek: Option<crate::transport::pty::PtyDrain>,
+    /// The line carries the sensor link, whose requests move simulated time in lockstep.
+    pub(super) carries_sensor: bool,
 }
 
 /// The lines the configuration asks for, each with its endpoint opened: the sonar line
@@ -76,6 +82,10 @@ pub(super) fn spawn_link_tasks(
     };
     for ((index, endpoint), spec) in endpoints.into_iter().enumerate().zip(specs) {
         let describe = endpoint.describe();
+        let peek = match &endpoint {
+            OpenEndpoint::Pty(pty, _) => pty.drain_handle().ok(),
+            _ => None,
+        };
         spawned.links.push(LinkInfo {
             name: spec.name,
             path: describe.clone(),
@@ -102,6 +112,8 @@ pub(super) fn spawn_link_tasks(
             backlog: bytes::BytesMut::new(),
             backlog_limit: spec.tx_queue_bytes,
             last_rx_wall: Instant::now(),
+            peek,
+            carries_sensor: spec.carries.sensor,
         });
     }
     spawned

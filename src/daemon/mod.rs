@@ -414,14 +414,18 @@ impl<M: Model> Daemon<M> {
                 inbound = self.inbound.recv() => match inbound {
                     Some(inbound) => {
                         self.advance_to_wall()?;
-                        if let Some(observer) = &self.observer {
-                            let name = self.engine.line_name(inbound.line);
-                            let t_s = self.engine.now() as f64 * 1e-9;
-                            observer.tap.bytes(t_s, name, crate::record::Direction::Rx, inbound.data.clone());
-                        }
-                        self.engine.receive(inbound.line, &inbound.data).map_err(model_error)?;
-                        if let Some(line) = self.lines.get_mut(inbound.line) {
-                            line.last_rx_wall = Instant::now();
+                        let moves_time = self
+                            .lines
+                            .get(inbound.line)
+                            .is_some_and(|l| l.carries_sensor);
+                        let behind = if self.pacing.map.is_none() && moves_time {
+                            self.take_earlier_input()?
+                        } else {
+                            Vec::new()
+                        };
+                        self.receive_inbound(&inbound)?;
+                        for chunk in &behind {
+                            self.receive_inbound(chunk)?;
                         }
                     }
                     None => return Ok(()),
@@ -520,6 +524,76 @@ impl<M: Model> Daemon<M> {
 
     /// In realtime: settles the overrun accounting for this wake-up and runs the model up to
     /// the wall clock.
+    /// Hands one chunk a line brought to the engine (and to the observer's tap), and notes
+    /// when the line last brought bytes.
+    fn receive_inbound(&mut self, inbound: &Inbound) -> Result<(), DaemonError> {
+        if let Some(observer) = &self.observer {
+            let name = self.engine.line_name(inbound.line);
+            let t_s = self.engine.now() as f64 * 1e-9;
+            observer.tap.bytes(
+                t_s,
+                name,
+                crate::record::Direction::Rx,
+                inbound.data.clone(),
+            );
+        }
+        self.engine
+            .receive(inbound.line, &inbound.data)
+            .map_err(model_error)?;
+        if let Some(line) = self.lines.get_mut(inbound.line) {
+            line.last_rx_wall = Instant::now();
+        }
+        Ok(())
+    }
+
+    /// In lockstep, before a chunk of the sensor link's line is handled: takes first
+    /// everything the EyeBot side wrote on the lines that do not carry the sensor link, which
+    /// it wrote before that chunk (a lockstep client waits for each reply, so nothing it
+    /// writes later can be there yet; the other way round, a sonar chunk is handled as it
+    /// comes, and a request written after it on the sensor line is still unread). The chunks the
+    /// link tasks already read come from the queue; what is still in a pty is read from it
+    /// directly (the loop runs on the link tasks' one thread, so no link task holds bytes it
+    /// read and has not queued). Without this, a select written on the sonar line just before
+    /// a TIME_STEP was taken at that step or at a later one, as the host scheduled the two
+    /// link tasks. Returns the queued chunks of the sensor link's lines, which come after it.
+    fn take_earlier_input(&mut self) -> Result<Vec<Inbound>, DaemonError> {
+        let mut behind = Vec::new();
+        while let Ok(queued) = self.inbound.try_recv() {
+            if self.lines.get(queued.line).is_none_or(|l| l.carries_sensor) {
+                behind.push(queued);
+            } else {
+                self.receive_inbound(&queued)?;
+            }
+        }
+        let mut buf = vec![0u8; 4096];
+        let others: Vec<usize> = (0..self.lines.len())
+            .filter(|&i| !self.lines[i].carries_sensor)
+            .collect();
+        for other in others {
+            while let Some(peek) = &self.lines[other].peek {
+                let n = match peek.read_now(&mut buf) {
+                    Ok(0) => break,
+                    Ok(n) => n,
+                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                    // WouldBlock: nothing more was written. Anything else is the link
+                    // task's to see and report.
+                    Err(_) => break,
+                };
+                self.lines[other]
+                    .cx
+                    .counters
+                    .bytes_rx
+                    .fetch_add(n as u64, Ordering::Relaxed);
+                let chunk = Inbound {
+                    line: other,
+                    data: bytes::Bytes::copy_from_slice(&buf[..n]),
+                };
+                self.receive_inbound(&chunk)?;
+            }
+        }
+        Ok(behind)
+    }
+
     fn catch_up(&mut self) -> Result<(), DaemonError> {
         let Some(map) = self.pacing.map.as_mut() else {
             return Ok(());
