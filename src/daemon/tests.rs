@@ -168,6 +168,8 @@ fn released_bytes_wait_for_a_busy_link_task_instead_of_being_dropped() {
         backlog: bytes::BytesMut::new(),
         backlog_limit: 4096,
         last_rx_wall: Instant::now(),
+        peek: None,
+        carries_sensor: line == 1,
     };
     let mut lines = vec![
         runtime(0, "sonar", sonar_tx),
