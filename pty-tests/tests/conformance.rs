@@ -766,6 +766,66 @@ fn realtime_replies_come_within_the_specified_time() {
     );
 }
 
+/// Section 2.9, "The sonar line": in lockstep, a select written on the sonar line just before a
+/// TIME_ADVANCE is taken at the tick the advance starts from, whatever the host's scheduling.
+/// Two hundred selects, each written and at once followed by an advance of 10 ticks (longer
+/// than a select's acknowledgement takes), with no wait between them: the recording stamps the
+/// last byte of select `k` at the advance's first tick, `start + 10 k`.
+#[test]
+fn a_select_written_just_before_an_advance_is_taken_at_its_first_tick() {
+    use eyebot_test_support::recording::{Direction, read_chunks};
+    let dir = TempDir::new("conf-select-order");
+    let record = dir.join("rec");
+    let mut d =
+        InProcessDaemon::start(dir, &config_text(&[LOCKSTEP]), Some(record.clone()), |_| {});
+    let mut s = Wire::open(&d.link("sensor"));
+    let mut sonar = Wire::open(&d.link("sonar"));
+    hello(&mut s, 0);
+    let start = match s.ask(1, Message::TimeGet) {
+        Message::Time { ticks, .. } => ticks,
+        other => panic!("{other:?}"),
+    };
+    let (selects, per_select) = (200u32, 10u32);
+    for k in 0..selects {
+        sonar.send(if k % 2 == 0 { b"@S1\r" } else { b"@S2\r" });
+        advance(&mut s, (k % 250 + 2) as u8, per_select);
+        sonar.drain(Duration::ZERO);
+    }
+    drop((s, sonar));
+    d.stop();
+    // The simulated time of the chunk holding each select's last byte (its `\r`).
+    let mut taken = Vec::new();
+    for chunk in read_chunks(&record)
+        .iter()
+        .filter(|c| c.link == "sonar" && c.dir == Direction::Rx)
+    {
+        taken.extend(
+            chunk
+                .data
+                .iter()
+                .filter(|b| **b == b'\r')
+                .map(|_| chunk.sim_s),
+        );
+    }
+    assert_eq!(taken.len(), selects as usize, "every select recorded");
+    let late: Vec<(u32, f64, f64)> = taken
+        .iter()
+        .zip(0u32..)
+        .map(|(t, k)| {
+            let due = f64::from(start + k * per_select) * TICK_S;
+            (k, due, *t)
+        })
+        .filter(|(_, due, t)| (t - due).abs() > 1e-9)
+        .collect();
+    assert!(
+        late.is_empty(),
+        "{} of {selects} selects were not taken at their advance's first tick (select, due s, \
+         taken s): {:?}",
+        late.len(),
+        &late[..late.len().min(10)]
+    );
+}
+
 /// The sonar line of a lockstep run, from its recording: seconds of simulated time.
 struct SonarTimeline {
     /// When the select's last byte was received.

@@ -18,9 +18,35 @@ pub(super) struct LineRuntime {
     /// A duplicate of a pty's master, read by the loop itself in lockstep: what the EyeBot
     /// side wrote on this line before a request on another line is taken before that
     /// request ([`super::Daemon::take_earlier_input`]).
-    pub(super) peek: Option<crate::transport::pty::PtyDrain>,
+    pub(super) peek: Option<ReadAhead>,
     /// The line carries the sensor link, whose requests move simulated time in lockstep.
     pub(super) carries_sensor: bool,
+}
+
+/// A pty master read ahead by the loop, with the buffer its reads go through (read once per
+/// request in lockstep, so it is kept rather than made each time).
+pub(super) struct ReadAhead {
+    pty: crate::transport::pty::PtyDrain,
+    buf: Box<[u8; READ_AHEAD_BYTES]>,
+}
+
+/// The most one read ahead takes from a pty.
+const READ_AHEAD_BYTES: usize = 4096;
+
+impl ReadAhead {
+    fn new(pty: crate::transport::pty::PtyDrain) -> Self {
+        Self {
+            pty,
+            buf: Box::new([0; READ_AHEAD_BYTES]),
+        }
+    }
+
+    /// What the pty holds now, up to [`READ_AHEAD_BYTES`]; empty when it holds nothing (or
+    /// `Err(WouldBlock)`, as a non-blocking read says it).
+    pub(super) fn read_now(&mut self) -> std::io::Result<&[u8]> {
+        let n = self.pty.read_now(&mut self.buf[..])?;
+        Ok(&self.buf[..n])
+    }
 }
 
 /// The lines the configuration asks for, each with its endpoint opened: the sonar line
@@ -83,7 +109,7 @@ pub(super) fn spawn_link_tasks(
     for ((index, endpoint), spec) in endpoints.into_iter().enumerate().zip(specs) {
         let describe = endpoint.describe();
         let peek = match &endpoint {
-            OpenEndpoint::Pty(pty, _) => pty.drain_handle().ok(),
+            OpenEndpoint::Pty(pty, _) => pty.drain_handle().ok().map(ReadAhead::new),
             _ => None,
         };
         spawned.links.push(LinkInfo {

@@ -565,30 +565,28 @@ impl<M: Model> Daemon<M> {
                 self.receive_inbound(&queued)?;
             }
         }
-        let mut buf = vec![0u8; 4096];
-        let others: Vec<usize> = (0..self.lines.len())
-            .filter(|&i| !self.lines[i].carries_sensor)
-            .collect();
-        for other in others {
-            while let Some(peek) = &self.lines[other].peek {
-                let n = match peek.read_now(&mut buf) {
-                    Ok(0) => break,
-                    Ok(n) => n,
+        for other in 0..self.lines.len() {
+            if self.lines[other].carries_sensor {
+                continue;
+            }
+            loop {
+                let line = &mut self.lines[other];
+                let Some(peek) = line.peek.as_mut() else {
+                    break;
+                };
+                let data = match peek.read_now() {
+                    Ok([]) => break,
+                    Ok(read) => bytes::Bytes::copy_from_slice(read),
                     Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                     // WouldBlock: nothing more was written. Anything else is the link
                     // task's to see and report.
                     Err(_) => break,
                 };
-                self.lines[other]
-                    .cx
+                line.cx
                     .counters
                     .bytes_rx
-                    .fetch_add(n as u64, Ordering::Relaxed);
-                let chunk = Inbound {
-                    line: other,
-                    data: bytes::Bytes::copy_from_slice(&buf[..n]),
-                };
-                self.receive_inbound(&chunk)?;
+                    .fetch_add(data.len() as u64, Ordering::Relaxed);
+                self.receive_inbound(&Inbound { line: other, data })?;
             }
         }
         Ok(behind)
