@@ -74,11 +74,11 @@ pub struct Divergence {
 /// velocity error decays with the linear damping alone. Surge is the slowest axis:
 /// `configs/vehicles/mako.toml`'s 35 kg hull with 3.5 kg of added mass against a linear surge
 /// damping of 3.327 N/(m/s) has a time constant of 11.6 s, and three of them (35 s) leave 5 %
-/// of an error a contact made. Ten seconds, a little under one time constant, left 42 %: on a
-/// null run of structure seed 434323 (case seed 379893, case 68) a slow spot turn beside the
-/// wall the hull had touched read the track at 14.4 and 25.5 chi-square per sample (known
-/// levels 1.43 and 1.10), most of it in the 30 s after that memory, and a water current was
-/// named.
+/// of an error a contact made. A memory of 10 s, under one time constant, leaves 42 %: with
+/// it, a null run of structure seed 434323 (case seed 379893, case 68), a slow spot turn beside
+/// the wall the hull had touched, reads the track at 14.4 and 25.5 chi-square per sample
+/// (known levels 1.43 and 1.10), most of it in the 30 s after that memory, and a water current
+/// is named.
 pub const CONTACT_MEMORY_S: f64 = 35.0;
 
 /// How long before a contact's first step its samples are left out too (s). A candidate near
