@@ -20,6 +20,7 @@ fn options(seed: u64) -> BenchOptions {
         hidden: Vec::new(),
         independent_path: PathBuf::new(),
         structure_seed: None,
+        drawn_programs: false,
         pairs: 0,
         bridge: Default::default(),
         keep: None,

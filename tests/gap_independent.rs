@@ -319,7 +319,7 @@ fn a_two_effect_case_with_a_negative_first_size_is_written() {
     require_tool("python3", "python3");
     let scratch = TempDir::new("gap-pair-size");
     let program = root().join("pty-tests/independent/mako_independent.py");
-    let truth = Independent::new(&program, None).expect("the independent model exists");
+    let truth = Independent::new(&program, None, false, 0).expect("the independent model exists");
     let gain = by_name("thrust_gain").expect("an independent effect");
     let offset = by_name("compass_offset").expect("an independent effect");
     let out = scratch.path().join("pair");
@@ -331,6 +331,81 @@ fn a_two_effect_case_with_a_negative_first_size_is_written() {
         m.experiment.name.contains("thrust_gain+compass_offset"),
         "{}",
         m.experiment.name
+    );
+}
+
+/// With drawn programmes (`gap-bench --drawn-programs`) the cases and spread runs of a
+/// campaign drive one programme of the model's kinds, drawn from the campaign's seeds, and
+/// each baseline run one the model draws per run: campaigns do not all drive `mixed`, and a
+/// calibration sees other programmes than its cases.
+#[test]
+fn drawn_programmes_give_the_cases_one_programme_and_the_baselines_their_own() {
+    use eyebot_hil::gap::bench::calibrated::Truth;
+    use eyebot_hil::gap::bench::independent::{Independent, program_kinds};
+    require_tool("python3", "python3");
+    let scratch = TempDir::new("gap-drawn-programs");
+    let program = root().join("pty-tests/independent/mako_independent.py");
+    let kinds = program_kinds(&program).expect("the model lists its programmes");
+    for kind in [
+        "mixed",
+        "spins",
+        "square",
+        "heading_hold",
+        "depth_hold",
+        "wall_run",
+    ] {
+        assert!(
+            kinds.iter().any(|k| k == kind),
+            "{kind} missing from {kinds:?}"
+        );
+    }
+    let drawn = |seed| {
+        Independent::new(&program, Some(11), true, seed)
+            .expect("the independent model exists")
+            .case_program()
+            .to_string()
+    };
+    let campaigns: Vec<String> = (1..=12).map(drawn).collect();
+    assert_eq!(
+        campaigns,
+        (1..=12).map(drawn).collect::<Vec<_>>(),
+        "drawn again"
+    );
+    let distinct: std::collections::BTreeSet<&String> = campaigns.iter().collect();
+    assert!(
+        distinct.len() >= 3,
+        "twelve campaigns drew only {distinct:?}"
+    );
+    let truth = Independent::new(&program, Some(11), true, 5).expect("the model exists");
+    let run_program = |dir: &Path| {
+        let m = Measurement::load(dir).expect("the run loads");
+        kinds
+            .iter()
+            .find(|k| {
+                m.experiment
+                    .name
+                    .starts_with(&format!("independent-{k}-seed"))
+            })
+            .cloned()
+            .unwrap_or_else(|| panic!("no programme of {kinds:?} in {}", m.experiment.name))
+    };
+    for seed in [7311, 7312] {
+        let out = scratch.path().join(format!("case-{seed}"));
+        truth.case(seed, &[], &out).expect("a null case is written");
+        assert_eq!(run_program(&out), truth.case_program());
+    }
+    let baselines: std::collections::BTreeSet<String> = (0..8)
+        .map(|i| {
+            let out = scratch.path().join(format!("baseline-{i}"));
+            truth
+                .baseline(i, 7320 + i as u64, &out)
+                .expect("a baseline run is written");
+            run_program(&out)
+        })
+        .collect();
+    assert!(
+        baselines.len() >= 2,
+        "eight baseline runs all drove {baselines:?}"
     );
 }
 

@@ -72,6 +72,11 @@ pub struct CampaignArgs {
     /// stated start; absent: the model's nominal vehicle.
     #[arg(long, value_name = "K")]
     pub structure_seed: Option<u64>,
+    /// Independent source: each baseline and validation run drives a programme the model
+    /// draws per run, and the cases and spread runs one programme drawn for the campaign
+    /// (its name is printed); default: every run drives `mixed`.
+    #[arg(long)]
+    pub drawn_programs: bool,
     /// Independent and bridge sources: this many further cases with two hidden effects at
     /// once (two distinct effects drawn from `--effects`), scored on both being named.
     #[arg(long, value_name = "N", default_value_t = 0)]
@@ -141,6 +146,11 @@ fn check_flags_fit_source(args: &CampaignArgs) -> Result<(), CliError> {
             "--source independent",
         ),
         (
+            args.drawn_programs && args.source != SourceArg::Independent,
+            "--drawn-programs",
+            "--source independent",
+        ),
+        (
             args.pairs > 0 && args.source == SourceArg::Simulator,
             "--pairs",
             "--source independent or bridge",
@@ -177,6 +187,7 @@ fn options(
         hidden: Vec::new(),
         independent_path: PathBuf::new(),
         structure_seed: args.structure_seed,
+        drawn_programs: args.drawn_programs,
         pairs: args.pairs,
         bridge: bench::bridge::BridgeOptions {
             exe: None,
@@ -231,6 +242,19 @@ fn options(
         }
     }
     Ok((opts, embedded))
+}
+
+/// With drawn programmes, says on stderr which programme the campaign's cases drive.
+fn note_programs(opts: &BenchOptions) -> Result<(), CliError> {
+    if opts.drawn_programs {
+        let kinds = bench::independent::program_kinds(&opts.independent_path)?;
+        let cases = bench::independent::draw_case_program(&kinds, opts.seed, opts.structure_seed);
+        eprintln!(
+            "gap-bench: programmes drawn: each baseline and validation run its own (`--program \
+             random`), the spread runs and cases `{cases}`"
+        );
+    }
+    Ok(())
 }
 
 /// The table followed by one CSV line per case (`bench::table::cases_csv`), as `--out`
@@ -308,6 +332,7 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
             if !matches!(opts.source, Source::Simulator) {
                 eprintln!("gap-bench calibrate: calibrating on the baseline runs");
             }
+            note_programs(&opts)?;
             let c = bench::calibrate(&opts)?;
             c.write(out)?;
             match &c.gap {
@@ -337,6 +362,7 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
         ));
     }
     let (opts, _embedded) = options(&args.campaign)?;
+    note_programs(&opts)?;
     let calibration = match &args.calibration {
         Some(path) => Some(Calibration::read(path)?),
         None => None,

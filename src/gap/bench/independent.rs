@@ -1,13 +1,17 @@
 //! Data from the independent vehicle model (`pty-tests/independent/mako_independent.py`): a
 //! different model form, closed-loop programs on measured sensors, its own sensors and noise.
-//! Every run drives the `mixed` program for three minutes; the between-run spread is measured
-//! on [`SPREAD_RUNS`] null runs of it; the case loop, calibration and scoring are
-//! [`super::calibrated`]'s. Sizes are multiples of the model's default sizes (its
-//! `--list`).
+//! By default every run drives the `mixed` program for three minutes; with drawn programmes
+//! ([`Programs::Drawn`]) each baseline and validation run drives a program the model draws
+//! per run, and the cases and spread runs one program drawn for the campaign. The
+//! between-run spread is measured on [`SPREAD_RUNS`] null runs of the cases' program; the
+//! case loop, calibration and scoring are [`super::calibrated`]'s. Sizes are multiples of
+//! the model's default sizes (its `--list`).
 
 use std::path::Path;
 use std::process::Command;
 use std::sync::LazyLock;
+
+use rand::RngExt;
 
 use crate::gap::GapError;
 use crate::gap::bench::calibrated::{Hidden, Truth};
@@ -15,8 +19,48 @@ use crate::gap::effects;
 
 /// Length of every run (s).
 pub const DURATION_S: f64 = 180.0;
-/// The program every run drives.
+/// The program every run drives unless programmes are drawn.
 pub const PROGRAM: &str = "mixed";
+
+/// Which program each run drives.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Programs {
+    /// Every run drives [`PROGRAM`].
+    Mixed,
+    /// Each baseline and validation run drives a program the model draws from its own kinds
+    /// per run (`--program random`, from the run's seed and the structure seed); the spread
+    /// runs and the cases drive `cases`. So the calibration sees other programmes than the
+    /// cases, as a user's calibration runs may, and the spread is measured on the cases' one,
+    /// as the README's protocol asks.
+    Drawn { cases: String },
+}
+
+/// The programs the independent model offers, from its `--list`.
+pub fn program_kinds(program: &Path) -> Result<Vec<String>, GapError> {
+    let text = python(program, &["--list".to_string()])?;
+    let kinds: Vec<String> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("programs"))
+        .skip(1)
+        .take_while(|l| l.starts_with(' '))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .collect();
+    if kinds.is_empty() {
+        return Err(GapError::Data(format!(
+            "{} --list: expected a `programs:` section naming at least one program",
+            program.display()
+        )));
+    }
+    Ok(kinds)
+}
+
+/// The cases' program of a campaign with drawn programmes: one of `kinds`, uniformly, drawn
+/// from the campaign's seed and structure seed (the same for every shard).
+pub fn draw_case_program(kinds: &[String], seed: u64, structure_seed: Option<u64>) -> String {
+    let mixed = seed ^ structure_seed.unwrap_or(0).rotate_left(32);
+    let mut rng = crate::sensors::rng::stream(mixed, "gap-bench-independent-programs");
+    kinds[rng.random_range(0..kinds.len())].clone()
+}
 /// Null runs the between-run spread is measured on.
 pub const SPREAD_RUNS: usize = 3;
 
@@ -125,6 +169,7 @@ pub fn default_sizes(program: &Path) -> Result<Vec<(String, Vec<f64>)>, GapError
 /// that seed draws, started away from its stated start.
 fn generate(
     program: &Path,
+    kind: &str,
     seed: u64,
     structure_seed: Option<u64>,
     hidden: &[(&str, &[f64])],
@@ -132,7 +177,7 @@ fn generate(
 ) -> Result<(), GapError> {
     let mut args: Vec<String> = [
         "--program",
-        PROGRAM,
+        kind,
         "--seed",
         &seed.to_string(),
         "--duration",
@@ -174,25 +219,48 @@ fn generate(
 }
 
 /// The independent model as a truth source: its program at `path`, its nominal vehicle or
-/// the one `structure_seed` draws.
+/// the one `structure_seed` draws, driving `programs`.
 pub struct Independent<'a> {
     pub program: &'a Path,
     pub structure_seed: Option<u64>,
+    pub programs: Programs,
 }
 
 impl Independent<'_> {
-    /// Checks the program exists.
-    pub fn new(program: &Path, structure_seed: Option<u64>) -> Result<Independent<'_>, GapError> {
+    /// Checks the program exists; with `drawn`, draws the cases' program from the model's
+    /// kinds and the campaign's `seed`.
+    pub fn new(
+        program: &Path,
+        structure_seed: Option<u64>,
+        drawn: bool,
+        seed: u64,
+    ) -> Result<Independent<'_>, GapError> {
         if !program.is_file() {
             return Err(GapError::Data(format!(
                 "the independent model {} does not exist (--independent PATH)",
                 program.display()
             )));
         }
+        let programs = if drawn {
+            Programs::Drawn {
+                cases: draw_case_program(&program_kinds(program)?, seed, structure_seed),
+            }
+        } else {
+            Programs::Mixed
+        };
         Ok(Independent {
             program,
             structure_seed,
+            programs,
         })
+    }
+
+    /// The program the cases and spread runs drive.
+    pub fn case_program(&self) -> &str {
+        match &self.programs {
+            Programs::Mixed => PROGRAM,
+            Programs::Drawn { cases } => cases,
+        }
     }
 }
 
@@ -202,7 +270,11 @@ impl Truth for Independent<'_> {
     }
 
     fn baseline(&self, _index: usize, seed: u64, out: &Path) -> Result<(), GapError> {
-        generate(self.program, seed, self.structure_seed, &[], out)
+        let kind = match self.programs {
+            Programs::Mixed => PROGRAM,
+            Programs::Drawn { .. } => "random",
+        };
+        generate(self.program, kind, seed, self.structure_seed, &[], out)
     }
 
     /// As the README's protocol has it: repeat null runs of the cases' programme, apart
@@ -214,6 +286,7 @@ impl Truth for Independent<'_> {
 
     fn case(&self, seed: u64, hidden: &[(&Hidden, &[f64])], out: &Path) -> Result<(), GapError> {
         let named: Vec<(&str, &[f64])> = hidden.iter().map(|(h, s)| (h.name, *s)).collect();
-        generate(self.program, seed, self.structure_seed, &named, out)
+        let kind = self.case_program();
+        generate(self.program, kind, seed, self.structure_seed, &named, out)
     }
 }

@@ -84,6 +84,10 @@ pub struct BenchOptions {
     /// Independent source: draw the vehicle's structure from the model's family with this
     /// seed (`--structure-seed` of the model), and start every run away from its stated start.
     pub structure_seed: Option<u64>,
+    /// Independent source: draw the baseline runs' programmes per run and one programme for
+    /// the cases and spread runs ([`independent::Programs::Drawn`]); false: every run drives
+    /// `mixed`.
+    pub drawn_programs: bool,
     /// Calibrated sources: cases with two hidden effects at once (two distinct effects of
     /// `hidden`, each sized as a one-effect case), after the one-effect and null cases.
     pub pairs: usize,
@@ -103,6 +107,7 @@ impl BenchOptions {
             cases: self.cases,
             seed: self.seed,
             structure_seed: self.structure_seed,
+            drawn_programs: self.drawn_programs,
             pairs: self.pairs,
             effects: match self.source {
                 Source::Simulator => self.effects.iter().map(|e| e.name.to_string()).collect(),
@@ -127,6 +132,9 @@ pub struct OptionsKey {
     /// Cases with two hidden effects.
     #[serde(default)]
     pub pairs: usize,
+    /// Independent source: programmes drawn ([`BenchOptions::drawn_programs`]).
+    #[serde(default)]
+    pub drawn_programs: bool,
 }
 
 /// One case and how the workflow did on it.
@@ -291,7 +299,12 @@ pub fn run(
             calibration: None,
         }),
         Source::Independent => {
-            let truth = independent::Independent::new(&opts.independent_path, opts.structure_seed)?;
+            let truth = independent::Independent::new(
+                &opts.independent_path,
+                opts.structure_seed,
+                opts.drawn_programs,
+                opts.seed,
+            )?;
             calibrated::run(opts, shard, shared.as_ref(), progress, &truth)
         }
         Source::Bridge => {
@@ -308,7 +321,12 @@ pub fn calibrate(opts: &BenchOptions) -> Result<Calibration, GapError> {
     let calibrated = match opts.source {
         Source::Simulator => None,
         Source::Independent => {
-            let truth = independent::Independent::new(&opts.independent_path, opts.structure_seed)?;
+            let truth = independent::Independent::new(
+                &opts.independent_path,
+                opts.structure_seed,
+                opts.drawn_programs,
+                opts.seed,
+            )?;
             Some(calibrated::calibrate(opts, &truth)?)
         }
         Source::Bridge => {
