@@ -328,8 +328,44 @@ fn lookalike<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a Candidat
                 "a rival of the same kind"
             );
         }
-        kin && c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
+        kin && (c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
+            || sensor_tie(c, win))
     })
+}
+
+/// Two sensor effects that both pass every guard, where the winner's lead read on the scale
+/// of the significance test ([`margin`]) is under the delta-BIC margin. Two sensor effects of
+/// one channel are told apart only by the readings where their changes differ (a depth
+/// offset and a depth gain, cosine 0.9999 on a run that holds one depth, only where the depth
+/// changes), and there the model's correlated error weighs as much as in the significance
+/// test: read unscaled, such a lead of 10-15 named the other of the two. Physics look-alikes
+/// keep the unscaled lead: the simulator's thrust gains and curves, imbalances and couplings
+/// tie on the scale.
+fn sensor_tie(c: &Candidate, win: &Candidate) -> bool {
+    let sensor = |name: &str| crate::gap::effects::by_name(name).is_some_and(|e| !e.physics);
+    if !(sensor(&win.name) && sensor(&c.name)) {
+        return false;
+    }
+    let lead = margin(win, c);
+    tracing::debug!(
+        winner = win.name,
+        rival = c.name,
+        lead,
+        "two sensor effects, the lead on the significance scale"
+    );
+    lead < crate::gap::fit::BIC_MARGIN
+}
+
+/// How much more the data favour `win` than `rival`, in BIC on the scale the significance
+/// margin uses: the difference of their chi-square gains over the larger of their
+/// quasi-likelihood scales (`noise_factor * variance_factor`: the model error and correlated
+/// noise both fits leave behind, as an F-test divides by the residual variance), less the
+/// difference of their parameter penalties.
+pub fn margin(win: &Candidate, rival: &Candidate) -> f64 {
+    let gain = |c: &Candidate| c.chi2_before - c.chi2_after;
+    let penalty = |c: &Candidate| gain(c) - c.delta_bic_uncalibrated;
+    let scale = |c: &Candidate| (c.noise_factor * c.variance_factor).max(1.0);
+    (gain(win) - gain(rival)) / scale(win).max(scale(rival)) - (penalty(win) - penalty(rival))
 }
 
 /// Whether `c` could stand where `win` stands: library effects of the same kind (mean or
@@ -819,6 +855,46 @@ mod tests {
             assert_eq!(apart.accepted[0].name, first);
             assert!(apart.ambiguous.is_none());
         }
+    }
+
+    /// Regression (a depth offset named a depth gain, 10.6 ahead unscaled): two sensor
+    /// effects of one channel tie when the winner's lead on the significance test's scale is
+    /// under the margin, whatever the unscaled lead; the same lead between two physics
+    /// effects names the winner, and a scaled lead over the margin names it too.
+    #[test]
+    fn two_sensor_effects_tie_on_the_scale_of_the_significance_test() {
+        // `gain` chi-square drop, every fit's scale `scale`, one parameter each (penalty 7).
+        let fitted = |name: &str, gain: f64, scale: f64| {
+            let mut c = candidate(name, 0.0, true);
+            c.chi2_before = 10_000.0;
+            c.chi2_after = 10_000.0 - gain;
+            c.delta_bic_uncalibrated = gain - 7.0;
+            c.noise_factor = scale;
+            c.variance_factor = 1.0;
+            c.delta_bic = gain / scale - 7.0;
+            c
+        };
+        let close = one_round(vec![
+            fitted("depth_gain", 2_012.0, 2.0),
+            fitted("depth_offset", 2_000.0, 2.0),
+        ]);
+        assert_eq!(
+            close.ambiguous,
+            Some(["depth_gain".to_string(), "depth_offset".to_string()])
+        );
+        assert!(close.accepted.is_empty(), "{:?}", close.accepted);
+        let apart = one_round(vec![
+            fitted("depth_gain", 2_030.0, 2.0),
+            fitted("depth_offset", 2_000.0, 2.0),
+        ]);
+        assert_eq!(apart.accepted[0].name, "depth_gain");
+        assert!(apart.ambiguous.is_none());
+        let physics = one_round(vec![
+            fitted("thrust_gain", 2_012.0, 2.0),
+            fitted("thrust_curve", 2_000.0, 2.0),
+        ]);
+        assert_eq!(physics.accepted[0].name, "thrust_gain");
+        assert!(physics.ambiguous.is_none());
     }
 
     /// Regression (a stand-in named): a thruster lag the fit holds on its bound explains far
