@@ -299,12 +299,7 @@ pub fn run(
             calibration: None,
         }),
         Source::Independent => {
-            let truth = independent::Independent::new(
-                &opts.independent_path,
-                opts.structure_seed,
-                opts.drawn_programs,
-                opts.seed,
-            )?;
+            let truth = independent_truth(opts)?;
             calibrated::run(opts, shard, shared.as_ref(), progress, &truth)
         }
         Source::Bridge => {
@@ -314,6 +309,16 @@ pub fn run(
     }
 }
 
+/// The independent source as `opts` set it up: its program, structure seed and programmes.
+fn independent_truth(opts: &BenchOptions) -> Result<independent::Independent<'_>, GapError> {
+    independent::Independent::new(
+        &opts.independent_path,
+        opts.structure_seed,
+        opts.drawn_programs,
+        opts.seed,
+    )
+}
+
 /// The campaign's calibration on its own (`gap-bench calibrate`), for every shard to read.
 /// The simulator source analyses with the base model it generates from: its calibration
 /// holds no model, only what the shards check (options and base model).
@@ -321,12 +326,7 @@ pub fn calibrate(opts: &BenchOptions) -> Result<Calibration, GapError> {
     let calibrated = match opts.source {
         Source::Simulator => None,
         Source::Independent => {
-            let truth = independent::Independent::new(
-                &opts.independent_path,
-                opts.structure_seed,
-                opts.drawn_programs,
-                opts.seed,
-            )?;
+            let truth = independent_truth(opts)?;
             Some(calibrated::calibrate(opts, &truth)?)
         }
         Source::Bridge => {
