@@ -191,8 +191,13 @@ fn replay_to_a_pty_carries_on_when_its_stdout_is_closed() {
 #[test]
 fn gap_bench_refuses_a_flag_its_source_does_not_read() {
     let dir = TempDir::new("gap-bench-flags");
-    let cases: [(&[&str], &str, &str); 3] = [
+    let cases: [(&[&str], &str, &str); 4] = [
         (&["--keep"], "--keep", "--source independent or bridge"),
+        (
+            &["--source", "bridge", "--drawn-programs", "--out"],
+            "--drawn-programs",
+            "--source independent",
+        ),
         (
             &["--source", "independent", "--programs"],
             "--programs",
