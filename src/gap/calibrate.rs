@@ -393,18 +393,24 @@ fn apparent_spread(
     let spread = apparent
         .into_iter()
         .filter(|(_, per_run)| per_run.len() >= 2)
-        .map(|(e, per_run)| {
-            let values = (0..e.parameters.len())
-                .map(|j| {
-                    let ms =
-                        per_run.iter().map(|v| v[j] * v[j]).sum::<f64>() / per_run.len() as f64;
-                    (ms * pull).sqrt()
-                })
-                .collect();
-            (e, values)
-        })
+        .map(|(e, per_run)| (e, spread_of(e, &per_run, pull)))
         .collect();
     Ok((spread, unidentified))
+}
+
+/// One effect's between-run spread from its apparent values on each run: per parameter the
+/// root mean square about no effect, times `pull` (the factor that undoes a fit's pull toward
+/// its own runs). The two components of a vector in a plane share one spread, the root of
+/// their mean squares' mean ([`effects::plane_vector`]).
+fn spread_of(e: &Effect, per_run: &[Vec<f64>], pull: f64) -> Vec<f64> {
+    let ms = |j: usize| per_run.iter().map(|v| v[j] * v[j]).sum::<f64>() / per_run.len() as f64;
+    let k = e.parameters.len();
+    if effects::plane_vector(e) {
+        let pooled = (0..k).map(ms).sum::<f64>() / k as f64;
+        vec![(pooled * pull).sqrt(); k]
+    } else {
+        (0..k).map(|j| (ms(j) * pull).sqrt()).collect()
+    }
 }
 
 /// Where the joint fit starts: the model as given, and one more start per further value of

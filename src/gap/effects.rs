@@ -179,6 +179,12 @@ pub fn candidates() -> impl Iterator<Item = &'static Effect> {
     LIBRARY.iter().filter(|e| e.candidate())
 }
 
+/// Whether `effect`'s parameters are the components of one vector in a plane
+/// ([`PLANE_VECTORS`]).
+pub fn plane_vector(effect: &Effect) -> bool {
+    PLANE_VECTORS.contains(&effect.name)
+}
+
 /// Whether `a` and `b` are twins of one form ([`FORM_TWINS`]).
 pub fn twins(a: &Effect, b: &Effect) -> bool {
     FORM_TWINS
@@ -219,7 +225,7 @@ impl PartialEq for Effect {
 
 mod library;
 mod structural;
-pub use library::{FORM_TWINS, LIBRARY};
+pub use library::{FORM_TWINS, LIBRARY, PLANE_VECTORS};
 
 /// Looks an effect up by name.
 pub fn by_name(name: &str) -> Option<&'static Effect> {

@@ -203,3 +203,21 @@ fn the_sway_from_a_turn_is_left_to_the_marker_and_to_the_rivals() {
         .collect();
     assert!(rivals.contains(&"sway_from_yaw"), "{rivals:?}");
 }
+
+/// A vector in a plane strays the same in every direction: the water current's north and
+/// east spreads are one pooled value, so three runs that strayed east leave no narrow north
+/// spread. An effect of two unrelated parameters keeps one spread per parameter.
+#[test]
+fn a_vector_in_a_plane_has_one_spread_in_every_direction() {
+    let by = |n: &str| effects::by_name(n).unwrap();
+    let runs = vec![vec![-0.004, 0.001], vec![0.002, 0.008], vec![0.001, 0.012]];
+    let current = spread_of(by("water_current"), &runs, 1.0);
+    let pooled = ((16.0 + 4.0 + 1.0 + 1.0 + 64.0 + 144.0) / 6.0_f64).sqrt() * 1e-3;
+    assert_eq!(current.len(), 2);
+    for s in &current {
+        assert!((s - pooled).abs() < 1e-12, "{current:?}, expected {pooled}");
+    }
+    let drag = spread_of(by("drag_mismatch"), &runs, 1.5);
+    let rms = |j: usize| (runs.iter().map(|v| v[j] * v[j]).sum::<f64>() / 3.0 * 1.5).sqrt();
+    assert_eq!(drag, vec![rms(0), rms(1)]);
+}
