@@ -379,3 +379,20 @@ fn the_surface_terms_act_afloat_and_nothing_submerged() {
     assert_eq!(deep(&c), deep(&stiff));
     assert_eq!(deep(&c), deep(&damped));
 }
+
+/// Every plane vector is a library effect with two parameters of one unit and one typical
+/// size, so pooling its components' spread mixes like with like; a misspelt name would
+/// silently keep one spread per component.
+#[test]
+fn every_plane_vector_is_a_library_effect_of_two_like_components() {
+    for name in PLANE_VECTORS {
+        let e = by_name(name).unwrap_or_else(|| panic!("{name} is not in the library"));
+        assert_eq!(e.parameters.len(), 2, "{name}: {:?}", e.parameters);
+        assert_eq!(e.scales[0], e.scales[1], "{name}: {:?}", e.scales);
+        assert_eq!(e.bounds[0], e.bounds[1], "{name}: {:?}", e.bounds);
+        assert!(plane_vector(e));
+    }
+    assert!(!plane_vector(
+        by_name("drag_mismatch").expect("in the library")
+    ));
+}
