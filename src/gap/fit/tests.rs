@@ -862,3 +862,49 @@ fn a_later_candidate_fitted_with_the_earlier_names_free_takes_back_its_share() {
         "lag {refitted_lag:.3} refitted from {too_long} (truth {lag_s})"
     );
 }
+
+/// A depth sensor's offset and the height the hull floats at (`float_depth`, a discrepancy
+/// term) are twins of form: on a run that spends most of its time afloat they move the depth
+/// reading alike (a cosine of 0.9999 on this manoeuvre), and only the dives, where the reading
+/// follows the offset and not the float, tell them apart. Fitted against a model that lacks a
+/// hidden depth offset, the float depth explains a little more; that near tie refuses no depth
+/// offset named after another effect (`structural_rival`), as none is refused named first. A
+/// hull that truly floats deeper is preferred in its form by more than the margin, and refuses
+/// the depth offset that stands in for it.
+#[test]
+fn a_depth_offset_and_the_float_depth_are_twins_of_form() {
+    let offset = effects::by_name("depth_offset").unwrap();
+    let float = effects::by_name("float_depth").unwrap();
+    let fitted = |truth: fn(&mut Configs)| {
+        let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(13, truth);
+        let clean = resim::simulate(&c, &m, None).unwrap();
+        let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+        let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+        let win = fit_effects(&setup, &[offset], &mut |_| {}).remove(0);
+        let twin = fit_effects(&setup, &[float], &mut |_| {}).remove(0);
+        let cosine = crate::gap::candidate::change_cosine_where_changed(&twin, &win);
+        let rival = structural_rival(&setup, &win).map(|r| r.name);
+        (win, twin, rival, cosine)
+    };
+    let (win, twin, rival, cosine) = fitted(|c| c.sensors.depth.errors.bias += 0.05);
+    assert!(win.guards.all(), "{:?}", win.guards);
+    assert!(cosine.is_some_and(|c| c > 0.999), "{cosine:?}");
+    assert!(
+        (twin.delta_bic_uncalibrated - win.delta_bic_uncalibrated).abs() < BIC_MARGIN,
+        "a near tie: {} against {}",
+        twin.delta_bic_uncalibrated,
+        win.delta_bic_uncalibrated
+    );
+    assert!(
+        rival.is_none_or(|r| r != "float_depth"),
+        "the float depth refuses its twin"
+    );
+    let (stand_in, _, rival, _) = fitted(|c| c.vehicle.cg_from_box_centre_m.z += 0.05);
+    assert_eq!(
+        rival.as_deref(),
+        Some("float_depth"),
+        "a depth offset standing in for a hull that floats deeper ({:?})",
+        stand_in.guards
+    );
+    assert!(effects::twins(offset, float) && effects::twins(float, offset));
+}
