@@ -38,6 +38,7 @@ pub mod later;
 pub mod lsq;
 pub mod model;
 pub mod outliers;
+pub mod redundant;
 pub mod report;
 pub mod residuals;
 pub mod resim;
@@ -899,6 +900,31 @@ pub fn analyse_with(
             *fitted.borrow_mut() = with_named(model, &ex.accepted)?;
             *configs.borrow_mut() = ex.configs;
             accepted = ex.accepted;
+        }
+    }
+    // An earlier name the later ones (or the look-alike the selection stopped on) leave
+    // without an effect of its own is dropped (`redundant`).
+    let mut refused = refused;
+    let beside = ambiguous.as_ref().and_then(|[winner, _]| {
+        rounds
+            .last()
+            .and_then(|round| round.iter().find(|c| &c.name == winner))
+    });
+    if !accepted.is_empty() {
+        let floors = current_floors.borrow();
+        let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
+            .with_known(model, &noise_weights(&floors));
+        if let Some(kept) = redundant::drop_redundant(&setup, &accepted, beside)? {
+            let mut c = start.clone();
+            for a in &kept.accepted {
+                if let Some(effect) = effects::by_name(&a.name) {
+                    effects::apply(effect, &a.values(), &mut c);
+                }
+            }
+            *fitted.borrow_mut() = with_named(model, &kept.accepted)?;
+            *configs.borrow_mut() = c;
+            accepted = kept.accepted;
+            refused.extend(kept.dropped);
         }
     }
     let (configs, fitted) = (configs.into_inner(), fitted.into_inner());
