@@ -914,7 +914,18 @@ pub fn analyse_with(
         let floors = current_floors.borrow();
         let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
             .with_known(model, &noise_weights(&floors));
-        if let Some(kept) = redundant::drop_redundant(&setup, &accepted, beside)? {
+        // Each name's values in the round it was named in (`rounds[i]` named `accepted[i]`).
+        let named_with: Vec<Vec<f64>> = accepted
+            .iter()
+            .zip(&rounds)
+            .map(|(a, round)| {
+                round
+                    .iter()
+                    .find(|c| c.name == a.name)
+                    .map_or_else(|| a.values(), Candidate::values)
+            })
+            .collect();
+        if let Some(kept) = redundant::drop_redundant(&setup, &accepted, &named_with, beside)? {
             let mut c = start.clone();
             for a in &kept.accepted {
                 if let Some(effect) = effects::by_name(&a.name) {
