@@ -501,6 +501,24 @@ fn a_structural_rival_needs_held_out_blocks_that_do_not_get_worse() {
     assert!(!rival::stands(&untested));
 }
 
+/// On the simulator manoeuvre measured with `truth`: `win`'s fit against the model without
+/// it, `twin`'s, `win`'s structural rival and the cosine of `twin`'s change with `win`'s.
+fn fitted_beside_twin(
+    win: &'static Effect,
+    twin: &'static Effect,
+    truth: fn(&mut Configs),
+) -> (Candidate, Candidate, Option<String>, Option<f64>) {
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(13, truth);
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+    let fit = fit_effects(&setup, &[win], &mut |_| {}).remove(0);
+    let other = fit_effects(&setup, &[twin], &mut |_| {}).remove(0);
+    let cosine = crate::gap::candidate::change_cosine_where_changed(&other, &fit);
+    let rival = structural_rival(&setup, &fit).map(|r| r.name);
+    (fit, other, rival, cosine)
+}
+
 /// A yaw moment in sway (`N_v v`) and one in surge times sway (`N_uv u v`, the Munk moment)
 /// are twins of form: fitted against the model that lacks a hidden sway-yaw coupling, the Munk
 /// moment makes the same change of the residuals as the coupling's fit (a cosine of 0.94 on
@@ -513,17 +531,8 @@ fn a_structural_rival_needs_held_out_blocks_that_do_not_get_worse() {
 fn a_sway_yaw_moment_and_the_munk_moment_are_twins_of_form() {
     let coupling = effects::by_name("sway_yaw_coupling").unwrap();
     let munk = effects::by_name("munk_moment").unwrap();
-    // The coupling's fit, its structural rival, and the cosine of the Munk moment's change
-    // with the coupling's.
-    let fitted = |truth: fn(&mut Configs)| {
-        let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(13, truth);
-        let clean = resim::simulate(&c, &m, None).unwrap();
-        let floors = resim::noise_floor(&c, &m, &clean).unwrap();
-        let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
-        let win = fit_effects(&setup, &[coupling], &mut |_| {}).remove(0);
-        let twin = fit_effects(&setup, &[munk], &mut |_| {}).remove(0);
-        let cosine = crate::gap::candidate::change_cosine_where_changed(&twin, &win);
-        let rival = structural_rival(&setup, &win).map(|r| r.name);
+    let fitted = |truth| {
+        let (win, _, rival, cosine) = fitted_beside_twin(coupling, munk, truth);
         (win, rival, cosine)
     };
     let (stand_in, rival, _) = fitted(|c| c.vehicle.damping_yaw_uv += 20.0);
@@ -875,17 +884,7 @@ fn a_later_candidate_fitted_with_the_earlier_names_free_takes_back_its_share() {
 fn a_depth_offset_and_the_float_depth_are_twins_of_form() {
     let offset = effects::by_name("depth_offset").unwrap();
     let float = effects::by_name("float_depth").unwrap();
-    let fitted = |truth: fn(&mut Configs)| {
-        let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(13, truth);
-        let clean = resim::simulate(&c, &m, None).unwrap();
-        let floors = resim::noise_floor(&c, &m, &clean).unwrap();
-        let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
-        let win = fit_effects(&setup, &[offset], &mut |_| {}).remove(0);
-        let twin = fit_effects(&setup, &[float], &mut |_| {}).remove(0);
-        let cosine = crate::gap::candidate::change_cosine_where_changed(&twin, &win);
-        let rival = structural_rival(&setup, &win).map(|r| r.name);
-        (win, twin, rival, cosine)
-    };
+    let fitted = |truth| fitted_beside_twin(offset, float, truth);
     let (win, twin, rival, cosine) = fitted(|c| c.sensors.depth.errors.bias += 0.05);
     assert!(win.guards.all(), "{:?}", win.guards);
     assert!(cosine.is_some_and(|c| c > 0.999), "{cosine:?}");
