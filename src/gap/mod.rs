@@ -890,9 +890,11 @@ pub fn analyse_with(
             Ok(None)
         },
     )?;
-    // An earlier name the later ones show to be its look-alike's place is exchanged for it.
-    let mut accepted = accepted;
-    if accepted.len() > 1 {
+    // After the rounds, against the model without any name: an earlier name the later ones show
+    // to be its look-alike's place is exchanged for it, then one the later ones (or the
+    // look-alike the selection stopped on) leave without an effect of its own is dropped.
+    let (mut accepted, mut refused) = (accepted, refused);
+    if !accepted.is_empty() {
         let floors = current_floors.borrow();
         let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
             .with_known(model, &noise_weights(&floors));
@@ -901,39 +903,10 @@ pub fn analyse_with(
             *configs.borrow_mut() = ex.configs;
             accepted = ex.accepted;
         }
-    }
-    // An earlier name the later ones (or the look-alike the selection stopped on) leave
-    // without an effect of its own is dropped (`redundant`).
-    let mut refused = refused;
-    let beside = ambiguous.as_ref().and_then(|[winner, _]| {
-        rounds
-            .last()
-            .and_then(|round| round.iter().find(|c| &c.name == winner))
-    });
-    if !accepted.is_empty() {
-        let floors = current_floors.borrow();
-        let setup = fit::setup(m, start.clone(), &floors, options.split, &spread)?
-            .with_known(model, &noise_weights(&floors));
-        // Each name's values in the round it was named in (`rounds[i]` named `accepted[i]`).
-        let named_with: Vec<Vec<f64>> = accepted
-            .iter()
-            .zip(&rounds)
-            .map(|(a, round)| {
-                round
-                    .iter()
-                    .find(|c| c.name == a.name)
-                    .map_or_else(|| a.values(), Candidate::values)
-            })
-            .collect();
-        if let Some(kept) = redundant::drop_redundant(&setup, &accepted, &named_with, beside)? {
-            let mut c = start.clone();
-            for a in &kept.accepted {
-                if let Some(effect) = effects::by_name(&a.name) {
-                    effects::apply(effect, &a.values(), &mut c);
-                }
-            }
+        if let Some(kept) = redundant::after_rounds(&setup, &rounds, &accepted, ambiguous.as_ref())?
+        {
             *fitted.borrow_mut() = with_named(model, &kept.accepted)?;
-            *configs.borrow_mut() = c;
+            *configs.borrow_mut() = kept.configs;
             accepted = kept.accepted;
             refused.extend(kept.dropped);
         }

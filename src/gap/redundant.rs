@@ -26,7 +26,7 @@
 
 use super::GapError;
 use super::candidate::{Candidate, Refused};
-use super::effects::Kind;
+use super::effects::{self, Configs, Kind};
 use super::fit;
 
 /// An earlier name whose interval holds zero is dropped only where its joint values have
@@ -60,6 +60,35 @@ pub(crate) struct Kept {
     pub accepted: Vec<Candidate>,
     /// The names dropped, each as a refused winner of its round with the reason.
     pub dropped: Vec<Refused>,
+    /// The setup's base with the names kept applied at their values.
+    pub configs: Configs,
+}
+
+/// The backward step after the greedy rounds: [`drop_redundant`] of `accepted` (`rounds[i]`
+/// the round that named `accepted[i]`, whose value there is the one it was named with), beside
+/// the winner of the last round where the selection stopped on it as `ambiguous`.
+pub(crate) fn after_rounds(
+    setup: &fit::Setup<'_>,
+    rounds: &[Vec<Candidate>],
+    accepted: &[Candidate],
+    ambiguous: Option<&[String; 2]>,
+) -> Result<Option<Kept>, GapError> {
+    let beside = ambiguous.and_then(|[winner, _]| {
+        rounds
+            .last()
+            .and_then(|round| round.iter().find(|c| &c.name == winner))
+    });
+    let named_with: Vec<Vec<f64>> = accepted
+        .iter()
+        .zip(rounds)
+        .map(|(a, round)| {
+            round
+                .iter()
+                .find(|c| c.name == a.name)
+                .map_or_else(|| a.values(), Candidate::values)
+        })
+        .collect();
+    drop_redundant(setup, accepted, &named_with, beside)
 }
 
 /// Backward elimination of `accepted` (named in rounds 0, 1, ... in order, with the values and
@@ -75,7 +104,7 @@ pub(crate) fn drop_redundant(
 ) -> Result<Option<Kept>, GapError> {
     // The length of a name's values in units of its parameters' scales.
     let size = |name: &str, values: &[f64]| -> f64 {
-        let scales = super::effects::by_name(name).map_or(&[][..], |e| e.scales);
+        let scales = effects::by_name(name).map_or(&[][..], |e| e.scales);
         values
             .iter()
             .zip(scales)
@@ -123,7 +152,7 @@ pub(crate) fn drop_redundant(
         );
         let weakest = (0..askable(kept.len()))
             .filter(|&i| {
-                super::effects::by_name(&kept[i].name).is_some_and(|e| e.kind == Kind::Mean)
+                effects::by_name(&kept[i].name).is_some_and(|e| e.kind == Kind::Mean)
                     && holds_zero(&judged[i].1)
                     && named_with.get(i).is_some_and(|w| {
                         size(&kept[i].name, &judged[i].0) < COLLAPSED * size(&kept[i].name, w)
@@ -196,9 +225,19 @@ pub(crate) fn drop_redundant(
             break;
         }
     }
-    Ok((!dropped.is_empty()).then_some(Kept {
+    if dropped.is_empty() {
+        return Ok(None);
+    }
+    let mut configs = setup.base.clone();
+    for a in &kept {
+        if let Some(effect) = effects::by_name(&a.name) {
+            effects::apply(effect, &a.values(), &mut configs);
+        }
+    }
+    Ok(Some(Kept {
         accepted: kept,
         dropped,
+        configs,
     }))
 }
 
