@@ -20,7 +20,10 @@
 //!   through a whole channel.
 //! - **A weak prior.** Each parameter adds a residual `x / PRIOR_WIDTH` (in units of its
 //!   typical size): a direction the data do not inform stays near the model as given instead
-//!   of wandering to a bound.
+//!   of wandering to a bound. Where the model file's `[prior]` says how sure a shipped value
+//!   is (a datasheet's tolerance), that standard deviation replaces it: baseline runs inform a
+//!   sensor's gain mostly through the model's dynamics, so a hull of another structure would
+//!   otherwise move the dynamics' error into the sensor.
 //! - **Two starts.** The thrust curve's scale and shape trade off, and the fit has more than
 //!   one minimum along them: it runs from the model as given and from a steeper curve
 //!   ([`CURVE_START`]), and keeps the result with the smaller gap on the baseline runs.
@@ -442,11 +445,27 @@ fn starts(chosen: &[&'static Effect]) -> Vec<DVector<f64>> {
     out
 }
 
+/// Each joint parameter's prior width in units of its typical size: the model's `[prior]`
+/// standard deviation where it gives one, else the weak [`PRIOR_WIDTH`].
+fn prior_widths(model: &GapModel, chosen: &[&'static Effect]) -> Vec<f64> {
+    chosen
+        .iter()
+        .flat_map(|e| {
+            e.parameters.iter().zip(e.scales).map(|(p, scale)| {
+                model
+                    .prior_sd(e.name, p)
+                    .map_or(PRIOR_WIDTH, |sd| sd / scale)
+            })
+        })
+        .collect()
+}
+
 /// The joint fit of `chosen` on every prepared run: `passes` passes (channel weights from the
 /// residual at the previous pass) from each of `starts`; the start whose result leaves the
 /// smallest gap on the baseline runs is kept. Returns the point, its fit and the residual
 /// evaluations used.
 fn joint_fit(
+    model: &GapModel,
     prepared: &[Prepared<'_>],
     setups: &[Setup<'_>],
     chosen: &[&'static Effect],
@@ -457,6 +476,7 @@ fn joint_fit(
     let (scales, bounds_raw) = effects::joint_scales_and_bounds(chosen);
     let bounds = Bounds::scaled(&bounds_raw, &scales);
     let dims = scales.len();
+    let prior_widths = prior_widths(model, chosen);
     // Channel weights, one per (run, channel), from the residual at the current point.
     let weights_at = |x: &DVector<f64>| -> Vec<Vec<ChannelWeight>> {
         prepared
@@ -484,7 +504,7 @@ fn joint_fit(
                 huber(v / w.spread, HUBER_K) * w.spread * pick(w)
             }));
         }
-        out.extend(x.iter().map(|v| v / PRIOR_WIDTH));
+        out.extend(x.iter().zip(&prior_widths).map(|(v, w)| v / w));
         Some(DVector::from_vec(out))
     };
     let mut evaluations = 0;
@@ -647,8 +667,15 @@ pub fn calibrate(
         })
         .collect();
     let (chosen, not_fitted) = choose_effects(&measured);
-    let (mut x, fit, evaluations) =
-        joint_fit(&prepared, &setups, &chosen, starts(&chosen), 2, progress)?;
+    let (mut x, fit, evaluations) = joint_fit(
+        model,
+        &prepared,
+        &setups,
+        &chosen,
+        starts(&chosen),
+        2,
+        progress,
+    )?;
     // Parameters the data do not identify are named: an interval that is infinite or wider
     // than the parameter's physical range, or a sensor parameter driven onto its bound (a
     // sensor effect taking a disagreement its own signature does not explain). Their values
@@ -759,13 +786,7 @@ fn choose_effects(measured: &[&str]) -> (Vec<&'static Effect>, Vec<String>) {
     let mut not_fitted = Vec::new();
     let mut joint: Vec<(u8, &'static Effect)> = effects::LIBRARY
         .iter()
-        .filter_map(|e| match e.calibration {
-            Fitted::Joint(k)
-            | Fitted::JointTwoStarts(k, _)
-            | Fitted::Discrepancy(k)
-            | Fitted::DiscrepancyStarts(k, _) => Some((k, e)),
-            _ => None,
-        })
+        .filter_map(|e| e.calibration.joint_place().map(|k| (k, e)))
         .collect();
     joint.sort_by_key(|(k, _)| *k);
     for (_, e) in joint {

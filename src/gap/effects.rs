@@ -163,6 +163,24 @@ pub enum Calibration {
     Rival,
 }
 
+impl Calibration {
+    /// Its place in `gap calibrate`'s joint fit, if it is fitted there.
+    pub fn joint_place(&self) -> Option<u8> {
+        match *self {
+            Calibration::Joint(k)
+            | Calibration::JointTwoStarts(k, _)
+            | Calibration::Discrepancy(k)
+            | Calibration::DiscrepancyStarts(k, _) => Some(k),
+            Calibration::No | Calibration::NoiseLevel | Calibration::Rival => None,
+        }
+    }
+
+    /// True when `gap calibrate` fits it jointly with the others.
+    pub fn is_jointly_fitted(&self) -> bool {
+        self.joint_place().is_some()
+    }
+}
+
 impl Effect {
     /// True for an effect `gap` may name as new (every effect but the calibration's
     /// discrepancy terms and the structural rivals).

@@ -48,6 +48,8 @@ struct RawModel {
     discrepancy_bound: BTreeMap<String, f64>,
     #[serde(default)]
     discrepancy_scatter: BTreeMap<String, RunScatter>,
+    #[serde(default)]
+    prior: BTreeMap<String, BTreeMap<String, f64>>,
 }
 
 /// Family-wise level of the run bounds: a run with nothing new exceeds one of the bounds of
@@ -153,6 +155,11 @@ pub struct GapModel {
     /// calibrate` beside the bounds): a question about fewer channels than the report judges
     /// together takes its bound from here ([`Self::run_bound_among`]).
     pub discrepancy_scatter: BTreeMap<String, RunScatter>,
+    /// How sure the model as given is of a calibrated parameter: per effect and parameter,
+    /// one standard deviation in the parameter's unit (`[prior]`). `gap calibrate` holds the
+    /// parameter to it; one not listed gets the weak prior
+    /// ([`crate::gap::calibrate::PRIOR_WIDTH`] typical sizes).
+    pub prior: BTreeMap<String, BTreeMap<String, f64>>,
 }
 
 /// Reads `name` relative to `base` if such a file exists, else from the embedded configs
@@ -242,6 +249,7 @@ impl GapModel {
                     .into());
             }
         }
+        check_prior(&doc, &raw.prior)?;
         Ok(Self {
             name: raw.name,
             vehicle_ref: raw.vehicle,
@@ -255,7 +263,13 @@ impl GapModel {
             discrepancy: raw.discrepancy,
             discrepancy_bound: raw.discrepancy_bound,
             discrepancy_scatter: raw.discrepancy_scatter,
+            prior: raw.prior,
         })
+    }
+
+    /// The standard deviation `[prior]` gives `parameter` of `effect`, if any.
+    pub fn prior_sd(&self, effect: &str, parameter: &str) -> Option<f64> {
+        self.prior.get(effect)?.get(parameter).copied()
     }
 
     /// The spread as a fit's interval takes it: each value times `t / z`, the 97.5 %
@@ -374,6 +388,19 @@ impl GapModel {
                 "spread_dof = {dof}   # degrees of freedom of the [[spread]] estimate"
             );
         }
+        if !self.prior.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n[prior]   # one standard deviation per parameter: how sure the model as given is"
+            );
+            for (effect, parameters) in &self.prior {
+                let sd: Vec<String> = parameters
+                    .iter()
+                    .map(|(p, v)| format!("{p} = {}", exact(*v)))
+                    .collect();
+                let _ = writeln!(s, "{effect} = {{ {} }}", sd.join(", "));
+            }
+        }
         for (table, e) in self
             .calibration
             .iter()
@@ -458,6 +485,56 @@ pub fn spread_factor(dof: u32) -> f64 {
 }
 
 /// Resolves the `[[effect]]` or `[[calibration]]` entries of a model file.
+/// Every `[prior]` entry names an effect `gap calibrate` fits and one of its parameters, with
+/// a finite standard deviation above zero.
+fn check_prior(
+    doc: &Document,
+    prior: &BTreeMap<String, BTreeMap<String, f64>>,
+) -> Result<(), GapError> {
+    for (name, parameters) in prior {
+        let effect = effects::by_name(name)
+            .filter(|e| e.calibration.is_jointly_fitted())
+            .ok_or_else(|| {
+                doc.invalid(
+                    &format!("prior.{name}"),
+                    format!(
+                        "`{name}` is not an effect `gap calibrate` fits jointly; they are {}",
+                        effects::LIBRARY
+                            .iter()
+                            .filter(|e| e.calibration.is_jointly_fitted())
+                            .map(|e| e.name)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?;
+        for (p, sd) in parameters {
+            if !effect.parameters.contains(&p.as_str()) {
+                return Err(doc
+                    .invalid(
+                        &format!("prior.{name}.{p}"),
+                        format!(
+                            "`{name}` has no parameter `{p}`; it has {}",
+                            effect.parameters.join(", ")
+                        ),
+                    )
+                    .into());
+            }
+            if !sd.is_finite() || *sd <= 0.0 {
+                return Err(doc
+                    .invalid(
+                        &format!("prior.{name}.{p}"),
+                        format!(
+                            "expected a standard deviation > 0 in the parameter's unit, got {sd}"
+                        ),
+                    )
+                    .into());
+            }
+        }
+    }
+    Ok(())
+}
+
 fn enabled(doc: &Document, table: &str, raw: &[RawEffect]) -> Result<Vec<EnabledEffect>, GapError> {
     let mut out = Vec::new();
     for (i, e) in raw.iter().enumerate() {
@@ -580,6 +657,58 @@ mod tests {
             "{e}"
         );
         assert!(model("[discrepancy]\ny_m = nan\n").is_err());
+    }
+
+    /// A prior is read per effect and parameter, written back unchanged (so a calibrated
+    /// model calibrates again under it), and refused, with the key named, for an effect
+    /// `gap calibrate` does not fit, a parameter the effect lacks or a width that is not a
+    /// positive number.
+    #[test]
+    fn the_prior_round_trips_and_rejects_bad_entries() {
+        let m = model("[prior]\ndepth_gain = { scale_factor = 0.05 }\n").expect("loads");
+        assert_eq!(m.prior_sd("depth_gain", "scale_factor"), Some(0.05));
+        assert_eq!(m.prior_sd("depth_offset", "offset_m"), None);
+        let again = GapModel::from_text(
+            "again.toml",
+            &m.to_toml("test", Path::new(".")),
+            PathBuf::new(),
+        )
+        .expect("written model loads");
+        assert_eq!(again.prior, m.prior);
+
+        for (text, key, expected) in [
+            (
+                "depth_pwm_emi = { rms_v = 0.1 }",
+                "prior.depth_pwm_emi",
+                "fits jointly",
+            ),
+            (
+                "sonar_gain = { x = 0.1 }",
+                "prior.sonar_gain",
+                "fits jointly",
+            ),
+            (
+                "depth_gain = { offset_m = 0.1 }",
+                "prior.depth_gain.offset_m",
+                "scale_factor",
+            ),
+            (
+                "depth_gain = { scale_factor = 0.0 }",
+                "prior.depth_gain.scale_factor",
+                "> 0",
+            ),
+            (
+                "depth_gain = { scale_factor = inf }",
+                "prior.depth_gain.scale_factor",
+                "> 0",
+            ),
+        ] {
+            let e = model(&format!("[prior]\n{text}\n")).expect_err(text);
+            assert!(
+                e.to_string().contains(key) && e.to_string().contains(expected),
+                "{text}: {e}"
+            );
+        }
     }
 
     /// The bound a run with nothing new stays under is read per channel, written back
