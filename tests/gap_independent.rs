@@ -103,6 +103,30 @@ fn calibration(spread_seeds: &[u64]) -> Calibration {
     calibrate::calibrate(&model, &base, &validate, &spread, &mut |_| {}).expect("calibrates")
 }
 
+/// Calibrates the shipped model on null runs 7311-7313 of the vehicle of `structure`
+/// (written into `dir`, as `base-SEED`), validated on 7314.
+fn calibrate_structure(dir: &Path, structure: u64) -> Calibration {
+    let run = |name: &str, seed: u64| {
+        let d = generate_vehicle(dir, name, Some(structure), seed, "none", None);
+        Run::load(&d).expect("run loads")
+    };
+    let base: Vec<Run> = [7311, 7312, 7313]
+        .iter()
+        .map(|s| run(&format!("base-{s}"), *s))
+        .collect();
+    let validate = vec![run("validate-7314", 7314)];
+    let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
+    calibrate::calibrate(&model, &base, &validate, &[], &mut |_| {}).expect("calibrates")
+}
+
+/// The calibration's score on its validation run.
+fn validation(c: &Calibration) -> &calibrate::RunGap {
+    c.runs
+        .iter()
+        .find(|r| !r.fitted)
+        .expect("validation run scored")
+}
+
 /// `gap` with the calibrated model on a fresh run.
 fn discover(name: &str, seed: u64, hidden: &str, size: Option<&str>) -> Analysis {
     let c = calibrated();
@@ -227,24 +251,9 @@ fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
 /// each: a camera track below its floor outvoted the compass).
 #[test]
 fn calibration_shrinks_the_gap_of_a_vehicle_of_another_structure_by_60_percent() {
-    const STRUCTURE: u64 = 52361;
     let dir = TempDir::new("gap-structure");
-    let run = |name: &str, seed: u64| {
-        let d = generate_vehicle(dir.path(), name, Some(STRUCTURE), seed, "none", None);
-        Run::load(&d).expect("run loads")
-    };
-    let base: Vec<Run> = [7311, 7312, 7313]
-        .iter()
-        .map(|s| run(&format!("base-{s}"), *s))
-        .collect();
-    let validate = vec![run("validate-7314", 7314)];
-    let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
-    let c = calibrate::calibrate(&model, &base, &validate, &[], &mut |_| {}).expect("calibrates");
-    let r = c
-        .runs
-        .iter()
-        .find(|r| !r.fitted)
-        .expect("validation run scored");
+    let c = calibrate_structure(dir.path(), 52361);
+    let r = validation(&c);
     assert!(
         r.reduction_pct >= 60.0,
         "validation run: gap {:.2} -> {:.2} ({:.0} % smaller); channels {:?}",
@@ -265,17 +274,8 @@ fn calibration_shrinks_the_gap_of_a_vehicle_of_another_structure_by_60_percent()
 /// `[prior]` holds the gain to its datasheet.
 #[test]
 fn calibration_leaves_the_depth_sensor_gain_to_its_datasheet_on_a_hull_of_another_heave() {
-    const STRUCTURE: u64 = 466433;
     let dir = TempDir::new("gap-heave");
-    let run = |name: &str, seed: u64| {
-        let d = generate_vehicle(dir.path(), name, Some(STRUCTURE), seed, "none", None);
-        Run::load(&d).expect("run loads")
-    };
-    let base: Vec<Run> = [7311, 7312, 7313]
-        .iter()
-        .map(|s| run(&format!("base-{s}"), *s))
-        .collect();
-    let validate = vec![run("validate-7314", 7314)];
+    let c = calibrate_structure(dir.path(), 466433);
     let truth: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("base-7311/truth.json")).expect("truth"),
     )
@@ -292,8 +292,6 @@ fn calibration_leaves_the_depth_sensor_gain_to_its_datasheet_on_a_hull_of_anothe
         .as_float()
         .expect("the shipped depth gain");
     let gain_error = vehicle_v_per_m / shipped_v_per_m - 1.0;
-    let model = GapModel::load(&root().join("configs/models/mako.toml")).expect("model");
-    let c = calibrate::calibrate(&model, &base, &validate, &[], &mut |_| {}).expect("calibrates");
     let gain = c
         .parameters
         .iter()
@@ -306,11 +304,7 @@ fn calibration_leaves_the_depth_sensor_gain_to_its_datasheet_on_a_hull_of_anothe
         gain.ci95[0],
         gain.ci95[1]
     );
-    let r = c
-        .runs
-        .iter()
-        .find(|r| !r.fitted)
-        .expect("validation run scored");
+    let r = validation(&c);
     assert!(
         r.reduction_pct >= 60.0,
         "validation run: gap {:.2} -> {:.2} ({:.0} % smaller)",
