@@ -418,18 +418,26 @@ pub fn interval_excludes_zero(
 /// square root of the residual's reliability.
 /// The energy beyond the floor is never taken below what the effect explains, so the
 /// corrected correlation stays at most about 1.
+///
+/// The sonar ranges are a function of the pose (the walls seen from the vehicle's position
+/// along its heading): an effect whose signature channels include the pose moves them as it
+/// moves the track or the heading (a compass offset turns every segment's anchored heading,
+/// and with it every transducer's line of sight), so their gain counts as its own, as an
+/// effect's `also_moves` channels do. They do not enter the correlation.
 fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals) -> (bool, String) {
     let in_sig = |i: usize| effect.channels.contains(&setup.m.channels[i].name.as_str());
+    let witnesses = pose_witnesses(setup, effect);
     let moves = |i: usize| {
-        effect
-            .also_moves
-            .contains(&setup.m.channels[i].name.as_str())
+        let name = setup.m.channels[i].name.as_str();
+        effect.also_moves.contains(&name) || witnesses.contains(&name)
     };
     let (mut dot, mut dd, mut rr, mut gain_sig, mut gain_all) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut by_channel = vec![0.0; setup.m.channels.len()];
     for (idx, a) in r0.part(true) {
         let b = r1.values[idx];
         let g = a * a - b * b;
         gain_all += g;
+        by_channel[r0.owner[idx]] += g;
         if in_sig(r0.owner[idx]) || moves(r0.owner[idx]) {
             gain_sig += g;
         }
@@ -450,6 +458,19 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
     } else {
         0.0
     };
+    if tracing::enabled!(tracing::Level::DEBUG) {
+        let gains: Vec<String> = by_channel
+            .iter()
+            .enumerate()
+            .filter(|(_, g)| **g != 0.0)
+            .map(|(i, g)| format!("{} {g:.1}", setup.m.channels[i].name))
+            .collect();
+        tracing::debug!(
+            effect = effect.name,
+            gains = gains.join(", "),
+            "signature: the improvement by channel"
+        );
+    }
     let share = if gain_all > 0.0 {
         gain_sig / gain_all
     } else {
@@ -462,15 +483,41 @@ fn signature(setup: &Setup<'_>, effect: &Effect, r0: &Residuals, r1: &Residuals)
              share of the improvement there{} = {:.0} % (>= {:.0} %)",
             effect.signature,
             effect.channels.join("/"),
-            if effect.also_moves.is_empty() {
-                String::new()
-            } else {
-                format!(" and in {}", effect.also_moves.join("/"))
+            {
+                let also: Vec<&str> = effect
+                    .also_moves
+                    .iter()
+                    .copied()
+                    .chain(witnesses.iter().copied())
+                    .collect();
+                if also.is_empty() {
+                    String::new()
+                } else {
+                    format!(" and in {}", also.join("/"))
+                }
             },
             share * 100.0,
             SIGNATURE_MIN_SHARE * 100.0
         ),
     )
+}
+
+/// The pose channels: the track (`x_m`, `y_m`) and the heading (`compass_deg`).
+const POSE_CHANNELS: [&str; 3] = ["x_m", "y_m", "compass_deg"];
+
+/// The measurement's sonar channels, where `effect`'s signature channels include the pose
+/// ([`signature`]); none otherwise.
+fn pose_witnesses<'m>(setup: &Setup<'m>, effect: &Effect) -> Vec<&'m str> {
+    if !effect.channels.iter().any(|c| POSE_CHANNELS.contains(c)) {
+        return Vec::new();
+    }
+    setup
+        .m
+        .channels
+        .iter()
+        .map(|c| c.name.as_str())
+        .filter(|n| crate::gap::sonar::index(n).is_some() && !effect.channels.contains(n))
+        .collect()
 }
 
 /// A fit of one candidate on one part of the data, scored.

@@ -424,6 +424,72 @@ fn signature_correlation_is_read_beyond_the_noise_floor_and_the_known_levels() {
     assert!(pass && text.contains("= 1.00"), "{text}");
 }
 
+/// Sonar ranges witness the pose: a compass offset that explains its signature channels
+/// and, through the heading it anchors, three times that gain in the sonar channels passes the
+/// share test (the sonar gain counts as its own); the same gain in the depth channel, which
+/// the heading does not move, leaves it a quarter of the improvement and fails. An effect of
+/// no pose channel (a depth offset) gets no credit for the sonar.
+#[test]
+fn sonar_ranges_count_with_an_effect_of_the_pose() {
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre(7);
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let s = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+    let base = s.residuals(&s.base, &s.clean);
+    // The manoeuvre pings no sonar: its sway accelerometer's samples stand in for a
+    // transducer's (the test reads only which channel owns a residual).
+    let mut sonar = m.clone();
+    sonar
+        .channels
+        .iter_mut()
+        .find(|ch| ch.name == "accel_y_adc")
+        .unwrap()
+        .name = "sonar1_m".into();
+    let s = Setup { m: &sonar, ..s };
+    let named = |k: usize| sonar.channels[base.owner[k]].name.as_str();
+    let is_sonar = |k: usize| crate::gap::sonar::index(named(k)).is_some();
+    let compass = effects::by_name("compass_offset").unwrap();
+    let in_sig = |k: usize| compass.channels.contains(&named(k));
+    let training = |k: usize| base.training[k];
+    let count = |f: &dyn Fn(usize) -> bool| {
+        (0..base.values.len())
+            .filter(|k| training(*k) && f(*k))
+            .count() as f64
+    };
+    // A disagreement of 3 per sample in the signature channels, explained whole; elsewhere a
+    // disagreement whose explained share carries three times the signature channels' gain.
+    let sig_gain = 9.0 * count(&in_sig);
+    let with = |other: &dyn Fn(usize) -> bool| {
+        let v = (3.0 * sig_gain / count(other)).sqrt();
+        let mut r0 = base.clone();
+        for (k, x) in r0.values.iter_mut().enumerate() {
+            *x = if in_sig(k) {
+                3.0
+            } else if other(k) {
+                v
+            } else {
+                0.0
+            };
+        }
+        let mut r1 = r0.clone();
+        r1.values.iter_mut().for_each(|x| *x = 0.0);
+        (r0, r1)
+    };
+    let (r0, r1) = with(&is_sonar);
+    let (pass, text) = signature(&s, compass, &r0, &r1);
+    assert!(pass, "{text}");
+    assert!(text.contains("and in sonar1_m"), "{text}");
+    assert!(text.contains("= 100 %"), "{text}");
+    let (r0, r1) = with(&|k| named(k) == "depth_adc");
+    let (pass, text) = signature(&s, compass, &r0, &r1);
+    assert!(!pass, "{text}");
+    assert!(text.contains("= 25 %"), "{text}");
+    let depth = effects::by_name("depth_offset").unwrap();
+    let (r0, r1) = with(&is_sonar);
+    let (_, text) = signature(&s, depth, &r0, &r1);
+    assert!(!text.contains("sonar"), "{text}");
+}
+
 /// A trial point that drives the model into a wall in a held-out block makes its readings jump
 /// there as contact impulses do; left out where that run touched, the held-out comparison sees
 /// the gain the point makes everywhere else, and outside the contact nothing is left out.
