@@ -444,6 +444,9 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
             r.gap_after,
             r.reduction_pct
         );
+        if let Some(w) = r.grown_warning() {
+            outln!("{w}");
+        }
     }
     outln!(
         "calibrated model in {} ({} re-simulations); details in {}",

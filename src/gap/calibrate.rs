@@ -130,6 +130,35 @@ pub struct RunGap {
     pub channels: Vec<(String, f64, f64)>,
 }
 
+impl RunGap {
+    /// For a validation run the calibrated model fits worse than the model as given: a
+    /// warning naming the run, the gap before and after and the channels that grew most.
+    /// The baseline runs then do not cover what this run does (another programme, depth or
+    /// speed), and what was fitted on them does not carry over to it.
+    pub fn grown_warning(&self) -> Option<String> {
+        if self.fitted || self.gap_after <= self.gap_before {
+            return None;
+        }
+        let mut grown: Vec<&(String, f64, f64)> =
+            self.channels.iter().filter(|(_, b, a)| a > b).collect();
+        grown.sort_by(|x, y| (y.2 - y.1).total_cmp(&(x.2 - x.1)));
+        let channels: Vec<String> = grown
+            .iter()
+            .take(3)
+            .map(|(ch, b, a)| format!("{ch} {b:.2} -> {a:.2}"))
+            .collect();
+        Some(format!(
+            "warning: the calibrated model fits validation run {} worse than the model as given \
+             (gap {:.2} -> {:.2}; chi2 per sample {}): the baseline runs do not cover what it \
+             does; calibrate on runs like it, or analyse it with the model as given",
+            self.dir,
+            self.gap_before,
+            self.gap_after,
+            channels.join(", ")
+        ))
+    }
+}
+
 /// An effect whose calibrated value the data do not identify.
 #[derive(Debug, Clone, Serialize)]
 pub struct Unidentified {
