@@ -1,5 +1,6 @@
 use super::*;
 use nalgebra::DMatrix;
+use std::collections::BTreeMap;
 
 fn fixture(case: &str) -> Run {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
