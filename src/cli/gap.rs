@@ -414,20 +414,19 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
             .collect::<Vec<_>>()
             .join(", ")
     };
+    for u in &c.unlike_spread {
+        outln!("{}", u.warning());
+    }
     if !c.discrepancy.is_empty() {
         outln!(
-            "known disagreement (chi2 per sample of the calibrated model, on the {} runs): {}",
-            if c.runs.iter().any(|r| !r.fitted) {
-                "validation"
-            } else {
-                "baseline"
-            },
+            "known disagreement (chi2 per sample of the calibrated model, on {}): {}",
+            c.known_from.join(", "),
             per_channel(&c.discrepancy)
         );
     }
     if !c.run_bounds.is_empty() {
         outln!(
-            "a run with nothing new stays under (chi2 per sample, 95 % for all channels together, from how the validation and spread runs scatter): {}",
+            "a run with nothing new stays under (chi2 per sample, 95 % for all channels together, from how the unfitted runs among those scatter): {}",
             per_channel(&c.run_bounds)
         );
     }

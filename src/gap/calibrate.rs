@@ -38,7 +38,9 @@
 //!
 //! The result is written as the model's `[[calibration]]` entries: applied before any effect,
 //! and still free to be found again by `gap` as a change in a later run. Calibration reports
-//! its gap before and after on runs it was not fitted to (`--validate`).
+//! its gap before and after on runs it was not fitted to (`--validate`), and the known
+//! disagreement `gap` reads each channel against, with how far runs with nothing new stray
+//! from it, on the spread runs and the validation runs like them (module `known`).
 
 use std::path::{Path, PathBuf};
 
@@ -54,7 +56,8 @@ use crate::gap::lsq::{self, Bounds};
 use crate::gap::model::{EnabledEffect, GapModel};
 
 use crate::gap::resim::{self, Floor};
-use known::{channel_chi2_per_run, discrepancy, run_bounds, run_scatter};
+pub use known::Unlike;
+use known::{chi2_of_runs, discrepancy, known_runs, run_bounds, run_scatter};
 
 /// Width of the prior on each parameter, in units of its typical size.
 pub const PRIOR_WIDTH: f64 = 10.0;
@@ -160,11 +163,16 @@ pub struct Calibration {
     /// baseline run to its end (1: not shrunk; 0: the model as given).
     pub shrunk: f64,
     /// The calibrated model's chi-square per independent sample by channel, averaged over
-    /// the validation runs (the baseline runs when there are none): what `gap` later
-    /// measures a run's gap against.
+    /// the runs of `known_from`: what `gap` later measures a run's gap against.
     pub discrepancy: Vec<(String, f64)>,
+    /// The runs the known disagreement was read on: the spread runs and the validation runs
+    /// like them; without spread runs the validation runs, else the baseline runs.
+    pub known_from: Vec<String>,
+    /// Validation runs left out of the known disagreement as unlike the spread runs.
+    pub unlike_spread: Vec<Unlike>,
     /// Per channel, the chi-square per sample one more run with nothing new stays under, from
-    /// how the validation and spread runs scatter ([`run_bounds`]); empty with fewer than two.
+    /// how the unfitted runs of `known_from` scatter ([`run_bounds`]); empty with fewer than
+    /// two.
     pub run_bounds: Vec<(String, f64)>,
     #[serde(skip)]
     pub model: GapModel,
@@ -658,27 +666,16 @@ pub fn calibrate(
     let runs = score_runs(model, baseline, validate, &chosen, &x)?;
     progress("discrepancy");
     let mut calibrated = out.model;
-    // The known level: on the validation runs (the baseline runs when there are none). How
-    // runs with nothing new scatter about it: on every run the calibration was not fitted to,
-    // the validation runs and the spread runs.
-    let validation = if validate.is_empty() {
-        baseline
-    } else {
-        validate
-    };
-    let levels = channel_chi2_per_run(&calibrated, &validation.iter().collect::<Vec<_>>())?;
-    let discrepancy = discrepancy(&levels);
-    // Each run is re-simulated once: the validation runs' chi-squares serve both.
-    let mut unfitted = channel_chi2_per_run(&calibrated, &spread_from.iter().collect::<Vec<_>>())?;
-    if !validate.is_empty() {
-        for (channel, values) in &levels {
-            unfitted.entry(channel.clone()).or_default().extend(values);
-        }
-    }
-    let bounds = run_bounds(&unfitted);
+    let validated = chi2_of_runs(&calibrated, validate)?;
+    let spread_chi2 = chi2_of_runs(&calibrated, spread_from)?;
+    let known = known_runs(&validated, &spread_chi2, || {
+        chi2_of_runs(&calibrated, baseline)
+    })?;
+    let discrepancy = discrepancy(&known.levels);
+    let bounds = run_bounds(&known.unfitted);
     calibrated.discrepancy = discrepancy.iter().cloned().collect();
     calibrated.discrepancy_bound = bounds.iter().cloned().collect();
-    calibrated.discrepancy_scatter = run_scatter(&unfitted);
+    calibrated.discrepancy_scatter = run_scatter(&known.unfitted);
     Ok(Calibration {
         parameters: out.parameters,
         runs,
@@ -697,6 +694,8 @@ pub fn calibrate(
         spread_unidentified,
         shrunk,
         discrepancy,
+        known_from: known.from,
+        unlike_spread: known.unlike,
         run_bounds: bounds,
         model: calibrated,
     })

@@ -98,6 +98,19 @@ impl RunScatter {
         let t = StudentsT::new(0.0, 1.0, k - 1.0).ok()?.inverse_cdf(q);
         Some((self.log_mean + t * self.log_sd * (1.0 + 1.0 / k).sqrt()).exp())
     }
+
+    /// The two-sided prediction interval of one more run with nothing new in this channel
+    /// when `channels` channels are judged together: `exp(m -+ t * s * sqrt(1 + 1/k))` with
+    /// `t` at `1 - RUN_BOUND_LEVEL / (2 channels)`. A run outside it in any channel is unlike
+    /// the runs, above or below them.
+    pub fn interval(&self, channels: usize) -> Option<[f64; 2]> {
+        use statrs::distribution::{ContinuousCDF, StudentsT};
+        let k = f64::from(self.runs);
+        let q = 1.0 - RUN_BOUND_LEVEL / (2.0 * channels.max(1) as f64);
+        let t = StudentsT::new(0.0, 1.0, k - 1.0).ok()?.inverse_cdf(q);
+        let half = t * self.log_sd * (1.0 + 1.0 / k).sqrt();
+        Some([(self.log_mean - half).exp(), (self.log_mean + half).exp()])
+    }
 }
 
 #[derive(Debug, Deserialize)]

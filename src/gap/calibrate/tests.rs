@@ -249,3 +249,66 @@ fn a_validation_run_the_calibration_fits_worse_is_warned_of() {
     assert_eq!(run(false, 1.2).grown_warning(), None);
     assert_eq!(run(true, 7.55).grown_warning(), None);
 }
+
+fn chi2(dir: &str, depth: f64, x: f64) -> known::RunChi2 {
+    known::RunChi2 {
+        dir: dir.into(),
+        channels: [("depth_adc".to_string(), depth), ("x_m".to_string(), x)].into(),
+    }
+}
+
+/// With spread runs (null runs of the programme later runs use) the known disagreement is
+/// theirs and that of each validation run like them; a validation run of another programme,
+/// far outside their scatter in one channel, is left out and named with that channel.
+#[test]
+fn a_validation_run_unlike_the_spread_runs_sets_no_known_level() {
+    let spread = [
+        chi2("square-1", 1.0, 3.0),
+        chi2("square-2", 1.2, 2.8),
+        chi2("square-3", 0.9, 3.2),
+    ];
+    let never = || -> Result<Vec<known::RunChi2>, GapError> { panic!("baseline runs read") };
+    let unlike = [chi2("depth-hold", 401.0, 3.1)];
+    let k = known::known_runs(&unlike, &spread, never).expect("known runs");
+    assert_eq!(k.from, ["square-1", "square-2", "square-3"]);
+    assert_eq!(k.levels["depth_adc"], [1.0, 1.2, 0.9]);
+    assert_eq!(k.unfitted["x_m"], [3.0, 2.8, 3.2]);
+    assert_eq!(k.unlike.len(), 1);
+    let w = k.unlike[0].warning();
+    assert!(
+        w.contains("depth-hold") && w.contains("depth_adc 401.00 outside"),
+        "{w}"
+    );
+    assert!(!w.contains("x_m"), "{w}");
+
+    // Below the spread runs' scatter is unlike too: a validation run at the surface beside
+    // cases that dive would lower the level they are judged against.
+    let calm = [chi2("surface", 0.01, 3.0)];
+    assert_eq!(
+        known::known_runs(&calm, &spread, never)
+            .expect("known")
+            .unlike
+            .len(),
+        1
+    );
+
+    let like = [chi2("square-4", 1.1, 2.9)];
+    let k = known::known_runs(&like, &spread, never).expect("known runs");
+    assert!(k.unlike.is_empty());
+    assert_eq!(k.from.len(), 4);
+    assert_eq!(k.levels["depth_adc"], [1.0, 1.2, 0.9, 1.1]);
+}
+
+/// Without spread runs the validation runs give the known level and the bound, as before; with
+/// neither the baseline runs give the level and no bound.
+#[test]
+fn without_spread_runs_the_validation_runs_then_the_baseline_runs_give_the_level() {
+    let v = [chi2("mixed-4", 2.0, 3.0)];
+    let k = known::known_runs(&v, &[], || panic!("baseline runs read")).expect("known");
+    assert_eq!(k.from, ["mixed-4"]);
+    assert_eq!(k.unfitted["depth_adc"], [2.0]);
+    let k = known::known_runs(&[], &[], || Ok(vec![chi2("mixed-1", 1.5, 2.5)])).expect("known");
+    assert_eq!(k.from, ["mixed-1"]);
+    assert_eq!(k.levels["x_m"], [2.5]);
+    assert!(k.unfitted.is_empty());
+}
