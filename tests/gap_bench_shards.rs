@@ -119,6 +119,7 @@ fn three_merged_shards_equal_the_unsharded_run() {
         gap_after: 1.0,
         reduction_pct: 80.0,
         seconds: 1.0,
+        spread: None,
     });
     let mixed = vec![parts[0].clone(), recal, parts[2].clone()];
     let err = bench::merge(&mixed).unwrap_err().to_string();

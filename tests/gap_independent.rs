@@ -123,7 +123,7 @@ fn calibrate_structure(dir: &Path, structure: u64) -> Calibration {
 fn validation(c: &Calibration) -> &calibrate::RunGap {
     c.runs
         .iter()
-        .find(|r| !r.fitted)
+        .find(|r| r.role == calibrate::RunRole::Validation)
         .expect("validation run scored")
 }
 
@@ -187,7 +187,11 @@ fn explain(a: &Analysis) -> String {
 #[test]
 fn calibration_halves_the_gap_on_a_run_it_was_not_fitted_to() {
     let c = calibrated();
-    let held: Vec<_> = c.runs.iter().filter(|r| !r.fitted).collect();
+    let held: Vec<_> = c
+        .runs
+        .iter()
+        .filter(|r| r.role == calibrate::RunRole::Validation)
+        .collect();
     assert_eq!(held.len(), 1);
     let r = held[0];
     assert!(

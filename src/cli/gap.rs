@@ -15,6 +15,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use crate::cli::CliError;
 use crate::cli::output::{errln, outln};
 use crate::config::{BesideOrEmbedded, ConfigSource, Document};
+use crate::gap::calibrate::RunRole;
 use crate::gap::format::Measurement;
 use crate::gap::model::GapModel;
 use crate::gap::{self, GapError, effects, generate, report};
@@ -433,10 +434,10 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
     for r in &c.runs {
         outln!(
             "{} {}: gap {:.2} -> {:.2} ({:.0} % smaller)",
-            if r.fitted {
-                "fitted on"
-            } else {
-                "validated on"
+            match r.role {
+                RunRole::Baseline => "fitted on",
+                RunRole::Validation => "validated on",
+                RunRole::Spread => "checked on spread run",
             },
             r.dir,
             r.gap_before,

@@ -338,10 +338,11 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
             match &c.gap {
                 Some(g) => outln!(
                     "calibration: gap {:.3} -> {:.3} ({:.1} % smaller) on a null run it was not \
-                     fitted to, in {:.1} s; written to {}",
+                     fitted to{}, in {:.1} s; written to {}",
                     g.gap_before,
                     g.gap_after,
                     g.reduction_pct,
+                    g.spread_clause(),
                     g.seconds,
                     out.display()
                 ),

@@ -121,12 +121,36 @@ pub struct Parameter {
     pub at_bound: bool,
 }
 
+/// What a run is to the calibration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RunRole {
+    /// Fitted to (`--measured`).
+    Baseline,
+    /// Scored, not fitted to (`--validate`).
+    Validation,
+    /// A null run of the programme later runs use (`--spread-from`), not fitted to.
+    Spread,
+}
+
+impl RunRole {
+    /// How the command line names the run.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Baseline => "baseline run",
+            Self::Validation => "validation run",
+            Self::Spread => "spread run",
+        }
+    }
+}
+
 /// The gap of one run before and after calibration.
 #[derive(Debug, Clone, Serialize)]
 pub struct RunGap {
     pub dir: String,
     /// True for a run the calibration was fitted to.
     pub fitted: bool,
+    pub role: RunRole,
     pub gap_before: f64,
     pub gap_after: f64,
     pub reduction_pct: f64,
@@ -663,7 +687,7 @@ pub fn calibrate(
     .and_then(|n| u32::try_from(n).ok());
 
     progress("scoring");
-    let runs = score_runs(model, baseline, validate, &chosen, &x)?;
+    let runs = score_runs(model, baseline, validate, spread_from, &chosen, &x)?;
     progress("discrepancy");
     let mut calibrated = out.model;
     let validated = chi2_of_runs(&calibrated, validate)?;
@@ -919,17 +943,23 @@ fn record_spread(apparent: Spread, calibrated: &mut GapModel) -> Vec<Parameter> 
     spread
 }
 
-/// The gap of every baseline run (fitted) and validation run, before and after applying the
-/// calibration `x` of `chosen`, overall and per channel.
+/// The gap of every baseline run (fitted), validation run and spread run, before and after
+/// applying the calibration `x` of `chosen`, overall and per channel.
 fn score_runs(
     model: &GapModel,
     baseline: &[Run],
     validate: &[Run],
+    spread_from: &[Run],
     chosen: &[&'static Effect],
     x: &DVector<f64>,
 ) -> Result<Vec<RunGap>, GapError> {
     let mut runs = Vec::new();
-    for (fitted, list) in [(true, baseline), (false, validate)] {
+    for (role, list) in [
+        (RunRole::Baseline, baseline),
+        (RunRole::Validation, validate),
+        (RunRole::Spread, spread_from),
+    ] {
+        let fitted = role == RunRole::Baseline;
         for r in list {
             let p = prepare(model, r)?;
             let s = p.setup()?;
@@ -940,6 +970,7 @@ fn score_runs(
             runs.push(RunGap {
                 dir: r.dir.display().to_string(),
                 fitted,
+                role,
                 gap_before: gb,
                 gap_after: ga,
                 reduction_pct: crate::gap::reduction_pct(gb, ga),

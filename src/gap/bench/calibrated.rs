@@ -347,12 +347,26 @@ fn calibrate_on(
     let t0 = Instant::now();
     let cal = calibrate::calibrate(&model, &runs, &validate, &spread_from, &mut |_| {})?;
     let seconds = t0.elapsed().as_secs_f64();
-    let gap = cal.runs.iter().find(|r| !r.fitted).map(|r| CalibrationGap {
-        gap_before: r.gap_before,
-        gap_after: r.gap_after,
-        reduction_pct: r.reduction_pct,
-        seconds,
-    });
+    let spread: Vec<&calibrate::RunGap> = cal
+        .runs
+        .iter()
+        .filter(|r| r.role == calibrate::RunRole::Spread)
+        .collect();
+    let mean = |f: fn(&calibrate::RunGap) -> f64| {
+        spread.iter().map(|r| f(r)).sum::<f64>() / spread.len() as f64
+    };
+    let spread_gap = (!spread.is_empty()).then(|| [mean(|r| r.gap_before), mean(|r| r.gap_after)]);
+    let gap = cal
+        .runs
+        .iter()
+        .find(|r| r.role == calibrate::RunRole::Validation)
+        .map(|r| CalibrationGap {
+            gap_before: r.gap_before,
+            gap_after: r.gap_after,
+            reduction_pct: r.reduction_pct,
+            seconds,
+            spread: spread_gap,
+        });
     let provenance = format!(
         "calibrated by `eyebot-hil gap-bench --source {} --seed {}` on baseline-0..{}",
         opts.source.name(),

@@ -262,6 +262,23 @@ pub struct CalibrationGap {
     pub reduction_pct: f64,
     /// Wall time of the calibration (s).
     pub seconds: f64,
+    /// The mean gap before and after over the spread runs: null runs of the cases'
+    /// programme, not fitted to (absent without spread runs).
+    #[serde(default)]
+    pub spread: Option<[f64; 2]>,
+}
+
+impl CalibrationGap {
+    /// How the calibration did on the spread runs, as a clause: `; on the spread runs (the
+    /// cases' programme): gap 5.67 -> 1.07 (81 % smaller)`, or nothing.
+    pub fn spread_clause(&self) -> String {
+        self.spread.map_or(String::new(), |[b, a]| {
+            format!(
+                "; on the spread runs (the cases' programme): gap {b:.2} -> {a:.2} ({:.0} % smaller)",
+                crate::gap::reduction_pct(b, a)
+            )
+        })
+    }
 }
 
 /// What a benchmark (or one shard of it) gave.

@@ -196,8 +196,12 @@ pub fn independent_table(results: &[CaseResult], calibration: Option<&Calibratio
     let mut s = String::new();
     if let Some(c) = calibration {
         s.push_str(&format!(
-            "calibration (3 baseline runs, scored on a 4th null run): gap {:.2} -> {:.2} ({:.0} % smaller), {:.0} s\n\n",
-            c.gap_before, c.gap_after, c.reduction_pct, c.seconds
+            "calibration (3 baseline runs, scored on a 4th null run): gap {:.2} -> {:.2} ({:.0} % smaller){}, {:.0} s\n\n",
+            c.gap_before,
+            c.gap_after,
+            c.reduction_pct,
+            c.spread_clause(),
+            c.seconds
         ));
     }
     s.push_str(

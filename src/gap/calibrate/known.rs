@@ -181,8 +181,8 @@ pub(super) fn known_runs(
 }
 
 impl RunGap {
-    /// For a validation run the calibrated model fits worse than the model as given: a
-    /// warning naming the run, the gap before and after and the channels that grew most.
+    /// For a run the calibration was not fitted to (validation or spread) that the calibrated
+    /// model fits worse than the model as given: a warning naming the run, the gap before and after and the channels that grew most.
     /// The baseline runs then do not cover what this run does (another programme, depth or
     /// speed), and what was fitted on them does not carry over to it.
     pub fn grown_warning(&self) -> Option<String> {
@@ -198,9 +198,10 @@ impl RunGap {
             .map(|(ch, b, a)| format!("{ch} {b:.2} -> {a:.2}"))
             .collect();
         Some(format!(
-            "warning: the calibrated model fits validation run {} worse than the model as given \
+            "warning: the calibrated model fits {} {} worse than the model as given \
              (gap {:.2} -> {:.2}; chi2 per sample {}): the baseline runs do not cover what it \
              does; calibrate on runs like it, or analyse it with the model as given",
+            self.role.label(),
             self.dir,
             self.gap_before,
             self.gap_after,

@@ -223,13 +223,14 @@ fn a_vector_in_a_plane_has_one_spread_in_every_direction() {
     assert_eq!(drag, vec![rms(0), rms(1)]);
 }
 
-/// A validation run the calibrated model fits worse gets a warning naming it and the channels
-/// that grew most; one it fits better, and a baseline run, get none.
+/// A validation or spread run the calibrated model fits worse gets a warning naming it, its
+/// role and the channels that grew most; one it fits better, and a baseline run, get none.
 #[test]
-fn a_validation_run_the_calibration_fits_worse_is_warned_of() {
-    let run = |fitted: bool, after: f64| RunGap {
+fn a_run_the_calibration_fits_worse_is_warned_of() {
+    let run = |role: RunRole, after: f64| RunGap {
         dir: "square-7".into(),
-        fitted,
+        fitted: role == RunRole::Baseline,
+        role,
         gap_before: 6.08,
         gap_after: after,
         reduction_pct: 100.0 * (1.0 - after / 6.08),
@@ -239,15 +240,24 @@ fn a_validation_run_the_calibration_fits_worse_is_warned_of() {
             ("compass_deg".into(), 1.5, 2.1),
         ],
     };
-    let w = run(false, 7.55).grown_warning().expect("a warning");
-    assert!(w.contains("square-7") && w.contains("6.08 -> 7.55"), "{w}");
+    let w = run(RunRole::Validation, 7.55)
+        .grown_warning()
+        .expect("a warning");
+    assert!(
+        w.contains("validation run square-7") && w.contains("6.08 -> 7.55"),
+        "{w}"
+    );
     assert!(
         w.contains("x_m 4.00 -> 9.50, compass_deg 1.50 -> 2.10"),
         "{w}"
     );
     assert!(!w.contains("y_m"), "{w}");
-    assert_eq!(run(false, 1.2).grown_warning(), None);
-    assert_eq!(run(true, 7.55).grown_warning(), None);
+    let w = run(RunRole::Spread, 7.55)
+        .grown_warning()
+        .expect("a warning");
+    assert!(w.contains("spread run square-7"), "{w}");
+    assert_eq!(run(RunRole::Validation, 1.2).grown_warning(), None);
+    assert_eq!(run(RunRole::Baseline, 7.55).grown_warning(), None);
 }
 
 fn chi2(dir: &str, depth: f64, x: f64) -> known::RunChi2 {
