@@ -148,8 +148,6 @@ impl RunRole {
 #[derive(Debug, Clone, Serialize)]
 pub struct RunGap {
     pub dir: String,
-    /// True for a run the calibration was fitted to.
-    pub fitted: bool,
     pub role: RunRole,
     pub gap_before: f64,
     pub gap_after: f64,
@@ -959,7 +957,6 @@ fn score_runs(
         (RunRole::Validation, validate),
         (RunRole::Spread, spread_from),
     ] {
-        let fitted = role == RunRole::Baseline;
         for r in list {
             let p = prepare(model, r)?;
             let s = p.setup()?;
@@ -969,7 +966,6 @@ fn score_runs(
             let (gb, ga) = (excess(&before), excess(&after));
             runs.push(RunGap {
                 dir: r.dir.display().to_string(),
-                fitted,
                 role,
                 gap_before: gb,
                 gap_after: ga,

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use super::{Run, RunGap, channel_chi2, prepare};
+use super::{Run, RunGap, RunRole, channel_chi2, prepare};
 use crate::gap::GapError;
 use crate::gap::model::{GapModel, RunScatter};
 
@@ -186,7 +186,7 @@ impl RunGap {
     /// The baseline runs then do not cover what this run does (another programme, depth or
     /// speed), and what was fitted on them does not carry over to it.
     pub fn grown_warning(&self) -> Option<String> {
-        if self.fitted || self.gap_after <= self.gap_before {
+        if self.role == RunRole::Baseline || self.gap_after <= self.gap_before {
             return None;
         }
         let mut grown: Vec<&(String, f64, f64)> =

@@ -229,7 +229,6 @@ fn a_vector_in_a_plane_has_one_spread_in_every_direction() {
 fn a_run_the_calibration_fits_worse_is_warned_of() {
     let run = |role: RunRole, after: f64| RunGap {
         dir: "square-7".into(),
-        fitted: role == RunRole::Baseline,
         role,
         gap_before: 6.08,
         gap_after: after,
