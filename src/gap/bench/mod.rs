@@ -242,6 +242,20 @@ impl CaseResult {
             && (self.named.is_some() || self.verdict.as_deref().is_some_and(|v| v != "none"))
     }
 
+    /// The answer points at the truth and at nothing else: every hidden effect either named
+    /// or one of an `ambiguous` verdict's two look-alikes, and no other name. Two effects the
+    /// data fit alike (a depth offset and a depth gain on runs that hold one depth) end
+    /// `ambiguous` by design; this tells that answer apart from a miss. Null cases: `false`.
+    pub fn points_at_truth(&self) -> bool {
+        let shown = |e: &String| {
+            self.named_all.contains(e) || self.ambiguous.as_ref().is_some_and(|a| a.contains(e))
+        };
+        self.effect.is_some()
+            && !self.any_wrong()
+            && self.expected.as_ref().is_some_and(shown)
+            && self.expected_second.as_ref().is_none_or(shown)
+    }
+
     /// A case with two hidden effects.
     pub fn is_pair(&self) -> bool {
         self.expected_second.is_some()

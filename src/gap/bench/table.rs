@@ -223,7 +223,34 @@ pub fn independent_table(results: &[CaseResult], calibration: Option<&Calibratio
         s.push_str(&independent_row(PAIRS_ROW, &pairs));
         s.push('\n');
     }
+    s.push_str(&pointing_line(&single, &pairs));
     s
+}
+
+/// The line under the independent source's table: how often the answer points at the truth
+/// and at nothing else ([`CaseResult::points_at_truth`]), right names and honest
+/// `ambiguous` verdicts together; the table's "correct name" columns count names only.
+fn pointing_line(single: &[&CaseResult], pairs: &[&CaseResult]) -> String {
+    let split = Split::of(single);
+    let points = |v: &[&CaseResult]| v.iter().filter(|c| c.points_at_truth()).count();
+    let pairs: Vec<&CaseResult> = pairs
+        .iter()
+        .copied()
+        .filter(|c| c.effect.is_some())
+        .collect();
+    let mut line = format!(
+        "\nright name, or `ambiguous` between the truth and one look-alike, with no other name: {}, at >= 3 sigma {}",
+        pct(points(&split.hidden), split.hidden.len()),
+        pct(points(&split.big), split.big.len()),
+    );
+    if !pairs.is_empty() {
+        line.push_str(&format!(
+            "; two effects, each named or in the ambiguous pair: {}",
+            pct(points(&pairs), pairs.len())
+        ));
+    }
+    line.push('\n');
+    line
 }
 
 /// The row of the cases with two hidden effects, below "overall": "correct name" there is
@@ -503,6 +530,52 @@ mod tests {
                 "| thruster_lag | 3 | 67 % (2/3) | 67 % (2/3) | 33 % (1/3) | 67 % (2/3) | - |"
             ),
             "{row}"
+        );
+    }
+    /// An `ambiguous` verdict between the truth and its look-alike points at the truth; one
+    /// between two other effects, or any wrong name beside it, does not. A two-effect case
+    /// points at both when each is named or in the ambiguous pair.
+    #[test]
+    fn an_ambiguous_verdict_naming_the_truth_points_at_it() {
+        let single = |named: &[&str], ambiguous: Option<[&str; 2]>| {
+            let mut c = case(Some("depth_offset"), None);
+            c.named_all = named.iter().map(|n| n.to_string()).collect();
+            c.named = c.named_all.first().cloned();
+            c.ambiguous = ambiguous.map(|a| a.map(str::to_string));
+            c
+        };
+        let tie = single(&[], Some(["depth_gain", "depth_offset"]));
+        assert!(tie.points_at_truth() && !tie.correct());
+        let elsewhere = single(&[], Some(["depth_gain", "float_depth"]));
+        assert!(!elsewhere.points_at_truth());
+        let wrong_then_tie = single(&["thrust_gain"], Some(["depth_gain", "depth_offset"]));
+        assert!(!wrong_then_tie.points_at_truth());
+        let right = single(&["depth_offset"], None);
+        assert!(right.points_at_truth());
+        assert!(!single(&[], None).points_at_truth());
+        assert!(
+            !case(None, None).points_at_truth(),
+            "a null points at nothing"
+        );
+        let mut pair = single(&["depth_pwm_emi"], Some(["depth_gain", "depth_offset"]));
+        pair.label = PAIRS_ROW.to_string();
+        pair.effect = Some("depth_emi+depth_offset".into());
+        pair.expected_second = Some("depth_pwm_emi".into());
+        assert!(pair.points_at_truth() && !pair.correct());
+        let mut half = pair.clone();
+        half.named_all.clear();
+        assert!(
+            !half.points_at_truth(),
+            "the EMI is neither named nor in the pair"
+        );
+        let t = independent_table(&[tie, elsewhere, right, pair, half], None);
+        let line = t
+            .lines()
+            .find(|l| l.starts_with("right name, or `ambiguous`"))
+            .expect("the line");
+        assert!(
+            line.contains(": 67 % (2/3), at >= 3 sigma 67 % (2/3); two effects, each named or in the ambiguous pair: 50 % (1/2)"),
+            "{line}"
         );
     }
 }
