@@ -389,6 +389,9 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
             c.not_fitted.join(", ")
         );
     }
+    for u in &c.held {
+        outln!("held at the model as given: {} ({})", u.effect, u.why);
+    }
     for u in &c.unidentified {
         outln!(
             "not identified by the baseline runs (its value is what the fit left: read it as \"this channel disagrees\"): {} ({})",

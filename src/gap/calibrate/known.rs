@@ -197,10 +197,23 @@ impl RunGap {
             .take(3)
             .map(|(ch, b, a)| format!("{ch} {b:.2} -> {a:.2}"))
             .collect();
+        let carried = if self.carried_by.is_empty() {
+            String::new()
+        } else {
+            let terms: Vec<String> = self
+                .carried_by
+                .iter()
+                .map(|(name, gap)| format!("{name} (gap {gap:.2} with it as given)"))
+                .collect();
+            format!(
+                "; the calibrated terms that carry it furthest: {}",
+                terms.join(", ")
+            )
+        };
         Some(format!(
             "warning: the calibrated model fits {} {} worse than the model as given \
-             (gap {:.2} -> {:.2}; chi2 per sample {}): the baseline runs do not cover what it \
-             does; calibrate on runs like it, or analyse it with the model as given",
+             (gap {:.2} -> {:.2}; chi2 per sample {}{carried}): the baseline runs do not cover \
+             what it does; calibrate on runs like it, or analyse it with the model as given",
             self.role.label(),
             self.dir,
             self.gap_before,

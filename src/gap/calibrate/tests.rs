@@ -238,6 +238,7 @@ fn a_run_the_calibration_fits_worse_is_warned_of() {
             ("y_m".into(), 3.0, 2.0),
             ("compass_deg".into(), 1.5, 2.1),
         ],
+        carried_by: Vec::new(),
     };
     let w = run(RunRole::Validation, 7.55)
         .grown_warning()
@@ -251,6 +252,19 @@ fn a_run_the_calibration_fits_worse_is_warned_of() {
         "{w}"
     );
     assert!(!w.contains("y_m"), "{w}");
+    assert!(!w.contains("carry it"), "{w}");
+    let carried = RunGap {
+        carried_by: vec![("thrust_curve".into(), 4.1), ("net_buoyancy".into(), 6.9)],
+        ..run(RunRole::Validation, 7.55)
+    };
+    let w = carried.grown_warning().expect("a warning");
+    assert!(
+        w.contains(
+            "; the calibrated terms that carry it furthest: thrust_curve (gap 4.10 with it as \
+             given), net_buoyancy (gap 6.90 with it as given)):"
+        ),
+        "{w}"
+    );
     let w = run(RunRole::Spread, 7.55)
         .grown_warning()
         .expect("a warning");
@@ -320,4 +334,63 @@ fn without_spread_runs_the_validation_runs_then_the_baseline_runs_give_the_level
     assert_eq!(k.from, ["mixed-1"]);
     assert_eq!(k.levels["x_m"], [2.5]);
     assert!(k.unfitted.is_empty());
+}
+
+/// Net buoyancy is fitted only where the baseline runs dive: a run that stays afloat (a dip
+/// of 3 s below its shallowest reading) leaves it at the model as given, with why; 60 s at
+/// half a metre below lets it be fitted. Depth is read through the model's sensor.
+#[test]
+fn net_buoyancy_is_held_unless_the_baseline_runs_dive() {
+    let run = fixture("null");
+    let c = model().configs(&run.m.experiment, &run.dir).unwrap();
+    let lsb = crate::sensors::AdcBoard::new(&c.sensors.adc, 0).lsb_v();
+    let code =
+        |depth_m: f64| c.sensors.adc.offset_lsb + depth_m * c.sensors.depth.volts_per_m / lsb;
+    let with_depth = |deep_s: f64, depth_m: f64| {
+        let mut m = run.m.clone();
+        let ch = m
+            .channels
+            .iter_mut()
+            .find(|ch| ch.name == "depth_adc")
+            .expect("the fixture measures depth");
+        ch.samples = (0..1800)
+            .map(|i| {
+                let t = f64::from(i) * 0.1;
+                let z = if t >= 50.0 && t < 50.0 + deep_s {
+                    depth_m
+                } else {
+                    0.3
+                };
+                (t, code(z))
+            })
+            .collect();
+        m
+    };
+    let afloat = submerged_s(&c, &with_depth(3.0, 0.6));
+    assert!((afloat - 3.0).abs() < 0.2, "{afloat}");
+    let shallow = submerged_s(&c, &with_depth(60.0, 0.4));
+    assert!(shallow < 0.2, "0.1 m below is not submerged: {shallow}");
+    let dived = submerged_s(&c, &with_depth(60.0, 0.8));
+    assert!((dived - 60.0).abs() < 0.2, "{dived}");
+    let chosen = || {
+        vec![
+            effects::by_name("thrust_gain").unwrap(),
+            effects::by_name("net_buoyancy").unwrap(),
+        ]
+    };
+    let (kept, held) = hold_submerged_only(chosen(), afloat);
+    assert_eq!(
+        kept.iter().map(|e| e.name).collect::<Vec<_>>(),
+        ["thrust_gain"]
+    );
+    assert_eq!(held.len(), 1);
+    assert_eq!(held[0].effect, "net_buoyancy");
+    assert!(
+        held[0].why.contains("3.0 s") && held[0].why.contains("dives"),
+        "{}",
+        held[0].why
+    );
+    let (kept, held) = hold_submerged_only(chosen(), dived);
+    assert_eq!(kept.len(), 2);
+    assert!(held.is_empty());
 }
