@@ -60,6 +60,16 @@ impl EmiData {
 /// Length of the windows over which the EMI signature averages squared differences (s).
 pub const EMI_WINDOW_S: f64 = 1.0;
 
+/// The largest lag-1 correlation of the depth residuals' successive differences, over the
+/// pairs where the stern duty is in the upper half of its range, at which the disagreement
+/// an EMI fit takes counts as white. White noise gives -0.5; a mean error that changes
+/// smoothly from sample to sample, up to +1. Measured (`EYEBOT_HIL_LOG=eyebot_hil::gap::fit::emi=debug`):
+/// hidden EMI cases -0.48 to -0.60 (structures 510529 and 514531, bridge seed 195343, nine
+/// cases); thruster lags that a depth hold turned into a duty-following rocking, named
+/// `depth_pwm_emi` before this test, +0.12 and +0.29 (structure 514531, cases 8 and 9); a
+/// null run whose EMI fit took 0.018 V, -0.17 (510529, case 66).
+pub const EMI_WHITE_MAX_CORRELATION: f64 = -0.35;
+
 /// Means of `a` and `b` over consecutive windows of `window_s` by `times` (ascending); windows
 /// with fewer than 5 samples are left out.
 pub(super) fn window_means(
@@ -154,9 +164,22 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
     // chi-square draw with one degree of freedom, so its own correlation with duty^2 stays
     // below about 0.45 even when EMI is all the noise there is; means over
     // [`EMI_WINDOW_S`] windows estimate the local variance.
+    // And what it takes is white: successive differences of white noise correlate at -0.5
+    // with their neighbours, those of an error that changes smoothly over a few samples (a
+    // depth hold rocking behind a lagging thruster) at up to +1.
+    let diffs: Vec<f64> = idx.iter().map(|&i| r[i] - r[i - 1]).collect();
+    let white = successive_correlation(&diffs, &data.gain);
+    tracing::debug!(
+        white,
+        e,
+        "emi: successive differences' lag-1 correlation at high duty"
+    );
     let (local_r2, local_gain) = window_means(&data.times, &data.r2, &data.gain, EMI_WINDOW_S);
     let corr = crate::gap::residuals::pearson(&local_r2, &local_gain);
-    let signature_pass = e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION;
+    let signature_pass = e > 0.0
+        && corr >= SIGNATURE_MIN_CORRELATION
+        && white.is_finite()
+        && white <= EMI_WHITE_MAX_CORRELATION;
     let params = [e];
     let guards = Guards {
         inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
@@ -178,7 +201,7 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
         heldout_gain: Some(heldout_before - heldout_after),
         signature_pass,
         signature: format!(
-            "{}: correlation of the depth residuals' local variance with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}; {EMI_WINDOW_S} s windows)",
+            "{}: correlation of the depth residuals' local variance with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}; {EMI_WINDOW_S} s windows), lag-1 correlation of their successive differences at high duty = {white:.2} (<= {EMI_WHITE_MAX_CORRELATION}: white)",
             effect.signature
         ),
         guards,
@@ -190,4 +213,15 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
         trained: Vec::new(),
         change: Vec::new(),
     })
+}
+
+/// The lag-1 correlation of successive differences `d` over the pairs whose EMI gain is in
+/// the upper half of `gain`'s range ([`EMI_WHITE_MAX_CORRELATION`]); 0 with fewer than three.
+pub(super) fn successive_correlation(d: &[f64], gain: &[f64]) -> f64 {
+    let top = gain.iter().copied().fold(0.0, f64::max);
+    let (a, b): (Vec<f64>, Vec<f64>) = (1..d.len())
+        .filter(|&k| gain[k] > 0.5 * top && gain[k - 1] > 0.5 * top)
+        .map(|k| (d[k], d[k - 1]))
+        .unzip();
+    crate::gap::residuals::pearson(&a, &b)
 }

@@ -647,6 +647,50 @@ fn a_strong_depth_emi_is_fitted_inside_its_range() {
     );
 }
 
+/// What a depth EMI fit takes must be white. A thruster lag rocks a depth hold behind the
+/// stern duty, so the depth residuals' spread grows with the duty as an EMI's does, but the
+/// rocking changes smoothly from sample to sample: its successive differences correlate with
+/// their neighbours, where white noise's correlate at -0.5. Here a duty-scaled 0.4 Hz rocking
+/// sampled at 10 Hz, beside white noise of a tenth of its size, reads above the limit, and
+/// duty-scaled white noise below it; on the simulator an EMI's fit passes its signature.
+#[test]
+fn a_smooth_error_that_follows_the_stern_duty_is_no_emi() {
+    use rand::SeedableRng;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let duty: Vec<f64> = (0..1800)
+        .map(|i| if (i / 300) % 2 == 0 { 0.9 } else { 0.2 })
+        .collect();
+    let gain: Vec<f64> = duty.iter().map(|u| u * u).collect();
+    let mut white = || -> f64 { rand::RngExt::sample(&mut rng, rand_distr::StandardNormal) };
+    let diffs = |r: &[f64]| -> Vec<f64> { r.windows(2).map(|w| w[1] - w[0]).collect() };
+    let noise: Vec<f64> = duty.iter().map(|u| u * white()).collect();
+    let rocking: Vec<f64> = duty
+        .iter()
+        .enumerate()
+        .map(|(i, u)| u * (std::f64::consts::TAU * 0.4 * i as f64 * 0.1).sin() + 0.1 * white())
+        .collect();
+    let limit = super::emi::EMI_WHITE_MAX_CORRELATION;
+    let of_noise = super::emi::successive_correlation(&diffs(&noise), &gain[1..]);
+    assert!(of_noise < -0.4, "{of_noise}");
+    let of_rocking = super::emi::successive_correlation(&diffs(&rocking), &gain[1..]);
+    assert!(of_rocking > limit, "{of_rocking}");
+
+    let emi = effects::by_name("depth_pwm_emi").unwrap();
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(23, |t: &mut Configs| {
+        t.sensors.depth.emi_v_rms_full_duty += 1.5;
+    });
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
+    let fitted = fit_emi(&setup, emi).expect("the depth channel is measured");
+    assert!(fitted.guards.signature, "{}", fitted.signature);
+    assert!(
+        fitted.signature.contains("at high duty = -0."),
+        "{}",
+        fitted.signature
+    );
+}
+
 /// A disagreement the model's runs share (here a depth reading off by a constant) reads as a
 /// smaller chi-square per independent sample once a named depth EMI raises the floor it is
 /// judged against; the known level measured without the EMI, read through
