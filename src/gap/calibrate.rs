@@ -182,7 +182,7 @@ pub struct Calibration {
     /// Parameters left out because none of their channels is measured.
     pub not_fitted: Vec<String>,
     /// Effects held at the model as given because the baseline runs cannot measure them,
-    /// with why ([`SUBMERGED_ONLY`]).
+    /// with why ([`Effect::submerged_only`]).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub held: Vec<Unidentified>,
     /// Effects the baseline runs do not identify, with why (their values stay as fitted).
@@ -787,24 +787,17 @@ fn choose_effects(measured: &[&str]) -> (Vec<&'static Effect>, Vec<String>) {
     (chosen, not_fitted)
 }
 
-/// Effects only runs below the surface measure: the submerged vertical dynamics. Afloat, a
-/// change of the hull's buoyancy moves only the height it floats at, and its heave damping
-/// and vertical thrust only how it bobs and dips, which the surface terms (`float_depth`,
-/// `surface_stiffness`, `surface_damping`) set as well: on runs that never leave the surface
-/// the fit gives them whatever the surface's unmodelled structure asks, with intervals as
-/// narrow as if they were measured. Structure 490499's three surface runs (a wall run, two
-/// spins) set the net buoyancy to +0.70 N [0.20, 1.19], and a depth hold then read 410
-/// chi-square per sample in depth against 248 with the model as given; with the buoyancy
-/// held alone, the heave damping took its place (685).
-pub const SUBMERGED_ONLY: &[&str] = &["net_buoyancy", "heave_damping", "vertical_thrust_gain"];
-
 /// How far below its run's shallowest depth reading a sample lies to count as submerged (m).
 /// The surface programmes of structures 490499 and 502519 (wall runs, spins) spend 0 to 4 s
 /// per run more than 0.10 m below their shallowest reading, 0 to 3.4 s more than 0.15 m.
 pub const SUBMERGED_MARGIN_M: f64 = 0.15;
 
 /// The time below the surface ([`SUBMERGED_MARGIN_M`]) the baseline runs need, together, for
-/// a [`SUBMERGED_ONLY`] effect to be fitted (s). A surface programme dips below it for a few
+/// an effect of the submerged vertical dynamics ([`Effect::submerged_only`]) to be fitted (s).
+/// Structure 490499's three surface runs (a wall run, two spins) set the net buoyancy to
+/// +0.70 N [0.20, 1.19], and a depth hold then read 410 chi-square per sample in depth
+/// against 248 with the model as given; with the buoyancy held alone, the heave damping took
+/// its place (685). A surface programme dips below it for a few
 /// seconds at most ([`SUBMERGED_MARGIN_M`]); the depth holds and dives of the same
 /// structures stay there for 164 to 170 s of their 180.
 pub const SUBMERGED_MIN_S: f64 = 20.0;
@@ -836,7 +829,7 @@ fn submerged_s(c: &Configs, m: &Measurement) -> f64 {
     below as f64 * dt
 }
 
-/// `chosen` less the [`SUBMERGED_ONLY`] effects when the baseline runs spent `below_s`
+/// `chosen` less the effects of the submerged vertical dynamics ([`Effect::submerged_only`]) when the baseline runs spent `below_s`
 /// seconds submerged, under [`SUBMERGED_MIN_S`]; those are returned with why.
 fn hold_submerged_only(
     chosen: Vec<&'static Effect>,
@@ -845,9 +838,8 @@ fn hold_submerged_only(
     if below_s >= SUBMERGED_MIN_S {
         return (chosen, Vec::new());
     }
-    let (held, kept): (Vec<&'static Effect>, Vec<&'static Effect>) = chosen
-        .into_iter()
-        .partition(|e| SUBMERGED_ONLY.contains(&e.name));
+    let (held, kept): (Vec<&'static Effect>, Vec<&'static Effect>) =
+        chosen.into_iter().partition(|e| e.submerged_only);
     let why = format!(
         "the baseline runs spend {below_s:.1} s more than {SUBMERGED_MARGIN_M} m below their \
          shallowest depth reading, under {SUBMERGED_MIN_S:.0} s: afloat, a change of buoyancy \

@@ -126,6 +126,12 @@ pub struct Effect {
     /// True for a gain, an offset or the water current: the effects whose parameter error the
     /// simulator benchmark's target covers.
     pub parameter_error_target: bool,
+    /// True for a term of the submerged vertical dynamics (the buoyancy, the heave damping,
+    /// the vertical pair's thrust): afloat, a change of it moves only the height the hull
+    /// floats at and how it bobs and dips, which the surface terms set too, so `gap
+    /// calibrate` fits it only where the baseline runs dive
+    /// ([`crate::gap::calibrate::SUBMERGED_MIN_S`]).
+    pub submerged_only: bool,
     /// How the calibrated benchmarks' truth sources hide it (`None`: they do not).
     pub hidden: Option<Hiding>,
 }

@@ -106,6 +106,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(3),
         positive: false,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[0.08],
             bridge: |p| {
@@ -147,6 +148,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(2),
         positive: false,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -165,6 +167,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(4),
         positive: false,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -185,6 +188,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(5),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -214,6 +218,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(6),
         positive: true,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[0.25],
             bridge: |p| vec![edit(Vehicle, "thrusters.lag_s", Change::Add(at(p, 0)))],
@@ -240,6 +245,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::No,
         positive: false,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[0.02, -0.015],
             bridge: |p| {
@@ -271,6 +277,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(11),
         positive: false,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[3.0, 2.0],
             bridge: |p| {
@@ -305,6 +312,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::No,
         positive: false,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -326,6 +334,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::No,
         positive: true,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -347,6 +356,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::No,
         positive: true,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[0.4],
             bridge: |p| {
@@ -382,6 +392,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::NoiseLevel,
         positive: true,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[0.03],
             bridge: |p| {
@@ -414,6 +425,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(20),
         positive: false,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[0.25],
             bridge: |p| {
@@ -446,6 +458,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::No,
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     // SubSim's lumped thrust constant was wrong by a factor (thesis 5.1, 5.4), which no
@@ -472,6 +485,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(0),
         positive: false,
         parameter_error_target: true,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[-0.2],
             bridge: |p| {
@@ -511,6 +525,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::JointTwoStarts(1, 0.3),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -530,6 +545,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(10),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[6.0],
             bridge: |p| vec![edit(Sensors, "compass.errors.bias", Change::Add(at(p, 0)))],
@@ -554,6 +570,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(12),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[0.08],
             bridge: |p| vec![edit(Sensors, "depth.errors.bias", Change::Add(at(p, 0)))],
@@ -581,6 +598,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(13),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[0.1],
             bridge: |p| {
@@ -610,6 +628,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(14),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -628,6 +647,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(15),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -646,6 +666,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(16),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -664,6 +685,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(17),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -682,6 +704,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(18),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -700,6 +723,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(19),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -719,6 +743,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(7),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[1.5],
             bridge: |p| {
@@ -748,6 +773,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(8),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: None,
     },
     Effect {
@@ -768,6 +794,7 @@ const CANDIDATES: [Effect; 27] = [
         calibration: Calibration::Joint(9),
         positive: false,
         parameter_error_target: false,
+        submerged_only: false,
         hidden: Some(Hiding {
             bridge_size: &[5.0],
             bridge: |p| vec![edit(Vehicle, "damping.sway_yaw[1]", Change::Add(at(p, 0)))],

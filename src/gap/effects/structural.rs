@@ -25,6 +25,7 @@ const STRUCTURAL: Effect = Effect {
     calibration: Calibration::Rival,
     positive: false,
     parameter_error_target: false,
+    submerged_only: false,
     hidden: None,
 };
 
@@ -98,6 +99,7 @@ pub(super) const TERMS: [Effect; 18] = [
         channels: &["depth_adc", "accel_z_adc"],
         extend: |p, c| scale_damping(&mut c.vehicle, 2, 1.0 + at(p, 0), 1.0 + at(p, 0)),
         calibration: Calibration::Discrepancy(25),
+        submerged_only: true,
         ..STRUCTURAL
     },
     Effect {
@@ -114,6 +116,7 @@ pub(super) const TERMS: [Effect; 18] = [
             *v = (*v + at(p, 0) / weight_per_m3).max(1e-4);
         },
         calibration: Calibration::Discrepancy(26),
+        submerged_only: true,
         ..STRUCTURAL
     },
     Effect {
@@ -245,6 +248,7 @@ pub(super) const TERMS: [Effect; 18] = [
             }
         },
         calibration: Calibration::Discrepancy(30),
+        submerged_only: true,
         ..STRUCTURAL
     },
     Effect {
