@@ -58,6 +58,9 @@ use crate::gap::model::{EnabledEffect, GapModel};
 use crate::gap::resim::{self, Floor};
 pub use known::Unlike;
 use known::{chi2_of_runs, discrepancy, known_runs, run_bounds, run_scatter};
+use score::score_runs;
+pub use submerged::{SUBMERGED_MARGIN_M, SUBMERGED_MIN_S};
+use submerged::{hold_submerged_only, submerged_s};
 
 /// Width of the prior on each parameter, in units of its typical size.
 pub const PRIOR_WIDTH: f64 = 10.0;
@@ -787,75 +790,6 @@ fn choose_effects(measured: &[&str]) -> (Vec<&'static Effect>, Vec<String>) {
     (chosen, not_fitted)
 }
 
-/// How far below its run's shallowest depth reading a sample lies to count as submerged (m).
-/// The surface programmes of structures 490499 and 502519 (wall runs, spins) spend 0 to 4 s
-/// per run more than 0.10 m below their shallowest reading, 0 to 3.4 s more than 0.15 m.
-pub const SUBMERGED_MARGIN_M: f64 = 0.15;
-
-/// The time below the surface ([`SUBMERGED_MARGIN_M`]) the baseline runs need, together, for
-/// an effect of the submerged vertical dynamics ([`Effect::submerged_only`]) to be fitted (s).
-/// Structure 490499's three surface runs (a wall run, two spins) set the net buoyancy to
-/// +0.70 N [0.20, 1.19], and a depth hold then read 410 chi-square per sample in depth
-/// against 248 with the model as given; with the buoyancy held alone, the heave damping took
-/// its place (685). A surface programme dips below it for a few
-/// seconds at most ([`SUBMERGED_MARGIN_M`]); the depth holds and dives of the same
-/// structures stay there for 164 to 170 s of their 180.
-pub const SUBMERGED_MIN_S: f64 = 20.0;
-
-/// The time `m`'s depth readings spend more than [`SUBMERGED_MARGIN_M`] below its shallowest
-/// reading (s), read through the depth sensor of `c`; 0 without a depth channel.
-fn submerged_s(c: &Configs, m: &Measurement) -> f64 {
-    let Some(ch) = m.channel("depth_adc").filter(|ch| ch.samples.len() > 1) else {
-        return 0.0;
-    };
-    let d = &c.sensors.depth;
-    if d.volts_per_m <= 0.0 {
-        return 0.0;
-    }
-    let lsb = crate::sensors::AdcBoard::new(&c.sensors.adc, 0).lsb_v();
-    let depth = |code: f64| (code - c.sensors.adc.offset_lsb) * lsb / d.volts_per_m;
-    let shallowest = ch
-        .samples
-        .iter()
-        .map(|(_, code)| depth(*code))
-        .fold(f64::INFINITY, f64::min);
-    let (first, last) = (ch.samples[0].0, ch.samples[ch.samples.len() - 1].0);
-    let dt = (last - first) / (ch.samples.len() - 1) as f64;
-    let below = ch
-        .samples
-        .iter()
-        .filter(|(_, code)| depth(*code) > shallowest + SUBMERGED_MARGIN_M)
-        .count();
-    below as f64 * dt
-}
-
-/// `chosen` less the effects of the submerged vertical dynamics ([`Effect::submerged_only`]) when the baseline runs spent `below_s`
-/// seconds submerged, under [`SUBMERGED_MIN_S`]; those are returned with why.
-fn hold_submerged_only(
-    chosen: Vec<&'static Effect>,
-    below_s: f64,
-) -> (Vec<&'static Effect>, Vec<Unidentified>) {
-    if below_s >= SUBMERGED_MIN_S {
-        return (chosen, Vec::new());
-    }
-    let (held, kept): (Vec<&'static Effect>, Vec<&'static Effect>) =
-        chosen.into_iter().partition(|e| e.submerged_only);
-    let why = format!(
-        "the baseline runs spend {below_s:.1} s more than {SUBMERGED_MARGIN_M} m below their \
-         shallowest depth reading, under {SUBMERGED_MIN_S:.0} s: afloat, a change of buoyancy \
-         moves only the height the hull floats at and its heave only how it bobs, which the \
-         surface terms set too; calibrate on a run that dives to measure it"
-    );
-    let held = held
-        .into_iter()
-        .map(|e| Unidentified {
-            effect: e.name.to_string(),
-            why: why.clone(),
-        })
-        .collect();
-    (kept, held)
-}
-
 /// A model that diverges on its own runs is never written: halves the fitted change `x`
 /// towards the model as given until every baseline run re-simulates to its end (or drops it
 /// altogether), and returns the factor it was shrunk by.
@@ -1025,92 +959,8 @@ fn record_spread(apparent: Spread, calibrated: &mut GapModel) -> Vec<Parameter> 
     spread
 }
 
-/// The gap of every baseline run (fitted), validation run and spread run, before and after
-/// applying the calibration `x` of `chosen`, overall and per channel.
-fn score_runs(
-    model: &GapModel,
-    baseline: &[Run],
-    validate: &[Run],
-    spread_from: &[Run],
-    chosen: &[&'static Effect],
-    x: &DVector<f64>,
-) -> Result<Vec<RunGap>, GapError> {
-    let mut runs = Vec::new();
-    for (role, list) in [
-        (RunRole::Baseline, baseline),
-        (RunRole::Validation, validate),
-        (RunRole::Spread, spread_from),
-    ] {
-        for r in list {
-            let p = prepare(model, r)?;
-            let s = p.setup()?;
-            let after_c = effects::apply_joint(&p.base, chosen, x);
-            let before = channel_chi2(&p, &s, &p.base).unwrap_or_default();
-            let after = channel_chi2(&p, &s, &after_c).unwrap_or_default();
-            let (gb, ga) = (excess(&before), excess(&after));
-            let carried_by = if role != RunRole::Baseline && ga > gb {
-                carried_by(&p, &s, chosen, x, ga)
-            } else {
-                Vec::new()
-            };
-            runs.push(RunGap {
-                dir: r.dir.display().to_string(),
-                role,
-                gap_before: gb,
-                gap_after: ga,
-                reduction_pct: crate::gap::reduction_pct(gb, ga),
-                channels: before
-                    .iter()
-                    .map(|(i, b)| {
-                        let a = after.iter().find(|(k, _)| k == i).map_or(f64::NAN, |x| x.1);
-                        (r.m.channels[*i].name.clone(), *b, a)
-                    })
-                    .collect(),
-                carried_by,
-            });
-        }
-    }
-    Ok(runs)
-}
-
-/// How many calibrated effects a grown run's warning names.
-const CARRIED_BY_SHOWN: usize = 3;
-
-/// The calibrated effects that carry a run the calibration fits worse (gap `after`) furthest
-/// from the model as given: each effect set back to the model as given (its parameters 0)
-/// with every other one kept, the run's gap then, for those where it shrinks, most first. A
-/// term fitted where the baseline runs drove the vehicle (a thrust curve on spins and
-/// cruises) and applied where they did not (the small commands of a depth hold) shows here.
-fn carried_by(
-    p: &Prepared<'_>,
-    s: &Setup<'_>,
-    chosen: &[&'static Effect],
-    x: &DVector<f64>,
-    after: f64,
-) -> Vec<(String, f64)> {
-    let mut out = Vec::new();
-    let mut at = 0;
-    for e in chosen {
-        let n = e.parameters.len();
-        let mut without = x.clone();
-        without.rows_mut(at, n).fill(0.0);
-        at += n;
-        if without == *x {
-            continue;
-        }
-        let c = effects::apply_joint(&p.base, chosen, &without);
-        if let Some(chi2) = channel_chi2(p, s, &c) {
-            let gap = excess(&chi2);
-            if gap < after {
-                out.push((e.name.to_string(), gap));
-            }
-        }
-    }
-    out.sort_by(|a, b| a.1.total_cmp(&b.1));
-    out.truncate(CARRIED_BY_SHOWN);
-    out
-}
-
 mod known;
+mod score;
+mod submerged;
 #[cfg(test)]
 mod tests;

@@ -225,3 +225,6 @@ pub(super) fn successive_correlation(d: &[f64], gain: &[f64]) -> f64 {
         .unzip();
     crate::gap::residuals::pearson(&a, &b)
 }
+
+#[cfg(test)]
+mod tests;

@@ -1,40 +1,4 @@
-use super::emi::window_means;
 use super::*;
-
-/// The EMI signature on squared differences drawn with a variance that follows the duty
-/// (0 for 20 s, 0.4 for 40 s, 1 for 10 s, as a surfacing, a hold and a dive give; EMI
-/// variance a sixth of the other noise's at the hold, equal to it at full duty): one
-/// draw per sample correlates below the 0.2 bar although the EMI is there, the 1 s
-/// window means correlate far above it, and with no EMI they stay below it.
-#[test]
-fn emi_signature_correlates_local_variance_not_single_draws() {
-    use rand::{RngExt, SeedableRng};
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let times: Vec<f64> = (0..7000).map(|i| i as f64 * 0.01).collect();
-    let duty = |t: f64| -> f64 {
-        match t {
-            t if t < 20.0 => 0.0,
-            t if t < 60.0 => 0.4,
-            _ => 1.0,
-        }
-    };
-    let gain: Vec<f64> = times.iter().map(|t| (duty(*t) * 1.0).powi(2)).collect();
-    let draw = |rng: &mut rand_chacha::ChaCha8Rng, var: f64| {
-        let z: f64 = rng.sample(rand_distr::StandardNormal);
-        var * z * z
-    };
-    let with: Vec<f64> = gain.iter().map(|g| draw(&mut rng, 1.0 + g)).collect();
-    let without: Vec<f64> = gain.iter().map(|_| draw(&mut rng, 1.0)).collect();
-    let single = crate::gap::residuals::pearson(&with, &gain);
-    assert!(single < SIGNATURE_MIN_CORRELATION, "single draws: {single}");
-    let (a, b) = window_means(&times, &with, &gain, EMI_WINDOW_S);
-    assert_eq!(a.len(), 70);
-    let windowed = crate::gap::residuals::pearson(&a, &b);
-    assert!(windowed > 0.6, "windows: {windowed}");
-    let (a, b) = window_means(&times, &without, &gain, EMI_WINDOW_S);
-    let null = crate::gap::residuals::pearson(&a, &b);
-    assert!(null.abs() < SIGNATURE_MIN_CORRELATION, "no EMI: {null}");
-}
 
 /// The interval guard: an infinite interval, or an estimate whose confidence region holds
 /// 0, names nothing; two correlated parameters whose intervals each hold 0 can still be
@@ -619,75 +583,6 @@ fn a_sway_yaw_moment_and_the_munk_moment_are_twins_of_form() {
         "the Munk moment refuses its twin"
     );
     assert!(effects::twins(coupling, munk) && effects::twins(munk, coupling));
-}
-
-/// The library's noise source fitted on manoeuvre 23 of a vehicle whose depth EMI is 1.5 V
-/// rms above the model's at full stern duty.
-fn strong_emi_fitted() -> Candidate {
-    let emi = effects::LIBRARY
-        .iter()
-        .find(|e| e.kind == Kind::Variance)
-        .expect("the library has a noise source");
-    let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(23, |t: &mut Configs| {
-        t.sensors.depth.emi_v_rms_full_duty += 1.5;
-    });
-    let clean = resim::simulate(&c, &m, None).unwrap();
-    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
-    let setup = setup(&m, c, &floors, Split::DEFAULT, &[]).unwrap();
-    fit_emi(&setup, emi).expect("the depth channel is measured")
-}
-
-/// A depth EMI the low-pass passes at 0.13 V rms (1.5 V before it, at full stern duty) is
-/// inside the library's range: fitted beyond 1 V with every guard passed. The range is the
-/// sensor configuration's, before the filter; with a range of 1 V there the fit ended on its
-/// bound, and an EMI of 20 LSB at the ADC could never be named.
-#[test]
-fn a_strong_depth_emi_is_fitted_inside_its_range() {
-    let fitted = strong_emi_fitted();
-    let value = fitted.parameters[0].1;
-    assert!(fitted.guards.all(), "{:?}", fitted.guards);
-    assert!(
-        value > 1.0,
-        "fitted {value:.3} {:?}, hidden 1.5",
-        fitted.ci95[0].1
-    );
-}
-
-/// What a depth EMI fit takes must be white. A thruster lag rocks a depth hold behind the
-/// stern duty, so the depth residuals' spread grows with the duty as an EMI's does, but the
-/// rocking changes smoothly from sample to sample: its successive differences correlate with
-/// their neighbours, where white noise's correlate at -0.5. Here a duty-scaled 0.4 Hz rocking
-/// sampled at 10 Hz, beside white noise of a tenth of its size, reads above the limit, and
-/// duty-scaled white noise below it; on the simulator an EMI's fit passes its signature.
-#[test]
-fn a_smooth_error_that_follows_the_stern_duty_is_no_emi() {
-    use rand::SeedableRng;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let duty: Vec<f64> = (0..1800)
-        .map(|i| if (i / 300) % 2 == 0 { 0.9 } else { 0.2 })
-        .collect();
-    let gain: Vec<f64> = duty.iter().map(|u| u * u).collect();
-    let mut white = || -> f64 { rand::RngExt::sample(&mut rng, rand_distr::StandardNormal) };
-    let diffs = |r: &[f64]| -> Vec<f64> { r.windows(2).map(|w| w[1] - w[0]).collect() };
-    let noise: Vec<f64> = duty.iter().map(|u| u * white()).collect();
-    let rocking: Vec<f64> = duty
-        .iter()
-        .enumerate()
-        .map(|(i, u)| u * (std::f64::consts::TAU * 0.4 * i as f64 * 0.1).sin() + 0.1 * white())
-        .collect();
-    let limit = super::emi::EMI_WHITE_MAX_CORRELATION;
-    let of_noise = super::emi::successive_correlation(&diffs(&noise), &gain[1..]);
-    assert!(of_noise < -0.4, "{of_noise}");
-    let of_rocking = super::emi::successive_correlation(&diffs(&rocking), &gain[1..]);
-    assert!(of_rocking > limit, "{of_rocking}");
-
-    let fitted = strong_emi_fitted();
-    assert!(fitted.guards.signature, "{}", fitted.signature);
-    assert!(
-        fitted.signature.contains("at high duty = -0."),
-        "{}",
-        fitted.signature
-    );
 }
 
 /// A disagreement the model's runs share (here a depth reading off by a constant) reads as a
