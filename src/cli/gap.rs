@@ -192,6 +192,11 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         .clone()
         .unwrap_or_else(|| measured.join("gap-report"));
     report::write_all(&analysis, &m, measured, model_path, &out)?;
+    if let Some(t) = &analysis.tie
+        && !analysis.accepted.is_empty()
+    {
+        outln!("ambiguous: {}", gap::report::carried_tie(t));
+    }
     match analysis.accepted.first() {
         Some(_) => {
             for (e, share) in analysis.accepted.iter().zip(&analysis.shares_pct) {
@@ -233,13 +238,13 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
             )
         }
         None if analysis.verdict == gap::Verdict::Ambiguous => {
-            outln!(
-                "ambiguous: {}",
-                analysis
-                    .ambiguous
-                    .as_ref()
-                    .map_or_else(String::new, gap::report::ambiguity)
-            )
+            if let Some(t) = &analysis.tie {
+                outln!("ambiguous: {}", gap::report::carried_tie(t));
+            }
+            if let Some(pair) = &analysis.ambiguous {
+                let then = if analysis.tie.is_some() { "then " } else { "" };
+                outln!("{then}ambiguous: {}", gap::report::ambiguity(pair));
+            }
         }
         None => outln!("no significant missing effect"),
     }

@@ -186,15 +186,44 @@ pub fn select(
     fit_round: &mut FitRound<'_>,
     accept: &mut Accept<'_>,
 ) -> Result<Selection, GapError> {
+    select_with(max, false, fit_round, accept)
+}
+
+/// [`select`], carrying on past the first round that ends on two look-alikes: its winner is
+/// handed to `accept` as if named and, once taken into the model, stays there unnamed
+/// ([`Selection::carried`]) while the later rounds look for the disagreement it leaves, its
+/// look-alike no longer a candidate. A tie between two effects says nothing of a second
+/// effect beside them (a depth offset or gain that one held depth cannot tell apart, beside a
+/// depth EMI), and either look-alike takes the same disagreement out of what the later rounds
+/// see. A second tie, or the winner refused, ends the selection as [`select`] does.
+pub fn select_past_ties(
+    max: usize,
+    fit_round: &mut FitRound<'_>,
+    accept: &mut Accept<'_>,
+) -> Result<Selection, GapError> {
+    select_with(max, true, fit_round, accept)
+}
+
+fn select_with(
+    max: usize,
+    carry: bool,
+    fit_round: &mut FitRound<'_>,
+    accept: &mut Accept<'_>,
+) -> Result<Selection, GapError> {
     let mut rounds: Vec<Vec<Candidate>> = Vec::new();
     let mut accepted: Vec<Candidate> = Vec::new();
     let mut ambiguous = None;
+    let mut carried: Option<Carried> = None;
     let mut outranked_by = None;
     let mut refused = Vec::new();
     'rounds: for round in 0..max {
         let Some(mut results) = fit_round(round, &accepted, &refused)? else {
             break;
         };
+        // A carried tie's look-alike is no candidate beside its winner.
+        if let Some(c) = &carried {
+            results.retain(|r| r.name != c.pair[1]);
+        }
         rank(&mut results);
         rounds.push(results);
         let results = rounds.last().map_or(&[][..], Vec::as_slice);
@@ -218,7 +247,22 @@ pub fn select(
                 break 'rounds;
             }
             if let Some(alt) = lookalike(&pool, &win) {
-                ambiguous = Some([win.name.clone(), alt.name.clone()]);
+                let pair = [win.name.clone(), alt.name.clone()];
+                if carry && carried.is_none() {
+                    accepted.push(win);
+                    let this_round = &refused[refused.len() - refused_here..];
+                    if accept(&mut accepted, this_round)?.is_none() {
+                        tracing::debug!(
+                            round,
+                            ?pair,
+                            "a tie carried: its winner in the model, unnamed"
+                        );
+                        carried = Some(Carried { round, pair });
+                        continue 'rounds;
+                    }
+                    accepted.pop();
+                }
+                ambiguous = Some(pair);
                 break 'rounds;
             }
             let name = win.name.clone();
@@ -240,6 +284,7 @@ pub fn select(
         rounds,
         accepted,
         ambiguous,
+        carried,
         outranked_by,
         refused,
     })
@@ -257,6 +302,9 @@ pub struct Selection {
     /// of one kind, or a physics effect behind a sensor winner): the winner's name first.
     /// Selection stops there and names neither: the data do not say which it is.
     pub ambiguous: Option<[String; 2]>,
+    /// A tie the selection carried on past ([`select_past_ties`]): its winner is among
+    /// `accepted`, in the model but not named.
+    pub carried: Option<Carried>,
     /// A round whose winner another candidate outranks by more than
     /// [`crate::gap::fit::BIC_MARGIN`] in the likelihood, passing every guard but its bounds:
     /// the disagreement looks most like that effect, larger than its physical range lets the
@@ -267,6 +315,15 @@ pub struct Selection {
     /// [`Accept`]), in the order refused: none is named, and the next candidate of the same
     /// round takes its place, up to [`REFUSALS_PER_ROUND`] refusals in a round.
     pub refused: Vec<Refused>,
+}
+
+/// A round's two look-alikes the selection carried on past ([`Selection::carried`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Carried {
+    /// The round (0 the first).
+    pub round: usize,
+    /// The winner, which the model carries, then its look-alike.
+    pub pair: [String; 2],
 }
 
 /// A winner refused when it was taken into the model ([`Selection::refused`]).
@@ -855,6 +912,97 @@ mod tests {
             assert_eq!(apart.accepted[0].name, first);
             assert!(apart.ambiguous.is_none());
         }
+    }
+
+    /// A tie says nothing of a second effect beside it: carrying on past it, the selection
+    /// takes the tie's winner into the model unnamed, leaves its look-alike out of the later
+    /// rounds, and names the next round's winner; a winner refused at the tie, or a second
+    /// tie, ends the selection there as `select` does.
+    #[test]
+    fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
+        let rounds = |round: usize| match round {
+            0 => vec![
+                candidate("depth_offset", 40.0, true),
+                candidate("depth_gain", 39.4, true),
+                candidate("depth_pwm_emi", 20.0, true),
+            ],
+            1 => vec![
+                candidate("depth_gain", 30.0, true),
+                candidate("depth_pwm_emi", 20.0, true),
+            ],
+            _ => Vec::new(),
+        };
+        let mut seen = Vec::new();
+        let past = select_past_ties(
+            3,
+            &mut |round, accepted, _| {
+                seen.push(accepted.iter().map(|a| a.name.clone()).collect::<Vec<_>>());
+                Ok(Some(rounds(round)))
+            },
+            &mut |_, _| Ok(None),
+        )
+        .unwrap();
+        let names: Vec<&str> = past.accepted.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["depth_offset", "depth_pwm_emi"]);
+        assert_eq!(
+            past.carried,
+            Some(Carried {
+                round: 0,
+                pair: ["depth_offset".to_string(), "depth_gain".to_string()]
+            })
+        );
+        assert!(past.ambiguous.is_none());
+        assert_eq!(seen[1], ["depth_offset"]);
+        assert!(
+            past.rounds[1].iter().all(|c| c.name != "depth_gain"),
+            "the look-alike is no candidate beside its winner"
+        );
+
+        // The same rounds without carrying on: the tie ends the selection.
+        let stop = select(
+            3,
+            &mut |round, _, _| Ok(Some(rounds(round))),
+            &mut |_, _| Ok(None),
+        )
+        .unwrap();
+        assert!(stop.accepted.is_empty() && stop.carried.is_none());
+        assert_eq!(
+            stop.ambiguous,
+            Some(["depth_offset".to_string(), "depth_gain".to_string()])
+        );
+
+        // The tie's winner refused when taken in: the selection ends on the tie.
+        let refused = select_past_ties(
+            3,
+            &mut |round, _, _| Ok(Some(rounds(round))),
+            &mut |_, _| Ok(Some("no".to_string())),
+        )
+        .unwrap();
+        assert!(refused.accepted.is_empty() && refused.carried.is_none());
+        assert!(refused.ambiguous.is_some());
+
+        // A second tie ends it, the first carried.
+        let twice = select_past_ties(
+            3,
+            &mut |round, _, _| {
+                Ok(Some(match round {
+                    0 => rounds(0),
+                    1 => vec![
+                        candidate("thrust_curve", 30.0, true),
+                        candidate("thrust_gain", 29.5, true),
+                    ],
+                    _ => Vec::new(),
+                }))
+            },
+            &mut |_, _| Ok(None),
+        )
+        .unwrap();
+        assert_eq!(twice.accepted.len(), 1);
+        assert!(twice.carried.is_some());
+        assert_eq!(
+            twice.ambiguous,
+            Some(["thrust_curve".to_string(), "thrust_gain".to_string()])
+        );
     }
 
     /// Regression (a depth offset named a depth gain, 10.6 ahead unscaled): two sensor

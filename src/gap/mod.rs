@@ -97,9 +97,9 @@ pub enum Verdict {
     /// The data disagree with the model beyond its noise floor and nothing in the library
     /// explains it; `Analysis::unexplained` says where.
     Unexplained,
-    /// Two effects explain the same disagreement about as well (`Analysis::ambiguous` names
-    /// both; a physics effect close behind a sensor winner, or two of one kind), and nothing
-    /// was named before them.
+    /// Two effects explain the same disagreement about as well (`Analysis::ambiguous` or
+    /// `Analysis::tie` names both; a physics effect close behind a sensor winner, or two of
+    /// one kind), and nothing else was named.
     Ambiguous,
 }
 
@@ -112,6 +112,32 @@ impl Verdict {
             Verdict::Unexplained => "unexplained",
             Verdict::Ambiguous => "ambiguous",
         }
+    }
+}
+
+/// Two look-alikes the search carried on past ([`Analysis::tie`]).
+#[derive(Debug, Clone)]
+pub struct Tie {
+    /// The round (0 the first).
+    pub round: usize,
+    /// The winner, then its look-alike.
+    pub pair: [String; 2],
+    /// The winner as the model carries it (the later names' joint refit): in `fitted` and
+    /// `configs_after`, not among the names.
+    pub carried: Candidate,
+    /// Its share of the shrink (percent), as `Analysis::shares_pct` counts the names'.
+    pub share_pct: f64,
+}
+
+impl Analysis {
+    /// Every look-alike pair the search ended on or carried on past, in the order met.
+    pub fn ties(&self) -> Vec<&[String; 2]> {
+        self.tie
+            .as_ref()
+            .map(|t| &t.pair)
+            .into_iter()
+            .chain(self.ambiguous.as_ref())
+            .collect()
     }
 }
 
@@ -151,6 +177,9 @@ pub struct Analysis {
     /// The two effects the last round could not tell apart, its winner first
     /// ([`candidate::Selection::ambiguous`]).
     pub ambiguous: Option<[String; 2]>,
+    /// A round whose two look-alikes the search carried on past
+    /// ([`candidate::select_past_ties`]): neither is named, and the model carries its winner.
+    pub tie: Option<Tie>,
     /// The candidate the last round's winner was not named for
     /// ([`candidate::Selection::outranked_by`]).
     pub outranked_by: Option<candidate::Outranked>,
@@ -542,9 +571,10 @@ pub fn analyse_with(
         rounds,
         accepted,
         ambiguous,
+        carried,
         outranked_by,
         refused,
-    } = candidate::select(
+    } = candidate::select_past_ties(
         fit::MAX_EFFECTS,
         &mut |round, accepted, refused| {
             let floors = current_floors.borrow();
@@ -950,9 +980,27 @@ pub fn analyse_with(
             windows: s.windows.clone(),
         })
         .collect();
+    // The carried tie's winner leaves the names, with its share of the shrink. The tie stands
+    // while its winner does: one the later names exchanged for its look-alike, or left
+    // without an effect of its own, no longer says which of two it is.
+    let (mut accepted, mut shares_pct) = (accepted, shares_pct);
+    let tie = carried.and_then(|c| {
+        let i = accepted.iter().position(|a| a.name == c.pair[0])?;
+        let share_pct = if i < shares_pct.len() {
+            shares_pct.remove(i)
+        } else {
+            f64::NAN
+        };
+        Some(Tie {
+            round: c.round,
+            pair: c.pair,
+            carried: accepted.remove(i),
+            share_pct,
+        })
+    });
     let verdict = if !accepted.is_empty() {
         Verdict::Effect
-    } else if ambiguous.is_some() {
+    } else if ambiguous.is_some() || tie.is_some() {
         Verdict::Ambiguous
     } else if before.iter().any(|s| s.significant) {
         Verdict::Unexplained
@@ -983,6 +1031,7 @@ pub fn analyse_with(
         after,
         rounds,
         ambiguous,
+        tie,
         outranked_by,
         refused,
         accepted,

@@ -79,6 +79,12 @@ pub fn json(a: &Analysis) -> Value {
             e["share_of_shrink_pct"] = json!(share);
         }
     }
+    // A tie the search carried on past: its pair, and the winner the fitted model carries.
+    out["tie"] = a.tie.as_ref().map_or(Value::Null, |t| {
+        let mut carried = effect(&t.carried);
+        carried["share_of_shrink_pct"] = finite(t.share_pct);
+        json!({ "round": t.round + 1, "pair": t.pair, "carried": carried })
+    });
     out["diverged"] = json!({
         "before": a.clean_before.divergences,
         "after": a.clean_after.divergences,
@@ -133,10 +139,8 @@ fn verdict_text(a: &Analysis) -> String {
                 .to_string()
         }
         (crate::gap::Verdict::Ambiguous, None) => {
-            format!(
-                "**ambiguous**: {}",
-                a.ambiguous.as_ref().map_or_else(String::new, ambiguity)
-            )
+            let ties: Vec<String> = a.ties().into_iter().map(ambiguity).collect();
+            format!("**ambiguous**: {}", ties.join("; then "))
         }
         _ => "no significant missing effect".to_string(),
     }
@@ -153,6 +157,27 @@ pub fn ambiguity([first, second]: &[String; 2]) -> String {
          within the margin); neither is named",
         kind(first),
         kind(second)
+    )
+}
+
+/// What a tie the search carried on past means for the names after it and the fitted model.
+pub fn carried_tie(t: &crate::gap::Tie) -> String {
+    let values: Vec<String> = t
+        .carried
+        .parameters
+        .iter()
+        .map(|(n, v)| format!("{n} = {v:.4}"))
+        .collect();
+    format!(
+        "in round {}, {}. The search carried on past the tie: the fitted model carries `{}` \
+         ({}; {:.0} % of the shrink), the better fit, and the later rounds look for the \
+         disagreement it leaves, `{}` no longer a candidate",
+        t.round + 1,
+        ambiguity(&t.pair),
+        t.pair[0],
+        values.join(", "),
+        t.share_pct,
+        t.pair[1]
     )
 }
 
@@ -197,6 +222,9 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
             r.round + 1,
             r.why
         );
+    }
+    if let Some(t) = &a.tie {
+        let _ = writeln!(s, "- {}", carried_tie(t));
     }
     if let Some(pair) = a.ambiguous.as_ref().filter(|_| !a.accepted.is_empty()) {
         let _ = writeln!(

@@ -486,6 +486,7 @@ pub fn run(
             held_out_raw_reduction_pct: first.map(|_| a.raw.heldout_reduction_pct()),
             held_out_grew: Some(first.is_some() && a.heldout_gap_after > a.heldout_gap_before),
             ambiguous: a.ambiguous.clone(),
+            tie: a.tie.as_ref().map(|t| t.pair.clone()),
             runner_up: super::runner_up(&a),
             verdict: Some(a.verdict.word().to_string()),
             seconds,

@@ -187,6 +187,10 @@ pub struct CaseResult {
     /// The two effects of an `ambiguous` verdict, the round's winner first.
     #[serde(default)]
     pub ambiguous: Option<[String; 2]>,
+    /// Two look-alikes the search carried on past, neither named, the winner (which the
+    /// fitted model carries) first (`gap::Analysis::tie`).
+    #[serde(default)]
+    pub tie: Option<[String; 2]>,
     /// The first round's best other candidate passing every guard, and how far its delta
     /// BIC is behind the round's winner (a look-alike under 10 behind makes the round
     /// `ambiguous`: see `candidate::Selection::ambiguous`).
@@ -243,12 +247,16 @@ impl CaseResult {
     }
 
     /// The answer points at the truth and at nothing else: every hidden effect either named
-    /// or one of an `ambiguous` verdict's two look-alikes, and no other name. Two effects the
-    /// data fit alike (a depth offset and a depth gain on runs that hold one depth) end
-    /// `ambiguous` by design; this tells that answer apart from a miss. Null cases: `false`.
+    /// or one of two look-alikes the search ended on (`ambiguous`) or carried on past
+    /// (`tie`), and no other name. Two effects the data fit alike (a depth offset and a depth
+    /// gain on runs that hold one depth) end `ambiguous` by design; this tells that answer
+    /// apart from a miss. Null cases: `false`.
     pub fn points_at_truth(&self) -> bool {
         let shown = |e: &String| {
-            self.named_all.contains(e) || self.ambiguous.as_ref().is_some_and(|a| a.contains(e))
+            self.named_all.contains(e)
+                || [&self.ambiguous, &self.tie]
+                    .iter()
+                    .any(|pair| pair.as_ref().is_some_and(|a| a.contains(e)))
         };
         self.effect.is_some()
             && !self.any_wrong()

@@ -632,6 +632,7 @@ fn run_case(env: &CaseEnv<'_>, case: PlannedCase<'_>) -> Result<CaseResult, GapE
         held_out_raw_reduction_pct: None,
         held_out_grew: None,
         ambiguous: a.ambiguous.clone(),
+        tie: a.tie.as_ref().map(|t| t.pair.clone()),
         runner_up: super::runner_up(&a),
         verdict: Some(a.verdict.word().to_string()),
         seconds,

@@ -282,8 +282,10 @@ pub struct CaseRow {
     pub held_out_truth_reduction_pct: Option<f64>,
     pub held_out_raw_reduction_pct: Option<f64>,
     pub held_out_grew: Option<bool>,
-    /// An `ambiguous` verdict's two effects, `A;B`.
+    /// The two look-alikes the search ended on, `A;B`.
     pub ambiguous: String,
+    /// The two look-alikes the search carried on past, `A;B` (the model carries `A`).
+    pub tie: String,
     /// The first round's best other passing candidate and its delta-BIC margin behind the
     /// winner, `NAME:MARGIN`.
     pub runner_up: String,
@@ -317,6 +319,7 @@ impl From<&CaseResult> for CaseRow {
             held_out_raw_reduction_pct: r.held_out_raw_reduction_pct,
             held_out_grew: r.held_out_grew,
             ambiguous: r.ambiguous.as_ref().map_or(String::new(), |a| a.join(";")),
+            tie: r.tie.as_ref().map_or(String::new(), |a| a.join(";")),
             runner_up: r
                 .runner_up
                 .as_ref()
@@ -367,6 +370,7 @@ mod tests {
             held_out_raw_reduction_pct: effect.map(|_| 20.0),
             held_out_grew: None,
             ambiguous: None,
+            tie: None,
             runner_up: None,
             verdict: Some(if effect.is_some() { "effect" } else { "none" }.to_string()),
             seconds: 1.0,
@@ -441,6 +445,7 @@ mod tests {
             held_out_raw_reduction_pct: None,
             held_out_grew: Some(false),
             ambiguous: None,
+            tie: None,
             runner_up: Some(("yaw_damping".into(), 12.5)),
             verdict: Some("effect".into()),
             seconds: 17.25,
@@ -534,7 +539,7 @@ mod tests {
     }
     /// An `ambiguous` verdict between the truth and its look-alike points at the truth; one
     /// between two other effects, or any wrong name beside it, does not. A two-effect case
-    /// points at both when each is named or in the ambiguous pair.
+    /// points at both when each is named or in the ambiguous pair (or a tie carried past).
     #[test]
     fn an_ambiguous_verdict_naming_the_truth_points_at_it() {
         let single = |named: &[&str], ambiguous: Option<[&str; 2]>| {
@@ -568,6 +573,13 @@ mod tests {
             !half.points_at_truth(),
             "the EMI is neither named nor in the pair"
         );
+        // A tie the search carried on past counts as an ambiguous pair does.
+        let mut carried = pair.clone();
+        carried.tie = carried.ambiguous.take();
+        assert!(carried.points_at_truth());
+        let mut elsewhere_carried = carried.clone();
+        elsewhere_carried.tie = Some(["depth_gain".into(), "float_depth".into()]);
+        assert!(!elsewhere_carried.points_at_truth());
         let t = independent_table(&[tie, elsewhere, right, pair, half], None);
         let line = t
             .lines()
