@@ -60,15 +60,16 @@ impl EmiData {
 /// Length of the windows over which the EMI signature averages squared differences (s).
 pub const EMI_WINDOW_S: f64 = 1.0;
 
-/// The largest lag-1 correlation of the depth residuals' successive differences, over the
-/// pairs where the stern duty is in the upper half of its range, at which the disagreement
-/// an EMI fit takes counts as white. White noise gives -0.5; a mean error that changes
-/// smoothly from sample to sample, up to +1. Measured (`EYEBOT_HIL_LOG=eyebot_hil::gap::fit::emi=debug`):
-/// hidden EMI cases -0.48 to -0.60 (structures 510529 and 514531, bridge seed 195343, nine
-/// cases); thruster lags that a depth hold turned into a duty-following rocking, which an
-/// EMI fit takes without this limit, +0.12 and +0.29 (structure 514531, cases 8 and 9); a
-/// null run whose EMI fit took 0.018 V, -0.17 (510529, case 66).
-pub const EMI_WHITE_MAX_CORRELATION: f64 = -0.35;
+/// How far, in standard errors, the white part of the depth disagreement must grow from the
+/// low half of the stern duty's range to the high half for an EMI fit to count as taking
+/// white noise: the one-sided 97.5 % point of the normal distribution, the level of the 95 %
+/// intervals every guard reads.
+pub const EMI_WHITE_MIN_Z: f64 = 1.96;
+
+/// Products of successive differences averaged per batch in [`white_growth_z`]: long enough
+/// that batch means are nearly independent (a product shares one difference with each
+/// neighbour), short enough for several batches in each half of the duty range.
+const WHITE_BATCH: usize = 32;
 
 /// Means of `a` and `b` over consecutive windows of `window_s` by `times` (ascending); windows
 /// with fewer than 5 samples are left out.
@@ -164,20 +165,18 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
     // chi-square draw with one degree of freedom, so its own correlation with duty^2 stays
     // below about 0.45 even when EMI is all the noise there is; means over
     // [`EMI_WINDOW_S`] windows estimate the local variance.
-    // And what it takes is white: successive differences of white noise correlate at -0.5
-    // with their neighbours, those of an error that changes smoothly over a few samples (a
-    // depth hold rocking behind a lagging thruster) at up to +1.
-    let diffs: Vec<f64> = idx.iter().map(|&i| r[i] - r[i - 1]).collect();
-    let white = successive_correlation(&diffs, &data.gain);
+    // And what grows with the duty is white ([`white_growth_z`]): an error that changes
+    // smoothly over a few samples (a depth hold rocking behind a lagging thruster) grows the
+    // squared differences with the duty as an EMI does, but not the white part.
+    let white = white_growth_z(&r, &w, &g);
     tracing::debug!(
         white,
         e,
-        "emi: successive differences' lag-1 correlation at high duty"
+        "emi: growth of the white disagreement with duty (z)"
     );
     let (local_r2, local_gain) = window_means(&data.times, &data.r2, &data.gain, EMI_WINDOW_S);
     let corr = crate::gap::residuals::pearson(&local_r2, &local_gain);
-    let signature_pass =
-        e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION && white <= EMI_WHITE_MAX_CORRELATION;
+    let signature_pass = e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION && white >= EMI_WHITE_MIN_Z;
     let params = [e];
     let guards = Guards {
         inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
@@ -199,7 +198,7 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
         heldout_gain: Some(heldout_before - heldout_after),
         signature_pass,
         signature: format!(
-            "{}: correlation of the depth residuals' local variance with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}; {EMI_WINDOW_S} s windows), lag-1 correlation of their successive differences at high duty = {white:.2} (<= {EMI_WHITE_MAX_CORRELATION}: white)",
+            "{}: correlation of the depth residuals' local variance with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}; {EMI_WINDOW_S} s windows), growth of their white part from low to high duty = {white:.1} standard errors (>= {EMI_WHITE_MIN_Z})",
             effect.signature
         ),
         guards,
@@ -213,15 +212,52 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
     })
 }
 
-/// The lag-1 correlation of successive differences `d` over the pairs whose EMI gain is in
-/// the upper half of `gain`'s range ([`EMI_WHITE_MAX_CORRELATION`]); 0 with fewer than three.
-pub(super) fn successive_correlation(d: &[f64], gain: &[f64]) -> f64 {
-    let top = gain.iter().copied().fold(0.0, f64::max);
-    let (a, b): (Vec<f64>, Vec<f64>) = (1..d.len())
-        .filter(|&k| gain[k] > 0.5 * top && gain[k - 1] > 0.5 * top)
-        .map(|k| (d[k], d[k - 1]))
-        .unzip();
-    crate::gap::residuals::pearson(&a, &b)
+/// How far the white part of the disagreement `r` beyond the floor's white variance `w` (per
+/// sample) grows from the samples whose EMI gain `g` is in the lower half of its range to
+/// those in the upper half, in standard errors.
+///
+/// With `d_k = r_k - r_(k-1)`, `-d_(k-1) d_k` has the expectation of the white variance of
+/// sample `k-1` less the covariance of the smooth part's successive changes (the
+/// difference-based variance estimators of nonparametric regression, Rice 1984). White noise
+/// is read whole; a smooth error that follows the duty (a depth hold rocking behind a lagging
+/// thruster), whose successive changes correlate positively, reads as less white, never as
+/// more; a white floor the model has too low reads alike at low and high duty. The standard
+/// errors are those of batch means ([`WHITE_BATCH`] products each). 0 with fewer than two
+/// batches at high duty; without two at low duty the growth is read from the floor.
+pub(super) fn white_growth_z(r: &[f64], w: &[f64], g: &[f64]) -> f64 {
+    let top = g.iter().copied().fold(0.0, f64::max);
+    if top <= 0.0 {
+        return 0.0;
+    }
+    let (mut high, mut low) = (Vec::new(), Vec::new());
+    for k in 2..r.len().min(w.len()).min(g.len()) {
+        let white = -(r[k] - r[k - 1]) * (r[k - 1] - r[k - 2]) - w[k - 1];
+        if g[k - 1] > 0.5 * top {
+            high.push(white);
+        } else {
+            low.push(white);
+        }
+    }
+    // The mean and the variance of the mean, from batch means.
+    let batched = |x: &[f64]| -> Option<(f64, f64)> {
+        let means: Vec<f64> = x
+            .chunks_exact(WHITE_BATCH)
+            .map(|c| c.iter().sum::<f64>() / WHITE_BATCH as f64)
+            .collect();
+        if means.len() < 2 {
+            return None;
+        }
+        let n = means.len() as f64;
+        let mean = means.iter().sum::<f64>() / n;
+        let var = means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        Some((mean, var / n))
+    };
+    let Some((h, vh)) = batched(&high) else {
+        return 0.0;
+    };
+    let (l, vl) = batched(&low).unwrap_or((0.0, 0.0));
+    let se = (vh + vl).sqrt();
+    if se > 0.0 { (h - l) / se } else { 0.0 }
 }
 
 #[cfg(test)]

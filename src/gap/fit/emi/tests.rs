@@ -72,12 +72,13 @@ fn a_strong_depth_emi_is_fitted_inside_its_range() {
     );
 }
 
-/// What a depth EMI fit takes must be white. A thruster lag rocks a depth hold behind the
-/// stern duty, so the depth residuals' spread grows with the duty as an EMI's does, but the
-/// rocking changes smoothly from sample to sample: its successive differences correlate with
-/// their neighbours, where white noise's correlate at -0.5. Here a duty-scaled 0.4 Hz rocking
-/// sampled at 10 Hz, beside white noise of a tenth of its size, reads above the limit, and
-/// duty-scaled white noise below it; on the simulator an EMI's fit passes its signature.
+/// What grows with the duty in a depth EMI fit must be white. A thruster lag rocks a depth
+/// hold behind the stern duty, so the depth residuals' spread grows with the duty as an EMI's
+/// does, but the rocking changes smoothly from sample to sample. Here a duty-scaled 0.4 Hz
+/// rocking sampled at 10 Hz beside the floor's white noise reads no white growth, a white
+/// floor the model has too low reads none either, and duty-scaled white noise reads far
+/// beyond the limit, also beside the rocking (a true EMI on a hull whose dynamics the model
+/// misses); on the simulator an EMI's fit passes its signature.
 #[test]
 fn a_smooth_error_that_follows_the_stern_duty_is_no_emi() {
     use rand::SeedableRng;
@@ -87,23 +88,35 @@ fn a_smooth_error_that_follows_the_stern_duty_is_no_emi() {
         .collect();
     let gain: Vec<f64> = duty.iter().map(|u| u * u).collect();
     let mut white = || -> f64 { rand::RngExt::sample(&mut rng, rand_distr::StandardNormal) };
-    let diffs = |r: &[f64]| -> Vec<f64> { r.windows(2).map(|w| w[1] - w[0]).collect() };
-    let noise: Vec<f64> = duty.iter().map(|u| u * white()).collect();
+    let floor = 0.1;
+    let floor_noise: Vec<f64> = duty.iter().map(|_| floor * white()).collect();
+    let noise: Vec<f64> = duty
+        .iter()
+        .zip(&floor_noise)
+        .map(|(u, f)| u * white() + f)
+        .collect();
     let rocking: Vec<f64> = duty
         .iter()
+        .zip(&floor_noise)
         .enumerate()
-        .map(|(i, u)| u * (std::f64::consts::TAU * 0.4 * i as f64 * 0.1).sin() + 0.1 * white())
+        .map(|(i, (u, f))| u * (std::f64::consts::TAU * 0.4 * i as f64 * 0.1).sin() + f)
         .collect();
-    let limit = EMI_WHITE_MAX_CORRELATION;
-    let of_noise = successive_correlation(&diffs(&noise), &gain[1..]);
-    assert!(of_noise < -0.4, "{of_noise}");
-    let of_rocking = successive_correlation(&diffs(&rocking), &gain[1..]);
-    assert!(of_rocking > limit, "{of_rocking}");
+    let both: Vec<f64> = noise.iter().zip(&rocking).map(|(a, b)| a + b).collect();
+    let w = vec![floor * floor; duty.len()];
+    let of_noise = white_growth_z(&noise, &w, &gain);
+    assert!(of_noise > 3.0 * EMI_WHITE_MIN_Z, "{of_noise}");
+    let of_rocking = white_growth_z(&rocking, &w, &gain);
+    assert!(of_rocking < EMI_WHITE_MIN_Z, "{of_rocking}");
+    let of_both = white_growth_z(&both, &w, &gain);
+    assert!(of_both > EMI_WHITE_MIN_Z, "{of_both}");
+    let too_low_a_floor: Vec<f64> = duty.iter().map(|_| 0.5 * white()).collect();
+    let of_floor = white_growth_z(&too_low_a_floor, &w, &gain);
+    assert!(of_floor.abs() < EMI_WHITE_MIN_Z, "{of_floor}");
 
     let fitted = strong_emi_fitted();
     assert!(fitted.guards.signature, "{}", fitted.signature);
     assert!(
-        fitted.signature.contains("at high duty = -0."),
+        fitted.signature.contains("from low to high duty = "),
         "{}",
         fitted.signature
     );
