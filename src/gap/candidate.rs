@@ -195,7 +195,8 @@ pub fn select(
 /// look-alike no longer a candidate. A tie between two effects says nothing of a second
 /// effect beside them (a depth offset or gain that one held depth cannot tell apart, beside a
 /// depth EMI), and either look-alike takes the same disagreement out of what the later rounds
-/// see. A second tie, or the winner refused, ends the selection as [`select`] does.
+/// see. A second tie ends the selection as [`select`] does. A winner refused when taken in
+/// is no effect, nor its look-alike: both are refused and the selection ends, with no tie.
 pub fn select_past_ties(
     max: usize,
     fit_round: &mut FitRound<'_>,
@@ -251,7 +252,7 @@ fn select_with(
                 if carry && carried.is_none() {
                     accepted.push(win);
                     let this_round = &refused[refused.len() - refused_here..];
-                    if accept(&mut accepted, this_round)?.is_none() {
+                    let Some(why) = accept(&mut accepted, this_round)? else {
                         tracing::debug!(
                             round,
                             ?pair,
@@ -259,8 +260,20 @@ fn select_with(
                         );
                         carried = Some(Carried { round, pair });
                         continue 'rounds;
-                    }
+                    };
                     accepted.pop();
+                    // Refused, the winner is no effect, and its look-alike, which explains
+                    // the same disagreement about as well, none either: no tie to report.
+                    tracing::debug!(round, ?pair, why, "a tie's winner refused");
+                    let [name, alt] = pair;
+                    let alt_why = format!("it ties with `{name}`, refused: {why}");
+                    refused.push(Refused { round, name, why });
+                    refused.push(Refused {
+                        round,
+                        name: alt,
+                        why: alt_why,
+                    });
+                    break 'rounds;
                 }
                 ambiguous = Some(pair);
                 break 'rounds;
@@ -916,8 +929,8 @@ mod tests {
 
     /// A tie says nothing of a second effect beside it: carrying on past it, the selection
     /// takes the tie's winner into the model unnamed, leaves its look-alike out of the later
-    /// rounds, and names the next round's winner; a winner refused at the tie, or a second
-    /// tie, ends the selection there as `select` does.
+    /// rounds, and names the next round's winner; a second tie ends the selection there as
+    /// `select` does, and a winner refused at the tie ends it with both refused, no tie.
     #[test]
     fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
         let rounds = |round: usize| match round {
@@ -971,7 +984,8 @@ mod tests {
             Some(["depth_offset".to_string(), "depth_gain".to_string()])
         );
 
-        // The tie's winner refused when taken in: the selection ends on the tie.
+        // The tie's winner refused when taken in: it is no effect, nor is its look-alike,
+        // and the selection ends with both refused and no tie.
         let refused = select_past_ties(
             3,
             &mut |round, _, _| Ok(Some(rounds(round))),
@@ -979,7 +993,9 @@ mod tests {
         )
         .unwrap();
         assert!(refused.accepted.is_empty() && refused.carried.is_none());
-        assert!(refused.ambiguous.is_some());
+        assert!(refused.ambiguous.is_none());
+        let names: Vec<&str> = refused.refused.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(names, ["depth_offset", "depth_gain"]);
 
         // A second tie ends it, the first carried.
         let twice = select_past_ties(

@@ -60,6 +60,16 @@ impl EmiData {
 /// Length of the windows over which the EMI signature averages squared differences (s).
 pub const EMI_WINDOW_S: f64 = 1.0;
 
+/// The largest lag-1 correlation of the depth residuals' successive differences, over the
+/// pairs where the stern duty is in the upper half of its range, at which the differences
+/// there count as mostly white (white noise gives -0.5, an error that changes smoothly from
+/// sample to sample up to +1): the one sign of an EMI's whiteness the quantized readings of a
+/// moving hull keep. The quantization error of a depth that ramps through the ADC's codes is a
+/// sawtooth whose successive changes correlate positively, and it biases the white growth
+/// ([`white_growth_z`]) of a strong EMI below zero (bridge seed 203381, case 25: -3.7 beside a
+/// correlation of the successive differences at -0.5). Either sign passes the whiteness test.
+pub const EMI_WHITE_MAX_CORRELATION: f64 = -0.35;
+
 /// How far, in standard errors, the white part of the depth disagreement must grow from the
 /// low half of the stern duty's range to the high half for an EMI fit to count as taking
 /// white noise: the one-sided 97.5 % point of the normal distribution, the level of the 95 %
@@ -169,14 +179,18 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
     // smoothly over a few samples (a depth hold rocking behind a lagging thruster) grows the
     // squared differences with the duty as an EMI does, but not the white part.
     let white = white_growth_z(&r, &w, &g);
+    let diffs: Vec<f64> = idx.iter().map(|&i| r[i] - r[i - 1]).collect();
+    let successive = successive_correlation(&diffs, &data.gain);
     tracing::debug!(
         white,
+        successive,
         e,
         "emi: growth of the white disagreement with duty (z)"
     );
     let (local_r2, local_gain) = window_means(&data.times, &data.r2, &data.gain, EMI_WINDOW_S);
     let corr = crate::gap::residuals::pearson(&local_r2, &local_gain);
-    let signature_pass = e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION && white >= EMI_WHITE_MIN_Z;
+    let is_white = white >= EMI_WHITE_MIN_Z || successive <= EMI_WHITE_MAX_CORRELATION;
+    let signature_pass = e > 0.0 && corr >= SIGNATURE_MIN_CORRELATION && is_white;
     let params = [e];
     let guards = Guards {
         inside_bounds: !fit.at_bound && effects::inside_bounds(effect, &params),
@@ -198,7 +212,7 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
         heldout_gain: Some(heldout_before - heldout_after),
         signature_pass,
         signature: format!(
-            "{}: correlation of the depth residuals' local variance with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}; {EMI_WINDOW_S} s windows), growth of their white part from low to high duty = {white:.1} standard errors (>= {EMI_WHITE_MIN_Z})",
+            "{}: correlation of the depth residuals' local variance with stern duty^2 = {corr:.2} (>= {SIGNATURE_MIN_CORRELATION}; {EMI_WINDOW_S} s windows), growth of their white part from low to high duty = {white:.1} standard errors (>= {EMI_WHITE_MIN_Z}) or lag-1 correlation of their successive differences at high duty = {successive:.2} (<= {EMI_WHITE_MAX_CORRELATION}): white",
             effect.signature
         ),
         guards,
@@ -258,6 +272,17 @@ pub(super) fn white_growth_z(r: &[f64], w: &[f64], g: &[f64]) -> f64 {
     let (l, vl) = batched(&low).unwrap_or((0.0, 0.0));
     let se = (vh + vl).sqrt();
     if se > 0.0 { (h - l) / se } else { 0.0 }
+}
+
+/// The lag-1 correlation of successive differences `d` over the pairs whose EMI gain is in
+/// the upper half of `gain`'s range ([`EMI_WHITE_MAX_CORRELATION`]); 0 with fewer than three.
+pub(super) fn successive_correlation(d: &[f64], gain: &[f64]) -> f64 {
+    let top = gain.iter().copied().fold(0.0, f64::max);
+    let (a, b): (Vec<f64>, Vec<f64>) = (1..d.len())
+        .filter(|&k| gain[k] > 0.5 * top && gain[k - 1] > 0.5 * top)
+        .map(|k| (d[k], d[k - 1]))
+        .unzip();
+    crate::gap::residuals::pearson(&a, &b)
 }
 
 #[cfg(test)]

@@ -75,10 +75,11 @@ fn a_strong_depth_emi_is_fitted_inside_its_range() {
 /// What grows with the duty in a depth EMI fit must be white. A thruster lag rocks a depth
 /// hold behind the stern duty, so the depth residuals' spread grows with the duty as an EMI's
 /// does, but the rocking changes smoothly from sample to sample. Here a duty-scaled 0.4 Hz
-/// rocking sampled at 10 Hz beside the floor's white noise reads no white growth, a white
-/// floor the model has too low reads none either, and duty-scaled white noise reads far
-/// beyond the limit, also beside the rocking (a true EMI on a hull whose dynamics the model
-/// misses); on the simulator an EMI's fit passes its signature.
+/// rocking sampled at 10 Hz beside the floor's white noise reads no white growth and no
+/// white successive differences, a white floor the model has too low reads no growth either,
+/// and duty-scaled white noise reads far beyond the limits, its growth also beside the
+/// rocking (a true EMI on a hull whose dynamics the model misses); on the simulator an EMI's
+/// fit passes its signature.
 #[test]
 fn a_smooth_error_that_follows_the_stern_duty_is_no_emi() {
     use rand::SeedableRng;
@@ -107,6 +108,13 @@ fn a_smooth_error_that_follows_the_stern_duty_is_no_emi() {
     assert!(of_noise > 3.0 * EMI_WHITE_MIN_Z, "{of_noise}");
     let of_rocking = white_growth_z(&rocking, &w, &gain);
     assert!(of_rocking < EMI_WHITE_MIN_Z, "{of_rocking}");
+    // Neither sign of whiteness: the successive differences at high duty correlate above the
+    // limit too, where white noise's read near -0.5.
+    let diffs = |r: &[f64]| -> Vec<f64> { r.windows(2).map(|w| w[1] - w[0]).collect() };
+    let rocking_corr = successive_correlation(&diffs(&rocking), &gain[1..]);
+    assert!(rocking_corr > EMI_WHITE_MAX_CORRELATION, "{rocking_corr}");
+    let noise_corr = successive_correlation(&diffs(&noise), &gain[1..]);
+    assert!(noise_corr < -0.4, "{noise_corr}");
     let of_both = white_growth_z(&both, &w, &gain);
     assert!(of_both > EMI_WHITE_MIN_Z, "{of_both}");
     let too_low_a_floor: Vec<f64> = duty.iter().map(|_| 0.5 * white()).collect();
