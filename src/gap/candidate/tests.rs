@@ -1,0 +1,537 @@
+//! The greedy selection's tests: ranking, guards, look-alikes, ties, refusals.
+
+use super::*;
+use crate::gap::effects;
+
+fn candidate(name: &str, bic: f64, pass: bool) -> Candidate {
+    let mut c = Candidate::untestable(effects::by_name(name).unwrap(), 100.0, "");
+    c.testable = true;
+    c.delta_bic = bic;
+    c.delta_bic_uncalibrated = bic;
+    c.guards = Guards {
+        inside_bounds: true,
+        interval_excludes_zero: true,
+        significant: pass,
+        signature: true,
+        heldout: Some(true),
+    };
+    c
+}
+
+/// The selection over one round of `round0` (the next round has no candidates).
+fn one_round(round0: Vec<Candidate>) -> Selection {
+    select(
+        2,
+        &mut |round, _, _| {
+            Ok(Some(if round == 0 {
+                round0.clone()
+            } else {
+                Vec::new()
+            }))
+        },
+        &mut |_, _| Ok(None),
+    )
+    .unwrap()
+}
+
+/// The loop ranks each round, accepts its best candidate that passes every guard (not
+/// the best ranked), hands the earlier winners to `accept`, and stops at a round
+/// without a winner.
+#[test]
+fn selection_accepts_the_best_passing_candidate_until_a_round_has_none() {
+    let mut seen_accepted = Vec::new();
+    let Selection {
+        rounds, accepted, ..
+    } = select(
+        3,
+        &mut |round, accepted, _| {
+            seen_accepted.push(accepted.len());
+            Ok(Some(match round {
+                0 => vec![
+                    candidate("thrust_gain", 20.0, true),
+                    candidate("water_current", 50.0, false),
+                    candidate("compass_offset", 30.0, true),
+                ],
+                _ => vec![candidate("thrust_gain", 5.0, false)],
+            }))
+        },
+        &mut |accepted, _| {
+            let (win, earlier) = accepted.split_last().unwrap();
+            assert!(earlier.is_empty() || win.name != earlier[0].name);
+            Ok(None)
+        },
+    )
+    .unwrap();
+    assert_eq!(seen_accepted, vec![0, 1]);
+    assert_eq!(rounds.len(), 2);
+    assert_eq!(
+        rounds[0][0].name, "water_current",
+        "ranked by the likelihood"
+    );
+    let names: Vec<&str> = accepted.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, vec!["compass_offset"]);
+}
+
+/// A winner the model refuses to take in (`accept` gives a reason) is not named: the
+/// effects accepted before it stay, the reason is kept with its round, and the round's
+/// next passing candidate takes its place, handed to `accept` with the refused one; a
+/// refused winner is no rival of the next (it would be a look-alike here: within the
+/// delta-BIC margin of it, both physics effects).
+#[test]
+fn a_refused_winner_gives_way_to_the_next_candidate_of_its_round() {
+    let mut rounds_fitted = 0;
+    let mut handed = Vec::new();
+    let selection = select(
+        3,
+        &mut |round, _, _| {
+            rounds_fitted += 1;
+            Ok(match round {
+                0 => Some(vec![candidate("thruster_lag", 900.0, true)]),
+                1 => Some(vec![
+                    candidate("added_mass", 300.0, true),
+                    candidate("thrust_gain", 280.0, true),
+                    candidate("compass_offset", 200.0, true),
+                ]),
+                _ => None,
+            })
+        },
+        &mut |accepted, before| {
+            let name = accepted.last().unwrap().name.clone();
+            handed.push((
+                name.clone(),
+                before.iter().map(|r| r.name.clone()).collect::<Vec<_>>(),
+            ));
+            Ok((name == "added_mass").then(|| "it does not shrink the gap".to_string()))
+        },
+    )
+    .unwrap();
+    let names: Vec<&str> = selection.accepted.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, vec!["thruster_lag", "thrust_gain"]);
+    let no: Vec<String> = Vec::new();
+    assert_eq!(
+        handed,
+        vec![
+            ("thruster_lag".to_string(), no.clone()),
+            ("added_mass".to_string(), no),
+            ("thrust_gain".to_string(), vec!["added_mass".to_string()]),
+        ],
+        "the winner in place of a refused one is handed over with it"
+    );
+    assert_eq!(
+        selection.refused,
+        vec![Refused {
+            round: 1,
+            name: "added_mass".into(),
+            why: "it does not shrink the gap".into()
+        }]
+    );
+    assert_eq!(selection.ambiguous, None);
+    assert_eq!(rounds_fitted, 3);
+    assert_eq!(selection.rounds.len(), 2);
+}
+
+/// A round whose winners are refused [`REFUSALS_PER_ROUND`] times ends the selection: no
+/// further candidate of it is tried and no further round is fitted.
+#[test]
+fn refusals_up_to_the_limit_end_the_selection() {
+    let mut rounds_fitted = 0;
+    let mut tried = Vec::new();
+    let selection = select(
+        3,
+        &mut |round, _, _| {
+            rounds_fitted += 1;
+            Ok(Some(match round {
+                0 => vec![
+                    candidate("added_mass", 300.0, true),
+                    candidate("thrust_gain", 200.0, true),
+                    candidate("compass_offset", 100.0, true),
+                ],
+                _ => vec![candidate("depth_offset", 50.0, true)],
+            }))
+        },
+        &mut |accepted, _| {
+            tried.push(accepted.last().unwrap().name.clone());
+            Ok(Some("a stand-in".to_string()))
+        },
+    )
+    .unwrap();
+    assert!(selection.accepted.is_empty());
+    assert_eq!(selection.refused.len(), REFUSALS_PER_ROUND);
+    assert_eq!(tried, vec!["added_mass", "thrust_gain"]);
+    assert_eq!(rounds_fitted, 1);
+}
+
+/// A rival that fails only its interval is a look-alike when it changes the residuals as
+/// the winner does (a depth gain beside a depth offset, both fitting the surface reading):
+/// the selection ends ambiguous. Changing them another way, or failing another guard
+/// too, it is none, and the winner is named.
+#[test]
+fn a_rival_failing_only_its_interval_is_a_look_alike_when_it_changes_the_same() {
+    let with = |change: Vec<f64>, significant: bool| {
+        let mut offset = candidate("depth_offset", 100.0, true);
+        offset.change = vec![1.0, 1.0, 0.5, 0.0];
+        let mut gain = candidate("depth_gain", 105.0, true);
+        gain.guards.interval_excludes_zero = false;
+        gain.guards.significant = significant;
+        gain.change = change;
+        one_round(vec![gain, offset])
+    };
+    let same = with(vec![1.1, 0.9, 0.6, 0.1], true);
+    assert_eq!(
+        same.ambiguous,
+        Some(["depth_offset".to_string(), "depth_gain".to_string()])
+    );
+    assert!(same.accepted.is_empty());
+    let other = with(vec![1.0, -1.0, 0.0, 1.0], true);
+    assert_eq!(other.ambiguous, None);
+    assert_eq!(other.accepted[0].name, "depth_offset");
+    let weak = with(vec![1.1, 0.9, 0.6, 0.1], false);
+    assert_eq!(weak.ambiguous, None);
+    assert_eq!(weak.accepted[0].name, "depth_offset");
+}
+
+/// Regression (a thruster imbalance named `accel_y_offset` on a vehicle of another
+/// structure: the imbalance fitted far better, delta BIC 110.6 against 38.0, but its
+/// interval held 0 under the between-run spread): a physics rival that fails only its
+/// interval and moves the sensor winner's readings as the winner does is a look-alike
+/// although it moves other channels too, so the selection ends ambiguous. A physics
+/// rival moving the sensor's readings another way is none, and the sensor is named.
+#[test]
+fn a_sensor_winner_is_compared_with_a_physics_rival_on_its_own_readings() {
+    let with = |rival: Vec<f64>| {
+        let mut offset = candidate("accel_y_offset", 38.0, true);
+        offset.change = vec![0.0, 0.0, 0.0, 0.5, 0.5, 0.4];
+        let mut imbalance = candidate("thruster_imbalance", 110.6, true);
+        imbalance.guards.interval_excludes_zero = false;
+        imbalance.change = rival;
+        one_round(vec![imbalance, offset])
+    };
+    // On all readings the two changes are far apart (cosine 0.27), on the sensor's 0.997 ...
+    let same = with(vec![2.0, -1.5, 1.8, 0.5, 0.6, 0.4]);
+    assert_eq!(
+        same.ambiguous,
+        Some([
+            "accel_y_offset".to_string(),
+            "thruster_imbalance".to_string()
+        ])
+    );
+    assert!(same.accepted.is_empty());
+    // ... and here they point apart on the sensor's readings too.
+    let other = with(vec![2.0, -1.5, 1.8, 0.5, -0.6, 0.0]);
+    assert_eq!(other.ambiguous, None);
+    assert_eq!(other.accepted[0].name, "accel_y_offset");
+}
+
+/// How much of a winner's change another change carries is its projection on the
+/// winner's: a larger change holding the winner's as a part carries most of it at a low
+/// cosine, one that moves the same readings across it carries none.
+#[test]
+fn a_change_carries_its_part_along_the_winners() {
+    let mut win = candidate("compass_offset", 50.0, true);
+    win.change = vec![1.0, 1.0, 0.0, 0.0];
+    let mut larger = candidate("reverse_thrust_curve", 60.0, true);
+    larger.change = vec![0.9, 0.8, 3.0, -2.5];
+    let mut across = candidate("reverse_thrust_curve", 60.0, true);
+    across.change = vec![1.0, -1.0, 0.5, 0.0];
+    let carries = |c: &Candidate| change_projection_where_changed(c, &win).unwrap();
+    assert!((carries(&larger) - 0.85).abs() < 1e-12);
+    assert!(change_cosine(&larger, &win).unwrap() < 0.3);
+    assert!(carries(&across).abs() < 1e-12);
+}
+
+/// Regression (a sensor effect named for a disagreement the dynamics explain as well): a
+/// sensor winner with a physics effect that passes every guard within the delta-BIC
+/// margin ends the selection as ambiguous, naming both and accepting neither; a physics
+/// winner with a sensor effect close behind is named (the physics wins), and a sensor
+/// winner clear of every other effect is named.
+#[test]
+fn a_sensor_effect_is_not_named_where_a_physics_effect_explains_as_much() {
+    let close = one_round(vec![
+        candidate("depth_gain", 40.0, true),
+        candidate("thrust_gain", 35.0, true),
+    ]);
+    assert!(close.accepted.is_empty(), "{:?}", close.accepted);
+    assert_eq!(
+        close.ambiguous,
+        Some(["depth_gain".to_string(), "thrust_gain".to_string()])
+    );
+    let physics_first = one_round(vec![
+        candidate("thrust_gain", 40.0, true),
+        candidate("depth_gain", 35.0, true),
+    ]);
+    assert_eq!(physics_first.accepted[0].name, "thrust_gain");
+    assert!(physics_first.ambiguous.is_none());
+    let clear = one_round(vec![
+        candidate("depth_gain", 60.0, true),
+        candidate("thrust_gain", 35.0, true),
+        candidate("yaw_damping", 58.0, false),
+    ]);
+    assert_eq!(clear.accepted[0].name, "depth_gain");
+    assert!(clear.ambiguous.is_none());
+    let (win, next, margin) = runner_up(&clear.rounds[0]).unwrap();
+    assert_eq!(
+        (win.name.as_str(), next.name.as_str()),
+        ("depth_gain", "thrust_gain")
+    );
+    assert_eq!(margin, 25.0, "the failed yaw_damping is no runner-up");
+}
+
+/// Regression (a coin toss named: a depth gain named `depth_offset` 0.6 BIC ahead of
+/// `depth_gain`, a thrust gain named `thrust_curve` 4.3 ahead): two effects of one kind
+/// on a shared channel that both pass every guard within the delta-BIC margin end the
+/// selection as ambiguous, the winner first; the same pair further apart names the
+/// winner, and a candidate close behind that fails a guard, shares no channel or is of
+/// the other kind is no look-alike.
+#[test]
+fn two_effects_of_one_kind_within_the_margin_are_ambiguous() {
+    for (first, second) in [
+        ("depth_offset", "depth_gain"),
+        ("thrust_curve", "thrust_gain"),
+    ] {
+        let close = one_round(vec![
+            candidate(first, 40.0, true),
+            candidate(second, 39.4, true),
+        ]);
+        assert!(close.accepted.is_empty(), "{:?}", close.accepted);
+        assert_eq!(
+            close.ambiguous,
+            Some([first.to_string(), second.to_string()])
+        );
+        let apart = one_round(vec![
+            candidate(first, 40.0, true),
+            candidate(second, 29.0, true),
+        ]);
+        assert_eq!(apart.accepted[0].name, first);
+        assert!(apart.ambiguous.is_none());
+        let failed = one_round(vec![
+            candidate(first, 40.0, true),
+            candidate(second, 39.4, false),
+        ]);
+        assert_eq!(failed.accepted[0].name, first);
+        assert!(failed.ambiguous.is_none());
+    }
+    // Close but on channels the other does not touch, or of the other kind (a variance
+    // effect's delta BIC is of another likelihood): no tie, the winner is named.
+    for (first, second) in [
+        ("compass_offset", "depth_gain"),
+        ("depth_pwm_emi", "depth_offset"),
+    ] {
+        let apart = one_round(vec![
+            candidate(first, 40.0, true),
+            candidate(second, 39.4, true),
+        ]);
+        assert_eq!(apart.accepted[0].name, first);
+        assert!(apart.ambiguous.is_none());
+    }
+}
+
+/// A tie says nothing of a second effect beside it: carrying on past it, the selection
+/// takes the tie's winner into the model unnamed, leaves its look-alike out of the later
+/// rounds, and names the next round's winner; a second tie ends the selection there as
+/// `select` does, and a winner refused at the tie ends it with both refused, no tie.
+#[test]
+fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
+    let rounds = |round: usize| match round {
+        0 => vec![
+            candidate("depth_offset", 40.0, true),
+            candidate("depth_gain", 39.4, true),
+            candidate("depth_pwm_emi", 20.0, true),
+        ],
+        1 => vec![
+            candidate("depth_gain", 30.0, true),
+            candidate("depth_pwm_emi", 20.0, true),
+        ],
+        _ => Vec::new(),
+    };
+    let mut seen = Vec::new();
+    let past = select_past_ties(
+        3,
+        &mut |round, accepted, _| {
+            seen.push(accepted.iter().map(|a| a.name.clone()).collect::<Vec<_>>());
+            Ok(Some(rounds(round)))
+        },
+        &mut |_, _| Ok(None),
+    )
+    .unwrap();
+    let names: Vec<&str> = past.accepted.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["depth_offset", "depth_pwm_emi"]);
+    assert_eq!(
+        past.carried,
+        Some(Carried {
+            round: 0,
+            pair: ["depth_offset".to_string(), "depth_gain".to_string()]
+        })
+    );
+    assert!(past.ambiguous.is_none());
+    assert_eq!(seen[1], ["depth_offset"]);
+    assert!(
+        past.rounds[1].iter().all(|c| c.name != "depth_gain"),
+        "the look-alike is no candidate beside its winner"
+    );
+
+    // The same rounds without carrying on: the tie ends the selection.
+    let stop = select(
+        3,
+        &mut |round, _, _| Ok(Some(rounds(round))),
+        &mut |_, _| Ok(None),
+    )
+    .unwrap();
+    assert!(stop.accepted.is_empty() && stop.carried.is_none());
+    assert_eq!(
+        stop.ambiguous,
+        Some(["depth_offset".to_string(), "depth_gain".to_string()])
+    );
+
+    // The tie's winner refused when taken in: it is no effect, nor is its look-alike,
+    // and the selection ends with both refused and no tie.
+    let refused = select_past_ties(
+        3,
+        &mut |round, _, _| Ok(Some(rounds(round))),
+        &mut |_, _| Ok(Some("no".to_string())),
+    )
+    .unwrap();
+    assert!(refused.accepted.is_empty() && refused.carried.is_none());
+    assert!(refused.ambiguous.is_none());
+    let names: Vec<&str> = refused.refused.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, ["depth_offset", "depth_gain"]);
+
+    // A second tie ends it, the first carried.
+    let twice = select_past_ties(
+        3,
+        &mut |round, _, _| {
+            Ok(Some(match round {
+                0 => rounds(0),
+                1 => vec![
+                    candidate("thrust_curve", 30.0, true),
+                    candidate("thrust_gain", 29.5, true),
+                ],
+                _ => Vec::new(),
+            }))
+        },
+        &mut |_, _| Ok(None),
+    )
+    .unwrap();
+    assert_eq!(twice.accepted.len(), 1);
+    assert!(twice.carried.is_some());
+    assert_eq!(
+        twice.ambiguous,
+        Some(["thrust_curve".to_string(), "thrust_gain".to_string()])
+    );
+}
+
+/// Regression (a depth offset named a depth gain, 10.6 ahead unscaled): two sensor
+/// effects of one channel tie when the winner's lead on the significance test's scale is
+/// under the margin, whatever the unscaled lead; the same lead between two physics
+/// effects names the winner, and a scaled lead over the margin names it too.
+#[test]
+fn two_sensor_effects_tie_on_the_scale_of_the_significance_test() {
+    // `gain` chi-square drop, every fit's scale `scale`, one parameter each (penalty 7).
+    let fitted = |name: &str, gain: f64, scale: f64| {
+        let mut c = candidate(name, 0.0, true);
+        c.chi2_before = 10_000.0;
+        c.chi2_after = 10_000.0 - gain;
+        c.delta_bic_uncalibrated = gain - 7.0;
+        c.noise_factor = scale;
+        c.variance_factor = 1.0;
+        c.delta_bic = gain / scale - 7.0;
+        c
+    };
+    let close = one_round(vec![
+        fitted("depth_gain", 2_012.0, 2.0),
+        fitted("depth_offset", 2_000.0, 2.0),
+    ]);
+    assert_eq!(
+        close.ambiguous,
+        Some(["depth_gain".to_string(), "depth_offset".to_string()])
+    );
+    assert!(close.accepted.is_empty(), "{:?}", close.accepted);
+    let apart = one_round(vec![
+        fitted("depth_gain", 2_030.0, 2.0),
+        fitted("depth_offset", 2_000.0, 2.0),
+    ]);
+    assert_eq!(apart.accepted[0].name, "depth_gain");
+    assert!(apart.ambiguous.is_none());
+    let physics = one_round(vec![
+        fitted("thrust_gain", 2_012.0, 2.0),
+        fitted("thrust_curve", 2_000.0, 2.0),
+    ]);
+    assert_eq!(physics.accepted[0].name, "thrust_gain");
+    assert!(physics.ambiguous.is_none());
+}
+
+/// Regression (a stand-in named): a thruster lag the fit holds on its bound explains far
+/// more than anything inside its bounds; the best passing candidate is not named in its
+/// place, and the selection reports the rival with its failed guard. A rival that fails
+/// its interval (a size null runs show too), also fails another guard, or explains no
+/// more, changes nothing.
+#[test]
+fn a_candidate_is_not_named_in_place_of_an_unconfirmed_better_one() {
+    let mut lag = candidate("thruster_lag", 7500.0, true);
+    lag.guards.inside_bounds = false;
+    let stand_in = one_round(vec![lag.clone(), candidate("thrust_gain", 1400.0, true)]);
+    assert!(stand_in.accepted.is_empty(), "{:?}", stand_in.accepted);
+    assert_eq!(
+        stand_in.outranked_by,
+        Some(Outranked {
+            name: "thruster_lag".into(),
+            failed: vec!["bounds"]
+        })
+    );
+    let mut known = candidate("compass_hard_iron", 168.0, true);
+    known.guards.interval_excludes_zero = false;
+    let beside = one_round(vec![known, candidate("thruster_lag", 115.0, true)]);
+    assert_eq!(beside.accepted[0].name, "thruster_lag");
+    assert!(beside.outranked_by.is_none());
+    let mut overfit = lag.clone();
+    overfit.guards.heldout = Some(false);
+    let other_guard = one_round(vec![overfit, candidate("thrust_gain", 1400.0, true)]);
+    assert_eq!(other_guard.accepted[0].name, "thrust_gain");
+    assert!(other_guard.outranked_by.is_none());
+    let mut small = lag;
+    small.delta_bic_uncalibrated = 1405.0;
+    let close = one_round(vec![small, candidate("thrust_gain", 1400.0, true)]);
+    assert_eq!(close.accepted[0].name, "thrust_gain");
+    assert!(close.outranked_by.is_none());
+}
+
+/// A candidate is named only when every guard holds.
+#[test]
+fn a_single_failed_guard_blocks_the_name() {
+    let all = Guards {
+        inside_bounds: true,
+        interval_excludes_zero: true,
+        significant: true,
+        signature: true,
+        heldout: Some(true),
+    };
+    assert!(all.all());
+    for k in 0..5 {
+        let mut g = all;
+        match k {
+            0 => g.inside_bounds = false,
+            1 => g.interval_excludes_zero = false,
+            2 => g.significant = false,
+            3 => g.signature = false,
+            _ => g.heldout = Some(false),
+        }
+        assert!(!g.all());
+        assert_eq!(g.failed().len(), 1);
+    }
+}
+
+/// A guard without a held-out part neither passes nor fails on it; a failed held-out
+/// guard is named.
+#[test]
+fn a_missing_heldout_part_is_not_a_failed_guard() {
+    let mut g = Guards {
+        inside_bounds: true,
+        interval_excludes_zero: true,
+        significant: true,
+        signature: true,
+        heldout: None,
+    };
+    assert!(g.all());
+    g.heldout = Some(false);
+    assert!(!g.all());
+    assert_eq!(g.failed(), vec!["held-out"]);
+}
