@@ -192,9 +192,7 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         .clone()
         .unwrap_or_else(|| measured.join("gap-report"));
     report::write_all(&analysis, &m, measured, model_path, &out)?;
-    if let Some(t) = &analysis.tie
-        && !analysis.accepted.is_empty()
-    {
+    if let Some(t) = &analysis.tie {
         outln!("ambiguous: {}", gap::report::carried_tie(t));
     }
     match analysis.accepted.first() {
@@ -238,9 +236,6 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
             )
         }
         None if analysis.verdict == gap::Verdict::Ambiguous => {
-            if let Some(t) = &analysis.tie {
-                outln!("ambiguous: {}", gap::report::carried_tie(t));
-            }
             if let Some(pair) = &analysis.ambiguous {
                 let then = if analysis.tie.is_some() { "then " } else { "" };
                 outln!("{then}ambiguous: {}", gap::report::ambiguity(pair));
