@@ -946,7 +946,7 @@ mod joint;
 pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, strong_blocks};
 pub use joint::{Named, Refit, named, refit_jointly, with_earlier_free};
 mod rival;
-pub use rival::{earlier_change_dynamics, moved_to_new_regime, structural_rival};
+pub use rival::{RivalFits, earlier_change_dynamics, moved_to_new_regime, structural_rival};
 
 #[cfg(test)]
 mod tests;

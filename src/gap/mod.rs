@@ -432,6 +432,8 @@ pub fn analyse_with(
     let round_configs = || configs.borrow().clone();
     // Each round's candidates warm-start the next round's fits.
     let mut previous: Vec<Candidate> = Vec::new();
+    // The structural terms fitted against a round's model, for every winner judged in it.
+    let rival_fits = std::cell::RefCell::new(fit::RivalFits::default());
     let candidate::Selection {
         rounds,
         accepted,
@@ -759,7 +761,7 @@ pub fn analyse_with(
                     .with_known(model, &noise_weights(&floors));
                 let unnamed = setup.residuals(&start, &clean0);
                 if fit::moved_to_new_regime(&setup, &unnamed, win)
-                    && let Some(rival) = fit::structural_rival(&setup, win)
+                    && let Some(rival) = rival_fits.borrow_mut().rival_of(&setup, win)
                 {
                     return Ok(Some(format!(
                         "`{}`, a term of the base model's structure, explains the same \

@@ -4,7 +4,7 @@
 
 use super::{BIC_MARGIN, Residuals, Setup, fit_effects};
 use crate::gap::candidate::{
-    Candidate, change_cosine_where_changed, change_projection_where_changed,
+    self, Candidate, change_cosine_where_changed, change_projection_where_changed,
 };
 use crate::gap::effects;
 use crate::gap::resim;
@@ -52,18 +52,101 @@ pub const RIVAL_SAME_PATTERN_COSINE: f64 = std::f64::consts::FRAC_1_SQRT_2;
 /// thrusters on a noisy depth reading), and there the structure the baseline runs left loose
 /// can be what is off: a new effect is then a stand-in for it.
 pub fn structural_rival(setup: &Setup<'_>, win: &Candidate) -> Option<Candidate> {
-    let effect = effects::by_name(&win.name)?;
-    let in_own = |r: &Residuals| own_channels_chi2(setup, r, effect.channels);
-    let before = in_own(&setup.residuals(&setup.base, &setup.clean));
-    let takes_out = |c: &Candidate| -> Option<f64> {
-        let e = effects::by_name(&c.name)?;
-        Some(before - in_own(&setup.eval(e, &c.values())?))
-    };
-    let win_takes = takes_out(win)?;
-    let rivals = effects::structural_rivals(effect);
-    fit_effects(setup, &rivals, &mut |_| {})
-        .into_iter()
-        .find(|r| {
+    RivalFits::default().rival_of(setup, win)
+}
+
+/// The structural terms' fits against one setup, kept for the next winner judged against the
+/// same setup. A fit depends only on the setup (the model, the floors it is judged by, the
+/// split and the known levels), not on the winner: two winners of one round whose channels
+/// share terms have them fitted once.
+#[derive(Default)]
+pub struct RivalFits {
+    key: Option<SetupKey>,
+    fits: Vec<Candidate>,
+}
+
+/// What a fit of a structural term reads from its [`Setup`], compared by value.
+struct SetupKey {
+    m: *const crate::gap::format::Measurement,
+    base: crate::gap::effects::Configs,
+    floors: Vec<Option<(Vec<f64>, f64, Vec<f64>, Vec<Vec<f64>>)>>,
+    split: super::Split,
+    spread: Vec<crate::gap::model::EnabledEffect>,
+    known: Vec<f64>,
+}
+
+impl SetupKey {
+    fn of(setup: &Setup<'_>) -> Self {
+        Self {
+            m: std::ptr::from_ref(setup.m),
+            base: setup.base.clone(),
+            floors: setup
+                .floors
+                .iter()
+                .map(|f| {
+                    f.as_ref().map(|f| {
+                        (
+                            f.sigma.clone(),
+                            f.tau,
+                            f.measurement_std.clone(),
+                            f.null.clone(),
+                        )
+                    })
+                })
+                .collect(),
+            split: setup.split,
+            spread: setup.spread.clone(),
+            known: setup.known.clone(),
+        }
+    }
+
+    fn same(&self, other: &Self) -> bool {
+        std::ptr::eq(self.m, other.m)
+            && self.base == other.base
+            && self.floors == other.floors
+            && self.split == other.split
+            && self.spread == other.spread
+            && self.known == other.known
+    }
+}
+
+impl RivalFits {
+    /// The fits of `todo` against `setup`, ranked as [`fit_effects`] ranks them: those kept
+    /// from an earlier call against the same setup, the rest fitted now.
+    fn fits(&mut self, setup: &Setup<'_>, todo: &[&'static effects::Effect]) -> Vec<Candidate> {
+        let key = SetupKey::of(setup);
+        if !self.key.as_ref().is_some_and(|k| k.same(&key)) {
+            self.key = Some(key);
+            self.fits.clear();
+        }
+        let missing: Vec<&'static effects::Effect> = todo
+            .iter()
+            .copied()
+            .filter(|e| !self.fits.iter().any(|c| c.name == e.name))
+            .collect();
+        if !missing.is_empty() {
+            self.fits.extend(fit_effects(setup, &missing, &mut |_| {}));
+        }
+        let mut out: Vec<Candidate> = todo
+            .iter()
+            .filter_map(|e| self.fits.iter().find(|c| c.name == e.name).cloned())
+            .collect();
+        candidate::rank(&mut out);
+        out
+    }
+
+    /// [`structural_rival`], with the structural terms' fits kept between calls.
+    pub fn rival_of(&mut self, setup: &Setup<'_>, win: &Candidate) -> Option<Candidate> {
+        let effect = effects::by_name(&win.name)?;
+        let in_own = |r: &Residuals| own_channels_chi2(setup, r, effect.channels);
+        let before = in_own(&setup.residuals(&setup.base, &setup.clean));
+        let takes_out = |c: &Candidate| -> Option<f64> {
+            let e = effects::by_name(&c.name)?;
+            Some(before - in_own(&setup.eval(e, &c.values())?))
+        };
+        let win_takes = takes_out(win)?;
+        let rivals = effects::structural_rivals(effect);
+        self.fits(setup, &rivals).into_iter().find(|r| {
             let carries = change_projection_where_changed(r, win);
             tracing::debug!(
                 winner = win.name,
@@ -92,6 +175,7 @@ pub fn structural_rival(setup: &Setup<'_>, win: &Candidate) -> Option<Candidate>
                     .is_none_or(|c| c >= RIVAL_SAME_PATTERN_COSINE)
                     || !adds_to(setup, effect, r))
         })
+    }
 }
 
 /// Whether a structural term's fit can stand as the rival of a name: it passes every guard a
