@@ -191,8 +191,13 @@ fn replay_to_a_pty_carries_on_when_its_stdout_is_closed() {
 #[test]
 fn gap_bench_refuses_a_flag_its_source_does_not_read() {
     let dir = TempDir::new("gap-bench-flags");
-    let cases: [(&[&str], &str, &str); 4] = [
+    let cases: [(&[&str], &str, &str); 5] = [
         (&["--keep"], "--keep", "--source independent or bridge"),
+        (
+            &["--baselines", "2", "--out"],
+            "--baselines",
+            "--source independent or bridge",
+        ),
         (
             &["--source", "bridge", "--drawn-programs", "--out"],
             "--drawn-programs",
@@ -222,5 +227,21 @@ fn gap_bench_refuses_a_flag_its_source_does_not_read() {
         assert!(stderr.contains(flag), "{args:?}: {stderr}");
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
         assert!(!dir.join("x").exists(), "{args:?}: nothing is written");
+    }
+    // A calibration needs a run, and the campaign draws three.
+    for n in ["0", "4"] {
+        let out = Command::new(BIN)
+            .args(["gap-bench", "--source", "independent", "--baselines", n])
+            .args(["--out", dir.join("x").to_str().unwrap()])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "--baselines {n}: {out:?}");
+        assert!(stderr.contains("--baselines"), "--baselines {n}: {stderr}");
+        assert!(stderr.contains("1..=3"), "--baselines {n}: {stderr}");
+        assert!(
+            !dir.join("x").exists(),
+            "--baselines {n}: nothing is written"
+        );
     }
 }

@@ -22,6 +22,7 @@ fn options(seed: u64) -> BenchOptions {
         structure_seed: None,
         drawn_programs: false,
         pairs: 0,
+        baselines: 3,
         bridge: Default::default(),
         keep: None,
     }

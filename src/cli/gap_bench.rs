@@ -12,6 +12,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use clap::ValueEnum;
+use clap::builder::TypedValueParser;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::cli::CliError;
@@ -81,6 +82,11 @@ pub struct CampaignArgs {
     /// once (two distinct effects drawn from `--effects`), scored on both being named.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub pairs: usize,
+    /// Independent and bridge sources: calibrate on this many baseline runs (1 to 3: the
+    /// first of the three the campaign draws; its validation run, spread runs and cases stay
+    /// the same), as a user with fewer runs would.
+    #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u16).range(1..=3).map(usize::from))]
+    pub baselines: usize,
     /// Bridge source: a directory with host builds of the C examples (`make -C
     /// firmware-protocol/c OUT=DIR`); default: built with `make` into a scratch directory.
     #[arg(long, value_name = "DIR")]
@@ -155,6 +161,11 @@ fn check_flags_fit_source(args: &CampaignArgs) -> Result<(), CliError> {
             "--pairs",
             "--source independent or bridge",
         ),
+        (
+            args.baselines != 3 && args.source == SourceArg::Simulator,
+            "--baselines",
+            "--source independent or bridge",
+        ),
     ];
     match misplaced.iter().find(|(bad, _, _)| *bad) {
         Some((_, flag, expected)) => Err(CliError::Usage(format!(
@@ -189,6 +200,7 @@ fn options(
         structure_seed: args.structure_seed,
         drawn_programs: args.drawn_programs,
         pairs: args.pairs,
+        baselines: args.baselines,
         bridge: bench::bridge::BridgeOptions {
             exe: None,
             programs: args.programs.clone(),

@@ -56,8 +56,8 @@ use crate::gap::format::Measurement;
 use crate::gap::model::{EnabledEffect, GapModel};
 use crate::gap::residuals::ChannelStats;
 pub use analysis::{Analysis, RawGap, Tie, Unexplained, Verdict};
+use later::nothing_off_that_it_moves;
 pub use later::{LATER_NAME_FLOOR_SHARE, LATER_NAME_MIN_SHARE};
-use later::{nothing_off_that_it_moves, too_small_a_share};
 
 /// Errors of the gap workflow; each names its input.
 #[derive(Debug, thiserror::Error)]
@@ -468,11 +468,14 @@ pub fn analyse_with(
                 .iter()
                 .map(|a| (a.values(), a.ci95.iter().map(|(_, c)| *c).collect()))
                 .collect();
-            // A newly named noise source moves the floor the fits are judged against.
+            // A newly named noise source moves the floor the fits are judged against; refused,
+            // it leaves the floor as it was.
+            let mut floor_before = None;
             if named
                 .last()
                 .is_some_and(|n| n.0.kind == effects::Kind::Variance)
             {
+                floor_before = Some((current_floors.borrow().clone(), floors_of.borrow().clone()));
                 let mut noisy = start.clone();
                 for (effect, values, _) in named.iter().filter(|n| n.0.kind != effects::Kind::Mean)
                 {
@@ -599,28 +602,23 @@ pub fn analyse_with(
             {
                 return Ok(Some(why));
             }
+            // An effect named after others must take at least a tenth of what they left
+            // (`later::too_small_later_share`); a noise source refused there leaves the
+            // floor as it was.
             if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
-                && effect.kind == effects::Kind::Mean
             {
-                let whole = if excess_where_it_acts {
-                    None
-                } else {
-                    too_small_a_share(&current.borrow(), &levels)
-                };
-                let where_it_acts = || {
-                    named_in_order
-                        .then(|| {
-                            later::too_small_where_it_acts(
-                                effect,
-                                &channel_names,
-                                &current.borrow(),
-                                &levels,
-                            )
-                        })
-                        .flatten()
-                };
-                if let Some(why) = whole.or_else(where_it_acts) {
+                if let Some(why) = later::too_small_later_share(
+                    effect,
+                    named_in_order.then_some(&channel_names[..]),
+                    &current.borrow(),
+                    &levels,
+                    excess_where_it_acts,
+                ) {
+                    if let Some((floors, of)) = floor_before {
+                        *current_floors.borrow_mut() = floors;
+                        *floors_of.borrow_mut() = of;
+                    }
                     return Ok(Some(why));
                 }
                 if excess_where_it_acts {

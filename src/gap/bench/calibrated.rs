@@ -4,7 +4,8 @@
 //! here, used only to score.
 //!
 //! For a seed S: [`BASELINE_RUNS`] null baseline runs and one more null run (seeds drawn from
-//! S); the embedded model is calibrated on the baselines ([`crate::gap::calibrate::calibrate`],
+//! S); the embedded model is calibrated on the first [`BenchOptions::baselines`] of the
+//! baselines (every seed is drawn whichever are used, so the cases stay the same) ([`crate::gap::calibrate::calibrate`],
 //! with the between-run spread, measured on [`Truth::spread_runs`] null cases when the source
 //! has them) and its gap before and after is reported on the further run.
 //! Then, per hidden effect, N runs with the effect hidden, each analysed with the calibrated
@@ -331,11 +332,14 @@ fn calibrate_on(
 ) -> Result<Calibrated, GapError> {
     let mut runs = Vec::new();
     for (i, seed) in plan.baseline_seeds.iter().enumerate() {
+        if i >= opts.baselines && i < BASELINE_RUNS {
+            continue;
+        }
         let dir = scratch.0.join(format!("baseline-{i}"));
         truth.baseline(i, *seed, &dir)?;
         runs.push(Run::load(&dir)?);
     }
-    let validate = runs.split_off(BASELINE_RUNS);
+    let validate = runs.split_off(opts.baselines.clamp(1, BASELINE_RUNS));
     let mut spread_from = Vec::new();
     for (i, seed) in plan.spread_seeds.iter().enumerate() {
         let dir = scratch.0.join(format!("spread-{i}"));
@@ -371,7 +375,7 @@ fn calibrate_on(
         "calibrated by `eyebot-hil gap-bench --source {} --seed {}` on baseline-0..{}",
         opts.source.name(),
         opts.seed,
-        BASELINE_RUNS - 1
+        opts.baselines.clamp(1, BASELINE_RUNS) - 1
     );
     for r in runs.iter().chain(&validate).chain(&spread_from) {
         scratch.done(&r.dir)?;

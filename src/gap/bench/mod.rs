@@ -91,6 +91,10 @@ pub struct BenchOptions {
     /// Calibrated sources: cases with two hidden effects at once (two distinct effects of
     /// `hidden`, each sized as a one-effect case), after the one-effect and null cases.
     pub pairs: usize,
+    /// Calibrated sources: the baseline runs the model is calibrated on, 1 to
+    /// [`calibrated::BASELINE_RUNS`] (the first of them; the validation run and the cases stay
+    /// those of the full set).
+    pub baselines: usize,
     /// The bridge source's set-up: where the C examples and this program are.
     pub bridge: bridge::BridgeOptions,
     /// Calibrated sources: keep the calibrated model, the baseline runs and every case's
@@ -109,6 +113,7 @@ impl BenchOptions {
             structure_seed: self.structure_seed,
             drawn_programs: self.drawn_programs,
             pairs: self.pairs,
+            baselines: self.baselines,
             effects: match self.source {
                 Source::Simulator => self.effects.iter().map(|e| e.name.to_string()).collect(),
                 Source::Independent | Source::Bridge => {
@@ -135,6 +140,14 @@ pub struct OptionsKey {
     /// Independent source: programmes drawn ([`BenchOptions::drawn_programs`]).
     #[serde(default)]
     pub drawn_programs: bool,
+    /// Baseline runs calibrated on ([`BenchOptions::baselines`]).
+    #[serde(default = "all_baselines")]
+    pub baselines: usize,
+}
+
+/// A part file written before the baseline runs could be fewer calibrated on all of them.
+fn all_baselines() -> usize {
+    calibrated::BASELINE_RUNS
 }
 
 /// One case and how the workflow did on it.

@@ -380,6 +380,7 @@ mod tests {
             effects: vec!["depth_offset".into()],
             structure_seed: None,
             pairs: 0,
+            baselines: 3,
             drawn_programs: false,
         }
     }

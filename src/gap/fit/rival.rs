@@ -65,11 +65,15 @@ pub struct RivalFits {
     fits: Vec<Candidate>,
 }
 
+/// A floor's figures that a fit reads: its sigma, correlation time, white part and null
+/// ensemble ([`crate::gap::resim::Floor`]).
+type FloorKey = (Vec<f64>, f64, Vec<f64>, Vec<Vec<f64>>);
+
 /// What a fit of a structural term reads from its [`Setup`], compared by value.
 struct SetupKey {
     m: *const crate::gap::format::Measurement,
     base: crate::gap::effects::Configs,
-    floors: Vec<Option<(Vec<f64>, f64, Vec<f64>, Vec<Vec<f64>>)>>,
+    floors: Vec<Option<FloorKey>>,
     split: super::Split,
     spread: Vec<crate::gap::model::EnabledEffect>,
     known: Vec<f64>,
