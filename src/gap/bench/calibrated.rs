@@ -370,6 +370,7 @@ fn calibrate_on(
             reduction_pct: r.reduction_pct,
             seconds,
             spread: spread_gap,
+            baselines: opts.baselines.clamp(1, BASELINE_RUNS),
         });
     let provenance = format!(
         "calibrated by `eyebot-hil gap-bench --source {} --seed {}` on baseline-0..{}",

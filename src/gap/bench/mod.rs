@@ -301,6 +301,9 @@ pub struct CalibrationGap {
     /// programme, not fitted to (absent without spread runs).
     #[serde(default)]
     pub spread: Option<[f64; 2]>,
+    /// The baseline runs calibrated on ([`BenchOptions::baselines`]).
+    #[serde(default = "all_baselines")]
+    pub baselines: usize,
 }
 
 impl CalibrationGap {

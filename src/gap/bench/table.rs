@@ -196,7 +196,9 @@ pub fn independent_table(results: &[CaseResult], calibration: Option<&Calibratio
     let mut s = String::new();
     if let Some(c) = calibration {
         s.push_str(&format!(
-            "calibration (3 baseline runs, scored on a 4th null run): gap {:.2} -> {:.2} ({:.0} % smaller){}, {:.0} s\n\n",
+            "calibration ({} baseline run{}, scored on a further null run): gap {:.2} -> {:.2} ({:.0} % smaller){}, {:.0} s\n\n",
+            c.baselines,
+            if c.baselines == 1 { "" } else { "s" },
             c.gap_before,
             c.gap_after,
             c.reduction_pct,
