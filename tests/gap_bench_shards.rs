@@ -121,6 +121,7 @@ fn three_merged_shards_equal_the_unsharded_run() {
         reduction_pct: 80.0,
         seconds: 1.0,
         spread: None,
+        baselines: 3,
     });
     let mixed = vec![parts[0].clone(), recal, parts[2].clone()];
     let err = bench::merge(&mixed).unwrap_err().to_string();
