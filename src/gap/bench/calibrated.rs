@@ -330,16 +330,17 @@ fn calibrate_on(
     plan: &Plan,
     scratch: &Scratch,
 ) -> Result<Calibrated, GapError> {
+    let used = opts.baselines_used();
     let mut runs = Vec::new();
     for (i, seed) in plan.baseline_seeds.iter().enumerate() {
-        if i >= opts.baselines && i < BASELINE_RUNS {
+        if i >= used && i < BASELINE_RUNS {
             continue;
         }
         let dir = scratch.0.join(format!("baseline-{i}"));
         truth.baseline(i, *seed, &dir)?;
         runs.push(Run::load(&dir)?);
     }
-    let validate = runs.split_off(opts.baselines.clamp(1, BASELINE_RUNS));
+    let validate = runs.split_off(used);
     let mut spread_from = Vec::new();
     for (i, seed) in plan.spread_seeds.iter().enumerate() {
         let dir = scratch.0.join(format!("spread-{i}"));
@@ -370,13 +371,13 @@ fn calibrate_on(
             reduction_pct: r.reduction_pct,
             seconds,
             spread: spread_gap,
-            baselines: opts.baselines.clamp(1, BASELINE_RUNS),
+            baselines: used,
         });
     let provenance = format!(
         "calibrated by `eyebot-hil gap-bench --source {} --seed {}` on baseline-0..{}",
         opts.source.name(),
         opts.seed,
-        opts.baselines.clamp(1, BASELINE_RUNS) - 1
+        used - 1
     );
     for r in runs.iter().chain(&validate).chain(&spread_from) {
         scratch.done(&r.dir)?;

@@ -104,6 +104,12 @@ pub struct BenchOptions {
 }
 
 impl BenchOptions {
+    /// The baseline runs a calibration uses: [`BenchOptions::baselines`] held to 1 to
+    /// [`calibrated::BASELINE_RUNS`].
+    pub fn baselines_used(&self) -> usize {
+        self.baselines.clamp(1, calibrated::BASELINE_RUNS)
+    }
+
     /// The options as a part file records them: what must agree for parts to merge.
     pub fn key(&self) -> OptionsKey {
         OptionsKey {
