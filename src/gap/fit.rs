@@ -943,7 +943,7 @@ mod memo;
 pub use emi::{EMI_WINDOW_S, fit_emi};
 mod constancy;
 mod joint;
-pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, strong_blocks};
+pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, noise_source_blocks, strong_blocks};
 pub use joint::{Named, Refit, named, refit_jointly, with_earlier_free};
 mod rival;
 pub use rival::{RivalFits, earlier_change_dynamics, moved_to_new_regime, structural_rival};

@@ -701,14 +701,44 @@ pub fn analyse_with(
                 && effect.kind == effects::Kind::Mean
                 && share < LATER_NAME_MIN_SHARE
             {
+                let unnamed_floors = &floors;
                 let floors = current_floors.borrow();
                 let setup = fit::setup(m, earlier.clone(), &floors, options.split, &spread)?
                     .with_known(model, &noise_weights(&floors));
-                let strong = fit::strong_blocks(
-                    &first.residuals(&start, &clean0),
-                    &setup.residuals(&setup.base, &setup.clean),
-                    options.split.block_s,
-                );
+                let now = setup.residuals(&setup.base, &setup.clean);
+                let earlier_kinds: Vec<effects::Kind> =
+                    named.iter().rev().skip(1).map(|n| n.0.kind).collect();
+                let strong = if earlier_kinds.iter().all(|k| *k == effects::Kind::Mean) {
+                    fit::strong_blocks(
+                        &first.residuals(&start, &clean0),
+                        &now,
+                        options.split.block_s,
+                    )
+                } else {
+                    // A noise source named before it acts where it widens the floor: there, not
+                    // where the means moved least, a stand-in for what it drives differs. The
+                    // mean names' change is read against the same floor, which the source's
+                    // widening would otherwise move everywhere.
+                    let mut acts = fit::noise_source_blocks(
+                        &now,
+                        unnamed_floors,
+                        &floors,
+                        options.split.block_s,
+                    );
+                    if earlier_kinds.contains(&effects::Kind::Mean) {
+                        let unnamed =
+                            fit::setup(m, start.clone(), &floors, options.split, &spread)?;
+                        let moved = fit::strong_blocks(
+                            &unnamed.residuals(&unnamed.base, &unnamed.clean),
+                            &now,
+                            options.split.block_s,
+                        );
+                        for (a, s) in acts.iter_mut().zip(moved) {
+                            *a |= s;
+                        }
+                    }
+                    acts
+                };
                 let test = fit::constancy(&setup, effect, &newest_values, *noise_factor, &strong);
                 tracing::debug!(
                     effect = effect.name,

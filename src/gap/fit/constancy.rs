@@ -6,6 +6,7 @@ use nalgebra::DVector;
 use super::{Residuals, Setup};
 use crate::gap::effects::Effect;
 use crate::gap::lsq::{self, Bounds};
+use crate::gap::resim::Floor;
 
 /// The constancy test of an effect named after others: its values fitted separately where
 /// the earlier names changed the model's fit most and where they changed it least.
@@ -47,6 +48,43 @@ pub fn strong_blocks(before: &Residuals, after: &Residuals, block_s: f64) -> Vec
         .iter()
         .map(|t| change[block(*t)].abs() >= median)
         .collect()
+}
+
+/// Per element of `r`, whether it lies in a time block (of `block_s`) where a named noise
+/// source acts: where, at some sample of the block, a channel's white measurement noise in the
+/// floors `now` (with the source) is wider than in `base` (without it). Where it is the same
+/// everywhere in a block, the source adds nothing there, and what a later name fits in those
+/// blocks is free of it: a depth EMI that follows the stern duty acts while the depth hold
+/// works and not while the motors are off. `r`'s elements of a channel are its samples in
+/// order, as [`Setup::residuals`] makes them.
+pub fn noise_source_blocks(
+    r: &Residuals,
+    base: &[Option<Floor>],
+    now: &[Option<Floor>],
+    block_s: f64,
+) -> Vec<bool> {
+    let block = |t: f64| (t / block_s).floor().max(0.0) as usize;
+    let blocks = r.times.iter().map(|t| block(*t) + 1).max().unwrap_or(0);
+    let mut acts = vec![false; blocks];
+    let mut sample = vec![0usize; base.len().max(now.len())];
+    for (t, &owner) in r.times.iter().zip(&r.owner) {
+        let Some(k) = sample.get_mut(owner) else {
+            continue;
+        };
+        let std_of = |floors: &[Option<Floor>]| {
+            floors
+                .get(owner)
+                .and_then(Option::as_ref)
+                .and_then(|f| f.measurement_std.get(*k).copied())
+        };
+        if let (Some(without), Some(with)) = (std_of(base), std_of(now))
+            && with > without * (1.0 + 1e-9)
+        {
+            acts[block(*t)] = true;
+        }
+        *k += 1;
+    }
+    r.times.iter().map(|t| acts[block(*t)]).collect()
 }
 
 /// Fits `effect` on the elements of `mask` only, from `start` (its values): the values in
@@ -103,6 +141,10 @@ pub fn constancy(
     strong: &[bool],
 ) -> Option<Constancy> {
     use statrs::distribution::{ChiSquared, ContinuousCDF};
+    // With every element on one side there is nothing to compare.
+    if strong.iter().all(|s| *s) || !strong.iter().any(|s| *s) {
+        return None;
+    }
     let weak: Vec<bool> = strong.iter().map(|s| !s).collect();
     let (xs, cs) = fit_masked(setup, effect, strong, values, noise_factor)?;
     let (xw, cw) = fit_masked(setup, effect, &weak, values, noise_factor)?;

@@ -83,6 +83,47 @@ fn strong_blocks_are_where_the_earlier_names_changed_the_fit_most() {
     assert!(strong[20..].iter().all(|s| !*s), "{strong:?}");
 }
 
+/// The blocks where a named noise source acts: where a channel's white measurement noise is
+/// wider with it than without it at some sample; every element of such a block alike, in
+/// every channel, and none where it is the same throughout.
+#[test]
+fn noise_source_blocks_are_where_the_floor_is_wider() {
+    let floor = |std: Vec<f64>| {
+        Some(crate::gap::resim::Floor {
+            sigma: std.clone(),
+            tau: 1.0,
+            measurement_std: std,
+            null: Vec::new(),
+            chi2_tau_once: std::sync::OnceLock::new(),
+        })
+    };
+    // Channel 0 sampled every second for 30 s, channel 1 every 5 s.
+    let t0: Vec<f64> = (0..30).map(f64::from).collect();
+    let t1: Vec<f64> = (0..6).map(|i| 5.0 * f64::from(i)).collect();
+    let without = vec![floor(vec![1.0; 30]), floor(vec![2.0; 6])];
+    // Channel 0 wider from 12 s to 14 s only: the 10-20 s block.
+    let mut wide = vec![1.0; 30];
+    for w in &mut wide[12..15] {
+        *w = 1.5;
+    }
+    let with = vec![floor(wide), floor(vec![2.0; 6])];
+    let r = Residuals {
+        values: vec![0.0; 36],
+        owner: [vec![0; 30], vec![1; 6]].concat(),
+        training: vec![true; 36],
+        times: [t0.clone(), t1.clone()].concat(),
+    };
+    let acts = noise_source_blocks(&r, &without, &with, 10.0);
+    let expected: Vec<bool> = t0
+        .iter()
+        .chain(&t1)
+        .map(|t| (10.0..20.0).contains(t))
+        .collect();
+    assert_eq!(acts, expected);
+    // The same floors: no block.
+    assert!(!noise_source_blocks(&r, &without, &without, 10.0).iter().any(|a| *a));
+}
+
 /// The constancy test on a run of the model's own form whose compass reads off: by a
 /// constant angle, the values fitted in the two halves agree; by one angle where the
 /// earlier names act and another elsewhere, they differ, each half finding its own.
