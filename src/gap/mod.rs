@@ -706,70 +706,72 @@ pub fn analyse_with(
                 let setup = fit::setup(m, earlier.clone(), &floors, options.split, &spread)?
                     .with_known(model, &noise_weights(&floors));
                 let now = setup.residuals(&setup.base, &setup.clean);
-                let earlier_kinds: Vec<effects::Kind> =
-                    named.iter().rev().skip(1).map(|n| n.0.kind).collect();
-                let strong = if earlier_kinds.iter().all(|k| *k == effects::Kind::Mean) {
-                    fit::strong_blocks(
-                        &first.residuals(&start, &clean0),
-                        &now,
-                        options.split.block_s,
-                    )
-                } else {
-                    // A noise source named before it acts where it widens the floor: there, not
-                    // where the means moved least, a stand-in for what it drives differs. The
-                    // mean names' change is read against the same floor, which the source's
-                    // widening would otherwise move everywhere.
-                    let mut acts = fit::noise_source_blocks(
-                        &now,
-                        unnamed_floors,
-                        &floors,
-                        options.split.block_s,
-                    );
-                    if earlier_kinds.contains(&effects::Kind::Mean) {
-                        let unnamed =
-                            fit::setup(m, start.clone(), &floors, options.split, &spread)?;
-                        let moved = fit::strong_blocks(
-                            &unnamed.residuals(&unnamed.base, &unnamed.clean),
-                            &now,
-                            options.split.block_s,
-                        );
-                        for (a, s) in acts.iter_mut().zip(moved) {
-                            *a |= s;
-                        }
-                    }
-                    acts
-                };
-                let test = fit::constancy(&setup, effect, &newest_values, *noise_factor, &strong);
-                tracing::debug!(
-                    effect = effect.name,
-                    share,
-                    ?test,
-                    "a later name's constancy"
+                // Where the earlier names change the fit most against where they change it
+                // least; and, after a noise source, where it widens the floor against where it
+                // leaves it as it was: it changes no mean, and a stand-in for what it drives (a
+                // depth hold chattering on a noisy reading) differs there, not where the means
+                // moved least.
+                let by_change = fit::strong_blocks(
+                    &first.residuals(&start, &clean0),
+                    &now,
+                    options.split.block_s,
                 );
-                if let Some(t) = test
-                    && !t.holds()
+                let mut splits = vec![(
+                    by_change,
+                    "blocks where they change the fit most",
+                    "where they change it least",
+                )];
+                if named
+                    .iter()
+                    .rev()
+                    .skip(1)
+                    .any(|n| n.0.kind != effects::Kind::Mean)
                 {
-                    let show = |v: &[f64]| {
-                        v.iter()
-                            .map(|x| format!("{x:.4}"))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    };
-                    return Ok(Some(format!(
-                        "it explains {:.0} % of the disagreement the effects named before it \
-                         left (the channels' mean chi-square over their known levels {without:.3} \
-                         -> {mean:.3}), and its value follows them: [{}] in the {} s blocks where \
-                         they change the fit most, [{}] where they change it least (Wald \
-                         statistic {:.1} > {:.1}, its {:.0} % point). Read it as what the earlier \
-                         names' form lacks",
-                        100.0 * share,
-                        show(&t.strong),
-                        options.split.block_s,
-                        show(&t.weak),
-                        t.statistic,
-                        t.critical,
-                        100.0 * fit::CONSTANCY_LEVEL
-                    )));
+                    splits.push((
+                        fit::noise_source_blocks(
+                            &now,
+                            unnamed_floors,
+                            &floors,
+                            options.split.block_s,
+                        ),
+                        "blocks where the noise source named before it widens the floor",
+                        "where it leaves the floor as it was",
+                    ));
+                }
+                for (strong, there, elsewhere) in splits {
+                    let test =
+                        fit::constancy(&setup, effect, &newest_values, *noise_factor, &strong);
+                    tracing::debug!(
+                        effect = effect.name,
+                        share,
+                        split = there,
+                        ?test,
+                        "a later name's constancy"
+                    );
+                    if let Some(t) = test
+                        && !t.holds()
+                    {
+                        let show = |v: &[f64]| {
+                            v.iter()
+                                .map(|x| format!("{x:.4}"))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        };
+                        return Ok(Some(format!(
+                            "it explains {:.0} % of the disagreement the effects named before it \
+                             left (the channels' mean chi-square over their known levels \
+                             {without:.3} -> {mean:.3}), and its value follows them: [{}] in the \
+                             {} s {there}, [{}] {elsewhere} (Wald statistic {:.1} > {:.1}, its \
+                             {:.0} % point). Read it as what the earlier names' form lacks",
+                            100.0 * share,
+                            show(&t.strong),
+                            options.split.block_s,
+                            show(&t.weak),
+                            t.statistic,
+                            t.critical,
+                            100.0 * fit::CONSTANCY_LEVEL
+                        )));
+                    }
                 }
             }
             // A later name is refused when the earlier names changed the vehicle's dynamics

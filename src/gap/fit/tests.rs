@@ -121,12 +121,17 @@ fn noise_source_blocks_are_where_the_floor_is_wider() {
         .collect();
     assert_eq!(acts, expected);
     // The same floors: no block.
-    assert!(!noise_source_blocks(&r, &without, &without, 10.0).iter().any(|a| *a));
+    assert!(
+        !noise_source_blocks(&r, &without, &without, 10.0)
+            .iter()
+            .any(|a| *a)
+    );
 }
 
 /// The constancy test on a run of the model's own form whose compass reads off: by a
 /// constant angle, the values fitted in the two halves agree; by one angle where the
-/// earlier names act and another elsewhere, they differ, each half finding its own.
+/// earlier names act and another elsewhere, they differ, each half finding its own. A split
+/// with every element on one side tests nothing.
 #[test]
 fn constancy_tells_one_value_from_a_value_that_follows_the_earlier_names() {
     let (_, c, m) = crate::gap::resim::tests::manoeuvre(7);
@@ -161,6 +166,11 @@ fn constancy_tells_one_value_from_a_value_that_follows_the_earlier_names() {
         (two.weak[0] - two.strong[0]).abs() > 7.0,
         "each half finds its own: {two:?}"
     );
+    // Every element on one side: nothing to compare.
+    let measured = offset(2.0, 12.0);
+    let setup = setup(&measured, c.clone(), &floors, Split::DEFAULT, &[]).unwrap();
+    let all = vec![true; setup.residuals(&setup.base, &setup.clean).values.len()];
+    assert!(constancy(&setup, effect, &[6.0], 1.0, &all).is_none());
 }
 
 /// A later name is a stand-in when the base model's structure explains its disagreement: on a
