@@ -696,6 +696,9 @@ pub fn analyse_with(
                     )));
                 }
             }
+            // The effects named before the newest, the latest first.
+            let before_it: Vec<&effects::Effect> =
+                named.iter().rev().skip(1).map(|n| n.0).collect();
             if let Some((effect, _, noise_factor)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
@@ -721,12 +724,7 @@ pub fn analyse_with(
                     "blocks where they change the fit most",
                     "where they change it least",
                 )];
-                if named
-                    .iter()
-                    .rev()
-                    .skip(1)
-                    .any(|n| n.0.kind != effects::Kind::Mean)
-                {
+                if before_it.iter().any(|e| e.kind != effects::Kind::Mean) {
                     splits.push((
                         fit::noise_source_blocks(
                             &now,
@@ -778,8 +776,6 @@ pub fn analyse_with(
             // (`fit::earlier_change_dynamics`), moved its channels somewhere new, and a term of
             // the base model's structure explains the same disagreement as well or better
             // there (`fit::structural_rival`).
-            let before_it: Vec<&effects::Effect> =
-                named.iter().rev().skip(1).map(|n| n.0).collect();
             if let Some((effect, _, _)) = named.last()
                 && named.len() > 1
                 && effect.kind == effects::Kind::Mean
