@@ -7,7 +7,8 @@
 //! on a bound has found the edge of the physical range, not a minimum; callers see that in
 //! [`Fit::at_bound`].
 
-use std::cell::Cell;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
@@ -38,7 +39,7 @@ pub struct Fit {
     pub residuals: DVector<f64>,
     /// Jacobian there (residuals per unit of `x`); `None` if an evaluation failed.
     pub jacobian: Option<DMatrix<f64>>,
-    /// Residual evaluations used (the Jacobian's included).
+    /// Residual evaluations used (the Jacobian's included), each point once.
     pub evaluations: usize,
     /// True when some parameter ended on its bound.
     pub at_bound: bool,
@@ -146,26 +147,65 @@ impl Bounds {
     }
 }
 
+/// `residuals_of` with every point it was asked kept, with its residuals (`None`: not
+/// evaluable there), and looked up when asked again. A search asks for points again: the
+/// engine restores the last accepted point after a refused step, a step the box clamps can
+/// land where the last one did, and the Jacobian at a point a search ended on is asked again
+/// by the search over the coordinates left free and for the fit's intervals. `residuals_of`
+/// is a function of `x` alone (a deterministic re-simulation), so the kept residuals are the
+/// ones asking again would give, to the bit; points are matched bit for bit (`0.0` and
+/// `-0.0` differ).
+/// A point and its residuals (`None`: not evaluable there).
+type Point = (DVector<f64>, Option<DVector<f64>>);
+
+struct Kept<'f, F> {
+    residuals_of: &'f F,
+    seen: Mutex<Vec<Point>>,
+    evaluated: AtomicUsize,
+}
+
+impl<'f, F> Kept<'f, F>
+where
+    F: Fn(&DVector<f64>) -> Option<DVector<f64>> + Sync,
+{
+    fn new(residuals_of: &'f F) -> Self {
+        Self {
+            residuals_of,
+            seen: Mutex::new(Vec::new()),
+            evaluated: AtomicUsize::new(0),
+        }
+    }
+
+    fn at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
+        let same = |p: &DVector<f64>| {
+            p.len() == x.len() && p.iter().zip(x).all(|(a, b)| a.to_bits() == b.to_bits())
+        };
+        if let Some(found) = self
+            .seen
+            .lock()
+            .ok()
+            .and_then(|seen| seen.iter().find(|(p, _)| same(p)).map(|(_, r)| r.clone()))
+        {
+            return found;
+        }
+        self.evaluated.fetch_add(1, Ordering::Relaxed);
+        let r = (self.residuals_of)(x);
+        if let Ok(mut seen) = self.seen.lock() {
+            seen.push((x.clone(), r.clone()));
+        }
+        r
+    }
+}
+
 struct Problem<'a, F> {
     residuals_of: &'a F,
     bounds: &'a Bounds,
     x: DVector<f64>,
     r: Option<DVector<f64>>,
-    evaluations: &'a Cell<usize>,
     /// The best point evaluated: (chi-square, x, residuals).
     best: (f64, DVector<f64>, DVector<f64>),
     /// Accepted steps in a row that gained less than [`CHI2_TOLERANCE`].
     stalled: usize,
-}
-
-impl<F> Problem<'_, F>
-where
-    F: Fn(&DVector<f64>) -> Option<DVector<f64>> + Sync,
-{
-    fn eval(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
-        self.evaluations.set(self.evaluations.get() + 1);
-        (self.residuals_of)(x)
-    }
 }
 
 impl<F> LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, F>
@@ -178,11 +218,10 @@ where
 
     fn set_params(&mut self, x: &DVector<f64>) {
         self.x = self.bounds.clamp(x);
-        self.r = self.eval(&self.x);
+        self.r = (self.residuals_of)(&self.x);
         if let Some(r) = &self.r {
             let c = r.norm_squared();
             tracing::trace!(
-                evaluation = self.evaluations.get(),
                 chi2 = c,
                 x = ?self.x.as_slice(),
                 "trial point"
@@ -212,13 +251,7 @@ where
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        jacobian(
-            self.residuals_of,
-            self.bounds,
-            &self.x,
-            self.r.as_ref()?,
-            self.evaluations,
-        )
+        jacobian(self.residuals_of, self.bounds, &self.x, self.r.as_ref()?)
     }
 }
 
@@ -229,33 +262,30 @@ fn jacobian<F>(
     bounds: &Bounds,
     x: &DVector<f64>,
     r0: &DVector<f64>,
-    evaluations: &Cell<usize>,
 ) -> Option<DMatrix<f64>>
 where
     F: Fn(&DVector<f64>) -> Option<DVector<f64>> + Sync,
 {
     use rayon::prelude::*;
-    let columns: Vec<(DVector<f64>, usize)> = (0..x.len())
+    let columns: Vec<DVector<f64>> = (0..x.len())
         .into_par_iter()
         .map(|k| column(residuals_of, bounds, x, r0, k))
         .collect::<Option<_>>()?;
     let mut j = DMatrix::zeros(r0.len(), x.len());
-    for (k, (col, used)) in columns.into_iter().enumerate() {
-        evaluations.set(evaluations.get() + used);
+    for (k, col) in columns.into_iter().enumerate() {
         j.set_column(k, &col);
     }
     Some(j)
 }
 
-/// Column `k` of the forward-difference Jacobian (stepping inwards at an upper bound) and the
-/// residual evaluations it took.
+/// Column `k` of the forward-difference Jacobian (stepping inwards at an upper bound).
 fn column<F>(
     residuals_of: &F,
     bounds: &Bounds,
     x: &DVector<f64>,
     r0: &DVector<f64>,
     k: usize,
-) -> Option<(DVector<f64>, usize)>
+) -> Option<DVector<f64>>
 where
     F: Fn(&DVector<f64>) -> Option<DVector<f64>>,
 {
@@ -271,18 +301,16 @@ where
         return None;
     }
     let mut col = (r - r0) / h;
-    let mut used = 1;
     // Where the step changes nothing (a parameter at the edge of the range where the model
     // responds, e.g. a reverse ratio that cannot exceed 1), the other side.
     if col.iter().all(|v| *v == 0.0) && x[k] - h >= bounds.lower[k] && x[k] - h <= bounds.upper[k] {
         let mut xb = x.clone();
         xb[k] -= h;
-        used += 1;
         if let Some(rb) = residuals_of(&xb).filter(|rb| rb.len() == r0.len()) {
             col = (r0 - rb) / h;
         }
     }
-    Some((col, used))
+    Some(col)
 }
 
 /// The forward-difference Jacobian at `x` (stepping inwards at an upper bound); `at_x`, the
@@ -300,7 +328,7 @@ where
         Some(r) => r,
         None => residuals_of(x)?,
     };
-    jacobian(residuals_of, bounds, x, &r0, &Cell::new(0))
+    jacobian(residuals_of, bounds, x, &r0)
 }
 
 /// Minimises `|residuals_of(x)|^2` over `x` inside `bounds`, from the best of `starts` (each
@@ -316,11 +344,11 @@ pub fn minimize<F>(residuals_of: &F, bounds: &Bounds, starts: &[DVector<f64>]) -
 where
     F: Fn(&DVector<f64>) -> Option<DVector<f64>> + Sync,
 {
-    let evaluations = Cell::new(0);
+    let kept = Kept::new(residuals_of);
+    let residuals_of = &|x: &DVector<f64>| kept.at(x);
     let mut best: Option<(f64, DVector<f64>, DVector<f64>)> = None;
     for s in starts {
         let s = bounds.clamp(s);
-        evaluations.set(evaluations.get() + 1);
         if let Some(r) = residuals_of(&s) {
             let c = r.norm_squared();
             if best.as_ref().is_none_or(|(b, _, _)| c < *b) {
@@ -341,7 +369,7 @@ where
         if free.is_empty() {
             break;
         }
-        let round = search(residuals_of, bounds, &x, &residuals, &free, &evaluations);
+        let round = search(residuals_of, bounds, &x, &residuals, &free);
         (x, residuals, termination) = round;
         let reached: Vec<usize> = free
             .into_iter()
@@ -355,13 +383,13 @@ where
             held[i] = true;
         }
     }
-    let jacobian = jacobian(residuals_of, bounds, &x, &residuals, &evaluations);
+    let jacobian = jacobian(residuals_of, bounds, &x, &residuals);
     Some(Fit {
         at_bound: bounds.on_bound(&x),
         x,
         residuals,
         jacobian,
-        evaluations: evaluations.get(),
+        evaluations: kept.evaluated.load(Ordering::Relaxed),
         termination,
     })
 }
@@ -375,7 +403,6 @@ fn search<F>(
     x: &DVector<f64>,
     r: &DVector<f64>,
     free: &[usize],
-    evaluations: &Cell<usize>,
 ) -> (DVector<f64>, DVector<f64>, TerminationReason)
 where
     F: Fn(&DVector<f64>) -> Option<DVector<f64>> + Sync,
@@ -398,7 +425,6 @@ where
         bounds: &sub_bounds,
         x: start.clone(),
         r: Some(r.clone()),
-        evaluations,
         best: (r.norm_squared(), start, r.clone()),
         stalled: 0,
     };
@@ -511,6 +537,42 @@ mod tests {
         assert!(ci[0][0].is_finite() && ci[0][1].is_finite(), "{ci:?}");
         assert!(ci[0][0] < 3.0 && ci[0][1] > 3.0, "{ci:?}");
         assert!(ci[1][0].is_infinite() && ci[1][1].is_infinite(), "{ci:?}");
+    }
+
+    /// No point is evaluated twice, though the engine asks for some again (the last accepted
+    /// point after a refused step, the Jacobian at a point on a bound in the next round over
+    /// the free coordinates and for the intervals), and what the kept points give is what
+    /// evaluating again gives: a curved valley with a bound across it, from several starts.
+    #[test]
+    fn no_point_is_evaluated_twice() {
+        use std::sync::Mutex;
+        let asked: Mutex<Vec<Vec<u64>>> = Mutex::new(Vec::new());
+        let f = |x: &DVector<f64>| {
+            if let Ok(mut a) = asked.lock() {
+                a.push(x.iter().map(|v| v.to_bits()).collect());
+            }
+            Some(DVector::from_vec(vec![
+                10.0 * (x[1] - x[0] * x[0]),
+                1.0 - x[0],
+                0.3 * (x[0] * x[1] - 0.5).sin(),
+            ]))
+        };
+        let bounds = Bounds {
+            lower: vec![-2.0, -1.0],
+            upper: vec![0.8, 3.0],
+        };
+        for start in [[-1.2, 1.0], [0.0, 0.0], [0.7, -0.9], [-2.0, 3.0]] {
+            asked.lock().unwrap().clear();
+            let fit = minimize(&f, &bounds, &[DVector::from_row_slice(&start)]).expect("fit");
+            let points = asked.lock().unwrap().clone();
+            let mut distinct = points.clone();
+            distinct.sort();
+            distinct.dedup();
+            assert_eq!(distinct.len(), points.len(), "from {start:?}: {points:?}");
+            assert_eq!(fit.evaluations, points.len(), "from {start:?}");
+            let again = jacobian_at(&f, &bounds, &fit.x, Some(fit.residuals.clone()));
+            assert_eq!(fit.jacobian, again, "from {start:?}");
+        }
     }
 
     /// A model that cannot be evaluated beyond some point (a quantity undefined there) ends
