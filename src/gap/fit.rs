@@ -944,7 +944,7 @@ pub use emi::{EMI_WINDOW_S, fit_emi};
 mod constancy;
 mod joint;
 pub use constancy::{CONSTANCY_LEVEL, Constancy, constancy, noise_source_blocks, strong_blocks};
-pub use joint::{Named, Refit, named, refit_jointly, with_earlier_free};
+pub use joint::{Named, Refit, judged_with_earlier_free, named, refit_jointly, with_earlier_free};
 mod rival;
 pub use rival::{RivalFits, earlier_change_dynamics, moved_to_new_regime, structural_rival};
 

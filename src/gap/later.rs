@@ -311,6 +311,14 @@ pub(crate) fn first_name_within_the_scatter(
 /// now pass their signature, their held-out blocks and their bounds but not their
 /// significance or their interval, fitted with the earlier names (`accepted`) held. Each is
 /// fitted again with those names free ([`fit::with_earlier_free`]) and the round ranked anew.
+/// A sensor effect that now fails more, and stands where an earlier sensor name stands (a
+/// look-alike of its kind on a shared channel, [`candidate::of_its_kind`]: a depth gain beside
+/// a depth offset), is judged on its held-out blocks and signature again too, on a joint fit
+/// ([`fit::judged_with_earlier_free`]). Two sensor effects of one channel are two terms of one
+/// reading model, which the data fix where the quantity read takes more than one value. Two
+/// physics look-alikes are not asked: on a vehicle of another structure, the second takes the
+/// dynamics the calibrated base does not have at the operating point the first moved it to (a
+/// thrust curve beside a thrust gain, on a run with a thrust gain alone hidden).
 /// `setup` makes the setup of the model without the named effects, asked for only when a
 /// candidate is rescored.
 pub(crate) fn rescore_with_earlier_free<'a>(
@@ -334,16 +342,31 @@ pub(crate) fn rescore_with_earlier_free<'a>(
             && !(g.significant && g.interval_excludes_zero)
             && strong_alone(&c.name)
     };
-    if accepted.is_empty() || !results.iter().any(held_back) {
+    let sensor = |name: &str| effects::by_name(name).is_some_and(|e| !e.physics);
+    let beside_earlier = |c: &Candidate| {
+        c.testable
+            && !c.guards.all()
+            && !held_back(c)
+            && strong_alone(&c.name)
+            && sensor(&c.name)
+            && accepted
+                .iter()
+                .any(|a| sensor(&a.name) && candidate::of_its_kind(c, a))
+    };
+    if accepted.is_empty() || !results.iter().any(|c| held_back(c) || beside_earlier(c)) {
         return Ok(());
     }
     let setup = setup()?;
     let named = fit::named(accepted)?;
     results
         .par_iter_mut()
-        .filter(|c| held_back(c))
+        .filter(|c| held_back(c) || beside_earlier(c))
         .for_each(|c| {
-            fit::with_earlier_free(&setup, &named, c);
+            if held_back(c) {
+                fit::with_earlier_free(&setup, &named, c);
+            } else {
+                fit::judged_with_earlier_free(&setup, &named, c);
+            }
         });
     candidate::rank(results);
     Ok(())

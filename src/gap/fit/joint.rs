@@ -11,7 +11,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{Setup, beyond_base, interval_excludes_zero, left_out_where_touched};
+use super::{
+    HELDOUT_MIN_GAIN, Residuals, Setup, beyond_base, held_out_gap_grows, interval_excludes_zero,
+    left_out_where_touched, signature,
+};
 use crate::gap::GapError;
 use crate::gap::candidate::{Candidate, Refitted};
 use crate::gap::effects::{self, Effect, Kind};
@@ -54,12 +57,39 @@ struct Joint {
     cov: Option<DMatrix<f64>>,
     /// The 95 % intervals, in the parameters' units.
     ci: Vec<[f64; 2]>,
+    /// The set's variance-type effects applied to the setup's base.
+    held: effects::Configs,
+    /// Where the start's re-simulation touches the pool and the base's does not.
+    start_contacts: Option<Vec<[f64; 2]>>,
+}
+
+impl Joint {
+    /// The residuals (every sample, the start's extra contacts left out) at `x`, in units of
+    /// the scales.
+    fn residuals_at(&self, setup: &Setup<'_>, x: &DVector<f64>) -> Option<Residuals> {
+        let c = effects::apply_joint(&self.held, &self.chosen, x);
+        let run = resim::simulate(&c, setup.m, None)
+            .ok()
+            .filter(|r| r.divergences.is_empty())?;
+        let r = setup.residuals(&c, &run);
+        Some(left_out_where_touched(&r, self.start_contacts.as_deref()).into_owned())
+    }
+
+    /// `x` with the last effect's parameters at no effect.
+    fn without_last(&self, x: &DVector<f64>) -> DVector<f64> {
+        let mut x = x.clone();
+        let k = self.chosen.last().map_or(0, |e| e.parameters.len());
+        let n = x.len();
+        x.rows_mut(n - k, k).fill(0.0);
+        x
+    }
 }
 
 /// Fits the mean-type effects of `set` (each with its start values and its round's
 /// `noise_factor`) together against `setup`, whose base holds none of them; the variance-type
-/// ones are applied as they are. `None` when none is mean-type or the fit fails.
-fn fit_joint(setup: &Setup<'_>, set: &[Named]) -> Option<Joint> {
+/// ones are applied as they are. `part`: the training samples only (`Some(true)`), or all
+/// (`None`). `None` when none is mean-type or the fit fails.
+fn fit_joint(setup: &Setup<'_>, set: &[Named], part: Option<bool>) -> Option<Joint> {
     let free: Vec<usize> = (0..set.len())
         .filter(|&i| set[i].0.kind == Kind::Mean)
         .collect();
@@ -91,7 +121,10 @@ fn fit_joint(setup: &Setup<'_>, set: &[Named]) -> Option<Joint> {
         let (c, run) = run_at(x)?;
         let r = setup.residuals(&c, &run);
         let r = left_out_where_touched(&r, start_contacts.as_deref());
-        Some(DVector::from_column_slice(&r.values))
+        Some(match part {
+            Some(_) => r.training_vector(),
+            None => DVector::from_column_slice(&r.values),
+        })
     };
     let without_last = free.last().and_then(|&i| {
         let mut x = start.clone();
@@ -101,7 +134,7 @@ fn fit_joint(setup: &Setup<'_>, set: &[Named]) -> Option<Joint> {
         objective(&x).map(|r| r.norm_squared())
     });
     let fit = lsq::minimize(&objective, &Bounds::scaled(&bounds, &scales), &[start])?;
-    let n_eff = setup.n_eff(None);
+    let n_eff = setup.n_eff(part);
     let variance_factor = (fit.chi2() / (n_eff - scales.len() as f64).max(1.0)).max(1.0);
     // Each parameter's noise factor is its own effect's: the covariance scaled by their
     // square roots on both sides, so each variance carries its own effect's factor.
@@ -132,6 +165,8 @@ fn fit_joint(setup: &Setup<'_>, set: &[Named]) -> Option<Joint> {
         n_eff,
         cov,
         ci,
+        held,
+        start_contacts,
     })
 }
 
@@ -145,7 +180,7 @@ fn fit_joint(setup: &Setup<'_>, set: &[Named]) -> Option<Joint> {
 /// between-run spread. `None` when no mean-type effect is accepted or the joint fit fails (the round values
 /// stand). The guards are not taken again at the joint values.
 pub fn refit_jointly(setup: &Setup<'_>, accepted: &[Named]) -> Option<Vec<Refit>> {
-    let joint = fit_joint(setup, accepted)?;
+    let joint = fit_joint(setup, accepted, None)?;
     let mut fitted = effects::joint_values(&joint.chosen, &joint.fit.x).into_iter();
     let mut k = 0;
     Some(
@@ -182,7 +217,7 @@ pub fn with_earlier_free(setup: &Setup<'_>, named: &[Named], candidate: &mut Can
     }
     let mut set = named.to_vec();
     set.push((effect, candidate.values(), candidate.noise_factor));
-    let Some(joint) = fit_joint(setup, &set) else {
+    let Some(joint) = fit_joint(setup, &set, None) else {
         return false;
     };
     let Some(before) = joint.without_last else {
@@ -248,5 +283,77 @@ pub fn with_earlier_free(setup: &Setup<'_>, named: &[Named], candidate: &mut Can
             }
         })
         .collect();
+    true
+}
+
+/// [`with_earlier_free`] for a candidate the earlier names left failing its signature or its
+/// held-out blocks too: a sensor effect that passed every guard fitted alone the round before,
+/// on a channel an earlier sensor name explains ([`crate::gap::candidate::of_its_kind`]: a
+/// depth gain beside a depth offset that took the gain's share with its own). Held, the earlier name keeps what it
+/// took, and the candidate's fit against it finds nothing; so its held-out and signature guards
+/// are judged again as its own fit's are, on the joint fit: the set, the candidate with it,
+/// fitted together on the training blocks, and scored on the held-out blocks against the model
+/// as named (a gain beyond [`HELDOUT_MIN_GAIN`] on the candidate's scale, no channel's gap
+/// grown), its signature read on the change it makes at those values. Where both pass, it is
+/// rescored on all the data as [`with_earlier_free`] does. Returns whether it was.
+pub fn judged_with_earlier_free(
+    setup: &Setup<'_>,
+    named: &[Named],
+    candidate: &mut Candidate,
+) -> bool {
+    let Some(effect) = effects::by_name(&candidate.name).filter(|e| e.kind == Kind::Mean) else {
+        return false;
+    };
+    if named.iter().all(|n| n.0.kind != Kind::Mean) {
+        return false;
+    }
+    let mut set = named.to_vec();
+    set.push((effect, candidate.values(), candidate.noise_factor));
+    let Some(train) = fit_joint(setup, &set, Some(true)) else {
+        return false;
+    };
+    let start = train.without_last(&DVector::from_iterator(
+        train.scales.len(),
+        set.iter()
+            .filter(|n| n.0.kind == Kind::Mean)
+            .flat_map(|n| n.1.iter().zip(n.0.scales).map(|(v, s)| v / s)),
+    ));
+    let (Some(as_named), Some(trained), Some(trained_without)) = (
+        train.residuals_at(setup, &start),
+        train.residuals_at(setup, &train.fit.x),
+        train.residuals_at(setup, &train.without_last(&train.fit.x)),
+    ) else {
+        return false;
+    };
+    let variance_factor =
+        (train.fit.chi2() / (train.n_eff - train.scales.len() as f64).max(1.0)).max(1.0);
+    let scale = candidate.noise_factor * variance_factor;
+    let (before, after) = (as_named.chi2(false), trained.chi2(false));
+    let heldout_gain = (before - after) / scale;
+    let heldout =
+        heldout_gain > HELDOUT_MIN_GAIN && !held_out_gap_grows(setup, &as_named, &trained);
+    let (signature_pass, signature_text) = signature(setup, effect, &trained_without, &trained);
+    tracing::debug!(
+        effect = effect.name,
+        heldout_gain,
+        heldout,
+        signature = signature_pass,
+        "a candidate judged on a joint fit with the earlier names free"
+    );
+    if !(heldout && signature_pass) {
+        return false;
+    }
+    let mut judged = candidate.clone();
+    judged.guards.signature = true;
+    judged.guards.heldout = Some(true);
+    if !with_earlier_free(setup, named, &mut judged) {
+        return false;
+    }
+    judged.heldout_chi2_before = Some(before);
+    judged.heldout_chi2_after = Some(after);
+    judged.heldout_gain = Some(heldout_gain);
+    judged.signature_pass = true;
+    judged.signature = signature_text;
+    *candidate = judged;
     true
 }

@@ -927,6 +927,59 @@ fn a_later_candidate_fitted_with_the_earlier_names_free_takes_back_its_share() {
     );
 }
 
+/// A later candidate the earlier name left nothing of its own, judged on a joint fit: with a
+/// depth offset and a depth gain both hidden on a run that visits several depths, the offset
+/// fitted alone takes part of the gain's disagreement with its own, and the gain, fitted with
+/// that offset held, fails its guards (the rule that rescores only a candidate failing its
+/// significance or interval does not ask it). Judged on the joint fit, it passes its held-out
+/// blocks and its signature, and its value and interval hold the truth. With no gain hidden,
+/// the same judgement does not name one.
+#[test]
+fn a_look_alike_the_earlier_name_left_nothing_is_judged_on_a_joint_fit() {
+    let offset = effects::by_name("depth_offset").unwrap();
+    let gain = effects::by_name("depth_gain").unwrap();
+    let judged = |gain_truth: f64| {
+        let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(17, |t| {
+            effects::apply(offset, &[0.1], t);
+            effects::apply(gain, &[gain_truth], t);
+        });
+        let clean = resim::simulate(&c, &m, None).unwrap();
+        let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+        let first = setup(&m, c.clone(), &floors, Split::DEFAULT, &[]).unwrap();
+        let alone = fit_effects(&first, &[offset], &mut |_| {}).remove(0);
+        assert!(alone.guards.all(), "{:?}", alone.guards);
+        let mut held = c.clone();
+        effects::apply(offset, &alone.values(), &mut held);
+        let second = setup(&m, held, &floors, Split::DEFAULT, &[]).unwrap();
+        let mut later = fit_effects(&second, &[gain], &mut |_| {}).remove(0);
+        let held_guards = later.guards;
+        let earlier = [(offset, alone.values(), alone.noise_factor)];
+        let rescored = judged_with_earlier_free(&first, &earlier, &mut later);
+        (alone, held_guards, rescored, later)
+    };
+    let (alone, held_guards, rescored, later) = judged(0.2);
+    assert!(
+        !held_guards.signature || held_guards.heldout != Some(true),
+        "the held gain fails only its significance or interval: {held_guards:?}"
+    );
+    assert!(rescored, "not rescored: {:?}", later.guards);
+    assert!(later.guards.all(), "{:?}", later.guards);
+    let (value, ci) = (later.values()[0], later.ci95[0].1);
+    assert!(ci[0] <= 0.2 && 0.2 <= ci[1], "gain {value:.3}, {ci:?}");
+    let offset_refitted = later.refitted[0].values[0];
+    assert!(
+        (offset_refitted - 0.1).abs() < (alone.values()[0] - 0.1).abs(),
+        "offset {offset_refitted:.3} refitted, {:.3} alone (truth 0.1)",
+        alone.values()[0]
+    );
+    let (_, _, _, none) = judged(0.0);
+    assert!(
+        !none.guards.all(),
+        "a gain named where none is hidden: {:?}",
+        none.ci95
+    );
+}
+
 /// A depth sensor's offset and the height the hull floats at (`float_depth`, a discrepancy
 /// term) are twins of form: on a run that spends most of its time afloat they move the depth
 /// reading alike (a cosine of 0.9999 on this manoeuvre), and only the dives, where the reading
