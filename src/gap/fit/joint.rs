@@ -201,6 +201,18 @@ pub fn refit_jointly(setup: &Setup<'_>, accepted: &[Named]) -> Option<Vec<Refit>
     )
 }
 
+/// The named effects with `candidate` last, and its library effect: `None` unless it is a
+/// mean-type effect and some named effect is too (a joint fit has nothing to free otherwise).
+fn with_candidate(named: &[Named], candidate: &Candidate) -> Option<(&'static Effect, Vec<Named>)> {
+    let effect = effects::by_name(&candidate.name).filter(|e| e.kind == Kind::Mean)?;
+    if named.iter().all(|n| n.0.kind != Kind::Mean) {
+        return None;
+    }
+    let mut set = named.to_vec();
+    set.push((effect, candidate.values(), candidate.noise_factor));
+    Some((effect, set))
+}
+
 /// A later round's candidate fitted with the effects named before it (`named`, as
 /// [`refit_jointly`] takes them) free, against `setup`, whose base holds none of them: its
 /// values, intervals, delta BIC and the guards those decide (bounds, interval, significance)
@@ -209,14 +221,9 @@ pub fn refit_jointly(setup: &Setup<'_>, accepted: &[Named]) -> Option<Vec<Refit>
 /// that passed every guard the round before; returns whether the candidate was rescored (only
 /// where the joint fit explains more than the held one did).
 pub fn with_earlier_free(setup: &Setup<'_>, named: &[Named], candidate: &mut Candidate) -> bool {
-    let Some(effect) = effects::by_name(&candidate.name).filter(|e| e.kind == Kind::Mean) else {
+    let Some((effect, set)) = with_candidate(named, candidate) else {
         return false;
     };
-    if named.iter().all(|n| n.0.kind != Kind::Mean) {
-        return false;
-    }
-    let mut set = named.to_vec();
-    set.push((effect, candidate.values(), candidate.noise_factor));
     let Some(joint) = fit_joint(setup, &set, None) else {
         return false;
     };
@@ -301,14 +308,9 @@ pub fn judged_with_earlier_free(
     named: &[Named],
     candidate: &mut Candidate,
 ) -> bool {
-    let Some(effect) = effects::by_name(&candidate.name).filter(|e| e.kind == Kind::Mean) else {
+    let Some((effect, set)) = with_candidate(named, candidate) else {
         return false;
     };
-    if named.iter().all(|n| n.0.kind != Kind::Mean) {
-        return false;
-    }
-    let mut set = named.to_vec();
-    set.push((effect, candidate.values(), candidate.noise_factor));
     let Some(train) = fit_joint(setup, &set, Some(true)) else {
         return false;
     };
