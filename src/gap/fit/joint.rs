@@ -61,6 +61,16 @@ struct Joint {
     held: effects::Configs,
     /// Where the start's re-simulation touches the pool and the base's does not.
     start_contacts: Option<Vec<[f64; 2]>>,
+    /// The set's start values, in units of the scales.
+    start: DVector<f64>,
+}
+
+/// `x` with its last `k` elements at zero.
+fn last_zeroed(x: &DVector<f64>, k: usize) -> DVector<f64> {
+    let mut x = x.clone();
+    let n = x.len();
+    x.rows_mut(n - k, k).fill(0.0);
+    x
 }
 
 impl Joint {
@@ -76,12 +86,8 @@ impl Joint {
     }
 
     /// `x` with the last effect's parameters at no effect.
-    fn without_last(&self, x: &DVector<f64>) -> DVector<f64> {
-        let mut x = x.clone();
-        let k = self.chosen.last().map_or(0, |e| e.parameters.len());
-        let n = x.len();
-        x.rows_mut(n - k, k).fill(0.0);
-        x
+    fn zeroing_last(&self, x: &DVector<f64>) -> DVector<f64> {
+        last_zeroed(x, self.chosen.last().map_or(0, |e| e.parameters.len()))
     }
 }
 
@@ -126,14 +132,15 @@ fn fit_joint(setup: &Setup<'_>, set: &[Named], part: Option<bool>) -> Option<Joi
             None => DVector::from_column_slice(&r.values),
         })
     };
-    let without_last = free.last().and_then(|&i| {
-        let mut x = start.clone();
-        let k = set[i].0.parameters.len();
-        let n = x.len();
-        x.rows_mut(n - k, k).fill(0.0);
-        objective(&x).map(|r| r.norm_squared())
-    });
-    let fit = lsq::minimize(&objective, &Bounds::scaled(&bounds, &scales), &[start])?;
+    let without_last = free
+        .last()
+        .and_then(|&i| objective(&last_zeroed(&start, set[i].0.parameters.len())))
+        .map(|r| r.norm_squared());
+    let fit = lsq::minimize(
+        &objective,
+        &Bounds::scaled(&bounds, &scales),
+        std::slice::from_ref(&start),
+    )?;
     let n_eff = setup.n_eff(part);
     let variance_factor = (fit.chi2() / (n_eff - scales.len() as f64).max(1.0)).max(1.0);
     // Each parameter's noise factor is its own effect's: the covariance scaled by their
@@ -167,6 +174,7 @@ fn fit_joint(setup: &Setup<'_>, set: &[Named], part: Option<bool>) -> Option<Joi
         ci,
         held,
         start_contacts,
+        start,
     })
 }
 
@@ -314,16 +322,11 @@ pub fn judged_with_earlier_free(
     let Some(train) = fit_joint(setup, &set, Some(true)) else {
         return false;
     };
-    let start = train.without_last(&DVector::from_iterator(
-        train.scales.len(),
-        set.iter()
-            .filter(|n| n.0.kind == Kind::Mean)
-            .flat_map(|n| n.1.iter().zip(n.0.scales).map(|(v, s)| v / s)),
-    ));
+    let start = train.zeroing_last(&train.start);
     let (Some(as_named), Some(trained), Some(trained_without)) = (
         train.residuals_at(setup, &start),
         train.residuals_at(setup, &train.fit.x),
-        train.residuals_at(setup, &train.without_last(&train.fit.x)),
+        train.residuals_at(setup, &train.zeroing_last(&train.fit.x)),
     ) else {
         return false;
     };
@@ -359,3 +362,6 @@ pub fn judged_with_earlier_free(
     *candidate = judged;
     true
 }
+
+#[cfg(test)]
+mod tests;
