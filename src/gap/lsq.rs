@@ -147,6 +147,9 @@ impl Bounds {
     }
 }
 
+/// A point and its residuals (`None`: not evaluable there).
+type Point = (DVector<f64>, Option<DVector<f64>>);
+
 /// `residuals_of` with every point it was asked kept, with its residuals (`None`: not
 /// evaluable there), and looked up when asked again. A search asks for points again: the
 /// engine restores the last accepted point after a refused step, a step the box clamps can
@@ -155,9 +158,6 @@ impl Bounds {
 /// is a function of `x` alone (a deterministic re-simulation), so the kept residuals are the
 /// ones asking again would give, to the bit; points are matched bit for bit (`0.0` and
 /// `-0.0` differ).
-/// A point and its residuals (`None`: not evaluable there).
-type Point = (DVector<f64>, Option<DVector<f64>>);
-
 struct Kept<'f, F> {
     residuals_of: &'f F,
     seen: Mutex<Vec<Point>>,
