@@ -459,6 +459,70 @@ fn two_sensor_effects_tie_on_the_scale_of_the_significance_test() {
     assert!(physics.ambiguous.is_none());
 }
 
+/// Regression (a sway-yaw coupling hidden beside a paddle-wheel scale, named a yaw damping
+/// 10.1 ahead unscaled): in a round after the first, two physics effects that change the
+/// residuals alike tie when the winner's lead on the significance scale is under the margin;
+/// the same lead names the winner where their changes differ, and in the first round.
+#[test]
+fn two_physics_look_alikes_of_a_later_round_tie_on_the_significance_scale() {
+    // `gain` chi-square drop, every fit's scale 2, one parameter each (penalty 7), and the
+    // change of the residuals the fit makes.
+    let fitted = |name: &str, gain: f64, change: &[f64]| {
+        let mut c = candidate(name, 0.0, true);
+        c.chi2_before = 10_000.0;
+        c.chi2_after = 10_000.0 - gain;
+        c.delta_bic_uncalibrated = gain - 7.0;
+        c.noise_factor = 2.0;
+        c.variance_factor = 1.0;
+        c.delta_bic = gain / 2.0 - 7.0;
+        c.change = change.to_vec();
+        c
+    };
+    let first = fitted("velocity_sensor_scale", 5_000.0, &[0.0, 0.0, 1.0]);
+    let two_rounds = |second: Vec<Candidate>| {
+        select(
+            3,
+            &mut |round, _, _| {
+                Ok(Some(match round {
+                    0 => vec![first.clone()],
+                    1 => second.clone(),
+                    _ => Vec::new(),
+                }))
+            },
+            &mut |_, _| Ok(None),
+        )
+        .unwrap()
+    };
+    let alike = two_rounds(vec![
+        fitted("yaw_damping", 412.0, &[1.0, 0.5, 0.0]),
+        fitted("sway_yaw_coupling", 400.0, &[1.0, 0.6, 0.0]),
+    ]);
+    assert_eq!(
+        alike.ambiguous,
+        Some(["yaw_damping".to_string(), "sway_yaw_coupling".to_string()])
+    );
+    let names: Vec<&str> = alike.accepted.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["velocity_sensor_scale"]);
+    let unlike = two_rounds(vec![
+        fitted("yaw_damping", 412.0, &[1.0, 0.0, 0.0]),
+        fitted("sway_yaw_coupling", 400.0, &[0.3, 1.0, 0.0]),
+    ]);
+    assert!(unlike.ambiguous.is_none());
+    assert_eq!(unlike.accepted[1].name, "yaw_damping");
+    let apart = two_rounds(vec![
+        fitted("yaw_damping", 440.0, &[1.0, 0.5, 0.0]),
+        fitted("sway_yaw_coupling", 400.0, &[1.0, 0.6, 0.0]),
+    ]);
+    assert!(apart.ambiguous.is_none());
+    assert_eq!(apart.accepted[1].name, "yaw_damping");
+    let first_round = one_round(vec![
+        fitted("yaw_damping", 412.0, &[1.0, 0.5, 0.0]),
+        fitted("sway_yaw_coupling", 400.0, &[1.0, 0.6, 0.0]),
+    ]);
+    assert!(first_round.ambiguous.is_none());
+    assert_eq!(first_round.accepted[0].name, "yaw_damping");
+}
+
 /// Regression (a stand-in named): a thruster lag the fit holds on its bound explains far
 /// more than anything inside its bounds; the best passing candidate is not named in its
 /// place, and the selection reports the rival with its failed guard. A rival that fails
