@@ -411,27 +411,15 @@ fn lookalike<'a>(round: &'a [Candidate], win: &Candidate, later: bool) -> Option
 /// significance scale ([`margin`]) is under the delta-BIC margin. The earlier names took the
 /// disagreement the run shows most clearly; what is left holds the model's correlated error
 /// in a larger share, and there a lead read unscaled names one of two look-alikes the data do
-/// not tell apart (a yaw damping 10.1 ahead of a sway-yaw coupling unscaled, 4.6 on the
+/// not tell apart (a yaw damping 10.1 ahead of a sway-yaw coupling unscaled, 4.3 on the
 /// scale, cosine 0.985, on a vehicle of another structure whose coupling was hidden). The
 /// first round keeps the unscaled lead: there the simulator's thrust gains and curves,
 /// imbalances and couplings tie on the scale, and a tie there names nothing at all.
 fn later_physics_tie(c: &Candidate, win: &Candidate) -> bool {
-    let physics = |name: &str| crate::gap::effects::by_name(name).is_some_and(|e| e.physics);
-    if !(physics(&win.name) && physics(&c.name)) {
-        return false;
-    }
-    let Some(cosine) = change_cosine(c, win) else {
-        return false;
-    };
-    let lead = margin(win, c);
-    tracing::debug!(
-        winner = win.name,
-        rival = c.name,
-        lead,
-        cosine,
-        "two physics effects of a later round, the lead on the significance scale"
-    );
-    cosine >= SAME_CHANGE_COSINE && lead < crate::gap::fit::BIC_MARGIN
+    // The cosine is logged with the rival ("a rival of the same kind").
+    both_of_one_sort(c, win, true)
+        && change_cosine(c, win).is_some_and(|cosine| cosine >= SAME_CHANGE_COSINE)
+        && lead_on_the_scale(c, win) < crate::gap::fit::BIC_MARGIN
 }
 
 /// Two sensor effects that both pass every guard, where the winner's lead read on the scale
@@ -439,22 +427,30 @@ fn later_physics_tie(c: &Candidate, win: &Candidate) -> bool {
 /// one channel are told apart only by the readings where their changes differ (a depth
 /// offset and a depth gain, cosine 0.9999 on a run that holds one depth, only where the depth
 /// changes), and there the model's correlated error weighs as much as in the significance
-/// test: read unscaled, such a lead of 10-15 named the other of the two. Physics look-alikes
-/// keep the unscaled lead: the simulator's thrust gains and curves, imbalances and couplings
-/// tie on the scale.
+/// test: read unscaled, such a lead of 10-15 named the other of the two. In the first round
+/// physics look-alikes keep the unscaled lead: the simulator's thrust gains and curves,
+/// imbalances and couplings tie on the scale.
 fn sensor_tie(c: &Candidate, win: &Candidate) -> bool {
-    let sensor = |name: &str| crate::gap::effects::by_name(name).is_some_and(|e| !e.physics);
-    if !(sensor(&win.name) && sensor(&c.name)) {
-        return false;
-    }
+    both_of_one_sort(c, win, false) && lead_on_the_scale(c, win) < crate::gap::fit::BIC_MARGIN
+}
+
+/// Whether `c` and `win` are both physics effects (`physics`) or both sensor effects.
+fn both_of_one_sort(c: &Candidate, win: &Candidate, physics: bool) -> bool {
+    let of_sort =
+        |name: &str| crate::gap::effects::by_name(name).is_some_and(|e| e.physics == physics);
+    of_sort(&win.name) && of_sort(&c.name)
+}
+
+/// The winner's lead over `c` on the significance scale ([`margin`]), logged.
+fn lead_on_the_scale(c: &Candidate, win: &Candidate) -> f64 {
     let lead = margin(win, c);
     tracing::debug!(
         winner = win.name,
         rival = c.name,
         lead,
-        "two sensor effects, the lead on the significance scale"
+        "two look-alikes of one sort, the lead on the significance scale"
     );
-    lead < crate::gap::fit::BIC_MARGIN
+    lead
 }
 
 /// How much more the data favour `win` than `rival`, in BIC on the scale the significance
