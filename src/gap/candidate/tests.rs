@@ -18,6 +18,21 @@ fn candidate(name: &str, bic: f64, pass: bool) -> Candidate {
     c
 }
 
+/// A candidate passing every guard whose fit drops the chi-square by `gain` with the
+/// quasi-likelihood scale `scale`, one parameter (penalty 7), changing the residuals by
+/// `change`.
+fn scaled(name: &str, gain: f64, scale: f64, change: &[f64]) -> Candidate {
+    let mut c = candidate(name, 0.0, true);
+    c.chi2_before = 10_000.0;
+    c.chi2_after = 10_000.0 - gain;
+    c.delta_bic_uncalibrated = gain - 7.0;
+    c.noise_factor = scale;
+    c.variance_factor = 1.0;
+    c.delta_bic = gain / scale - 7.0;
+    c.change = change.to_vec();
+    c
+}
+
 /// The selection over one round of `round0` (the next round has no candidates).
 fn one_round(round0: Vec<Candidate>) -> Selection {
     select(
@@ -425,17 +440,7 @@ fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
 /// effects names the winner, and a scaled lead over the margin names it too.
 #[test]
 fn two_sensor_effects_tie_on_the_scale_of_the_significance_test() {
-    // `gain` chi-square drop, every fit's scale `scale`, one parameter each (penalty 7).
-    let fitted = |name: &str, gain: f64, scale: f64| {
-        let mut c = candidate(name, 0.0, true);
-        c.chi2_before = 10_000.0;
-        c.chi2_after = 10_000.0 - gain;
-        c.delta_bic_uncalibrated = gain - 7.0;
-        c.noise_factor = scale;
-        c.variance_factor = 1.0;
-        c.delta_bic = gain / scale - 7.0;
-        c
-    };
+    let fitted = |name: &str, gain: f64, scale: f64| scaled(name, gain, scale, &[]);
     let close = one_round(vec![
         fitted("depth_gain", 2_012.0, 2.0),
         fitted("depth_offset", 2_000.0, 2.0),
@@ -465,19 +470,7 @@ fn two_sensor_effects_tie_on_the_scale_of_the_significance_test() {
 /// the same lead names the winner where their changes differ, and in the first round.
 #[test]
 fn two_physics_look_alikes_of_a_later_round_tie_on_the_significance_scale() {
-    // `gain` chi-square drop, every fit's scale 2, one parameter each (penalty 7), and the
-    // change of the residuals the fit makes.
-    let fitted = |name: &str, gain: f64, change: &[f64]| {
-        let mut c = candidate(name, 0.0, true);
-        c.chi2_before = 10_000.0;
-        c.chi2_after = 10_000.0 - gain;
-        c.delta_bic_uncalibrated = gain - 7.0;
-        c.noise_factor = 2.0;
-        c.variance_factor = 1.0;
-        c.delta_bic = gain / 2.0 - 7.0;
-        c.change = change.to_vec();
-        c
-    };
+    let fitted = |name: &str, gain: f64, change: &[f64]| scaled(name, gain, 2.0, change);
     let first = fitted("velocity_sensor_scale", 5_000.0, &[0.0, 0.0, 1.0]);
     let two_rounds = |second: Vec<Candidate>| {
         select(
