@@ -231,6 +231,45 @@ fn split_stepping_equals_one_long_run() {
     assert!((long.t_s() - 18.0).abs() < 1e-9);
 }
 
+/// The sensors' view of a state remembers the state's rates for the next step. Reading it
+/// after every step or never gives the same trajectory bit for bit, and a state whose rates
+/// one model remembered steps under another model as if nothing were remembered.
+#[test]
+fn reading_the_state_between_steps_changes_nothing() {
+    let m = model();
+    let bits = |s: &physics::SimState, m: &Model| {
+        let v = m.vehicle_state(s);
+        let mut b: Vec<u64> = v.position_m.iter().map(|x| x.to_bits()).collect();
+        b.extend(v.attitude.coords.iter().map(|x| x.to_bits()));
+        b.extend(v.velocity_body_mps.iter().map(|x| x.to_bits()));
+        b.extend(v.specific_force_body_mps2.iter().map(|x| x.to_bits()));
+        b
+    };
+    let mut read = m.initial_state(&at(5.0, 6.0, 0.5), 3);
+    let mut unread = read.clone();
+    for k in 0..900 {
+        let c = percent(&m, [100.0, (k % 200) as f64 - 100.0, 40.0, -30.0]);
+        m.vehicle_state(&read);
+        m.step(&mut read, &c).unwrap();
+        m.step(&mut unread, &c).unwrap();
+    }
+    assert_eq!(bits(&read, &m), bits(&unread, &m));
+
+    // `read` now remembers its rates under `m`; a model with another drag must not use them.
+    let mut draggy = vehicle();
+    draggy.damping_linear[0] *= 3.0;
+    draggy.damping_linear[5] *= 3.0;
+    let other = Model::new(draggy, world());
+    let mut forgotten = read.clone();
+    other.reanchor(&mut forgotten, &physics::Anchor::default());
+    let c = percent(&m, [100.0, 100.0, 0.0, 0.0]);
+    for _ in 0..50 {
+        other.step(&mut read, &c).unwrap();
+        other.step(&mut forgotten, &c).unwrap();
+    }
+    assert_eq!(bits(&read, &other), bits(&forgotten, &other));
+}
+
 /// The 10 ms step is converged: a 2 ms step changes the top speed and the turn by far less
 /// than the thesis's tolerances. The thrust fluctuation is switched off for this comparison:
 /// its noise is drawn per step, so different steps would see different noise paths.

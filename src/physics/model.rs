@@ -18,6 +18,9 @@
 //! contacts with the pool are resolved by a position projection and a 6-DOF impulse through
 //! the same inverse mass matrix (restitution plus Coulomb friction).
 
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use nalgebra::{Matrix3, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -83,6 +86,50 @@ pub struct Anchor {
     pub heading_rad: Option<f64>,
 }
 
+/// The rates at a state from everything but the thrust: the body velocity turned into the
+/// world frame (the position rate less the current), the quaternion rate, and the
+/// acceleration `M^-1 (-C nu_r - D nu_r - g(eta) + surface)`. The thrust's acceleration
+/// `M^-1 tau` is added per step, so one evaluation serves any thrust.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Rates {
+    velocity_world: Vector3<f64>,
+    q_dot: Quaternion<f64>,
+    accel: Vector6<f64>,
+}
+
+/// The [`Rates`] at a state's own pose and velocity, remembered by whichever of
+/// [`Model::vehicle_state`] and [`Model::step`] needs them first, with the identity of the
+/// model that computed them. A hit gives the very bits a fresh evaluation would, so the cache
+/// never makes two states differ: it takes no part in equality.
+#[derive(Debug, Clone, Default)]
+struct RatesCache(Cell<Option<(u64, Rates)>>);
+
+impl PartialEq for RatesCache {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl RatesCache {
+    fn get(&self, model_id: u64) -> Option<Rates> {
+        self.0
+            .get()
+            .and_then(|(id, r)| (id == model_id).then_some(r))
+    }
+
+    fn set(&self, model_id: u64, rates: Rates) {
+        self.0.set(Some((model_id, rates)));
+    }
+
+    fn clear(&self) {
+        self.0.set(None);
+    }
+}
+
+/// Every [`Model`] gets its own number, so a state's [`RatesCache`] is only read by the model
+/// that filled it.
+static NEXT_MODEL_ID: AtomicU64 = AtomicU64::new(0);
+
 /// Everything that changes during a run. Cloning it and stepping both copies with the same
 /// commands gives bit-identical results.
 #[derive(Debug, Clone, PartialEq)]
@@ -104,6 +151,7 @@ pub struct SimState {
     contact_count: u64,
     contact_steps: u64,
     rng: ChaCha8Rng,
+    rates: RatesCache,
 }
 
 impl SimState {
@@ -132,6 +180,8 @@ fn down_in_body(attitude: &UnitQuaternion<f64>) -> Vector3<f64> {
 /// stepping, so one model can step many states.
 #[derive(Debug)]
 pub struct Model {
+    /// This instance's number, for [`RatesCache`].
+    id: u64,
     vehicle: VehicleConfig,
     world: WorldConfig,
     pool: Pool,
@@ -210,6 +260,7 @@ impl Model {
             })
         }));
         Self {
+            id: NEXT_MODEL_ID.fetch_add(1, Ordering::Relaxed),
             thruster_dynamics: ThrusterDynamics::new(&vehicle.thruster_common, dt_s),
             pool: Pool::new(&world),
             dt_s,
@@ -352,6 +403,7 @@ impl Model {
             contact_count: 0,
             contact_steps: 0,
             rng,
+            rates: RatesCache::default(),
         }
     }
 
@@ -360,6 +412,7 @@ impl Model {
     /// re-simulation that re-anchors its state to measurements at segment boundaries
     /// (multiple shooting) uses it; stepping never calls it.
     pub fn reanchor(&self, state: &mut SimState, anchor: &Anchor) {
+        state.rates.clear();
         if let Some(x) = anchor.north_m {
             state.position_m.x = x;
         }
@@ -379,6 +432,7 @@ impl Model {
     /// ground (moving with no water: its velocity through the water is minus the current),
     /// thruster lag and noise streams kept. The live view's "set pose" uses it.
     pub fn place(&self, state: &mut SimState, position_m: Vector3<f64>, heading_rad: f64) {
+        state.rates.clear();
         state.position_m = position_m;
         state.attitude = UnitQuaternion::from_euler_angles(0.0, 0.0, heading_rad);
         let current_body = state.attitude.inverse() * self.world.current_mps;
@@ -396,6 +450,7 @@ impl Model {
     /// with no thrust: what a re-simulation does with a state it could not step (diverged)
     /// until it can re-anchor it.
     pub fn hold(&self, state: &mut SimState) {
+        state.rates.clear();
         let current_body = state.attitude.inverse() * self.world.current_mps;
         state.nu_r = Vector6::new(
             -current_body.x,
@@ -460,24 +515,78 @@ impl Model {
         out
     }
 
-    /// Right-hand side: (position rate, quaternion rate, nu_r rate).
-    fn derivative(
+    /// The rates from everything but the thrust ([`Rates`]).
+    fn unforced_rates(
         &self,
         position_m: &Vector3<f64>,
         q: &Quaternion<f64>,
         nu: &Vector6<f64>,
-        tau: &Vector6<f64>,
-    ) -> (Vector3<f64>, Quaternion<f64>, Vector6<f64>) {
+    ) -> Rates {
         // One rotation matrix serves the position rate and the restoring force.
         let r = UnitQuaternion::new_normalize(*q).to_rotation_matrix();
         let v = Vector3::new(nu[0], nu[1], nu[2]);
         let w = Vector3::new(nu[3], nu[4], nu[5]);
-        let pos_dot = r * v + self.world.current_mps;
-        let q_dot = q * Quaternion::new(0.0, w.x, w.y, w.z) * 0.5;
         let down_body = r.matrix().row(2).transpose();
-        let forces = tau + self.restoring(position_m.z, &down_body) - self.coriolis_and_damping(nu)
+        let forces = self.restoring(position_m.z, &down_body) - self.coriolis_and_damping(nu)
             + self.surface_damping(position_m.z, &down_body, nu);
-        (pos_dot, q_dot, self.m_inv * forces)
+        Rates {
+            velocity_world: r * v,
+            q_dot: q * Quaternion::new(0.0, w.x, w.y, w.z) * 0.5,
+            accel: self.m_inv * forces,
+        }
+    }
+
+    /// [`Model::unforced_rates`] at the state's own pose and velocity, from its cache when
+    /// this model filled it.
+    fn state_rates(&self, state: &SimState) -> Rates {
+        state.rates.get(self.id).unwrap_or_else(|| {
+            let r =
+                self.unforced_rates(&state.position_m, state.attitude.quaternion(), &state.nu_r);
+            state.rates.set(self.id, r);
+            r
+        })
+    }
+
+    /// Right-hand side (position rate, quaternion rate, nu_r rate) from the unforced rates and
+    /// the thrust's acceleration `M^-1 tau`.
+    fn derivative(
+        &self,
+        rates: &Rates,
+        thrust_accel: &Vector6<f64>,
+    ) -> (Vector3<f64>, Quaternion<f64>, Vector6<f64>) {
+        (
+            rates.velocity_world + self.world.current_mps,
+            rates.q_dot,
+            rates.accel + thrust_accel,
+        )
+    }
+
+    /// One RK4 step of (position, quaternion, nu_r) under a constant thrust acceleration, from
+    /// `first`, the unforced rates at the start.
+    fn rk4(
+        &self,
+        state: &SimState,
+        first: &Rates,
+        thrust_accel: &Vector6<f64>,
+    ) -> (Vector3<f64>, Quaternion<f64>, Vector6<f64>) {
+        let dt = self.dt_s;
+        let p0 = state.position_m;
+        let q0 = *state.attitude.quaternion();
+        let n0 = state.nu_r;
+        let h = 0.5 * dt;
+        let at = |p: Vector3<f64>, q: Quaternion<f64>, n: Vector6<f64>| {
+            self.derivative(&self.unforced_rates(&p, &q, &n), thrust_accel)
+        };
+        let (dp1, dq1, dn1) = self.derivative(first, thrust_accel);
+        let (dp2, dq2, dn2) = at(p0 + dp1 * h, q0 + dq1 * h, n0 + dn1 * h);
+        let (dp3, dq3, dn3) = at(p0 + dp2 * h, q0 + dq2 * h, n0 + dn2 * h);
+        let (dp4, dq4, dn4) = at(p0 + dp3 * dt, q0 + dq3 * dt, n0 + dn3 * dt);
+        let s = dt / 6.0;
+        (
+            p0 + (dp1 + (dp2 + dp3) * 2.0 + dp4) * s,
+            q0 + (dq1 + (dq2 + dq3) * 2.0 + dq4) * s,
+            n0 + (dn1 + (dn2 + dn3) * 2.0 + dn4) * s,
+        )
     }
 
     /// Advances `state` by one fixed step under `commands`. Pure: the result depends only on
@@ -527,22 +636,9 @@ impl Model {
             tau += self.wrench[i] * thrust_n[i];
         }
 
-        // RK4.
-        let p0 = state.position_m;
-        let q0 = *state.attitude.quaternion();
-        let n0 = state.nu_r;
-        let h = 0.5 * dt;
-        let (dp1, dq1, dn1) = self.derivative(&p0, &q0, &n0, &tau);
-        let (dp2, dq2, dn2) =
-            self.derivative(&(p0 + dp1 * h), &(q0 + dq1 * h), &(n0 + dn1 * h), &tau);
-        let (dp3, dq3, dn3) =
-            self.derivative(&(p0 + dp2 * h), &(q0 + dq2 * h), &(n0 + dn2 * h), &tau);
-        let (dp4, dq4, dn4) =
-            self.derivative(&(p0 + dp3 * dt), &(q0 + dq3 * dt), &(n0 + dn3 * dt), &tau);
-        let s = dt / 6.0;
-        let mut position = p0 + (dp1 + (dp2 + dp3) * 2.0 + dp4) * s;
-        let q = q0 + (dq1 + (dq2 + dq3) * 2.0 + dq4) * s;
-        let mut nu = n0 + (dn1 + (dn2 + dn3) * 2.0 + dn4) * s;
+        // RK4; the thrust is held over the step, so its acceleration is computed once.
+        let (mut position, q, mut nu) =
+            self.rk4(state, &self.state_rates(state), &(self.m_inv * tau));
         let t_s = (state.step + 1) as f64 * dt;
         if !q.coords.iter().all(|x| x.is_finite()) || q.norm() < 1e-6 {
             return Err(PhysicsError::NonFinite {
@@ -610,6 +706,7 @@ impl Model {
         state.position_m = position;
         state.attitude = attitude;
         state.nu_r = nu;
+        state.rates.clear();
         Ok(())
     }
 
@@ -618,23 +715,13 @@ impl Model {
     /// full [`Model::step`] against it in the same run.
     #[doc(hidden)]
     pub fn step_rigid_body_only(&self, state: &mut SimState) {
-        let dt = self.dt_s;
-        let tau = Vector6::zeros();
-        let p0 = state.position_m;
-        let q0 = *state.attitude.quaternion();
-        let n0 = state.nu_r;
-        let h = 0.5 * dt;
-        let (dp1, dq1, dn1) = self.derivative(&p0, &q0, &n0, &tau);
-        let (dp2, dq2, dn2) =
-            self.derivative(&(p0 + dp1 * h), &(q0 + dq1 * h), &(n0 + dn1 * h), &tau);
-        let (dp3, dq3, dn3) =
-            self.derivative(&(p0 + dp2 * h), &(q0 + dq2 * h), &(n0 + dn2 * h), &tau);
-        let (dp4, dq4, dn4) =
-            self.derivative(&(p0 + dp3 * dt), &(q0 + dq3 * dt), &(n0 + dn3 * dt), &tau);
-        let s = dt / 6.0;
-        state.position_m = p0 + (dp1 + (dp2 + dp3) * 2.0 + dp4) * s;
-        state.attitude = UnitQuaternion::new_normalize(q0 + (dq1 + (dq2 + dq3) * 2.0 + dq4) * s);
-        state.nu_r = n0 + (dn1 + (dn2 + dn3) * 2.0 + dn4) * s;
+        let first =
+            self.unforced_rates(&state.position_m, state.attitude.quaternion(), &state.nu_r);
+        let (position, q, nu) = self.rk4(state, &first, &Vector6::zeros());
+        state.position_m = position;
+        state.attitude = UnitQuaternion::new_normalize(q);
+        state.nu_r = nu;
+        state.rates.clear();
         state.step += 1;
     }
 
@@ -716,12 +803,7 @@ impl Model {
         let v_r = Vector3::new(state.nu_r[0], state.nu_r[1], state.nu_r[2]);
         let w = Vector3::new(state.nu_r[3], state.nu_r[4], state.nu_r[5]);
         let current_body = att.inverse() * self.world.current_mps;
-        let (_, _, nu_dot) = self.derivative(
-            &state.position_m,
-            att.quaternion(),
-            &state.nu_r,
-            &state.tau_thrust,
-        );
+        let nu_dot = self.state_rates(state).accel + self.m_inv * state.tau_thrust;
         // Kinematic acceleration of the CG in body axes is v_r_dot + w x v_r for a constant
         // current; the accelerometer reads it minus gravity.
         let accel = Vector3::new(
