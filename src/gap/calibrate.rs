@@ -237,7 +237,9 @@ fn channel_chi2(p: &Prepared<'_>, setup: &Setup<'_>, c: &Configs) -> Option<Vec<
             .iter()
             .zip(&r.owner)
             .zip(&r.times)
-            .filter(|((_, o), t)| **o == i && !setup.clean.in_contact(**t))
+            .filter(|((_, o), t)| {
+                **o == i && !setup.clean.in_contact(**t, &setup.m.channels[i].name)
+            })
             .fold((0.0, 0usize), |(s, n), ((v, _), _)| (s + v * v, n + 1));
         if n > 0 {
             out.push((i, sum / (n as f64 / f.tau)));

@@ -79,6 +79,9 @@ pub struct Residuals {
     pub training: Vec<bool>,
     /// Each element's sample time (s).
     pub times: Vec<f64>,
+    /// How long after a contact each element's channel stays left out (s,
+    /// [`Run::contact_memory_s`] of the setup's base run).
+    pub memory_s: Vec<f64>,
 }
 
 impl Residuals {
@@ -229,7 +232,7 @@ impl Setup<'_> {
                     .sample_times(i)
                     .iter()
                     .filter(|t| part.is_none_or(|p| self.split.is_training(**t) == p))
-                    .filter(|t| !self.clean.in_contact(**t))
+                    .filter(|t| !self.clean.in_contact(**t, &self.m.channels[i].name))
                     .count();
                 Some(weight(i) * n as f64 / f.tau)
             })
@@ -264,7 +267,7 @@ impl Setup<'_> {
             // Left out where the fitted residuals are (contact), as zeros of the same length.
             let live: Vec<f64> = times
                 .iter()
-                .map(|t| f64::from(u8::from(!self.clean.in_contact(*t))))
+                .map(|t| f64::from(u8::from(!self.clean.in_contact(*t, &ch.name))))
                 .collect();
             let k = f.tau.sqrt();
             for (m, v) in null.iter_mut().enumerate() {
@@ -315,15 +318,20 @@ impl Setup<'_> {
                     .map(|(r, s)| r / (s * k))
                     .collect()
             };
+            let memory_s = self.clean.contact_memory_s(&ch.name);
             for (v, t) in values.iter().zip(&times) {
                 // Where the base re-simulation touched the pool, contact impulses make the
                 // residual jump with any change of a parameter: left out of every fit (a
                 // zero), the same samples for every candidate of the setup.
-                out.values
-                    .push(if self.clean.in_contact(*t) { 0.0 } else { *v });
+                out.values.push(if self.clean.in_contact(*t, &ch.name) {
+                    0.0
+                } else {
+                    *v
+                });
                 out.owner.push(i);
                 out.training.push(self.split.is_training(*t));
                 out.times.push(*t);
+                out.memory_s.push(memory_s);
             }
         }
         out

@@ -91,8 +91,8 @@ pub enum GapError {
 /// fit leaves out ([`resim::Run::in_contact`]) are left out of the statistics the verdict and
 /// the known levels read too, so a wall contact, which no effect's fit may see, is no
 /// disagreement of its own.
-fn free_of_contact(run: &resim::Run, t: &[f64]) -> Vec<bool> {
-    t.iter().map(|t| !run.in_contact(*t)).collect()
+fn free_of_contact(run: &resim::Run, t: &[f64], channel: &str) -> Vec<bool> {
+    t.iter().map(|t| !run.in_contact(*t, channel)).collect()
 }
 
 /// The entries of `v` that `keep` keeps (`v` as it is when it is not one per sample).
@@ -141,7 +141,7 @@ fn stats_for(
             .known(&ch.name)
             .under(weights.get(i).copied().unwrap_or(1.0));
         if let Some((t, r)) = sonar::stats_residuals(c, run, m.experiment.duration_s, ch) {
-            let keep = free_of_contact(run, &t);
+            let keep = free_of_contact(run, &t, &ch.name);
             let (t, r) = (kept(&t, &keep), kept(&r, &keep));
             let unit = resim::Floor {
                 sigma: vec![1.0; r.len()],
@@ -166,7 +166,7 @@ fn stats_for(
             continue;
         };
         let t: Vec<f64> = ch.samples.iter().map(|(t, _)| *t).collect();
-        let keep = free_of_contact(run, &t);
+        let keep = free_of_contact(run, &t, &ch.name);
         let r = kept(&resim::residuals(ch, &p), &keep);
         // Constant lag: the shift in -1..1 s (50 ms steps) with the smallest RMS.
         let mut best = (0.0, f64::INFINITY);

@@ -81,6 +81,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
     if noise_seed.is_none() {
         vehicle.thruster_common.fluctuation_rel_std = 0.0;
     }
+    let depth_memory = crate::gap::run::depth_contact_memory_s(&vehicle);
     let model = Model::new(vehicle, c.world.clone());
     let i = &m.experiment.initial;
     let depth = i.z_m.unwrap_or_else(|| model.floating_depth_m());
@@ -119,6 +120,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
                 divergences: Vec::new(),
                 contacts: Vec::new(),
                 segment_steps: None,
+                depth_memory_s: depth_memory,
             };
             anchor_noise(c, m, &probe)
         });
@@ -232,6 +234,7 @@ pub fn simulate(c: &Configs, m: &Measurement, noise_seed: Option<u64>) -> Result
         divergences,
         contacts,
         segment_steps,
+        depth_memory_s: depth_memory,
     })
 }
 

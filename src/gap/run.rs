@@ -6,6 +6,7 @@ use serde::Serialize;
 
 use nalgebra::UnitQuaternion;
 
+use crate::physics::VehicleConfig;
 use crate::physics::state::VehicleState;
 
 /// How the re-simulation is cut.
@@ -55,6 +56,9 @@ pub struct Run {
     /// Steps per re-anchored segment (`None`: one open-loop run). The state at each multiple
     /// is the anchored start of a new segment.
     pub segment_steps: Option<usize>,
+    /// How long after a contact the depth channel's samples stay left out (s):
+    /// [`depth_contact_memory_s`] of the re-simulated vehicle.
+    pub depth_memory_s: f64,
 }
 
 /// A segment of a re-simulation that diverged: held from `t_s` to the segment's end.
@@ -70,7 +74,7 @@ pub struct Divergence {
 
 /// How long after a contact segment its impulses stay in the state each segment carries over
 /// to the next (velocities, rates, thruster lag), so that those samples are left out of fits
-/// too (s). Re-anchoring resets position and heading, not velocities, and at low speed a
+/// too (s); the depth channel's memory is [`depth_contact_memory_s`]. Re-anchoring resets position and heading, not velocities, and at low speed a
 /// velocity error decays with the linear damping alone. Surge is the slowest axis:
 /// `configs/vehicles/mako.toml`'s 35 kg hull with 3.5 kg of added mass against a linear surge
 /// damping of 3.327 N/(m/s) has a time constant of 11.6 s, and three of them (35 s) leave 5 %
@@ -88,18 +92,73 @@ pub const CONTACT_MEMORY_S: f64 = 35.0;
 /// at the touch) as its parameters moved by 0.005 uT, and its fit stopped where it started.
 pub const CONTACT_LEAD_S: f64 = 1.0;
 
+/// The channel whose contact memory follows the heave, roll and pitch alone
+/// ([`depth_contact_memory_s`]).
+pub const DEPTH_CHANNEL: &str = "depth_adc";
+
+/// How long after a contact the depth channel's samples are left out (s): three of the
+/// slowest time constants with which a velocity error a contact left in heave, roll or pitch
+/// decays, at most [`CONTACT_MEMORY_S`].
+///
+/// The depth sensor reads the heave and, through its lever arm, roll and pitch; each segment
+/// re-anchors the depth, so what a contact leaves in the depth channel is the error of those
+/// velocities. Submerged, heave has no restoring force and its error decays with `(m + A_33)
+/// / D_33` (7 s on `configs/vehicles/mako.toml`); roll and pitch are restored by the
+/// metacentre and their error's envelope decays with `2 (I + A) / D` (6 s in pitch). The
+/// surge and sway errors that [`CONTACT_MEMORY_S`] waits for reach the depth only through the
+/// pitch angle. Waiting the surge's 35 s on the depth channel too left out the only held-out
+/// samples a floating run has at its end: on structure 614923 (seed 560371) the
+/// re-simulation touched a wall at 141-150 s, the run floats from 168 s, and two depth offsets
+/// of 10-18 sigma, fitted at their truth, failed their held-out blocks.
+pub fn depth_contact_memory_s(v: &VehicleConfig) -> f64 {
+    let decay = |inertia: f64, damping: f64| {
+        if damping > 0.0 {
+            inertia / damping
+        } else {
+            f64::INFINITY
+        }
+    };
+    let heave = decay(v.mass_kg + v.added_mass[2], v.damping_linear[2]);
+    let roll = 2.0
+        * decay(
+            v.inertia_kgm2[(0, 0)] + v.added_mass[3],
+            v.damping_linear[3],
+        );
+    let pitch = 2.0
+        * decay(
+            v.inertia_kgm2[(1, 1)] + v.added_mass[4],
+            v.damping_linear[4],
+        );
+    let slowest = heave.max(roll).max(pitch);
+    if slowest.is_finite() {
+        (3.0 * slowest).min(CONTACT_MEMORY_S)
+    } else {
+        CONTACT_MEMORY_S
+    }
+}
+
 /// True when `t_s` lies in one of the contact intervals `contacts` ([`Run::contacts`]),
-/// within [`CONTACT_LEAD_S`] before it or within [`CONTACT_MEMORY_S`] after it.
-pub fn touching(contacts: &[[f64; 2]], t_s: f64) -> bool {
+/// within [`CONTACT_LEAD_S`] before it or within `memory_s` after it.
+pub fn touching(contacts: &[[f64; 2]], t_s: f64, memory_s: f64) -> bool {
     contacts
         .iter()
-        .any(|[a, b]| *a - CONTACT_LEAD_S <= t_s && t_s < *b + CONTACT_MEMORY_S)
+        .any(|[a, b]| *a - CONTACT_LEAD_S <= t_s && t_s < *b + memory_s)
 }
 
 impl Run {
-    /// True when `t_s` lies where the hull touched the pool ([`Run::contacts`]).
-    pub fn in_contact(&self, t_s: f64) -> bool {
-        touching(&self.contacts, t_s)
+    /// How long after a contact the samples of `channel` stay left out (s).
+    pub fn contact_memory_s(&self, channel: &str) -> f64 {
+        if channel == DEPTH_CHANNEL {
+            self.depth_memory_s
+        } else {
+            CONTACT_MEMORY_S
+        }
+    }
+
+    /// True when a sample of `channel` at `t_s` lies where the hull touched the pool
+    /// ([`Run::contacts`]) or within the channel's memory of it.
+    pub fn in_contact(&self, t_s: f64, channel: &str) -> bool {
+        touching(&self.contacts, t_s, self.contact_memory_s(channel))
     }
 
     /// The state nearest `t_s` (clamped to the run).
@@ -272,5 +331,48 @@ mod tests {
             (tau / expected - 1.0).abs() < 0.15,
             "{tau} against {expected}"
         );
+    }
+
+    /// The depth channel comes back from a contact once the heave, roll and pitch have
+    /// forgotten it; every other channel waits for the surge. A heavier heave damping
+    /// shortens the depth's wait, and with no heave damping it waits as long as the rest.
+    #[test]
+    fn the_depth_channel_forgets_a_contact_with_the_heave() {
+        use crate::config::Embedded;
+        use crate::physics::{DEFAULT_VEHICLE, load_vehicle};
+        let mako = load_vehicle(&Embedded, DEFAULT_VEHICLE).unwrap();
+        let memory = depth_contact_memory_s(&mako);
+        let heave = (mako.mass_kg + mako.added_mass[2]) / mako.damping_linear[2];
+        assert!(memory >= 3.0 * heave, "{memory} against heave {heave}");
+        assert!(memory < CONTACT_MEMORY_S, "{memory}");
+
+        let mut draggy = mako.clone();
+        draggy.damping_linear[2] *= 2.0;
+        assert!(depth_contact_memory_s(&draggy) < memory);
+        let mut free = mako.clone();
+        free.damping_linear[2] = 0.0;
+        assert_eq!(depth_contact_memory_s(&free), CONTACT_MEMORY_S);
+
+        let run = Run {
+            dt_s: 0.01,
+            states: Vec::new(),
+            percent: Vec::new(),
+            divergences: Vec::new(),
+            contacts: vec![[31.0, 33.0]],
+            segment_steps: None,
+            depth_memory_s: memory,
+        };
+        let after_depth = 33.0 + memory + 0.5;
+        assert!(after_depth < 33.0 + CONTACT_MEMORY_S);
+        assert!(run.in_contact(33.0 + memory - 0.5, DEPTH_CHANNEL));
+        assert!(!run.in_contact(after_depth, DEPTH_CHANNEL));
+        for channel in ["x_m", "compass_deg", "accel_x_adc"] {
+            assert!(run.in_contact(after_depth, channel), "{channel}");
+            assert!(
+                !run.in_contact(33.0 + CONTACT_MEMORY_S, channel),
+                "{channel}"
+            );
+        }
+        assert!(run.in_contact(31.0 - CONTACT_LEAD_S, DEPTH_CHANNEL));
     }
 }

@@ -20,8 +20,8 @@ pub(crate) fn left_out_where_touched<'r>(
         return Cow::Borrowed(r);
     };
     let mut r = r.clone();
-    for (v, t) in r.values.iter_mut().zip(&r.times) {
-        if resim::touching(contacts, *t) {
+    for ((v, t), memory_s) in r.values.iter_mut().zip(&r.times).zip(&r.memory_s) {
+        if resim::touching(contacts, *t, *memory_s) {
             *v = 0.0;
         }
     }

@@ -72,6 +72,7 @@ fn strong_blocks_are_where_the_earlier_names_changed_the_fit_most() {
         owner: vec![0; values.len()],
         training: vec![true; values.len()],
         times: times.clone(),
+        memory_s: vec![crate::gap::run::CONTACT_MEMORY_S; values.len()],
         values,
     };
     // Fixed in the first 10 s block; in the second, one sample made worse.
@@ -112,6 +113,7 @@ fn noise_source_blocks_are_where_the_floor_is_wider() {
         owner: [vec![0; 30], vec![1; 6]].concat(),
         training: vec![true; 36],
         times: [t0.clone(), t1.clone()].concat(),
+        memory_s: vec![crate::gap::run::CONTACT_MEMORY_S; 36],
     };
     let acts = noise_source_blocks(&r, &without, &with, 10.0);
     let expected: Vec<bool> = t0
@@ -518,6 +520,7 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
         owner: vec![0; times.len()],
         training: times.iter().map(|t| split.is_training(*t)).collect(),
         times: times.clone(),
+        memory_s: vec![crate::gap::run::CONTACT_MEMORY_S; times.len()],
     };
     // The trial point halves every residual but the contact's, 31-33 s in a held-out block.
     let mut after = before.clone();
@@ -535,6 +538,7 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
         divergences: Vec::new(),
         contacts: vec![[31.0, 33.0]],
         segment_steps: None,
+        depth_memory_s: crate::gap::run::CONTACT_MEMORY_S,
     };
     let (b, a) = (
         left_out_where_touched(&before, Some(&run.contacts)),
