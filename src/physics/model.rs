@@ -10,11 +10,12 @@
 //!
 //! For an irrotational, constant current this form is exact when `C_RB` uses the
 //! parametrisation independent of linear velocity (Fossen 2011, property 8.1), which is what
-//! [`Model::derivative`] implements. The added mass sits inside the constant mass matrix, whose
-//! inverse is computed once; nothing is estimated from the last step's acceleration.
+//! [`Model::unforced_rates`] implements. The added mass sits inside the constant mass matrix,
+//! whose inverse is computed once; nothing is estimated from the last step's acceleration.
 //!
 //! Integration: classical RK4 on (position, attitude quaternion, `nu_r`) with the thrust held
-//! over the step; the thruster lag and fluctuation are discretised exactly. After the step,
+//! over the step, so its acceleration `M^-1 tau` is computed once a step and added to each
+//! stage's unforced rates; the thruster lag and fluctuation are discretised exactly. After the step,
 //! contacts with the pool are resolved by a position projection and a 6-DOF impulse through
 //! the same inverse mass matrix (restitution plus Coulomb friction).
 
