@@ -155,6 +155,20 @@ impl Run {
         }
     }
 
+    /// A run with no states that touched the pool at `contacts`, for tests of what is left out.
+    #[cfg(test)]
+    pub(crate) fn touched_at(contacts: Vec<[f64; 2]>, depth_memory_s: f64) -> Self {
+        Self {
+            dt_s: 0.01,
+            states: Vec::new(),
+            percent: Vec::new(),
+            divergences: Vec::new(),
+            contacts,
+            segment_steps: None,
+            depth_memory_s,
+        }
+    }
+
     /// True when a sample of `channel` at `t_s` lies where the hull touched the pool
     /// ([`Run::contacts`]) or within the channel's memory of it.
     pub fn in_contact(&self, t_s: f64, channel: &str) -> bool {
@@ -353,15 +367,7 @@ mod tests {
         free.damping_linear[2] = 0.0;
         assert_eq!(depth_contact_memory_s(&free), CONTACT_MEMORY_S);
 
-        let run = Run {
-            dt_s: 0.01,
-            states: Vec::new(),
-            percent: Vec::new(),
-            divergences: Vec::new(),
-            contacts: vec![[31.0, 33.0]],
-            segment_steps: None,
-            depth_memory_s: memory,
-        };
+        let run = Run::touched_at(vec![[31.0, 33.0]], memory);
         let after_depth = 33.0 + memory + 0.5;
         assert!(after_depth < 33.0 + CONTACT_MEMORY_S);
         assert!(run.in_contact(33.0 + memory - 0.5, DEPTH_CHANNEL));

@@ -531,15 +531,7 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
         before.chi2(false) < after.chi2(false),
         "the contact makes the held-out worse"
     );
-    let run = Run {
-        dt_s: 0.01,
-        states: Vec::new(),
-        percent: Vec::new(),
-        divergences: Vec::new(),
-        contacts: vec![[31.0, 33.0]],
-        segment_steps: None,
-        depth_memory_s: crate::gap::run::CONTACT_MEMORY_S,
-    };
+    let run = Run::touched_at(vec![[31.0, 33.0]], crate::gap::run::CONTACT_MEMORY_S);
     let (b, a) = (
         left_out_where_touched(&before, Some(&run.contacts)),
         left_out_where_touched(&after, Some(&run.contacts)),
