@@ -144,8 +144,8 @@ pub struct SimState {
     fluctuation: [f64; 4],
     thrust_n: [f64; 4],
     effort: [f64; 4],
-    /// Generalised thrust force of the last step (body frame, about the CG).
-    tau_thrust: Vector6<f64>,
+    /// Acceleration of the last step's generalised thrust, `M^-1 tau` (body frame, about the CG).
+    thrust_accel: Vector6<f64>,
     /// Velocity change from contact impulses in the last step, divided by the step.
     contact_accel: Vector6<f64>,
     in_contact: bool,
@@ -398,7 +398,7 @@ impl Model {
             fluctuation: [0.0; 4],
             thrust_n: [0.0; 4],
             effort: [0.0; 4],
-            tau_thrust: Vector6::zeros(),
+            thrust_accel: Vector6::zeros(),
             contact_accel: Vector6::zeros(),
             in_contact: false,
             contact_count: 0,
@@ -463,7 +463,7 @@ impl Model {
         );
         state.thrust_lagged_n = [0.0; 4];
         state.thrust_n = [0.0; 4];
-        state.tau_thrust = Vector6::zeros();
+        state.thrust_accel = Vector6::zeros();
         state.contact_accel = Vector6::zeros();
         state.step += 1;
     }
@@ -638,8 +638,8 @@ impl Model {
         }
 
         // RK4; the thrust is held over the step, so its acceleration is computed once.
-        let (mut position, q, mut nu) =
-            self.rk4(state, &self.state_rates(state), &(self.m_inv * tau));
+        let thrust_accel = self.m_inv * tau;
+        let (mut position, q, mut nu) = self.rk4(state, &self.state_rates(state), &thrust_accel);
         let t_s = (state.step + 1) as f64 * dt;
         if !q.coords.iter().all(|x| x.is_finite()) || q.norm() < 1e-6 {
             return Err(PhysicsError::NonFinite {
@@ -695,7 +695,7 @@ impl Model {
         state.fluctuation = fluctuation;
         state.thrust_n = thrust_n;
         state.effort = commands.map(|c| c.effort());
-        state.tau_thrust = tau;
+        state.thrust_accel = thrust_accel;
         state.contact_accel = (nu - nu_before_contact) / dt;
         if touching && !state.in_contact {
             state.contact_count += 1;
@@ -804,7 +804,7 @@ impl Model {
         let v_r = Vector3::new(state.nu_r[0], state.nu_r[1], state.nu_r[2]);
         let w = Vector3::new(state.nu_r[3], state.nu_r[4], state.nu_r[5]);
         let current_body = att.inverse() * self.world.current_mps;
-        let nu_dot = self.state_rates(state).accel + self.m_inv * state.tau_thrust;
+        let nu_dot = self.state_rates(state).accel + state.thrust_accel;
         // Kinematic acceleration of the CG in body axes is v_r_dot + w x v_r for a constant
         // current; the accelerometer reads it minus gravity.
         let accel = Vector3::new(
