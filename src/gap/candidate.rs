@@ -382,8 +382,9 @@ fn unconfirmed_rival<'a>(round: &'a [Candidate], win: &Candidate) -> Option<&'a 
 /// 1995). Two sensor effects or two physics effects that close are a tie, and so is a
 /// physics effect close behind a sensor winner (a sensor effect may take a disagreement only
 /// with its own signature). Only a sensor effect close behind a physics winner is no tie:
-/// the physics wins. In a round after the first (`later`), two physics effects that change
-/// the residuals alike are judged on the significance scale too ([`later_physics_tie`]).
+/// the physics wins. Two physics effects that change the residuals alike are judged on the
+/// significance scale too ([`physics_tie`]): in a round after the first (`later`) from a
+/// cosine of [`SAME_CHANGE_COSINE`], in the first from [`FIRST_ROUND_SAME_CHANGE_COSINE`].
 /// Library effects only.
 fn lookalike<'a>(round: &'a [Candidate], win: &Candidate, later: bool) -> Option<&'a Candidate> {
     round.iter().find(|c| {
@@ -402,23 +403,34 @@ fn lookalike<'a>(round: &'a [Candidate], win: &Candidate, later: bool) -> Option
         }
         kin && (c.delta_bic_uncalibrated > win.delta_bic_uncalibrated - crate::gap::fit::BIC_MARGIN
             || sensor_tie(c, win)
-            || (later && later_physics_tie(c, win)))
+            || physics_tie(c, win, later))
     })
 }
 
-/// Two physics effects of a round after the first that both pass every guard and change the
-/// residuals alike (cosine at least [`SAME_CHANGE_COSINE`]), where the winner's lead on the
-/// significance scale ([`margin`]) is under the delta-BIC margin. The earlier names took the
-/// disagreement the run shows most clearly; what is left holds the model's correlated error
-/// in a larger share, and there a lead read unscaled names one of two look-alikes the data do
-/// not tell apart (a yaw damping 10.1 ahead of a sway-yaw coupling unscaled, 4.3 on the
-/// scale, cosine 0.985, on a vehicle of another structure whose coupling was hidden). The
-/// first round keeps the unscaled lead: there the simulator's thrust gains and curves,
-/// imbalances and couplings tie on the scale, and a tie there names nothing at all.
-fn later_physics_tie(c: &Candidate, win: &Candidate) -> bool {
+/// Two physics effects that both pass every guard and change the residuals alike, where the
+/// winner's lead on the significance scale ([`margin`]) is under the delta-BIC margin: in a
+/// round after the first (`later`), from a cosine of [`SAME_CHANGE_COSINE`]; in the first,
+/// from [`FIRST_ROUND_SAME_CHANGE_COSINE`].
+///
+/// The earlier names took the disagreement the run shows most clearly; what is left holds
+/// the model's correlated error in a larger share, and there a lead read unscaled names one of
+/// two look-alikes the data do not tell apart (a yaw damping 10.1 ahead of a sway-yaw
+/// coupling unscaled, 4.3 on the scale, cosine 0.985, on a vehicle of another structure whose
+/// coupling was hidden). In the first round only two changes that are nearly one are read on
+/// the scale: the simulator's thrust gains and curves, imbalances and couplings tie there at
+/// lower cosines, and a first-round tie names neither. Nearly one, the unscaled lead is the
+/// base model's error, not the data's preference: a yaw damping 25.5 ahead unscaled, 7.9 on
+/// the scale, cosine 0.996, of a hidden sway-yaw coupling beside a paddle-wheel scale
+/// (structure 618937, seed 564391, pair 37) was named in its place.
+fn physics_tie(c: &Candidate, win: &Candidate, later: bool) -> bool {
+    let least = if later {
+        SAME_CHANGE_COSINE
+    } else {
+        FIRST_ROUND_SAME_CHANGE_COSINE
+    };
     // The cosine is logged with the rival ("a rival of the same kind").
     both_of_one_sort(c, win, true)
-        && change_cosine(c, win).is_some_and(|cosine| cosine >= SAME_CHANGE_COSINE)
+        && change_cosine(c, win).is_some_and(|cosine| cosine >= least)
         && lead_on_the_scale(c, win) < crate::gap::fit::BIC_MARGIN
 }
 
@@ -527,6 +539,11 @@ pub(crate) fn change_projection_where_changed(a: &Candidate, b: &Candidate) -> O
 /// Two fits whose changes of the residuals point the same way at least this closely (the
 /// cosine of the angle between them) explain the same disagreement.
 pub const SAME_CHANGE_COSINE: f64 = 0.9;
+
+/// Two physics fits of a first round whose changes of the residuals point the same way at
+/// least this closely are told apart on the significance scale ([`physics_tie`]): the share
+/// of either change the other does not carry is at most 1 - 0.99^2, about 2 %.
+pub const FIRST_ROUND_SAME_CHANGE_COSINE: f64 = 0.99;
 
 /// `c` fails no guard but its interval, and changes the residuals as `win` does (cosine at
 /// least [`SAME_CHANGE_COSINE`]): it explains the same disagreement, and its interval holds 0
