@@ -786,7 +786,7 @@ pub fn analyse_with(
                 let setup = fit::setup(m, round_configs(), &floors, options.split, &spread)?
                     .with_known(model, &noise_weights(&floors));
                 let unnamed = setup.residuals(&start, &clean0);
-                if fit::moved_to_new_regime(&setup, &unnamed, win)
+                if fit::moved_to_new_regime(&setup, &before_it, &unnamed, win)
                     && let Some(rival) = rival_fits.borrow_mut().rival_of(&setup, win)
                 {
                     return Ok(Some(format!(

@@ -21,15 +21,16 @@ pub const RIVAL_MIN_SHARE: f64 = 0.5;
 pub const RIVAL_SAME_PATTERN_COSINE: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// The structural term that explains what `win` explains, fitted alone against the setup's
-/// model and passing every guard; `None` when none does. It explains as much overall (its
-/// delta BIC within [`BIC_MARGIN`] of `win`'s, in the likelihood rounds are ranked by, or
-/// above it), and it explains the same: of the chi-square `win` takes out of its own
+/// model and passing every guard; `None` when none does. It explains as much overall
+/// ([`explains_as_much`]: `win`'s lead over it on the significance scale under
+/// [`BIC_MARGIN`]), and it explains the same: of the chi-square `win` takes out of its own
 /// signature channels, it takes out at least [`RIVAL_MIN_SHARE`]. A term that gains only
 /// elsewhere is no rival of a winner whose disagreement it leaves (a thruster spin-down that
 /// makes the compass fit worse, of a compass offset). Only the terms acting on a channel of
 /// `win`'s signature are tried ([`effects::structural_rivals`]). A twin of `win`'s form
-/// ([`effects::FORM_TWINS`]) must explain more than `win` by the margin: the two tie on runs
-/// that hold the state they differ by fixed, and a tie is no sign of a stand-in.
+/// ([`effects::FORM_TWINS`]) must explain more than `win` by the margin on that scale: the
+/// two tie on runs that hold the state they differ by fixed, and a tie is no sign of a
+/// stand-in.
 ///
 /// The share is of chi-square, not of the pattern: a rival may take it out by another change
 /// of the residuals than the winner's. The debug line reports how much of the winner's change
@@ -165,20 +166,40 @@ impl RivalFits {
                 heldout_gain = r.heldout_gain,
                 "a structural rival"
             );
-            // A twin of the winner's form ties with it on most runs: it is a rival only
-            // where the data prefer its form.
-            let margin = if effects::by_name(&r.name).is_some_and(|t| effects::twins(effect, t)) {
-                -BIC_MARGIN
-            } else {
-                BIC_MARGIN
-            };
+            let twin = effects::by_name(&r.name).is_some_and(|t| effects::twins(effect, t));
             stands(r)
-                && r.delta_bic_uncalibrated > win.delta_bic_uncalibrated - margin
+                && explains_as_much(win, r, twin)
                 && takes_out(r).is_some_and(|t| t >= RIVAL_MIN_SHARE * win_takes)
                 && (change_cosine_where_changed(r, win)
                     .is_none_or(|c| c >= RIVAL_SAME_PATTERN_COSINE)
                     || !adds_to(setup, effect, r))
         })
+    }
+}
+
+/// Whether the structural term `r` explains as much as `win`: the winner's lead over it on
+/// the significance scale ([`candidate::margin`]: their chi-square gains over the larger of
+/// the two fits' quasi-likelihood scales) is under [`BIC_MARGIN`]. A `twin` of the winner's
+/// form ties with it on most runs: it is a rival only where the data prefer its form, by the
+/// margin.
+///
+/// The scale is the model's correlated error both fits leave: where it is large, an unscaled
+/// lead of a few tens is that error, not the data's preference. After a depth EMI, a thrust
+/// curve took 681.3 against a net buoyancy's 647.1 unscaled, 1.1 on the scale, on a run
+/// with nothing else hidden (structure 622951, seed 568421, case 28), and was named beside
+/// the EMI.
+pub(super) fn explains_as_much(win: &Candidate, r: &Candidate, twin: bool) -> bool {
+    let lead = candidate::margin(win, r);
+    tracing::debug!(
+        winner = win.name,
+        rival = r.name,
+        lead,
+        "the winner's lead over a structural rival on the significance scale"
+    );
+    if twin {
+        lead < -BIC_MARGIN
+    } else {
+        lead < BIC_MARGIN
     }
 }
 
@@ -263,10 +284,31 @@ pub const NEW_REGIME_MIN_SHARE: f64 = 0.25;
 /// first moves the heading and track little (structure seed 188491, seed 171347, case 71:
 /// 25.9 against the sway-yaw coupling's 862.3), a lag several times the calibrated one
 /// moves them all.
-pub fn moved_to_new_regime(setup: &Setup<'_>, unnamed: &Residuals, win: &Candidate) -> bool {
+///
+/// A noise source among the earlier names (`earlier`) takes a winner that moves the noise
+/// source's own channel somewhere new whatever the readings show. The source acts on readings
+/// only; what it did to the vehicle went through the loop closed on that channel into the
+/// commands (a depth hold that chatters its vertical thrusters on a noisy depth reading), which
+/// the re-simulation replays whether the source is named or not, so no reading it predicts
+/// moves when it is named. A winner whose form acts where that loop acts (a thrust curve,
+/// through every thruster and so the depth) meets the chatter; one that moves other channels
+/// alone (a yaw damping: heading, track, sway) does not.
+pub fn moved_to_new_regime(
+    setup: &Setup<'_>,
+    earlier: &[&effects::Effect],
+    unnamed: &Residuals,
+    win: &Candidate,
+) -> bool {
     let Some(effect) = effects::by_name(&win.name) else {
         return true;
     };
+    let moves = |c: &&str| effect.channels.contains(c) || effect.also_moves.contains(c);
+    if earlier
+        .iter()
+        .any(|e| e.kind != effects::Kind::Mean && e.channels.iter().any(moves))
+    {
+        return true;
+    }
     let now = setup.residuals(&setup.base, &setup.clean);
     if now.values.len() != unnamed.values.len() || win.change.len() != now.values.len() {
         return true;

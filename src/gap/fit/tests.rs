@@ -696,11 +696,17 @@ fn a_known_level_is_read_against_the_floor_a_named_emi_raises() {
 /// The earlier names take a later winner somewhere new only where they move the readings of
 /// its channels by a share of what the winner moves them: a depth offset named first leaves
 /// the heading and track a sway-yaw coupling changes nearly as they were, a thruster lag of
-/// 1.5 s more than the model's moves them.
+/// 1.5 s more than the model's moves them. A noise source among the earlier names takes a
+/// winner that moves its channel somewhere new whatever the readings show (the commands it
+/// made the loop give are replayed whether it is named or not): a depth EMI beside the offset
+/// takes a thrust curve there, which acts through the vertical thrusters, and leaves the
+/// coupling's turns where they were.
 #[test]
 fn an_earlier_depth_offset_leaves_a_coupling_in_its_regime_and_a_lag_does_not() {
     let coupling = effects::by_name("sway_yaw_coupling").unwrap();
-    let moved = |earlier: &str, value: f64| {
+    let curve = effects::by_name("thrust_curve").unwrap();
+    let emi = effects::by_name("depth_pwm_emi").unwrap();
+    let moved = |earlier: &str, value: f64, noise: bool, winner: &'static Effect| {
         let earlier = effects::by_name(earlier).unwrap();
         let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(13, |t| {
             effects::apply(coupling, &[2.0], t);
@@ -712,15 +718,77 @@ fn an_earlier_depth_offset_leaves_a_coupling_in_its_regime_and_a_lag_does_not() 
         let clean = resim::simulate(&named, &m, None).unwrap();
         let floors = resim::noise_floor(&named, &m, &clean).unwrap();
         let setup = setup(&m, named, &floors, Split::DEFAULT, &[]).unwrap();
-        let win = fit_effects(&setup, &[coupling], &mut |_| {}).remove(0);
-        assert!(win.guards.all(), "after {}: {:?}", earlier.name, win.guards);
-        moved_to_new_regime(&setup, &setup.residuals(&c, &clean0), &win)
+        let win = fit_effects(&setup, &[winner], &mut |_| {}).remove(0);
+        if winner == coupling {
+            assert!(win.guards.all(), "after {}: {:?}", earlier.name, win.guards);
+        }
+        let named: Vec<&Effect> = if noise {
+            vec![earlier, emi]
+        } else {
+            vec![earlier]
+        };
+        moved_to_new_regime(&setup, &named, &setup.residuals(&c, &clean0), &win)
     };
     assert!(
-        !moved("depth_offset", 0.1),
+        !moved("depth_offset", 0.1, false, coupling),
         "a depth offset moves the turns"
     );
-    assert!(moved("thruster_lag", 1.5), "a lag leaves the turns");
+    assert!(
+        moved("thruster_lag", 1.5, false, coupling),
+        "a lag leaves the turns"
+    );
+    assert!(
+        !moved("depth_offset", 0.1, true, coupling),
+        "a depth EMI moves the turns"
+    );
+    assert!(
+        moved("depth_offset", 0.1, true, curve),
+        "a depth EMI chatters the thrusters a thrust curve acts through"
+    );
+}
+
+/// A structural rival explains as much as a winner when the winner's lead over it on the
+/// significance scale is under the margin, however far ahead it is unscaled (a thrust curve
+/// 34.1 ahead of a net buoyancy after a depth EMI, 1.1 on the scale); a twin of the winner's
+/// form must explain more by the margin on that scale.
+#[test]
+fn a_structural_rival_is_judged_on_the_significance_scale() {
+    let fitted = |name: &str, gain: f64, scale: f64| {
+        let mut c = Candidate::untestable(effects::by_name(name).unwrap(), 100.0, "");
+        c.chi2_before = 10_000.0;
+        c.chi2_after = 10_000.0 - gain;
+        c.delta_bic_uncalibrated = gain - 7.0;
+        c.noise_factor = scale;
+        c.variance_factor = 1.0;
+        c
+    };
+    let win = fitted("thrust_curve", 690.0, 30.0);
+    assert!(rival::explains_as_much(
+        &win,
+        &fitted("net_buoyancy", 656.0, 30.0),
+        false
+    ));
+    assert!(!rival::explains_as_much(
+        &fitted("thrust_curve", 690.0, 1.0),
+        &fitted("net_buoyancy", 656.0, 1.0),
+        false
+    ));
+    assert!(!rival::explains_as_much(
+        &win,
+        &fitted("net_buoyancy", 300.0, 30.0),
+        false
+    ));
+    let coupling = fitted("sway_yaw_coupling", 600.0, 2.0);
+    assert!(!rival::explains_as_much(
+        &coupling,
+        &fitted("munk_moment", 610.0, 2.0),
+        true
+    ));
+    assert!(rival::explains_as_much(
+        &coupling,
+        &fitted("munk_moment", 640.0, 2.0),
+        true
+    ));
 }
 
 /// Sensor effects of the mean type named first leave the vehicle's dynamics as they were; a
