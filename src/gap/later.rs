@@ -84,7 +84,7 @@ pub(crate) fn too_small_a_share(without: &[f64], with: &[f64]) -> Option<String>
 }
 
 /// True when `effect` moves `channel`: one of its signature channels or `also_moves`.
-fn moves(effect: &effects::Effect, channel: &str) -> bool {
+pub(crate) fn moves(effect: &effects::Effect, channel: &str) -> bool {
     effect.channels.contains(&channel) || effect.also_moves.contains(&channel)
 }
 

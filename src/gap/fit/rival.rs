@@ -7,6 +7,7 @@ use crate::gap::candidate::{
     self, Candidate, change_cosine_where_changed, change_projection_where_changed,
 };
 use crate::gap::effects;
+use crate::gap::later;
 use crate::gap::resim;
 
 /// A structural rival must take out of the winner's own signature channels at least this
@@ -302,11 +303,9 @@ pub fn moved_to_new_regime(
     let Some(effect) = effects::by_name(&win.name) else {
         return true;
     };
-    let moves = |c: &&str| effect.channels.contains(c) || effect.also_moves.contains(c);
-    if earlier
-        .iter()
-        .any(|e| e.kind != effects::Kind::Mean && e.channels.iter().any(moves))
-    {
+    if earlier.iter().any(|e| {
+        e.kind != effects::Kind::Mean && e.channels.iter().any(|c| later::moves(effect, c))
+    }) {
         return true;
     }
     let now = setup.residuals(&setup.base, &setup.clean);
