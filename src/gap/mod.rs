@@ -434,6 +434,9 @@ pub fn analyse_with(
     let mut previous: Vec<Candidate> = Vec::new();
     // The structural terms fitted against a round's model, for every winner judged in it.
     let rival_fits = std::cell::RefCell::new(fit::RivalFits::default());
+    // Each winner refused because a structural term explains the same, with that term's fit.
+    let refused_for_structure: std::cell::RefCell<Vec<(String, Candidate)>> =
+        std::cell::RefCell::new(Vec::new());
     let candidate::Selection {
         rounds,
         accepted,
@@ -673,6 +676,16 @@ pub fn analyse_with(
             if let Some((effect, _, _)) = named.last()
                 && let Some(first) = refused_before.first()
                 && effect.kind == effects::Kind::Mean
+                && let Some(win) = accepted.last()
+                && later::held_as_stand_in(
+                    win,
+                    refused_for_structure
+                        .borrow()
+                        .iter()
+                        .rev()
+                        .find(|(name, _)| *name == first.name)
+                        .map(|(_, term)| term),
+                )
             {
                 let share = if named_in_order {
                     later::share_where_it_acts(effect, &channel_names, &current.borrow(), &levels)
@@ -789,14 +802,18 @@ pub fn analyse_with(
                 if fit::moved_to_new_regime(&setup, &before_it, &unnamed, win)
                     && let Some(rival) = rival_fits.borrow_mut().rival_of(&setup, win)
                 {
-                    return Ok(Some(format!(
+                    let why = format!(
                         "`{}`, a term of the base model's structure, explains the same \
                          disagreement as well or better (delta BIC {:.1} \
                          against {:.1}): the earlier names take the vehicle where the baseline \
                          runs did not, and the data do not tell a new effect from structure \
                          those runs left unpinned there",
                         rival.name, rival.delta_bic_uncalibrated, win.delta_bic_uncalibrated
-                    )));
+                    );
+                    refused_for_structure
+                        .borrow_mut()
+                        .push((win.name.clone(), rival));
+                    return Ok(Some(why));
                 }
             }
             *current.borrow_mut() = levels;

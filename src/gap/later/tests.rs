@@ -444,3 +444,42 @@ fn a_later_noise_source_must_take_a_real_share_of_its_channel() {
         "{why}"
     );
 }
+
+/// A winner in place of one a structural term refused is held to most of what is left only
+/// when it changes the residuals as that term does: a water current at right angles to the
+/// lag's form (cosine -0.06, structure 666013 pair 3) meets the later-name rules alone; a
+/// change along the term's, of either sign, or one that cannot be compared, is held; so is
+/// every winner in place of one refused for another reason.
+#[test]
+fn a_winner_in_place_of_a_structural_refusal_is_held_only_when_it_changes_as_the_term_does() {
+    let with_change = |name: &str, change: &[f64]| {
+        let mut c =
+            Candidate::untestable(effects::by_name(name).expect("a library effect"), 1.0, "");
+        c.change = change.to_vec();
+        c
+    };
+    let term = with_change("thruster_lag", &[1.0, 0.0, 0.0, 1.0]);
+    let across = with_change("water_current", &[0.0, 1.0, 1.0, -0.1]);
+    assert!(!held_as_stand_in(&across, Some(&term)));
+    assert!(
+        held_as_stand_in(&across, None),
+        "refused for another reason"
+    );
+    let along = with_change("drag_mismatch", &[1.0, 0.2, 0.0, 1.0]);
+    assert!(held_as_stand_in(&along, Some(&term)));
+    let against = with_change("drag_mismatch", &[-1.0, 0.5, 0.5, -1.0]);
+    assert!(
+        held_as_stand_in(&against, Some(&term)),
+        "a change along the term's, reversed"
+    );
+    // Cosine 0.45: under the bound, not held; 0.55: held.
+    let c = |x: f64| with_change("drag_mismatch", &[x, (1.0 - x * x).sqrt(), 0.0, 0.0]);
+    let unit = with_change("thruster_lag", &[1.0, 0.0, 0.0, 0.0]);
+    assert!(!held_as_stand_in(&c(0.45), Some(&unit)));
+    assert!(held_as_stand_in(&c(0.55), Some(&unit)));
+    let unknown = with_change("water_current", &[]);
+    assert!(
+        held_as_stand_in(&unknown, Some(&term)),
+        "no change to compare"
+    );
+}
