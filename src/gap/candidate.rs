@@ -158,12 +158,44 @@ pub fn winner(round: &[Candidate]) -> Option<&Candidate> {
 pub type FitRound<'a> =
     dyn FnMut(usize, &[Candidate], &[Refused]) -> Result<Option<Vec<Candidate>>, GapError> + 'a;
 /// Takes a round's winner, the last of the accepted effects, into the model; it may replace
-/// the accepted effects' values (the winner's too) by their joint refit. `Some(why)` refuses
-/// the winner after all (the accepted effects' values left as they were): the round's next
-/// candidate is tried in its place, and is handed over with the winners refused before it in
-/// the same round.
+/// the accepted effects' values (the winner's too) by their joint refit. `Some(refusal)`
+/// refuses the winner after all (the accepted effects' values left as they were): the round's
+/// next candidate is tried in its place, and is handed over with the winners refused before it
+/// in the same round.
 pub type Accept<'a> =
-    dyn FnMut(&mut [Candidate], &[Refused]) -> Result<Option<String>, GapError> + 'a;
+    dyn FnMut(&mut [Candidate], &[Refused]) -> Result<Option<Refusal>, GapError> + 'a;
+
+/// Why [`Accept`] refused a winner.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Refusal {
+    /// In words, with the figures.
+    pub why: String,
+    /// The refusal is of the winner's form, not of the disagreement it explains: a term of the
+    /// base model's structure explains that disagreement as well or better in the winner's own
+    /// channels. A look-alike the winner tied with has other channels and another form, and is
+    /// judged on its own; a refusal of the disagreement (nothing left beyond what runs with
+    /// nothing new show) refuses the look-alike with it.
+    pub of_its_form: bool,
+}
+
+impl Refusal {
+    /// A refusal of the winner's form ([`Refusal::of_its_form`]).
+    pub fn of_its_form(why: String) -> Self {
+        Self {
+            why,
+            of_its_form: true,
+        }
+    }
+}
+
+impl From<String> for Refusal {
+    fn from(why: String) -> Self {
+        Self {
+            why,
+            of_its_form: false,
+        }
+    }
+}
 
 /// Winners one round may refuse before the selection stops. A refusal says the winner is
 /// no effect of its own (it does not shrink the gap, or it stands in for what the earlier
@@ -196,7 +228,9 @@ pub fn select(
 /// effect beside them (a depth offset or gain that one held depth cannot tell apart, beside a
 /// depth EMI), and either look-alike takes the same disagreement out of what the later rounds
 /// see. A second tie ends the selection as [`select`] does. A winner refused when taken in
-/// is no effect, nor its look-alike: both are refused and the selection ends, with no tie.
+/// is no effect, nor its look-alike: both are refused and the selection ends, with no tie;
+/// unless it is refused for its form ([`Refusal::of_its_form`]): then it gives way as any
+/// refused winner does, and the look-alike is judged on its own in its place.
 pub fn select_past_ties(
     max: usize,
     fit_round: &mut FitRound<'_>,
@@ -252,7 +286,7 @@ fn select_with(
                 if carry && carried.is_none() {
                     accepted.push(win);
                     let this_round = &refused[refused.len() - refused_here..];
-                    let Some(why) = accept(&mut accepted, this_round)? else {
+                    let Some(refusal) = accept(&mut accepted, this_round)? else {
                         tracing::debug!(
                             round,
                             ?pair,
@@ -262,9 +296,21 @@ fn select_with(
                         continue 'rounds;
                     };
                     accepted.pop();
+                    let Refusal { why, of_its_form } = refusal;
+                    tracing::debug!(round, ?pair, why, of_its_form, "a tie's winner refused");
+                    if of_its_form {
+                        // Its form refused, the winner gives way as any refused winner does,
+                        // and the look-alike is judged on its own in its place.
+                        let [name, _] = pair;
+                        refused.push(Refused { round, name, why });
+                        refused_here += 1;
+                        if refused_here >= REFUSALS_PER_ROUND {
+                            break 'rounds;
+                        }
+                        continue;
+                    }
                     // Refused, the winner is no effect, and its look-alike, which explains
                     // the same disagreement about as well, none either: no tie to report.
-                    tracing::debug!(round, ?pair, why, "a tie's winner refused");
                     let [name, alt] = pair;
                     let alt_why = format!("it ties with `{name}`, refused: {why}");
                     refused.push(Refused { round, name, why });
@@ -281,7 +327,7 @@ fn select_with(
             let name = win.name.clone();
             accepted.push(win);
             let this_round = &refused[refused.len() - refused_here..];
-            let Some(why) = accept(&mut accepted, this_round)? else {
+            let Some(Refusal { why, .. }) = accept(&mut accepted, this_round)? else {
                 continue 'rounds;
             };
             accepted.pop();

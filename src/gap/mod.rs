@@ -540,10 +540,13 @@ pub fn analyse_with(
                 && effect.kind == effects::Kind::Mean
                 && mean >= without
             {
-                return Ok(Some(format!(
-                    "with it, the channels' mean chi-square over their known levels is \
+                return Ok(Some(
+                    format!(
+                        "with it, the channels' mean chi-square over their known levels is \
                      {mean:.3}, against {without:.3} without it: it does not shrink the gap"
-                )));
+                    )
+                    .into(),
+                ));
             }
             // An effect named after others is refused as a stand-in when it explains only a
             // small part of what the earlier names left and its value follows them: where they
@@ -586,7 +589,7 @@ pub fn analyse_with(
                 && let Some(why) =
                     later::first_name_without_excess(effect, &channel_names, &current.borrow())
             {
-                return Ok(Some(why));
+                return Ok(Some(why.into()));
             }
             if let Some((effect, _, _)) = named.last()
                 && named.len() == 1
@@ -603,7 +606,7 @@ pub fn analyse_with(
                     &noise_weights(&current_floors.borrow()),
                 )?
             {
-                return Ok(Some(why));
+                return Ok(Some(why.into()));
             }
             // An effect named after others must take at least a tenth of what they left
             // (`later::too_small_later_share`); a noise source refused there leaves the
@@ -622,7 +625,7 @@ pub fn analyse_with(
                         *current_floors.borrow_mut() = floors;
                         *floors_of.borrow_mut() = of;
                     }
-                    return Ok(Some(why));
+                    return Ok(Some(why.into()));
                 }
                 if excess_where_it_acts {
                     if let Some(why) = nothing_off_that_it_moves(
@@ -633,10 +636,13 @@ pub fn analyse_with(
                         &current_floors.borrow(),
                         &noise_weights(&current_floors.borrow()),
                     )? {
-                        return Ok(Some(format!(
-                            "the effects named before it leave the channels' mean chi-square \
+                        return Ok(Some(
+                            format!(
+                                "the effects named before it leave the channels' mean chi-square \
                              at {without:.3}, at or below the known levels, and {why}"
-                        )));
+                            )
+                            .into(),
+                        ));
                     }
                     tracing::debug!(
                         effect = effect.name,
@@ -664,12 +670,15 @@ pub fn analyse_with(
                     &noise_weights(&current_floors.borrow()),
                 )?
             {
-                return Ok(Some(format!(
-                    "it explains {:.0} % of the disagreement the effects named before it left \
+                return Ok(Some(
+                    format!(
+                        "it explains {:.0} % of the disagreement the effects named before it left \
                      (the channels' mean chi-square over their known levels {without:.3} -> \
                      {mean:.3}), and {why}",
-                    100.0 * share
-                )));
+                        100.0 * share
+                    )
+                    .into(),
+                ));
             }
             // A winner in place of one refused in the same round must explain most of what
             // is left in the channels it moves (`later::share_where_it_acts`).
@@ -698,15 +707,18 @@ pub fn analyse_with(
                     } else {
                         "in the channels"
                     };
-                    return Ok(Some(format!(
-                        "it takes the place of `{}`, refused in the same round, and explains \
+                    return Ok(Some(
+                        format!(
+                            "it takes the place of `{}`, refused in the same round, and explains \
                          only {:.0} % of the disagreement left {there} (their mean chi-square \
                          over their known levels); in place of a refused winner an effect must \
                          explain most of it ({:.0} %)",
-                        first.name,
-                        100.0 * share,
-                        100.0 * LATER_NAME_MIN_SHARE
-                    )));
+                            first.name,
+                            100.0 * share,
+                            100.0 * LATER_NAME_MIN_SHARE
+                        )
+                        .into(),
+                    ));
                 }
             }
             // The effects named before the newest, the latest first.
@@ -781,7 +793,7 @@ pub fn analyse_with(
                             t.statistic,
                             t.critical,
                             100.0 * fit::CONSTANCY_LEVEL
-                        )));
+                        ).into()));
                     }
                 }
             }
@@ -813,7 +825,7 @@ pub fn analyse_with(
                     refused_for_structure
                         .borrow_mut()
                         .push((win.name.clone(), rival));
-                    return Ok(Some(why));
+                    return Ok(Some(candidate::Refusal::of_its_form(why)));
                 }
             }
             *current.borrow_mut() = levels;

@@ -116,7 +116,7 @@ fn a_refused_winner_gives_way_to_the_next_candidate_of_its_round() {
                 name.clone(),
                 before.iter().map(|r| r.name.clone()).collect::<Vec<_>>(),
             ));
-            Ok((name == "added_mass").then(|| "it does not shrink the gap".to_string()))
+            Ok((name == "added_mass").then(|| "it does not shrink the gap".to_string().into()))
         },
     )
     .unwrap();
@@ -166,7 +166,7 @@ fn refusals_up_to_the_limit_end_the_selection() {
         },
         &mut |accepted, _| {
             tried.push(accepted.last().unwrap().name.clone());
-            Ok(Some("a stand-in".to_string()))
+            Ok(Some("a stand-in".to_string().into()))
         },
     )
     .unwrap();
@@ -343,7 +343,8 @@ fn two_effects_of_one_kind_within_the_margin_are_ambiguous() {
 /// A tie says nothing of a second effect beside it: carrying on past it, the selection
 /// takes the tie's winner into the model unnamed, leaves its look-alike out of the later
 /// rounds, and names the next round's winner; a second tie ends the selection there as
-/// `select` does, and a winner refused at the tie ends it with both refused, no tie.
+/// `select` does, and a winner refused at the tie ends it with both refused, no tie, unless
+/// the refusal is of the winner's form: then the look-alike is judged on its own.
 #[test]
 fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
     let rounds = |round: usize| match round {
@@ -402,13 +403,47 @@ fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
     let refused = select_past_ties(
         3,
         &mut |round, _, _| Ok(Some(rounds(round))),
-        &mut |_, _| Ok(Some("no".to_string())),
+        &mut |_, _| Ok(Some("no".to_string().into())),
     )
     .unwrap();
     assert!(refused.accepted.is_empty() && refused.carried.is_none());
     assert!(refused.ambiguous.is_none());
     let names: Vec<&str> = refused.refused.iter().map(|r| r.name.as_str()).collect();
     assert_eq!(names, ["depth_offset", "depth_gain"]);
+
+    // The tie's winner refused for its form (a structural term explains its disagreement in
+    // its own channels): it gives way as any refused winner does, and its look-alike is
+    // judged on its own in its place, handed over with it.
+    let mut handed = Vec::new();
+    let form = select_past_ties(
+        3,
+        &mut |round, accepted, _| {
+            let left = rounds(round).into_iter();
+            Ok(Some(
+                left.filter(|c| accepted.iter().all(|a| a.name != c.name))
+                    .collect(),
+            ))
+        },
+        &mut |accepted, before| {
+            let name = accepted.last().unwrap().name.clone();
+            handed.push((name.clone(), before.len()));
+            Ok((name == "depth_offset")
+                .then(|| Refusal::of_its_form("a structural term explains it".to_string())))
+        },
+    )
+    .unwrap();
+    let names: Vec<&str> = form.accepted.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["depth_gain", "depth_pwm_emi"]);
+    assert!(form.ambiguous.is_none() && form.carried.is_none());
+    let refused: Vec<&str> = form.refused.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(refused, ["depth_offset"]);
+    assert_eq!(
+        handed[..2],
+        [
+            ("depth_offset".to_string(), 0),
+            ("depth_gain".to_string(), 1)
+        ]
+    );
 
     // A second tie ends it, the first carried.
     let twice = select_past_ties(
