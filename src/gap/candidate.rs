@@ -53,7 +53,7 @@ impl Guards {
 }
 
 /// An effect accepted in an earlier round, refitted jointly with a later candidate.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Refitted {
     pub name: String,
     pub values: Vec<f64>,
@@ -61,7 +61,7 @@ pub struct Refitted {
 }
 
 /// What fitting one candidate gave.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Candidate {
     pub name: String,
     /// (parameter, fitted change relative to the model).
@@ -166,25 +166,32 @@ pub type Accept<'a> =
     dyn FnMut(&mut [Candidate], &[Refused]) -> Result<Option<Refusal>, GapError> + 'a;
 
 /// Why [`Accept`] refused a winner.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Refusal {
     /// In words, with the figures.
     pub why: String,
-    /// The refusal is of the winner's form, not of the disagreement it explains: a term of the
-    /// base model's structure explains that disagreement as well or better in the winner's own
-    /// channels. A look-alike the winner tied with has other channels and another form, and is
-    /// judged on its own; a refusal of the disagreement (nothing left beyond what runs with
-    /// nothing new show) refuses the look-alike with it.
-    pub of_its_form: bool,
+    /// Set when the refusal is of the winner's form, not of the disagreement it explains: this
+    /// term of the base model's structure, fitted in the winner's place, explains that
+    /// disagreement as well or better in the winner's own channels. A look-alike the winner
+    /// tied with has other channels and another form, and is judged on its own; a refusal of
+    /// the disagreement (nothing left beyond what runs with nothing new show) refuses the
+    /// look-alike with it.
+    pub structure: Option<Box<Candidate>>,
 }
 
 impl Refusal {
-    /// A refusal of the winner's form ([`Refusal::of_its_form`]).
-    pub fn of_its_form(why: String) -> Self {
+    /// A refusal of the winner's form: `term`, of the base model's structure, explains what
+    /// it does ([`Refusal::structure`]).
+    pub fn of_its_form(why: String, term: Candidate) -> Self {
         Self {
             why,
-            of_its_form: true,
+            structure: Some(Box::new(term)),
         }
+    }
+
+    /// Whether the refusal is of the winner's form ([`Refusal::structure`]).
+    pub fn is_of_its_form(&self) -> bool {
+        self.structure.is_some()
     }
 }
 
@@ -192,7 +199,7 @@ impl From<String> for Refusal {
     fn from(why: String) -> Self {
         Self {
             why,
-            of_its_form: false,
+            structure: None,
         }
     }
 }
@@ -296,13 +303,19 @@ fn select_with(
                         continue 'rounds;
                     };
                     accepted.pop();
-                    let Refusal { why, of_its_form } = refusal;
+                    let of_its_form = refusal.is_of_its_form();
+                    let Refusal { why, structure } = refusal;
                     tracing::debug!(round, ?pair, why, of_its_form, "a tie's winner refused");
                     if of_its_form {
                         // Its form refused, the winner gives way as any refused winner does,
                         // and the look-alike is judged on its own in its place.
                         let [name, _] = pair;
-                        refused.push(Refused { round, name, why });
+                        refused.push(Refused {
+                            round,
+                            name,
+                            why,
+                            structure,
+                        });
                         refused_here += 1;
                         if refused_here >= REFUSALS_PER_ROUND {
                             break 'rounds;
@@ -313,12 +326,8 @@ fn select_with(
                     // the same disagreement about as well, none either: no tie to report.
                     let [name, alt] = pair;
                     let alt_why = format!("it ties with `{name}`, refused: {why}");
-                    refused.push(Refused { round, name, why });
-                    refused.push(Refused {
-                        round,
-                        name: alt,
-                        why: alt_why,
-                    });
+                    refused.push(Refused::of_the_disagreement(round, name, why));
+                    refused.push(Refused::of_the_disagreement(round, alt, alt_why));
                     break 'rounds;
                 }
                 ambiguous = Some(pair);
@@ -327,12 +336,17 @@ fn select_with(
             let name = win.name.clone();
             accepted.push(win);
             let this_round = &refused[refused.len() - refused_here..];
-            let Some(Refusal { why, .. }) = accept(&mut accepted, this_round)? else {
+            let Some(Refusal { why, structure }) = accept(&mut accepted, this_round)? else {
                 continue 'rounds;
             };
             accepted.pop();
             tracing::debug!(round, winner = name, why, "a round's winner refused");
-            refused.push(Refused { round, name, why });
+            refused.push(Refused {
+                round,
+                name,
+                why,
+                structure,
+            });
             refused_here += 1;
             if refused_here >= REFUSALS_PER_ROUND {
                 break 'rounds;
@@ -393,6 +407,22 @@ pub struct Refused {
     pub name: String,
     /// Why, in words with the figures.
     pub why: String,
+    /// The term of the base model's structure that explains its disagreement as well or better,
+    /// where it was refused for its form ([`Refusal::structure`]).
+    #[serde(skip)]
+    pub structure: Option<Box<Candidate>>,
+}
+
+impl Refused {
+    /// A winner refused for the disagreement it explains, not for its form.
+    pub fn of_the_disagreement(round: usize, name: String, why: String) -> Self {
+        Self {
+            round,
+            name,
+            why,
+            structure: None,
+        }
+    }
 }
 
 /// The candidate a round's winner was not named for ([`Selection::outranked_by`]).

@@ -434,9 +434,6 @@ pub fn analyse_with(
     let mut previous: Vec<Candidate> = Vec::new();
     // The structural terms fitted against a round's model, for every winner judged in it.
     let rival_fits = std::cell::RefCell::new(fit::RivalFits::default());
-    // Each winner refused because a structural term explains the same, with that term's fit.
-    let refused_for_structure: std::cell::RefCell<Vec<(String, Candidate)>> =
-        std::cell::RefCell::new(Vec::new());
     let candidate::Selection {
         rounds,
         accepted,
@@ -540,13 +537,11 @@ pub fn analyse_with(
                 && effect.kind == effects::Kind::Mean
                 && mean >= without
             {
-                return Ok(Some(
-                    format!(
-                        "with it, the channels' mean chi-square over their known levels is \
+                let why = format!(
+                    "with it, the channels' mean chi-square over their known levels is \
                      {mean:.3}, against {without:.3} without it: it does not shrink the gap"
-                    )
-                    .into(),
-                ));
+                );
+                return Ok(Some(why.into()));
             }
             // An effect named after others is refused as a stand-in when it explains only a
             // small part of what the earlier names left and its value follows them: where they
@@ -636,13 +631,11 @@ pub fn analyse_with(
                         &current_floors.borrow(),
                         &noise_weights(&current_floors.borrow()),
                     )? {
-                        return Ok(Some(
-                            format!(
-                                "the effects named before it leave the channels' mean chi-square \
+                        let why = format!(
+                            "the effects named before it leave the channels' mean chi-square \
                              at {without:.3}, at or below the known levels, and {why}"
-                            )
-                            .into(),
-                        ));
+                        );
+                        return Ok(Some(why.into()));
                     }
                     tracing::debug!(
                         effect = effect.name,
@@ -670,15 +663,13 @@ pub fn analyse_with(
                     &noise_weights(&current_floors.borrow()),
                 )?
             {
-                return Ok(Some(
-                    format!(
-                        "it explains {:.0} % of the disagreement the effects named before it left \
+                let why = format!(
+                    "it explains {:.0} % of the disagreement the effects named before it left \
                      (the channels' mean chi-square over their known levels {without:.3} -> \
                      {mean:.3}), and {why}",
-                        100.0 * share
-                    )
-                    .into(),
-                ));
+                    100.0 * share
+                );
+                return Ok(Some(why.into()));
             }
             // A winner in place of one refused in the same round must explain most of what
             // is left in the channels it moves (`later::share_where_it_acts`).
@@ -686,15 +677,7 @@ pub fn analyse_with(
                 && let Some(first) = refused_before.first()
                 && effect.kind == effects::Kind::Mean
                 && let Some(win) = accepted.last()
-                && later::held_as_stand_in(
-                    win,
-                    refused_for_structure
-                        .borrow()
-                        .iter()
-                        .rev()
-                        .find(|(name, _)| *name == first.name)
-                        .map(|(_, term)| term),
-                )
+                && later::held_as_stand_in(win, first.structure.as_deref())
             {
                 let share = if named_in_order {
                     later::share_where_it_acts(effect, &channel_names, &current.borrow(), &levels)
@@ -707,18 +690,16 @@ pub fn analyse_with(
                     } else {
                         "in the channels"
                     };
-                    return Ok(Some(
-                        format!(
-                            "it takes the place of `{}`, refused in the same round, and explains \
+                    let why = format!(
+                        "it takes the place of `{}`, refused in the same round, and explains \
                          only {:.0} % of the disagreement left {there} (their mean chi-square \
                          over their known levels); in place of a refused winner an effect must \
                          explain most of it ({:.0} %)",
-                            first.name,
-                            100.0 * share,
-                            100.0 * LATER_NAME_MIN_SHARE
-                        )
-                        .into(),
-                    ));
+                        first.name,
+                        100.0 * share,
+                        100.0 * LATER_NAME_MIN_SHARE
+                    );
+                    return Ok(Some(why.into()));
                 }
             }
             // The effects named before the newest, the latest first.
@@ -780,7 +761,7 @@ pub fn analyse_with(
                                 .collect::<Vec<_>>()
                                 .join(", ")
                         };
-                        return Ok(Some(format!(
+                        let why = format!(
                             "it explains {:.0} % of the disagreement the effects named before it \
                              left (the channels' mean chi-square over their known levels \
                              {without:.3} -> {mean:.3}), and its value follows them: [{}] in the \
@@ -793,7 +774,8 @@ pub fn analyse_with(
                             t.statistic,
                             t.critical,
                             100.0 * fit::CONSTANCY_LEVEL
-                        ).into()));
+                        );
+                        return Ok(Some(why.into()));
                     }
                 }
             }
@@ -822,10 +804,7 @@ pub fn analyse_with(
                          those runs left unpinned there",
                         rival.name, rival.delta_bic_uncalibrated, win.delta_bic_uncalibrated
                     );
-                    refused_for_structure
-                        .borrow_mut()
-                        .push((win.name.clone(), rival));
-                    return Ok(Some(candidate::Refusal::of_its_form(why)));
+                    return Ok(Some(candidate::Refusal::of_its_form(why, rival)));
                 }
             }
             *current.borrow_mut() = levels;

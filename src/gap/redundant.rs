@@ -189,18 +189,19 @@ pub(crate) fn drop_redundant(
             ci95 = ?judged[i].1,
             "an earlier name the later ones leave without an effect"
         );
-        dropped.push(Refused {
-            round: rounds.remove(i),
-            name: gone.name,
-            why: format!(
-                "refitted together with `{}`, named after it, its value is [{}] with 95 % \
-                 interval {intervals}, which holds no effect, against [{}] when it was named: \
-                 what it explained, they explain",
-                later.join("`, `"),
-                show(&judged[i].0),
-                show(was)
-            ),
-        });
+        let why = format!(
+            "refitted together with `{}`, named after it, its value is [{}] with 95 % interval \
+             {intervals}, which holds no effect, against [{}] when it was named: what it \
+             explained, they explain",
+            later.join("`, `"),
+            show(&judged[i].0),
+            show(was)
+        );
+        dropped.push(Refused::of_the_disagreement(
+            rounds.remove(i),
+            gone.name,
+            why,
+        ));
         judged.remove(i);
         let mut set = kept.clone();
         set.extend(beside.cloned());

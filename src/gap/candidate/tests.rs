@@ -134,11 +134,11 @@ fn a_refused_winner_gives_way_to_the_next_candidate_of_its_round() {
     );
     assert_eq!(
         selection.refused,
-        vec![Refused {
-            round: 1,
-            name: "added_mass".into(),
-            why: "it does not shrink the gap".into()
-        }]
+        vec![Refused::of_the_disagreement(
+            1,
+            "added_mass".into(),
+            "it does not shrink the gap".into()
+        )]
     );
     assert_eq!(selection.ambiguous, None);
     assert_eq!(rounds_fitted, 3);
@@ -427,8 +427,12 @@ fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
         &mut |accepted, before| {
             let name = accepted.last().unwrap().name.clone();
             handed.push((name.clone(), before.len()));
-            Ok((name == "depth_offset")
-                .then(|| Refusal::of_its_form("a structural term explains it".to_string())))
+            Ok((name == "depth_offset").then(|| {
+                Refusal::of_its_form(
+                    "a structural term explains it".to_string(),
+                    candidate("float_depth", 45.0, true),
+                )
+            }))
         },
     )
     .unwrap();
@@ -437,6 +441,11 @@ fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
     assert!(form.ambiguous.is_none() && form.carried.is_none());
     let refused: Vec<&str> = form.refused.iter().map(|r| r.name.as_str()).collect();
     assert_eq!(refused, ["depth_offset"]);
+    assert_eq!(
+        form.refused[0].structure.as_ref().map(|t| t.name.as_str()),
+        Some("float_depth"),
+        "a refusal of the winner's form keeps the structural term that explains it"
+    );
     assert_eq!(
         handed[..2],
         [
