@@ -235,9 +235,10 @@ pub fn select(
 /// effect beside them (a depth offset or gain that one held depth cannot tell apart, beside a
 /// depth EMI), and either look-alike takes the same disagreement out of what the later rounds
 /// see. A second tie ends the selection as [`select`] does. A winner refused when taken in
-/// is no effect, nor its look-alike: both are refused and the selection ends, with no tie;
-/// unless it is refused for its form ([`Refusal::of_its_form`]): then it gives way as any
-/// refused winner does, and the look-alike is judged on its own in its place.
+/// is no effect, nor its look-alike: both are refused, with no tie, one refusal of the round
+/// between them, and the round's next candidate is judged in their place; unless it is
+/// refused for its form ([`Refusal::of_its_form`]): then it gives way as any refused winner
+/// does, and the look-alike is judged on its own in its place.
 pub fn select_past_ties(
     max: usize,
     fit_round: &mut FitRound<'_>,
@@ -272,6 +273,8 @@ fn select_with(
         // The round's candidates less those refused in it or before: a refused winner is
         // judged no effect, so it neither wins again nor counts as a rival of the next.
         let mut refused_here = 0;
+        // The refused records of this round begin here (a tie refused leaves two).
+        let round_start = refused.len();
         loop {
             let pool: Vec<Candidate> = results
                 .iter()
@@ -292,7 +295,7 @@ fn select_with(
                 let pair = [win.name.clone(), alt.name.clone()];
                 if carry && carried.is_none() {
                     accepted.push(win);
-                    let this_round = &refused[refused.len() - refused_here..];
+                    let this_round = &refused[round_start..];
                     let Some(refusal) = accept(&mut accepted, this_round)? else {
                         tracing::debug!(
                             round,
@@ -324,18 +327,24 @@ fn select_with(
                     }
                     // Refused, the winner is no effect, and its look-alike, which explains
                     // the same disagreement about as well, none either: no tie to report.
+                    // One disagreement refused, one refusal of the round: its next candidate,
+                    // which the two took the lead from, is judged in their place.
                     let [name, alt] = pair;
                     let alt_why = format!("it ties with `{name}`, refused: {why}");
                     refused.push(Refused::of_the_disagreement(round, name, why));
                     refused.push(Refused::of_the_disagreement(round, alt, alt_why));
-                    break 'rounds;
+                    refused_here += 1;
+                    if refused_here >= REFUSALS_PER_ROUND {
+                        break 'rounds;
+                    }
+                    continue;
                 }
                 ambiguous = Some(pair);
                 break 'rounds;
             }
             let name = win.name.clone();
             accepted.push(win);
-            let this_round = &refused[refused.len() - refused_here..];
+            let this_round = &refused[round_start..];
             let Some(Refusal { why, structure }) = accept(&mut accepted, this_round)? else {
                 continue 'rounds;
             };

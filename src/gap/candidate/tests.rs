@@ -343,8 +343,9 @@ fn two_effects_of_one_kind_within_the_margin_are_ambiguous() {
 /// A tie says nothing of a second effect beside it: carrying on past it, the selection
 /// takes the tie's winner into the model unnamed, leaves its look-alike out of the later
 /// rounds, and names the next round's winner; a second tie ends the selection there as
-/// `select` does, and a winner refused at the tie ends it with both refused, no tie, unless
-/// the refusal is of the winner's form: then the look-alike is judged on its own.
+/// `select` does, and a winner refused at the tie is refused with its look-alike, no tie, as
+/// one refusal of the round, the round's next candidate judged in their place, unless the
+/// refusal is of the winner's form: then the look-alike is judged on its own.
 #[test]
 fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
     let rounds = |round: usize| match round {
@@ -398,18 +399,53 @@ fn the_selection_carries_on_past_a_tie_to_a_second_effect() {
         Some(["depth_offset".to_string(), "depth_gain".to_string()])
     );
 
-    // The tie's winner refused when taken in: it is no effect, nor is its look-alike,
-    // and the selection ends with both refused and no tie.
+    // The tie's winner refused when taken in: it is no effect, nor is its look-alike; both
+    // are refused, no tie, and the round's next candidate is judged in their place, handed
+    // over with both. Refused too, it is the round's second refusal, and the selection ends.
+    let mut handed = Vec::new();
     let refused = select_past_ties(
         3,
         &mut |round, _, _| Ok(Some(rounds(round))),
-        &mut |_, _| Ok(Some("no".to_string().into())),
+        &mut |accepted, before| {
+            handed.push((accepted.last().unwrap().name.clone(), before.len()));
+            Ok(Some("no".to_string().into()))
+        },
     )
     .unwrap();
     assert!(refused.accepted.is_empty() && refused.carried.is_none());
     assert!(refused.ambiguous.is_none());
     let names: Vec<&str> = refused.refused.iter().map(|r| r.name.as_str()).collect();
-    assert_eq!(names, ["depth_offset", "depth_gain"]);
+    assert_eq!(names, ["depth_offset", "depth_gain", "depth_pwm_emi"]);
+    assert_eq!(
+        handed,
+        [
+            ("depth_offset".to_string(), 0),
+            ("depth_pwm_emi".to_string(), 2)
+        ]
+    );
+    assert_eq!(refused.rounds.len(), 1);
+    // Only the tie refused, the next candidate is named in its place.
+    let next = select_past_ties(
+        3,
+        &mut |round, accepted, refused| {
+            let left = rounds(round).into_iter();
+            Ok(Some(
+                left.filter(|c| {
+                    accepted.iter().all(|a| a.name != c.name)
+                        && refused.iter().all(|r| r.name != c.name)
+                })
+                .collect(),
+            ))
+        },
+        &mut |accepted, _| {
+            let name = &accepted.last().unwrap().name;
+            Ok((name == "depth_offset").then(|| "no".to_string().into()))
+        },
+    )
+    .unwrap();
+    let names: Vec<&str> = next.accepted.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["depth_pwm_emi"]);
+    assert!(next.ambiguous.is_none() && next.carried.is_none());
 
     // The tie's winner refused for its form (a structural term explains its disagreement in
     // its own channels): it gives way as any refused winner does, and its look-alike is
