@@ -309,30 +309,25 @@ fn select_with(
                     let of_its_form = refusal.is_of_its_form();
                     let Refusal { why, structure } = refusal;
                     tracing::debug!(round, ?pair, why, of_its_form, "a tie's winner refused");
+                    let [name, alt] = pair;
                     if of_its_form {
                         // Its form refused, the winner gives way as any refused winner does,
                         // and the look-alike is judged on its own in its place.
-                        let [name, _] = pair;
                         refused.push(Refused {
                             round,
                             name,
                             why,
                             structure,
                         });
-                        refused_here += 1;
-                        if refused_here >= REFUSALS_PER_ROUND {
-                            break 'rounds;
-                        }
-                        continue;
+                    } else {
+                        // Refused, the winner is no effect, and its look-alike, which explains
+                        // the same disagreement about as well, none either: no tie to report.
+                        // One disagreement refused, one refusal of the round: its next
+                        // candidate, which the two took the lead from, is judged in their place.
+                        let alt_why = format!("it ties with `{name}`, refused: {why}");
+                        refused.push(Refused::of_the_disagreement(round, name, why));
+                        refused.push(Refused::of_the_disagreement(round, alt, alt_why));
                     }
-                    // Refused, the winner is no effect, and its look-alike, which explains
-                    // the same disagreement about as well, none either: no tie to report.
-                    // One disagreement refused, one refusal of the round: its next candidate,
-                    // which the two took the lead from, is judged in their place.
-                    let [name, alt] = pair;
-                    let alt_why = format!("it ties with `{name}`, refused: {why}");
-                    refused.push(Refused::of_the_disagreement(round, name, why));
-                    refused.push(Refused::of_the_disagreement(round, alt, alt_why));
                     refused_here += 1;
                     if refused_here >= REFUSALS_PER_ROUND {
                         break 'rounds;

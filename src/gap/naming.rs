@@ -85,6 +85,11 @@ impl Winner<'_> {
     fn newest(&self) -> Option<(&'static effects::Effect, f64)> {
         self.named.last().map(|(e, _, nf)| (*e, *nf))
     }
+
+    /// The effects named before the newest, the latest first.
+    fn before_it(&self) -> Vec<&'static effects::Effect> {
+        self.named.iter().rev().skip(1).map(|n| n.0).collect()
+    }
 }
 
 impl Naming<'_> {
@@ -461,8 +466,6 @@ impl Naming<'_> {
         {
             return Ok(None);
         }
-        // The effects named before the newest, the latest first.
-        let before_it: Vec<&effects::Effect> = w.named.iter().rev().skip(1).map(|n| n.0).collect();
         let floors = self.current_floors.borrow();
         let setup = self.setup_on(w.earlier.clone(), &floors)?;
         let now = setup.residuals(&setup.base, &setup.clean);
@@ -481,7 +484,7 @@ impl Naming<'_> {
             "blocks where they change the fit most",
             "where they change it least",
         )];
-        if before_it.iter().any(|e| e.kind != effects::Kind::Mean) {
+        if w.before_it().iter().any(|e| e.kind != effects::Kind::Mean) {
             splits.push((
                 fit::noise_source_blocks(&now, self.floors, &floors, block_s),
                 "blocks where the noise source named before it widens the floor",
@@ -537,20 +540,19 @@ impl Naming<'_> {
         let Some((effect, _)) = w.newest() else {
             return Ok(None);
         };
-        let before_it: Vec<&effects::Effect> = w.named.iter().rev().skip(1).map(|n| n.0).collect();
         let Some(win) = accepted.last() else {
             return Ok(None);
         };
         if w.named.len() <= 1
             || effect.kind != effects::Kind::Mean
-            || !fit::earlier_change_dynamics(&before_it)
+            || !fit::earlier_change_dynamics(&w.before_it())
         {
             return Ok(None);
         }
         let floors = self.current_floors.borrow();
         let setup = self.setup_on(self.configs.borrow().clone(), &floors)?;
         let unnamed = setup.residuals(self.start, self.clean0);
-        if fit::moved_to_new_regime(&setup, &before_it, &unnamed, win)
+        if fit::moved_to_new_regime(&setup, &w.before_it(), &unnamed, win)
             && let Some(rival) = self.rival_fits.borrow_mut().rival_of(&setup, win)
         {
             let why = format!(
