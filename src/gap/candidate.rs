@@ -177,6 +177,11 @@ pub struct Refusal {
     /// the disagreement (nothing left beyond what runs with nothing new show) refuses the
     /// look-alike with it.
     pub structure: Option<Box<Candidate>>,
+    /// Set when the refusal refuses again what an earlier refusal of its round refused: a
+    /// winner held as a stand-in for the structural term that refused the round's first
+    /// winner ([`later::held_as_stand_in`](crate::gap::later)) is refused for the disagreement
+    /// that term explains. It is no second refusal of the round ([`REFUSALS_PER_ROUND`]).
+    pub repeats: bool,
 }
 
 impl Refusal {
@@ -186,6 +191,16 @@ impl Refusal {
         Self {
             why,
             structure: Some(Box::new(term)),
+            repeats: false,
+        }
+    }
+
+    /// A refusal of what an earlier refusal of the round refused ([`Refusal::repeats`]).
+    pub fn repeating(why: String) -> Self {
+        Self {
+            why,
+            structure: None,
+            repeats: true,
         }
     }
 
@@ -200,6 +215,7 @@ impl From<String> for Refusal {
         Self {
             why,
             structure: None,
+            repeats: false,
         }
     }
 }
@@ -209,7 +225,9 @@ impl From<String> for Refusal {
 /// names or the base model's structure lack), not that the round holds none: the next
 /// candidate may be the effect the refused one stood in front of. Two refused in one round
 /// say most of what is left is what no candidate is; each refusal also costs a structural
-/// check of up to 14 fits.
+/// check of up to 14 fits. A refusal that repeats an earlier one of its round
+/// ([`Refusal::repeats`]) refuses no new disagreement, costs no structural check, and counts
+/// none.
 pub const REFUSALS_PER_ROUND: usize = 2;
 
 /// The greedy selection, whatever the objective: up to `max` rounds; in each, `fit_round`
@@ -307,8 +325,19 @@ fn select_with(
                     };
                     accepted.pop();
                     let of_its_form = refusal.is_of_its_form();
-                    let Refusal { why, structure } = refusal;
-                    tracing::debug!(round, ?pair, why, of_its_form, "a tie's winner refused");
+                    let Refusal {
+                        why,
+                        structure,
+                        repeats,
+                    } = refusal;
+                    tracing::debug!(
+                        round,
+                        ?pair,
+                        why,
+                        of_its_form,
+                        repeats,
+                        "a tie's winner refused"
+                    );
                     let [name, alt] = pair;
                     if of_its_form {
                         // Its form refused, the winner gives way as any refused winner does,
@@ -328,7 +357,7 @@ fn select_with(
                         refused.push(Refused::of_the_disagreement(round, name, why));
                         refused.push(Refused::of_the_disagreement(round, alt, alt_why));
                     }
-                    refused_here += 1;
+                    refused_here += usize::from(!repeats);
                     if refused_here >= REFUSALS_PER_ROUND {
                         break 'rounds;
                     }
@@ -340,18 +369,29 @@ fn select_with(
             let name = win.name.clone();
             accepted.push(win);
             let this_round = &refused[round_start..];
-            let Some(Refusal { why, structure }) = accept(&mut accepted, this_round)? else {
+            let Some(Refusal {
+                why,
+                structure,
+                repeats,
+            }) = accept(&mut accepted, this_round)?
+            else {
                 continue 'rounds;
             };
             accepted.pop();
-            tracing::debug!(round, winner = name, why, "a round's winner refused");
+            tracing::debug!(
+                round,
+                winner = name,
+                why,
+                repeats,
+                "a round's winner refused"
+            );
             refused.push(Refused {
                 round,
                 name,
                 why,
                 structure,
             });
-            refused_here += 1;
+            refused_here += usize::from(!repeats);
             if refused_here >= REFUSALS_PER_ROUND {
                 break 'rounds;
             }

@@ -287,8 +287,8 @@ impl Naming<'_> {
         if let Some(why) = self.later_share_rules(w)? {
             return Ok(Some(why.into()));
         }
-        if let Some(why) = self.in_place_of_a_refused_winner(w, accepted, refused_before) {
-            return Ok(Some(why.into()));
+        if let Some(refusal) = self.in_place_of_a_refused_winner(w, accepted, refused_before) {
+            return Ok(Some(refusal));
         }
         if let Some(why) = self.follows_the_earlier_names(w)? {
             return Ok(Some(why.into()));
@@ -413,13 +413,15 @@ impl Naming<'_> {
     /// A winner in place of one refused in the same round must explain most of what is left
     /// in the channels it moves ([`later::share_where_it_acts`]), unless the refused one gave
     /// way to a structural term the winner changes the residuals unlike
-    /// ([`later::held_as_stand_in`]).
+    /// ([`later::held_as_stand_in`]). Held as a stand-in for that term, it is refused for the
+    /// disagreement the term explains: the refusal repeats the first ([`Refusal::repeats`]),
+    /// and the round's next candidate is judged on its own.
     fn in_place_of_a_refused_winner(
         &self,
         w: &Winner<'_>,
         accepted: &[Candidate],
         refused_before: &[Refused],
-    ) -> Option<String> {
+    ) -> Option<Refusal> {
         let (effect, _) = w.newest()?;
         let first = refused_before.first()?;
         let win = accepted.last()?;
@@ -441,14 +443,19 @@ impl Naming<'_> {
         } else {
             "in the channels"
         };
-        Some(format!(
+        let why = format!(
             "it takes the place of `{}`, refused in the same round, and explains only {:.0} % of \
              the disagreement left {there} (their mean chi-square over their known levels); in \
              place of a refused winner an effect must explain most of it ({:.0} %)",
             first.name,
             100.0 * share,
             100.0 * LATER_NAME_MIN_SHARE
-        ))
+        );
+        Some(if first.structure.is_some() {
+            Refusal::repeating(why)
+        } else {
+            why.into()
+        })
     }
 
     /// An effect named after others is refused as a stand-in when it explains only a small

@@ -176,6 +176,54 @@ fn refusals_up_to_the_limit_end_the_selection() {
     assert_eq!(rounds_fitted, 1);
 }
 
+/// A refusal that repeats an earlier one of its round (a stand-in held for the structural
+/// term that refused the round's first winner) is no second refusal: the round's next
+/// candidate is judged, handed over with both, and named. The same second refusal not
+/// repeating ends the selection there.
+#[test]
+fn a_repeated_refusal_is_no_second_refusal_of_the_round() {
+    let round = || {
+        vec![
+            candidate("thrust_gain", 300.0, true),
+            candidate("thrust_curve", 250.0, true),
+            candidate("water_current", 200.0, true),
+        ]
+    };
+    for repeats in [true, false] {
+        let mut handed = Vec::new();
+        let selection = select(
+            1,
+            &mut |_, _, _| Ok(Some(round())),
+            &mut |accepted, before| {
+                let name = accepted.last().unwrap().name.clone();
+                handed.push((name.clone(), before.len()));
+                Ok(match name.as_str() {
+                    "thrust_gain" => Some(Refusal::of_its_form(
+                        "a structural term explains it".to_string(),
+                        candidate("thruster_lag_shape", 320.0, true),
+                    )),
+                    "thrust_curve" if repeats => {
+                        Some(Refusal::repeating("a stand-in for the term".to_string()))
+                    }
+                    "thrust_curve" => Some("a stand-in for the term".to_string().into()),
+                    _ => None,
+                })
+            },
+        )
+        .unwrap();
+        let names: Vec<&str> = selection.accepted.iter().map(|c| c.name.as_str()).collect();
+        let refused: Vec<&str> = selection.refused.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(refused, ["thrust_gain", "thrust_curve"]);
+        if repeats {
+            assert_eq!(names, ["water_current"]);
+            assert_eq!(handed.last(), Some(&("water_current".to_string(), 2)));
+        } else {
+            assert!(names.is_empty(), "{names:?}");
+            assert_eq!(handed.len(), REFUSALS_PER_ROUND);
+        }
+    }
+}
+
 /// A rival that fails only its interval is a look-alike when it changes the residuals as
 /// the winner does (a depth gain beside a depth offset, both fitting the surface reading):
 /// the selection ends ambiguous. Changing them another way, or failing another guard
