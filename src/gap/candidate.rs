@@ -225,9 +225,9 @@ impl From<String> for Refusal {
 /// names or the base model's structure lack), not that the round holds none: the next
 /// candidate may be the effect the refused one stood in front of. Two refused in one round
 /// say most of what is left is what no candidate is; each refusal also costs a structural
-/// check of up to 14 fits. A refusal that repeats an earlier one of its round
-/// ([`Refusal::repeats`]) refuses no new disagreement, costs no structural check, and counts
-/// none.
+/// check of up to 14 fits. A refusal that repeats the first of its round (a stand-in held for
+/// the structural term that refused the first, [`Refusal::repeats`], or a winner that term
+/// refuses too) refuses no new disagreement and counts none.
 pub const REFUSALS_PER_ROUND: usize = 2;
 
 /// The greedy selection, whatever the objective: up to `max` rounds; in each, `fit_round`
@@ -325,11 +325,8 @@ fn select_with(
                     };
                     accepted.pop();
                     let of_its_form = refusal.is_of_its_form();
-                    let Refusal {
-                        why,
-                        structure,
-                        repeats,
-                    } = refusal;
+                    let repeats = repeats_the_round(&refused[round_start..], &refusal);
+                    let Refusal { why, structure, .. } = refusal;
                     tracing::debug!(
                         round,
                         ?pair,
@@ -369,15 +366,12 @@ fn select_with(
             let name = win.name.clone();
             accepted.push(win);
             let this_round = &refused[round_start..];
-            let Some(Refusal {
-                why,
-                structure,
-                repeats,
-            }) = accept(&mut accepted, this_round)?
-            else {
+            let Some(refusal) = accept(&mut accepted, this_round)? else {
                 continue 'rounds;
             };
             accepted.pop();
+            let repeats = repeats_the_round(&refused[round_start..], &refusal);
+            let Refusal { why, structure, .. } = refusal;
             tracing::debug!(
                 round,
                 winner = name,
@@ -405,6 +399,18 @@ fn select_with(
         outranked_by,
         refused,
     })
+}
+
+/// Whether `refusal` refuses again what the first refusal of its round (`this_round`, the
+/// round's refused records) refused: it says so ([`Refusal::repeats`]), or it gives way to the
+/// same term of the base model's structure. A round whose winners one structural term
+/// explains has found one thing, that term; the next candidate may be an effect beside it.
+fn repeats_the_round(this_round: &[Refused], refusal: &Refusal) -> bool {
+    let first = this_round.first().and_then(|r| r.structure.as_deref());
+    refusal.repeats
+        || first
+            .zip(refusal.structure.as_deref())
+            .is_some_and(|(a, b)| a.name == b.name)
 }
 
 /// What the greedy selection found.

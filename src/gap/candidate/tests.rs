@@ -176,10 +176,10 @@ fn refusals_up_to_the_limit_end_the_selection() {
     assert_eq!(rounds_fitted, 1);
 }
 
-/// A refusal that repeats an earlier one of its round (a stand-in held for the structural
-/// term that refused the round's first winner) is no second refusal: the round's next
-/// candidate is judged, handed over with both, and named. The same second refusal not
-/// repeating ends the selection there.
+/// A refusal that repeats the first of its round (a stand-in held for the structural term
+/// that refused the round's first winner, or a winner the same term refuses) is no second
+/// refusal: the round's next candidate is judged, handed over with both, and named. A second
+/// refusal of another kind, or for another term, ends the selection there.
 #[test]
 fn a_repeated_refusal_is_no_second_refusal_of_the_round() {
     let round = || {
@@ -189,7 +189,38 @@ fn a_repeated_refusal_is_no_second_refusal_of_the_round() {
             candidate("water_current", 200.0, true),
         ]
     };
-    for repeats in [true, false] {
+    let form = |term: &str| {
+        Refusal::of_its_form(
+            "a structural term explains it".to_string(),
+            candidate(term, 320.0, true),
+        )
+    };
+    let second: [(fn() -> Refusal, bool); 4] = [
+        (
+            || Refusal::repeating("a stand-in for the term".to_string()),
+            true,
+        ),
+        (
+            || {
+                Refusal::of_its_form(
+                    "the same term explains it".to_string(),
+                    candidate("thruster_lag_shape", 310.0, true),
+                )
+            },
+            true,
+        ),
+        (
+            || {
+                Refusal::of_its_form(
+                    "another term explains it".to_string(),
+                    candidate("yaw_added_inertia", 310.0, true),
+                )
+            },
+            false,
+        ),
+        (|| "a stand-in for the term".to_string().into(), false),
+    ];
+    for (refusal, repeats) in second {
         let mut handed = Vec::new();
         let selection = select(
             1,
@@ -198,14 +229,8 @@ fn a_repeated_refusal_is_no_second_refusal_of_the_round() {
                 let name = accepted.last().unwrap().name.clone();
                 handed.push((name.clone(), before.len()));
                 Ok(match name.as_str() {
-                    "thrust_gain" => Some(Refusal::of_its_form(
-                        "a structural term explains it".to_string(),
-                        candidate("thruster_lag_shape", 320.0, true),
-                    )),
-                    "thrust_curve" if repeats => {
-                        Some(Refusal::repeating("a stand-in for the term".to_string()))
-                    }
-                    "thrust_curve" => Some("a stand-in for the term".to_string().into()),
+                    "thrust_gain" => Some(form("thruster_lag_shape")),
+                    "thrust_curve" => Some(refusal()),
                     _ => None,
                 })
             },
