@@ -145,19 +145,27 @@ impl Setup<'_> {
 
     /// Channel by channel (index), the chi-square per independent sample of `r` on `part`
     /// (the training blocks, the held-out blocks, or all of them): the report's gap measure
-    /// before each channel is taken against its known level and averaged.
+    /// before each channel is taken against its known level and averaged. Wall contacts are
+    /// left out ([`Setup::residuals`] holds zeros there): counted, they would dilute the level
+    /// by the share of a channel's samples the contacts take.
     pub fn part_levels(&self, r: &Residuals, part: Option<bool>) -> Vec<(usize, f64)> {
         self.modelled()
             .into_iter()
             .filter_map(|i| {
                 let tau = self.floors[i].as_ref()?.tau;
+                let name = &self.m.channels[i].name;
                 let (sum, n) = r
                     .values
                     .iter()
                     .zip(&r.owner)
                     .zip(&r.training)
-                    .filter(|((_, o), t)| **o == i && part.is_none_or(|p| **t == p))
-                    .fold((0.0, 0usize), |(s, n), ((v, _), _)| (s + v * v, n + 1));
+                    .zip(&r.times)
+                    .filter(|(((_, o), t), time)| {
+                        **o == i
+                            && part.is_none_or(|p| **t == p)
+                            && !self.clean.in_contact(**time, name)
+                    })
+                    .fold((0.0, 0usize), |(s, n), (((v, _), _), _)| (s + v * v, n + 1));
                 (n > 0).then(|| (i, sum / (n as f64 / tau)))
             })
             .collect()

@@ -548,6 +548,50 @@ fn held_out_samples_where_the_trial_run_touches_are_left_out() {
     assert_eq!(left_out_where_touched(&after, None).values, after.values);
 }
 
+/// A channel's level is its chi-square per independent sample over the samples the fits see:
+/// where the base re-simulation touched the pool the residuals are zeros, left out of the
+/// count as well as the sum. Counted, a run whose contacts take half a channel's samples read
+/// that channel at half its level, and a later effect was refused for "no disagreement left".
+#[test]
+fn a_level_leaves_the_contact_samples_out_of_its_count() {
+    let (_, c, m) = crate::gap::resim::tests::manoeuvre_of(31, |t| {
+        t.sensors.depth.errors.bias += 0.015;
+    });
+    let clean = resim::simulate(&c, &m, None).unwrap();
+    let floors = resim::noise_floor(&c, &m, &clean).unwrap();
+    let mut setup = setup(&m, c.clone(), &floors, Split::DEFAULT, &[]).unwrap();
+    let free = setup.part_levels(&setup.residuals(&c, &clean), None);
+    let end = m.experiment.duration_s;
+    // A contact from the start to well past half the run, every channel's memory included.
+    setup.clean.contacts = vec![[0.0, 0.6 * end]];
+    let r = setup.residuals(&c, &clean);
+    let touched = setup.part_levels(&r, None);
+    for (i, level) in &touched {
+        let name = &m.channels[*i].name;
+        let tau = floors[*i].as_ref().unwrap().tau;
+        let (sum, n) = r
+            .values
+            .iter()
+            .zip(&r.owner)
+            .zip(&r.times)
+            .filter(|((_, o), t)| **o == *i && !setup.clean.in_contact(**t, name))
+            .fold((0.0, 0.0), |(s, n), ((v, _), _)| (s + v * v, n + 1.0));
+        assert!(n > 0.0, "{name}: samples are left after the contact");
+        let expected = sum / (n / tau);
+        assert!(
+            (level - expected).abs() <= 1e-12 * expected.max(1.0),
+            "{name}: level {level} against {expected} over the samples left in"
+        );
+    }
+    let left_out = r.values.iter().filter(|v| **v == 0.0).count();
+    assert!(
+        left_out * 2 > r.values.len(),
+        "the contact leaves out most samples ({left_out} of {})",
+        r.values.len()
+    );
+    assert!(!touched.is_empty() && touched.len() <= free.len());
+}
+
 /// A structural rival is not named, so its held-out blocks need not confirm it; they must
 /// only not get worse. Every other guard still holds it.
 #[test]
