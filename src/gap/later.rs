@@ -60,6 +60,38 @@ pub(crate) fn held_as_stand_in(win: &Candidate, structure: Option<&Candidate>) -
     cosine.is_none_or(|c| c.abs() >= STAND_IN_COSINE)
 }
 
+/// Whether an effect named after `before`, explaining `share` of the excess they left, is
+/// asked whether its value follows them ([`fit::constancy`]): a mean effect that explains less
+/// than [`LATER_NAME_MIN_SHARE`] of it, or, whatever its share, a sensor effect of a channel a
+/// physics effect named before it moves (its signature channels or `also_moves`).
+///
+/// For a physics effect each sign alone is no proof of a stand-in: on a vehicle of another
+/// structure a right effect's value depends on the regime too, and a right effect may be a
+/// small part of a disagreement that is mostly structure. A sensor's reading model does not
+/// change with where the vehicle goes, while a physics effect named before it drives the hull
+/// where the baseline runs did not, and what the calibrated structure lacks there reaches the
+/// sensors it moves as a mean error that follows the drive: on structure 746057 (seed 691627)
+/// case 37 a thrust gain of -0.44 (82 sigma) left the surge accelerometer at 1.57 of its known
+/// level, and an `accel_x_offset` took 66 % of what the gain left, -2.22 LSB where the gain
+/// changed the fit most against -1.25 where it changed it least (Wald 15.9 > 6.6). Where the
+/// physics name does not move the sensor's channel, the split by its change says nothing of
+/// that channel and is not asked: a right depth offset after a yaw damping (structure 770041,
+/// seed 715611, pair 5) read -0.47 m in the blocks the damping changed most and 0.14 m
+/// elsewhere (Wald 22.1), a depth read at the surface against one read in dives.
+pub(crate) fn asks_constancy(
+    effect: &effects::Effect,
+    before: &[&effects::Effect],
+    share: f64,
+) -> bool {
+    let driven_by_physics = || {
+        !effect.physics
+            && before
+                .iter()
+                .any(|e| e.physics && effect.channels.iter().any(|c| moves(e, c)))
+    };
+    effect.kind == Kind::Mean && (share < LATER_NAME_MIN_SHARE || driven_by_physics())
+}
+
 /// In an exchange of an earlier name for its look-alike, each later name is also tried in
 /// exchange for this many of its own round's rivals that passed every guard, the strongest
 /// first ([`exchange_lookalikes`]).

@@ -458,19 +458,16 @@ impl Naming<'_> {
         })
     }
 
-    /// An effect named after others is refused as a stand-in when it explains only a small
-    /// part of what the earlier names left and its value follows them: where they act strongly
-    /// they drive the model where the calibration did not take it, and what their form lacks
-    /// shows as a disagreement another effect can take in part. Either sign alone is no proof:
-    /// on a vehicle of another structure a right effect's value depends on the regime too, and
-    /// a right effect may be a small part of a disagreement that is mostly structure.
+    /// An effect named after others is refused as a stand-in when its value follows them
+    /// (asked as [`later::asks_constancy`] says): where they act strongly they drive the model
+    /// where the calibration did not take it, and what their form lacks shows as a
+    /// disagreement another effect can take in part.
     fn follows_the_earlier_names(&self, w: &Winner<'_>) -> Result<Option<String>, GapError> {
         let Some((effect, noise_factor)) = w.newest() else {
             return Ok(None);
         };
         let (without, mean, share) = (w.without, w.mean, w.share);
-        if w.named.len() <= 1 || effect.kind != effects::Kind::Mean || share >= LATER_NAME_MIN_SHARE
-        {
+        if w.named.len() <= 1 || !later::asks_constancy(effect, &w.before_it(), share) {
             return Ok(None);
         }
         let floors = self.current_floors.borrow();

@@ -483,3 +483,47 @@ fn a_winner_in_place_of_a_structural_refusal_is_held_only_when_it_changes_as_the
         "no change to compare"
     );
 }
+
+/// A sensor effect named after a physics effect that moves its channel is asked whether its
+/// value follows it whatever its share; a physics effect, a sensor effect after sensor effects
+/// alone, or one whose channel the physics name does not move, only when it explains less than
+/// half of what is left; a noise source never.
+#[test]
+fn a_sensor_name_after_a_physics_name_that_moves_its_channel_is_asked_whether_it_follows_it() {
+    let e = |name: &str| effects::by_name(name).expect("a library effect");
+    let (offset, gain, hard_iron) = (
+        e("accel_x_offset"),
+        e("thrust_gain"),
+        e("compass_hard_iron"),
+    );
+    let (current, emi, depth, yaw) = (
+        e("water_current"),
+        e("depth_pwm_emi"),
+        e("depth_offset"),
+        e("yaw_damping"),
+    );
+    assert!(asks_constancy(offset, &[gain], 0.66));
+    assert!(asks_constancy(hard_iron, &[hard_iron, current], 1.0));
+    assert!(
+        !asks_constancy(depth, &[yaw], 0.96),
+        "the damping moves no depth"
+    );
+    assert!(asks_constancy(depth, &[yaw], 0.3));
+    assert!(
+        !asks_constancy(current, &[gain], 0.66),
+        "a physics name keeps its share"
+    );
+    assert!(asks_constancy(current, &[gain], 0.3));
+    assert!(
+        !asks_constancy(offset, &[hard_iron], 0.66),
+        "no physics named before it"
+    );
+    assert!(
+        !asks_constancy(offset, &[emi], 0.66),
+        "a noise source is no physics effect"
+    );
+    assert!(
+        !asks_constancy(emi, &[gain], 0.1),
+        "a noise source changes no mean"
+    );
+}
