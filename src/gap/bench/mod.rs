@@ -283,6 +283,23 @@ impl CaseResult {
             && self.expected_second.as_ref().is_none_or(shown)
     }
 
+    /// Over the look-alike pairs the answer ends on or carries past (`ambiguous`, `tie`) that
+    /// hold exactly one hidden effect: how many have it as the round's winner (listed first),
+    /// and how many there are. Had each such pair been named by its winner, the rest would be
+    /// wrong names: what an `ambiguous` verdict spares.
+    pub fn lookalikes_led_by_truth(&self) -> (usize, usize) {
+        let hidden = |e: &String| {
+            self.expected.as_ref() == Some(e) || self.expected_second.as_ref() == Some(e)
+        };
+        [&self.ambiguous, &self.tie]
+            .into_iter()
+            .flatten()
+            .filter(|[a, b]| hidden(a) != hidden(b))
+            .fold((0, 0), |(led, all), [a, _]| {
+                (led + usize::from(hidden(a)), all + 1)
+            })
+    }
+
     /// A case with two hidden effects.
     pub fn is_pair(&self) -> bool {
         self.expected_second.is_some()

@@ -251,6 +251,19 @@ fn pointing_line(single: &[&CaseResult], pairs: &[&CaseResult]) -> String {
             pct(points(&pairs), pairs.len())
         ));
     }
+    let (led, lookalikes) = single
+        .iter()
+        .chain(&pairs)
+        .map(|c| c.lookalikes_led_by_truth())
+        .fold((0, 0), |(l, n), (a, b)| (l + a, n + b));
+    if lookalikes > 0 {
+        line.push_str(&format!(
+            "\nlook-alike pairs left `ambiguous` or carried past that hold one hidden effect: its \
+             round's winner is the hidden one in {} (named by the winner, the rest would be wrong \
+             names)",
+            pct(led, lookalikes)
+        ));
+    }
     line.push('\n');
     line
 }
@@ -591,5 +604,34 @@ mod tests {
             line.contains(": 67 % (2/3), at >= 3 sigma 67 % (2/3); two effects, each named or in the ambiguous pair: 50 % (1/2)"),
             "{line}"
         );
+    }
+
+    /// The look-alike line counts the pairs that hold exactly one hidden effect, by whether
+    /// that effect won its round (listed first): a pair of two other effects says nothing of
+    /// the order, and a pair of both hidden effects has no wrong one to name.
+    #[test]
+    fn the_lookalike_line_counts_pairs_led_by_the_hidden_effect() {
+        let with = |ambiguous: Option<[&str; 2]>, tie: Option<[&str; 2]>| {
+            let mut c = case(Some("depth_offset"), None);
+            c.ambiguous = ambiguous.map(|a| a.map(str::to_string));
+            c.tie = tie.map(|a| a.map(str::to_string));
+            c
+        };
+        let led = with(Some(["depth_offset", "depth_gain"]), None);
+        assert_eq!(led.lookalikes_led_by_truth(), (1, 1));
+        let trailing = with(None, Some(["depth_gain", "depth_offset"]));
+        assert_eq!(trailing.lookalikes_led_by_truth(), (0, 1));
+        let elsewhere = with(Some(["depth_gain", "float_depth"]), None);
+        assert_eq!(elsewhere.lookalikes_led_by_truth(), (0, 0));
+        let mut both_hidden = with(Some(["depth_offset", "depth_gain"]), None);
+        both_hidden.expected_second = Some("depth_gain".into());
+        assert_eq!(both_hidden.lookalikes_led_by_truth(), (0, 0));
+        let t = independent_table(&[led, trailing.clone(), trailing, elsewhere], None);
+        assert!(
+            t.contains("its round's winner is the hidden one in 33 % (1/3)"),
+            "{t}"
+        );
+        let none = independent_table(&[case(Some("depth_offset"), None)], None);
+        assert!(!none.contains("look-alike pairs left"), "{none}");
     }
 }
