@@ -448,8 +448,11 @@ class Vehicle:
         if self.trim_pitch_nm or self.trim_roll_nm:  # centre of buoyancy off the CG's vertical
             my += self.trim_pitch_nm * math.cos(self.theta)
             mx += self.trim_roll_nm * math.cos(self.phi)
-        # semi-implicit Euler: velocities first, positions with the new velocities
-        self.du, self.dv, self.dr = fx / m11, fy / m22, nz / m66
+        # semi-implicit Euler: velocities first, positions with the new velocities. The forces
+        # above act on the water-relative velocity; u and v are over the ground, so they also
+        # carry the steady current's turn in the body frame (d(uc)/dt = r vc, d(vc)/dt = -r uc):
+        # a hull that moves with the water keeps moving with it however it turns.
+        self.du, self.dv, self.dr = fx / m11 + r * vc, fy / m22 - r * uc, nz / m66
         self.dw = fz / p["m_heave_kg"]
         self.u += dt * self.du
         self.v += dt * self.dv
