@@ -590,3 +590,22 @@ fn two_hidden_effects_are_both_named() {
     let total: f64 = a.shares_pct.iter().sum();
     assert!((total - 100.0).abs() < 1e-6, "{:?}", a.shares_pct);
 }
+
+/// The independent model's own checks (`pty-tests/independent/test_mako_independent.py`: the
+/// pinned nominal runs, the structure family's draws, two hidden effects, the file format, a
+/// hull carried by the current as it turns), so that the README's test command runs them.
+#[test]
+fn the_independent_models_own_checks_pass() {
+    let python = require_tool("python3", "python3");
+    let out = Command::new(python)
+        .args(["-m", "unittest", "-q"])
+        .current_dir(root().join("pty-tests/independent"))
+        .env("PYTHONDONTWRITEBYTECODE", "1")
+        .output()
+        .expect("python3 runs");
+    assert!(
+        out.status.success(),
+        "python3 -m unittest in pty-tests/independent failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
