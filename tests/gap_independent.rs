@@ -609,3 +609,39 @@ fn the_independent_models_own_checks_pass() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// An exchange of an earlier name for its look-alike must shrink the gap by the measure the
+/// report gives, every channel counted once, not the summed chi-square alone. On structure
+/// 866197 (campaign seed 811733) pair case 78 hides a thrust gain and a compass offset; both
+/// are named in their rounds. A thrust curve and a yaw damping in their place lower the summed
+/// chi-square by about 1457 (the track's and accelerometers' many samples) while the channels'
+/// mean over their known levels rises from 1.47 to 4.5: the pair named stays.
+#[test]
+fn an_exchange_that_raises_the_channels_mean_is_not_made() {
+    use eyebot_hil::gap::bench::{self, BenchOptions, Shard, Source};
+    require_tool("python3", "python3");
+    let opts = BenchOptions {
+        source: Source::Independent,
+        cases: 5,
+        seed: 811733,
+        effects: Vec::new(),
+        hidden: bench::independent::HIDDEN.iter().collect(),
+        independent_path: root().join("pty-tests/independent/mako_independent.py"),
+        structure_seed: Some(866197),
+        drawn_programs: false,
+        pairs: 10,
+        baselines: 3,
+        bridge: Default::default(),
+        keep: None,
+    };
+    let shard = Shard::new(79, 80).expect("valid shard");
+    let part = bench::run_part(&opts, shard, None, &mut |_, _, _, _| {}).expect("the case runs");
+    assert_eq!(part.results.len(), 1, "shard 79/80 holds case 78 alone");
+    let case = &part.results[0];
+    assert_eq!(case.effect.as_deref(), Some("thrust_gain+compass_offset"));
+    assert_eq!(
+        case.named_all,
+        vec!["thrust_gain".to_string(), "compass_offset".to_string()],
+        "{case:?}"
+    );
+}
