@@ -12,7 +12,7 @@ use super::fit;
 use super::format::Measurement;
 use super::model::GapModel;
 use super::residuals::{self, ChannelStats, Known};
-use super::{GapError, channel_mean, part_channels, resim, stats_for};
+use super::{GapError, channel_mean, resim, stats_for};
 
 /// An effect named after others that explains less than this share of the excess of the
 /// gap measure's channel mean over 1 the earlier names left is tested for constancy
@@ -529,7 +529,8 @@ pub(crate) struct Exchanged {
 }
 
 /// An exchange tried: its gain over the named set (BIC cost of extra parameters paid), the
-/// chi-square and the gap measure's channel mean with it, the names put in (index in the named set, candidate) and the joint refit.
+/// summed chi-square and the gap measure's channel mean with it, the names put in (index in
+/// the named set, candidate) and the joint refit.
 struct Trial {
     gain: f64,
     chi2: (f64, f64),
@@ -587,8 +588,10 @@ pub(crate) fn exchange_lookalikes(
         let run = resim::simulate(c, setup.m, None)
             .ok()
             .filter(|r| r.divergences.is_empty())?;
-        let mean = channel_mean(part_channels(setup, c, &run, false, None).into_iter())?;
-        Some((setup.residuals(c, &run).all_chi2(), mean))
+        let r = setup.residuals(c, &run);
+        let levels = setup.part_levels(&r, None);
+        let mean = channel_mean(levels.into_iter().map(|(i, chi2)| (chi2, setup.known[i])))?;
+        Some((r.all_chi2(), mean))
     };
     let mut current = accepted.to_vec();
     let mut named: Vec<fit::Named> = current
