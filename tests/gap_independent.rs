@@ -610,6 +610,38 @@ fn the_independent_models_own_checks_pass() {
     );
 }
 
+/// One case of a structural campaign on the independent model, as `gap-bench --source
+/// independent --structure-seed STRUCTURE --seed SEED --cases CASES --pairs PAIRS --shard
+/// K/N` runs it (its own calibration first): the hidden effects, and every name `gap` gave.
+fn structural_case(
+    structure: u64,
+    seed: u64,
+    (cases, pairs): (usize, usize),
+    (k, n): (usize, usize),
+) -> (Option<String>, Vec<String>) {
+    use eyebot_hil::gap::bench::{self, BenchOptions, Shard, Source};
+    require_tool("python3", "python3");
+    let opts = BenchOptions {
+        source: Source::Independent,
+        cases,
+        seed,
+        effects: Vec::new(),
+        hidden: bench::independent::HIDDEN.iter().collect(),
+        independent_path: root().join("pty-tests/independent/mako_independent.py"),
+        structure_seed: Some(structure),
+        drawn_programs: false,
+        pairs,
+        baselines: 3,
+        bridge: Default::default(),
+        keep: None,
+    };
+    let shard = Shard::new(k, n).expect("valid shard");
+    let part = bench::run_part(&opts, shard, None, &mut |_, _, _, _| {}).expect("the case runs");
+    assert_eq!(part.results.len(), 1, "shard {k}/{n} holds one case");
+    let case = part.results.into_iter().next().expect("one case");
+    (case.effect, case.named_all)
+}
+
 /// An exchange of an earlier name for its look-alike must shrink the gap by the measure the
 /// report gives, every channel counted once, not the summed chi-square alone. On structure
 /// 866197 (campaign seed 811733) pair case 78 hides a thrust gain and a compass offset; both
@@ -618,32 +650,9 @@ fn the_independent_models_own_checks_pass() {
 /// mean over their known levels rises from 1.47 to 4.5: the pair named stays.
 #[test]
 fn an_exchange_that_raises_the_channels_mean_is_not_made() {
-    use eyebot_hil::gap::bench::{self, BenchOptions, Shard, Source};
-    require_tool("python3", "python3");
-    let opts = BenchOptions {
-        source: Source::Independent,
-        cases: 5,
-        seed: 811733,
-        effects: Vec::new(),
-        hidden: bench::independent::HIDDEN.iter().collect(),
-        independent_path: root().join("pty-tests/independent/mako_independent.py"),
-        structure_seed: Some(866197),
-        drawn_programs: false,
-        pairs: 10,
-        baselines: 3,
-        bridge: Default::default(),
-        keep: None,
-    };
-    let shard = Shard::new(79, 80).expect("valid shard");
-    let part = bench::run_part(&opts, shard, None, &mut |_, _, _, _| {}).expect("the case runs");
-    assert_eq!(part.results.len(), 1, "shard 79/80 holds case 78 alone");
-    let case = &part.results[0];
-    assert_eq!(case.effect.as_deref(), Some("thrust_gain+compass_offset"));
-    assert_eq!(
-        case.named_all,
-        vec!["thrust_gain".to_string(), "compass_offset".to_string()],
-        "{case:?}"
-    );
+    let (hidden, named) = structural_case(866197, 811733, (5, 10), (79, 80));
+    assert_eq!(hidden.as_deref(), Some("thrust_gain+compass_offset"));
+    assert_eq!(named, ["thrust_gain", "compass_offset"]);
 }
 
 /// A first name's look-alike is tried in its place from a cosine of 0.8 between their changes
@@ -655,30 +664,7 @@ fn an_exchange_that_raises_the_channels_mean_is_not_made() {
 /// 1.3: both hidden effects are named.
 #[test]
 fn a_first_name_gives_way_to_a_look_alike_that_parts_from_it() {
-    use eyebot_hil::gap::bench::{self, BenchOptions, Shard, Source};
-    require_tool("python3", "python3");
-    let opts = BenchOptions {
-        source: Source::Independent,
-        cases: 0,
-        seed: 855931,
-        effects: Vec::new(),
-        hidden: bench::independent::HIDDEN.iter().collect(),
-        independent_path: root().join("pty-tests/independent/mako_independent.py"),
-        structure_seed: Some(910361),
-        drawn_programs: false,
-        pairs: 40,
-        baselines: 3,
-        bridge: Default::default(),
-        keep: None,
-    };
-    let shard = Shard::new(36, 40).expect("valid shard");
-    let part = bench::run_part(&opts, shard, None, &mut |_, _, _, _| {}).expect("the case runs");
-    assert_eq!(part.results.len(), 1, "shard 36/40 holds case 35 alone");
-    let case = &part.results[0];
-    assert_eq!(case.effect.as_deref(), Some("yaw_damping+thrust_gain"));
-    assert_eq!(
-        case.named_all,
-        vec!["thrust_gain".to_string(), "yaw_damping".to_string()],
-        "{case:?}"
-    );
+    let (hidden, named) = structural_case(910361, 855931, (0, 40), (36, 40));
+    assert_eq!(hidden.as_deref(), Some("yaw_damping+thrust_gain"));
+    assert_eq!(named, ["thrust_gain", "yaw_damping"]);
 }
