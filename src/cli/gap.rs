@@ -378,14 +378,6 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<(), CliError> {
             "between-run spread measured on {}{dof}",
             c.spread_from.join(", ")
         );
-        if let Some(p) = c.spread_prior {
-            outln!(
-                "each candidate's spread moderated towards all candidates' (Smyth 2004): a \
-                 squared spread {:.2} times the fit's own variance, {:.1} prior degrees of freedom",
-                p.ratio,
-                p.dof
-            );
-        }
         outln!("| effect | parameter | between-run spread (1 sigma) |");
         for p in &c.spread {
             outln!("| {} | {} | {:.4} |", p.effect, p.parameter, p.value);

@@ -180,9 +180,6 @@ pub struct Calibration {
     /// Between-run spread of each effect's apparent value (1 sigma) on the `spread_from`
     /// runs, or on the baseline runs when none are given; empty with one run.
     pub spread: Vec<Parameter>,
-    /// The prior each spread was moderated towards ([`moderate`]): none with fewer than
-    /// three measured candidates.
-    pub spread_prior: Option<moderate::Prior>,
     /// The runs the spread was measured on.
     pub spread_from: Vec<String>,
     /// Parameters left out because none of their channels is measured.
@@ -345,49 +342,25 @@ fn mean_level(levels: &[(f64, [f64; 2])]) -> Option<(f64, [f64; 2])> {
 /// Each effect's between-run spread, per parameter (1 sigma).
 type Spread = Vec<(&'static Effect, Vec<f64>)>;
 
-/// The between-run spread as measured: each effect's, the effects whose fits ended on a
-/// bound or unbounded, the degrees of freedom of the runs, and the prior that moderated it
-/// ([`moderate`]; none when too few candidates were measured).
-struct Apparent {
-    spread: Spread,
-    unidentified: Vec<String>,
-    dof: u32,
-    prior: Option<moderate::Prior>,
-}
-
 /// Each library effect's apparent value when nothing changed: every candidate fitted on each
 /// of `runs` with the calibration `x` applied, and the root mean square of the per-run values
 /// (1 sigma). Runs the joint calibration was `fitted_on` are pulled towards zero by
-/// `sqrt((n - 1) / n)`, which is undone; runs it never saw are taken as they are. Each
-/// spread is then moderated towards those of all candidates, in units of its own fit's
-/// standard deviation ([`moderate`]). Needs two or more runs (none from fewer).
+/// `sqrt((n - 1) / n)`, which is undone; runs it never saw are taken as they are. Needs two
+/// or more runs (none from fewer).
 fn apparent_spread(
     runs: &[Prepared<'_>],
     fitted_on: bool,
     chosen: &[&'static Effect],
     x: &DVector<f64>,
     progress: &mut dyn FnMut(&str),
-) -> Result<Apparent, GapError> {
-    let n = runs.len();
-    let dof = if fitted_on { n.saturating_sub(1) } else { n };
-    let mut out = Apparent {
-        spread: Vec::new(),
-        unidentified: Vec::new(),
-        dof: u32::try_from(dof).unwrap_or(u32::MAX),
-        prior: None,
-    };
-    if n < 2 {
-        return Ok(out);
+) -> Result<(Spread, Vec<String>), GapError> {
+    if runs.len() < 2 {
+        return Ok((Vec::new(), Vec::new()));
     }
     let mut on_bound: Vec<&'static Effect> = Vec::new();
-    let pull = if fitted_on {
-        n as f64 / (n as f64 - 1.0)
-    } else {
-        1.0
-    };
-    // Per effect, per run: the apparent values and the fit's own standard deviations.
-    type PerRun = Vec<Vec<f64>>;
-    let mut apparent: Vec<(&'static Effect, PerRun, PerRun)> = Vec::new();
+    let n = runs.len() as f64;
+    let pull = if fitted_on { n / (n - 1.0) } else { 1.0 };
+    let mut apparent: Vec<(&'static Effect, Vec<Vec<f64>>)> = Vec::new();
     for (i, p) in runs.iter().enumerate() {
         progress(&format!("spread: run {} of {}", i + 1, runs.len()));
         let base = effects::apply_joint(&p.base, chosen, x);
@@ -409,64 +382,19 @@ fn apparent_spread(
                 on_bound.push(e);
             }
             let values: Vec<f64> = r.parameters.iter().map(|(_, v)| *v).collect();
-            let sds: Vec<f64> = r
-                .ci95
-                .iter()
-                .map(|(_, [a, b])| (b - a) / (2.0 * 1.96))
-                .collect();
-            match apparent.iter_mut().find(|(a, _, _)| a.name == e.name) {
-                Some((_, v, sd)) => {
-                    v.push(values);
-                    sd.push(sds);
-                }
-                None => apparent.push((e, vec![values], vec![sds])),
+            match apparent.iter_mut().find(|(a, _)| a.name == e.name) {
+                Some((_, v)) => v.push(values),
+                None => apparent.push((e, vec![values])),
             }
         }
     }
-    let measured: Vec<(&'static Effect, Vec<f64>, Vec<f64>)> = apparent
+    let unidentified = on_bound.iter().map(|t| t.name.to_string()).collect();
+    let spread = apparent
         .into_iter()
-        .filter(|(_, per_run, _)| per_run.len() >= 2)
-        .map(|(e, per_run, sds)| (e, spread_of(e, &per_run, pull), spread_of(e, &sds, 1.0)))
+        .filter(|(_, per_run)| per_run.len() >= 2)
+        .map(|(e, per_run)| (e, spread_of(e, &per_run, pull)))
         .collect();
-    let identified = |e: &Effect| !on_bound.iter().any(|t| t.name == e.name);
-    let ratios: Vec<f64> = measured
-        .iter()
-        .filter(|(e, _, _)| identified(e))
-        .flat_map(|(e, spread, sd)| {
-            // The components of a plane vector share one spread: one ratio.
-            let k = if effects::plane_vector(e) {
-                1
-            } else {
-                spread.len()
-            };
-            (0..k).map(|j| (spread[j] / sd[j]).powi(2))
-        })
-        .collect();
-    out.prior = moderate::prior(&ratios, dof as f64);
-    tracing::debug!(prior = ?out.prior, dof, ratios = ratios.len(), "between-run spread moderated");
-    out.spread = measured
-        .into_iter()
-        .map(|(e, spread, sd)| {
-            let moderated = match out.prior {
-                Some(prior) if identified(e) => spread
-                    .iter()
-                    .zip(&sd)
-                    .map(|(s, f)| {
-                        let ratio = (s / f).powi(2);
-                        if ratio.is_finite() && *f > 0.0 {
-                            f * moderate::squeeze(ratio, dof as f64, prior).sqrt()
-                        } else {
-                            *s
-                        }
-                    })
-                    .collect(),
-                _ => spread,
-            };
-            (e, moderated)
-        })
-        .collect();
-    out.unidentified = on_bound.iter().map(|t| t.name.to_string()).collect();
-    Ok(out)
+    Ok((spread, unidentified))
 }
 
 /// One effect's between-run spread from its apparent values on each run: per parameter the
@@ -763,15 +691,17 @@ pub fn calibrate(
     let shrunk = shrink_until_stable(&prepared, &chosen, &mut x);
     let mut out = fitted_parameters(model, &chosen, &x, &fit);
     fit_noise_levels(&prepared, &chosen, &x, &measured, &mut out, progress)?;
-    let apparent = between_run_spread(model, &prepared, spread_from, &chosen, &x, progress)?;
-    let spread_unidentified = apparent.unidentified;
-    let spread_prior = apparent.prior;
-    let spread = record_spread(apparent.spread, &mut out.model);
+    let (apparent, spread_unidentified) =
+        between_run_spread(model, &prepared, spread_from, &chosen, &x, progress)?;
+    let spread = record_spread(apparent, &mut out.model);
     // The scatter is measured on the spread runs, or on the baseline runs the joint fit
-    // already pulled towards zero (one degree of freedom fewer), and moderated: the prior's
-    // degrees of freedom add to the runs'.
-    out.model.spread_dof =
-        (!spread.is_empty()).then(|| moderate::total_dof(apparent.dof, spread_prior));
+    // already pulled towards zero: one degree of freedom fewer.
+    out.model.spread_dof = match spread_from.len() {
+        0 => baseline.len().checked_sub(1),
+        n => Some(n),
+    }
+    .filter(|_| !spread.is_empty())
+    .and_then(|n| u32::try_from(n).ok());
 
     progress("scoring");
     let runs = score_runs(model, baseline, validate, spread_from, &chosen, &x)?;
@@ -792,7 +722,6 @@ pub fn calibrate(
         runs,
         evaluations,
         spread,
-        spread_prior,
         spread_from: if spread_from.is_empty() {
             baseline
         } else {
@@ -994,7 +923,7 @@ fn between_run_spread(
     chosen: &[&'static Effect],
     x: &DVector<f64>,
     progress: &mut dyn FnMut(&str),
-) -> Result<Apparent, GapError> {
+) -> Result<(Spread, Vec<String>), GapError> {
     let spread_prepared: Vec<Prepared<'_>> = spread_from
         .iter()
         .map(|r| prepare(model, r))
@@ -1033,7 +962,6 @@ fn record_spread(apparent: Spread, calibrated: &mut GapModel) -> Vec<Parameter> 
 }
 
 mod known;
-pub mod moderate;
 mod score;
 mod submerged;
 #[cfg(test)]
