@@ -172,6 +172,9 @@ pub fn run(args: &GapArgs) -> Result<(), CliError> {
         errln!("notice: {n}");
     }
     let model = GapModel::load(model_path)?;
+    if let Some(why) = model.caution() {
+        errln!("caution: {}: {why}", model_path.display());
+    }
     let total = (gap::fit::MAX_EFFECTS * effects::candidates().count()) as u64;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())

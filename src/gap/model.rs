@@ -285,6 +285,37 @@ impl GapModel {
         self.prior.get(effect)?.get(parameter).copied()
     }
 
+    /// What a calibrated model cannot say of how runs with nothing new stray, for `gap` to
+    /// print beside its verdict: a model with a known disagreement (`[discrepancy]`) but no
+    /// `[[spread]]` takes each candidate's interval from its own fit alone, and one without
+    /// `[discrepancy_bound]` judges a channel against its known level alone. Calibrated on one
+    /// run, a model has neither, and what `gap` names may then be the analysed run's own model
+    /// error. `None` for a model as given (no known disagreement) or one with both.
+    pub fn caution(&self) -> Option<String> {
+        if self.discrepancy.is_empty() {
+            return None;
+        }
+        let missing: Vec<&str> = [
+            (self.spread.is_empty(), "no between-run spread ([[spread]])"),
+            (
+                self.discrepancy_bound.is_empty(),
+                "no bound a run with nothing new stays under ([discrepancy_bound])",
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(gone, what)| gone.then_some(what))
+        .collect();
+        if missing.is_empty() {
+            return None;
+        }
+        Some(format!(
+            "the model holds {}: how far a run with nothing new strays from it is not known, so \
+             an effect named here may be this run's own model error; calibrate with two or more \
+             --spread-from null runs of the programme you analyse (`gap calibrate`)",
+            missing.join(" and ")
+        ))
+    }
+
     /// The spread as a fit's interval takes it: each value times `t / z`, the 97.5 %
     /// quantiles of Student's t with [`Self::spread_dof`] degrees of freedom and of the
     /// normal. A scatter measured on a few runs is itself uncertain, and a new run's apparent
@@ -857,5 +888,35 @@ mod tests {
         // Many runs: the normal's interval.
         assert!((spread_factor(10_000) - 1.0).abs() < 1e-3);
         assert!(spread_factor(1) > 6.0);
+    }
+
+    /// A model calibrated on one run (a known disagreement, no spread, no run bound) carries a
+    /// caution naming both and the way to measure them; a model as given carries none, nor
+    /// does one with both.
+    #[test]
+    fn a_model_without_spread_or_run_bound_carries_a_caution() {
+        let one_run = model("[discrepancy]\nx_m = 2.0\n").expect("loads");
+        let why = one_run.caution().expect("a caution");
+        assert!(
+            why.contains("[[spread]]") && why.contains("[discrepancy_bound]"),
+            "{why}"
+        );
+        assert!(why.contains("--spread-from"), "{why}");
+        assert_eq!(model("").expect("loads").caution(), None);
+        let spread = "[[spread]]\nname = \"yaw_damping\"\nparameters = { scale = 0.1 }\n";
+        let no_bound = model(&format!(
+            "spread_dof = 3\n[discrepancy]\nx_m = 2.0\n{spread}"
+        ))
+        .expect("loads");
+        let why = no_bound.caution().expect("no run bound");
+        assert!(
+            !why.contains("[[spread]]") && why.contains("[discrepancy_bound]"),
+            "{why}"
+        );
+        let both = model(&format!(
+            "spread_dof = 3\n[discrepancy]\nx_m = 2.0\n[discrepancy_bound]\nx_m = 3.0\n{spread}"
+        ))
+        .expect("loads");
+        assert_eq!(both.caution(), None);
     }
 }

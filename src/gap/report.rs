@@ -94,6 +94,7 @@ pub fn json(a: &Analysis) -> Value {
         "after": a.clean_after.contacts,
     });
     out["outranked_by"] = json!(a.outranked_by);
+    out["caution"] = json!(a.fitted.caution());
     out["refused"] = json!(a.refused);
     out
 }
@@ -299,6 +300,9 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
     }
     for n in &m.notices {
         let _ = writeln!(s, "- notice: {n}");
+    }
+    if let Some(why) = a.fitted.caution() {
+        let _ = writeln!(s, "- caution: {why}");
     }
     if !a.unmodelled.is_empty() {
         let _ = writeln!(s, "- not re-simulated: {}", a.unmodelled.join(", "));
