@@ -320,12 +320,12 @@ fn a_later_name_the_earlier_look_alike_led_to_gives_way_with_it() {
     );
 }
 
-/// A first name that takes a small part of the excess where it acts is refused when its
-/// channels lie within what runs with nothing new scatter to, as a later name is: on a run
-/// with a hidden depth offset, against the model without it, with the depth channel's bound
-/// set to twice its chi-square per sample, an offset that takes a fifth of the depth excess
-/// is refused; one that takes four fifths is not asked; with the bound at half the
-/// chi-square, the channel is off and the small share is named too.
+/// A first name is refused when its channels lie within what runs with nothing new scatter
+/// to: on a run with a hidden depth offset, against the model without it, with the depth
+/// channel's bound set to twice its chi-square per sample, an offset that takes a fifth of the
+/// depth excess is refused, as a later name is, and one that takes four fifths is refused too,
+/// its one channel no further off judged together; with the bound at half the chi-square, the
+/// channel is off and the small share is named too.
 #[test]
 fn a_first_name_taking_a_sliver_within_the_scatter_is_refused() {
     let depth = effects::by_name("depth_offset").unwrap();
@@ -379,7 +379,11 @@ fn a_first_name_taking_a_sliver_within_the_scatter_is_refused() {
     let wide = bound_at(2.0);
     let why = judge(&wide, [1.0, 1.0, 1.0, 2.6]).expect("a fifth, within the scatter");
     assert!(why.contains("20 %") && why.contains("depth_adc"), "{why}");
-    assert_eq!(judge(&wide, [1.0, 1.0, 1.0, 1.4]), None, "four fifths");
+    let why = judge(&wide, [1.0, 1.0, 1.0, 1.4]).expect("four fifths, within the scatter");
+    assert!(
+        why.contains("80 %") && why.contains("nor are they together"),
+        "{why}"
+    );
     let narrow = bound_at(0.5);
     assert_eq!(
         judge(&narrow, [1.0, 1.0, 1.0, 2.6]),
@@ -526,4 +530,75 @@ fn a_sensor_name_after_a_physics_name_that_moves_its_channel_is_asked_whether_it
         !asks_constancy(emi, &[gain], 0.1),
         "a noise source changes no mean"
     );
+}
+
+/// A first name that explains most of the excess where it acts is judged on the channels it
+/// moves together: on a run with a hidden thruster imbalance, against the model without it,
+/// each channel the imbalance moves is set a scatter of runs with nothing new that puts this
+/// run at `t` of Student's t. At t = 2.5 in every channel none is off alone (with four runs,
+/// the bound of one of three or more channels judged alone lies beyond t = 3.7), all are off
+/// together, and the imbalance is named; at t = 0 they are where such runs lie, and it is refused with the
+/// figure; a channel far above beside one as far below cancel.
+#[test]
+fn a_first_name_explaining_most_needs_its_channels_off_together() {
+    let imbalance = effects::by_name("thruster_imbalance").unwrap();
+    let (mut model, base, m) = resim::tests::manoeuvre_of(5, |c: &mut Configs| {
+        effects::apply(imbalance, &[0.15], c);
+    });
+    let clean = resim::simulate(&base, &m, None).unwrap();
+    let floors = resim::noise_floor(&base, &m, &clean).unwrap();
+    let stats = stats_for(&model, &m, &base, &clean, &floors, &[]);
+    let moved: Vec<ChannelStats> = moved_by(imbalance, &stats).into_iter().cloned().collect();
+    assert!(moved.len() >= 3, "{moved:?}");
+    let channels: Vec<&str> = moved.iter().map(|s| s.channel.as_str()).collect();
+    let without = vec![3.0; channels.len()];
+    let with = vec![1.2; channels.len()];
+    let at = |model: &mut GapModel, t: &dyn Fn(usize) -> f64| {
+        for (i, s) in moved.iter().enumerate() {
+            let sd = 0.1;
+            let scatter = crate::gap::model::RunScatter {
+                log_mean: s.chi2_per_sample.ln() - t(i) * sd * (1.25_f64).sqrt(),
+                log_sd: sd,
+                runs: 4,
+            };
+            model.discrepancy_scatter.insert(s.channel.clone(), scatter);
+        }
+    };
+    let judge = |model: &GapModel| {
+        first_name_within_the_scatter(
+            model,
+            &m,
+            imbalance,
+            &channels,
+            &without,
+            &with,
+            &base,
+            &floors,
+            &[],
+        )
+        .unwrap()
+    };
+    at(&mut model, &|_| 2.5);
+    let refs: Vec<&ChannelStats> = moved.iter().collect();
+    let together = off_together(&model, &refs).expect("every channel has a scatter");
+    assert_eq!(together.channels, moved.len());
+    assert!(together.off(), "{together:?}");
+    assert_eq!(judge(&model), None, "off together, none alone");
+    at(&mut model, &|_| 0.0);
+    assert!(off_together(&model, &refs).unwrap().z.abs() < 1e-6);
+    let why = judge(&model).expect("where runs with nothing new lie");
+    assert!(
+        why.contains("90 %") && why.contains("nor are they together ("),
+        "{why}"
+    );
+    at(&mut model, &|i| if i < 2 { [4.0, -4.0][i] } else { 0.0 });
+    let together = off_together(&model, &refs).unwrap();
+    assert!(together.z.abs() < 1e-9 && !together.off(), "{together:?}");
+    model.discrepancy_scatter.clear();
+    assert_eq!(
+        off_together(&model, &refs),
+        None,
+        "no scatter, no judgement"
+    );
+    assert_eq!(judge(&model), None, "without a scatter, not asked");
 }
