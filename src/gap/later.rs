@@ -368,7 +368,12 @@ pub(crate) fn first_name_within_the_scatter(
     }
     let share = share_where_it_acts(effect, &kept, &before, &after);
     let most = share >= LATER_NAME_MIN_SHARE;
-    let why = nothing_off(model, m, effect, start, floors, weights, most)?;
+    let judged = if most {
+        Judged::AloneOrTogether
+    } else {
+        Judged::Alone
+    };
+    let why = nothing_off_that_it_moves(model, m, effect, start, floors, weights, judged)?;
     Ok(why.map(|why| {
         format!(
             "named first, it explains {:.0} % of the excess over the known levels in the \
@@ -465,6 +470,9 @@ pub(crate) fn rescore_with_earlier_free<'a>(
 /// once, and with three runs with nothing new it lies several times over the known level (a
 /// paddle-wheel channel at 6.08 against a known 1.65 and a report bound of 6.50, a velocity
 /// scale's own channel left off by a thrust gain named before it).
+///
+/// With [`Judged::AloneOrTogether`] the channels are judged together as well
+/// ([`off_together`]): `None` when one is off alone or all are off together.
 pub(crate) fn nothing_off_that_it_moves(
     model: &GapModel,
     m: &Measurement,
@@ -472,20 +480,7 @@ pub(crate) fn nothing_off_that_it_moves(
     earlier: &Configs,
     floors: &[Option<resim::Floor>],
     weights: &[f64],
-) -> Result<Option<String>, GapError> {
-    nothing_off(model, m, effect, earlier, floors, weights, false)
-}
-
-/// [`nothing_off_that_it_moves`], and with `together`, the channels judged together as well
-/// ([`off_together`]): `None` when one is off alone or all are off together.
-fn nothing_off(
-    model: &GapModel,
-    m: &Measurement,
-    effect: &effects::Effect,
-    earlier: &Configs,
-    floors: &[Option<resim::Floor>],
-    weights: &[f64],
-    together: bool,
+    judged: Judged,
 ) -> Result<Option<String>, GapError> {
     let run = resim::simulate(earlier, m, None)?;
     let stats = stats_for(model, m, earlier, &run, floors, weights);
@@ -519,7 +514,7 @@ fn nothing_off(
     if moved.is_empty() || moved.iter().any(off) {
         return Ok(None);
     }
-    let jointly = if together {
+    let jointly = if judged == Judged::AloneOrTogether {
         let Some(t) = off_together(model, &moved) else {
             return Ok(None);
         };
@@ -552,6 +547,15 @@ fn nothing_off(
          sample: {figures}){jointly}: what it would fit is disagreement the calibration's own \
          runs show"
     )))
+}
+
+/// How [`nothing_off_that_it_moves`] judges the channels an effect moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Judged {
+    /// Each channel against its own run bound.
+    Alone,
+    /// Each against its own run bound, and all of them together ([`off_together`]).
+    AloneOrTogether,
 }
 
 /// How far the channels an effect moves lie, together, above how the calibration's runs with

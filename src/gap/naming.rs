@@ -407,6 +407,7 @@ impl Naming<'_> {
             earlier,
             &self.current_floors.borrow(),
             &self.noise_weights(&self.current_floors.borrow()),
+            later::Judged::Alone,
         )
     }
 

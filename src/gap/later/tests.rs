@@ -166,6 +166,34 @@ fn a_later_name_must_take_a_real_share_where_it_acts() {
     );
 }
 
+/// A run with a hidden thruster imbalance of 0.15, the model without it, and the noise floor
+/// of that model's re-simulation of the run.
+struct ImbalanceRun {
+    model: GapModel,
+    base: Configs,
+    m: Measurement,
+    floors: Vec<Option<resim::Floor>>,
+    /// The statistics of the channels the imbalance moves, against the model without it.
+    moved: Vec<ChannelStats>,
+}
+
+fn imbalance_run(imbalance: &'static effects::Effect) -> ImbalanceRun {
+    let (model, base, m) = resim::tests::manoeuvre_of(5, |c: &mut Configs| {
+        effects::apply(imbalance, &[0.15], c);
+    });
+    let clean = resim::simulate(&base, &m, None).unwrap();
+    let floors = resim::noise_floor(&base, &m, &clean).unwrap();
+    let stats = stats_for(&model, &m, &base, &clean, &floors, &[]);
+    let moved = moved_by(imbalance, &stats).into_iter().cloned().collect();
+    ImbalanceRun {
+        model,
+        base,
+        m,
+        floors,
+        moved,
+    }
+}
+
 /// A later name needs a channel it moves still off: on a run with a hidden thruster
 /// imbalance, against the model without it, the imbalance's channels are off and it may be
 /// named after others; against the model with the imbalance in it, nothing it moves is
@@ -175,21 +203,19 @@ fn a_later_name_must_take_a_real_share_where_it_acts() {
 fn a_later_name_needs_a_channel_it_moves_still_off() {
     let imbalance = effects::by_name("thruster_imbalance").unwrap();
     let depth = effects::by_name("depth_offset").unwrap();
-    let (model, base, m) = resim::tests::manoeuvre_of(5, |c: &mut Configs| {
-        effects::apply(imbalance, &[0.15], c);
-    });
-    let clean = resim::simulate(&base, &m, None).unwrap();
-    let floors = resim::noise_floor(&base, &m, &clean).unwrap();
-    let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[]).unwrap();
+    let run = imbalance_run(imbalance);
+    let (model, base, m, floors) = (run.model, run.base, run.m, run.floors);
+    let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[], Judged::Alone)
+        .unwrap();
     assert_eq!(off, None, "the imbalance's channels are off");
     let mut with = base.clone();
     effects::apply(imbalance, &[0.15], &mut with);
-    let why = nothing_off_that_it_moves(&model, &m, imbalance, &with, &floors, &[])
+    let why = nothing_off_that_it_moves(&model, &m, imbalance, &with, &floors, &[], Judged::Alone)
         .unwrap()
         .expect("nothing left off once the imbalance is in the model");
     assert!(why.contains("compass_deg") && why.contains("x_m"), "{why}");
     assert!(
-        nothing_off_that_it_moves(&model, &m, depth, &base, &floors, &[])
+        nothing_off_that_it_moves(&model, &m, depth, &base, &floors, &[], Judged::Alone)
             .unwrap()
             .is_some(),
         "a depth offset finds its channel off, which the imbalance leaves alone"
@@ -207,13 +233,8 @@ fn a_later_name_needs_a_channel_it_moves_still_off() {
 #[test]
 fn a_later_name_is_judged_against_the_bound_for_its_own_channels() {
     let imbalance = effects::by_name("thruster_imbalance").unwrap();
-    let (mut model, base, m) = resim::tests::manoeuvre_of(5, |c: &mut Configs| {
-        effects::apply(imbalance, &[0.15], c);
-    });
-    let clean = resim::simulate(&base, &m, None).unwrap();
-    let floors = resim::noise_floor(&base, &m, &clean).unwrap();
-    let stats = stats_for(&model, &m, &base, &clean, &floors, &[]);
-    let moved = moved_by(imbalance, &stats);
+    let run = imbalance_run(imbalance);
+    let (mut model, base, m, floors, moved) = (run.model, run.base, run.m, run.floors, run.moved);
     assert!(moved.iter().any(|s| s.chi2_per_sample > 4.0), "{moved:?}");
     for s in &moved {
         let unit = crate::gap::model::RunScatter {
@@ -231,10 +252,11 @@ fn a_later_name_is_judged_against_the_bound_for_its_own_channels() {
             .insert(s.channel.clone(), 2.0 * s.chi2_per_sample);
         model.discrepancy_scatter.insert(s.channel.clone(), scatter);
     }
-    let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[]).unwrap();
+    let off = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[], Judged::Alone)
+        .unwrap();
     assert_eq!(off, None, "the moved channels lie over their own bound");
     model.discrepancy_scatter.clear();
-    let why = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[])
+    let why = nothing_off_that_it_moves(&model, &m, imbalance, &base, &floors, &[], Judged::Alone)
         .unwrap()
         .expect("under the report's bound, nothing is off");
     assert!(why.contains("run bound"), "{why}");
@@ -542,13 +564,8 @@ fn a_sensor_name_after_a_physics_name_that_moves_its_channel_is_asked_whether_it
 #[test]
 fn a_first_name_explaining_most_needs_its_channels_off_together() {
     let imbalance = effects::by_name("thruster_imbalance").unwrap();
-    let (mut model, base, m) = resim::tests::manoeuvre_of(5, |c: &mut Configs| {
-        effects::apply(imbalance, &[0.15], c);
-    });
-    let clean = resim::simulate(&base, &m, None).unwrap();
-    let floors = resim::noise_floor(&base, &m, &clean).unwrap();
-    let stats = stats_for(&model, &m, &base, &clean, &floors, &[]);
-    let moved: Vec<ChannelStats> = moved_by(imbalance, &stats).into_iter().cloned().collect();
+    let run = imbalance_run(imbalance);
+    let (mut model, base, m, floors, moved) = (run.model, run.base, run.m, run.floors, run.moved);
     assert!(moved.len() >= 3, "{moved:?}");
     let channels: Vec<&str> = moved.iter().map(|s| s.channel.as_str()).collect();
     let without = vec![3.0; channels.len()];
