@@ -143,4 +143,8 @@ pub struct Analysis {
     pub configs_before: Configs,
     pub configs_after: Configs,
     pub floors: Vec<Option<resim::Floor>>,
+    /// For each look-alike pair of [`Analysis::ties`], in order, where the two effects'
+    /// predictions differ ([`crate::gap::contrast`]); a pair whose changes are not known is
+    /// left out.
+    pub contrasts: Vec<crate::gap::contrast::Contrast>,
 }

@@ -24,6 +24,7 @@
 //! - [`lsq`]: the one bounded Levenberg-Marquardt engine every fit uses.
 //! - [`calibrate`]: `gap calibrate`, the base model's parameters fitted on baseline runs.
 //! - [`analysis`]: what `gap` found, as [`analyse_with`] returns it.
+//! - [`contrast`]: where two look-alike effects predict the run differently.
 //! - `naming`: the rules a round's winner is taken into the model by, or refused by.
 
 pub mod analysis;
@@ -31,6 +32,7 @@ pub mod anchor;
 pub mod bench;
 pub mod calibrate;
 pub mod candidate;
+pub mod contrast;
 pub mod convert;
 pub mod edit;
 pub mod effects;
@@ -393,6 +395,8 @@ pub fn analyse_with(
     let first =
         fit::setup(m, start.clone(), &floors, options.split, &spread)?.with_known(model, &[]);
     let heldout_before = heldout_excess(&first, &start, &clean0, false);
+    // The residuals' layout (owners and times) every round's changes follow.
+    let layout = first.residuals(&start, &clean0);
     let heldout_raw_before = heldout_excess(&first, &start, &clean0, true);
     let naming = naming::Naming {
         model,
@@ -524,6 +528,18 @@ pub fn analyse_with(
             share_pct,
         })
     });
+    let contrasts = tie
+        .as_ref()
+        .map(|t| &t.pair)
+        .into_iter()
+        .chain(ambiguous.as_ref())
+        .filter_map(|pair| {
+            rounds.iter().rev().find_map(|round| {
+                let of = |name: &str| round.iter().find(|c| c.name == name);
+                contrast::between(of(&pair[0])?, of(&pair[1])?, &layout, m, &clean0)
+            })
+        })
+        .collect();
     let verdict = if !accepted.is_empty() {
         Verdict::Effect
     } else if ambiguous.is_some() || tie.is_some() {
@@ -568,6 +584,7 @@ pub fn analyse_with(
         configs_before: start,
         configs_after: configs,
         floors,
+        contrasts,
     })
 }
 

@@ -93,6 +93,7 @@ pub fn json(a: &Analysis) -> Value {
         "before": a.clean_before.contacts,
         "after": a.clean_after.contacts,
     });
+    out["where_ties_differ"] = json!(a.contrasts);
     out["outranked_by"] = json!(a.outranked_by);
     out["caution"] = json!(a.fitted.caution());
     out["refused"] = json!(a.refused);
@@ -233,6 +234,9 @@ fn write_verdict(s: &mut String, a: &Analysis, m: &Measurement) {
             "- after the effects named, {}. Nothing more is named",
             ambiguity(pair)
         );
+    }
+    for c in &a.contrasts {
+        let _ = writeln!(s, "- where they differ: {}", crate::gap::contrast::text(c));
     }
     for u in &a.unexplained {
         let w: Vec<String> = u

@@ -162,7 +162,7 @@ fn regressors(run: &Run, t: f64) -> [(&'static str, f64); 9] {
     .map(|(n, v)| (n, if n == "tilt" { pitch } else { v }))
 }
 
-fn regime_of(run: &Run, t: f64) -> [String; 4] {
+pub(crate) fn regime_of(run: &Run, t: f64) -> [String; 4] {
     let s = run.at(t);
     let (roll, pitch, yaw) = s.euler_rad();
     let p = run.percent_at(t);
