@@ -395,8 +395,6 @@ pub fn analyse_with(
     let first =
         fit::setup(m, start.clone(), &floors, options.split, &spread)?.with_known(model, &[]);
     let heldout_before = heldout_excess(&first, &start, &clean0, false);
-    // The residuals' layout (owners and times) every round's changes follow.
-    let layout = first.residuals(&start, &clean0);
     let heldout_raw_before = heldout_excess(&first, &start, &clean0, true);
     let naming = naming::Naming {
         model,
@@ -484,6 +482,10 @@ pub fn analyse_with(
     };
     let weights_after = noise_weights(&current_floors);
     let after = stats_for(model, m, &configs, &clean1, &floors_after, &weights_after);
+    // The residuals' layout (owners and times) every round's changes follow, which a tie's
+    // contrast is read on: built only where the search ended on or carried a tie.
+    let layout =
+        (carried.is_some() || ambiguous.is_some()).then(|| first.residuals(&start, &clean0));
     // Judged against the floor the model's named noise sources give, as the whole run is.
     let judged = fit::Setup {
         floors: &floors_after,
@@ -528,18 +530,6 @@ pub fn analyse_with(
             share_pct,
         })
     });
-    let contrasts = tie
-        .as_ref()
-        .map(|t| &t.pair)
-        .into_iter()
-        .chain(ambiguous.as_ref())
-        .filter_map(|pair| {
-            rounds.iter().rev().find_map(|round| {
-                let of = |name: &str| round.iter().find(|c| c.name == name);
-                contrast::between(of(&pair[0])?, of(&pair[1])?, &layout, m, &clean0)
-            })
-        })
-        .collect();
     let verdict = if !accepted.is_empty() {
         Verdict::Effect
     } else if ambiguous.is_some() || tie.is_some() {
@@ -549,7 +539,7 @@ pub fn analyse_with(
     } else {
         Verdict::None
     };
-    Ok(Analysis {
+    let mut analysis = Analysis {
         verdict,
         track_distance_before_m: track_distance(m, &clean0),
         track_distance_after_m: track_distance(m, &clean1),
@@ -584,8 +574,29 @@ pub fn analyse_with(
         configs_before: start,
         configs_after: configs,
         floors,
-        contrasts,
-    })
+        contrasts: Vec::new(),
+    };
+    // Where each tie's two effects predict the run differently.
+    if let Some(layout) = &layout {
+        let contrasts = analysis
+            .ties()
+            .iter()
+            .filter_map(|pair| {
+                analysis.rounds.iter().rev().find_map(|round| {
+                    let of = |name: &str| round.iter().find(|c| c.name == name);
+                    contrast::between(
+                        of(&pair[0])?,
+                        of(&pair[1])?,
+                        layout,
+                        m,
+                        &analysis.clean_before,
+                    )
+                })
+            })
+            .collect();
+        analysis.contrasts = contrasts;
+    }
+    Ok(analysis)
 }
 
 #[cfg(test)]
