@@ -103,6 +103,20 @@ pub struct Candidate {
     /// setup's residuals); empty where there is none (a variance effect, a summary fit).
     #[serde(skip)]
     pub change: Vec<f64>,
+    /// The model's own noise along `change` ([`NoiseAlong`]); empty where `change` is.
+    #[serde(skip)]
+    pub noise_along: NoiseAlong,
+}
+
+/// The model's own noise, projected on a fit's change of the residuals: what two fits'
+/// changes are compared with along the direction in which they differ ([`margin`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NoiseAlong {
+    /// The change's dot product with each null residual of the seeded ensemble (process
+    /// noise), in the ensemble's order.
+    pub process: Vec<f64>,
+    /// Each residual's white measurement variance in floor units, in the residuals' order.
+    pub white: std::sync::Arc<[f64]>,
 }
 
 impl Candidate {
@@ -130,6 +144,7 @@ impl Candidate {
             refitted: Vec::new(),
             trained: Vec::new(),
             change: Vec::new(),
+            noise_along: NoiseAlong::default(),
         }
     }
 
@@ -592,15 +607,70 @@ fn lead_on_the_scale(c: &Candidate, win: &Candidate) -> f64 {
 }
 
 /// How much more the data favour `win` than `rival`, in BIC on the scale the significance
-/// margin uses: the difference of their chi-square gains over the larger of their
-/// quasi-likelihood scales (`noise_factor * variance_factor`: the model error and correlated
-/// noise both fits leave behind, as an F-test divides by the residual variance), less the
-/// difference of their parameter penalties.
+/// margin uses: the difference of their chi-square gains over a quasi-likelihood scale (as an
+/// F-test divides by the residual variance), less the difference of their parameter
+/// penalties. The scale is the one the lead itself has ([`contrast_scale`]); where the two
+/// fits' changes are not known, the larger of their own scales (`noise_factor *
+/// variance_factor`).
 pub fn margin(win: &Candidate, rival: &Candidate) -> f64 {
     let gain = |c: &Candidate| c.chi2_before - c.chi2_after;
     let penalty = |c: &Candidate| gain(c) - c.delta_bic_uncalibrated;
-    let scale = |c: &Candidate| (c.noise_factor * c.variance_factor).max(1.0);
-    (gain(win) - gain(rival)) / scale(win).max(scale(rival)) - (penalty(win) - penalty(rival))
+    let own = |c: &Candidate| (c.noise_factor * c.variance_factor).max(1.0);
+    let scale = contrast_scale(win, rival).unwrap_or_else(|| own(win).max(own(rival)));
+    (gain(win) - gain(rival)) / scale - (penalty(win) - penalty(rival))
+}
+
+/// The quasi-likelihood scale of the lead of `win` over `rival`. The two fits leave the
+/// residuals `r0 + c_w` and `r0 + c_r`; the noise in `r0` moves the difference of their
+/// chi-squares by `2 e . (c_r - c_w)`, so the lead's noise is the residuals' noise along
+/// `d = c_w - c_r`, not along either change: noise both fits take alike (a level both a depth
+/// offset and a depth gain follow) favours neither. Its variance over that of independent
+/// noise of the floor is `(mean_j (d . e_j)^2 + sum_i w_i d_i^2) / |d|^2` over the seeded
+/// ensemble's null residuals `e_j` and the white variances `w_i` (as
+/// `noise_factor` is along one fit's Jacobian), at least 1, times the larger residual variance
+/// the two fits leave (`variance_factor`: the model error beyond the floor). `None` where
+/// either change or its noise is not known, or the two changes are one.
+fn contrast_scale(win: &Candidate, rival: &Candidate) -> Option<f64> {
+    let (a, b) = (&win.noise_along, &rival.noise_along);
+    let n = win.change.len();
+    if n == 0
+        || rival.change.len() != n
+        || a.white.len() != n
+        || a.process.is_empty()
+        || a.process.len() != b.process.len()
+    {
+        return None;
+    }
+    let d: Vec<f64> = win
+        .change
+        .iter()
+        .zip(&rival.change)
+        .map(|(x, y)| x - y)
+        .collect();
+    let norm2: f64 = d.iter().map(|x| x * x).sum();
+    if norm2 <= 0.0 || !norm2.is_finite() {
+        return None;
+    }
+    let process = a
+        .process
+        .iter()
+        .zip(&b.process)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum::<f64>()
+        / a.process.len() as f64;
+    let white: f64 = a.white.iter().zip(&d).map(|(w, x)| w * x * x).sum();
+    let factor = ((process + white) / norm2).max(1.0);
+    let scale = (factor * win.variance_factor.max(rival.variance_factor)).max(1.0);
+    tracing::debug!(
+        winner = win.name,
+        rival = rival.name,
+        factor,
+        own_winner = win.noise_factor,
+        own_rival = rival.noise_factor,
+        scale,
+        "the noise along the difference of two fits"
+    );
+    Some(scale)
 }
 
 /// Whether `c` could stand where `win` stands: library effects of the same kind (mean or

@@ -771,6 +771,18 @@ fn fit_mean(
         signature: signature_pass,
         heldout: Some(heldout),
     };
+    let change: Vec<f64> = if chosen.residuals.values.len() == r0.values.len() {
+        chosen
+            .residuals
+            .values
+            .iter()
+            .zip(&r0.values)
+            .map(|(a, b)| a - b)
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let noise_along = noise_along(setup, &change);
     Candidate {
         name: effect.name.to_string(),
         parameters: names(effect).zip(chosen.params.iter().copied()).collect(),
@@ -791,17 +803,28 @@ fn fit_mean(
         variance_factor: chosen.variance_factor,
         refitted: Vec::new(),
         trained,
-        change: if chosen.residuals.values.len() == r0.values.len() {
-            chosen
-                .residuals
-                .values
-                .iter()
-                .zip(&r0.values)
-                .map(|(a, b)| a - b)
-                .collect()
-        } else {
-            Vec::new()
-        },
+        change,
+        noise_along,
+    }
+}
+
+/// The setup's null residuals and white measurement variance over all the data, projected on
+/// `change` ([`candidate::NoiseAlong`]); empty where the two do not describe the same
+/// residuals.
+fn noise_along(setup: &Setup<'_>, change: &[f64]) -> candidate::NoiseAlong {
+    let (null, white) = setup.null_vectors(None);
+    if change.is_empty()
+        || white.len() != change.len()
+        || null.iter().any(|v| v.len() != change.len())
+    {
+        return candidate::NoiseAlong::default();
+    }
+    candidate::NoiseAlong {
+        process: null
+            .iter()
+            .map(|v| v.iter().zip(change).map(|(a, b)| a * b).sum())
+            .collect(),
+        white: white.into(),
     }
 }
 

@@ -617,6 +617,48 @@ fn two_sensor_effects_tie_on_the_scale_of_the_significance_test() {
     assert!(physics.ambiguous.is_none());
 }
 
+/// The lead of one look-alike over another is read on the noise along the difference of
+/// their changes: the model's own noise that both fits take alike (a level a depth offset and
+/// a depth gain both follow, which makes each fit's own noise factor 4) favours neither, and
+/// the lead keeps its size; noise along where they differ scales it down as before.
+#[test]
+fn a_lead_is_read_on_the_noise_along_where_two_fits_differ() {
+    let white: std::sync::Arc<[f64]> = vec![1.0; 4].into();
+    let with_noise = |name: &str, gain: f64, change: &[f64], null: &[[f64; 4]]| {
+        let mut c = scaled(name, gain, 4.0, change);
+        c.noise_along = NoiseAlong {
+            process: null
+                .iter()
+                .map(|e| e.iter().zip(change).map(|(a, b)| a * b).sum())
+                .collect(),
+            white: white.clone(),
+        };
+        c
+    };
+    let (gain, offset) = ([2.0, 2.0, 2.0, 3.0], [2.0, 2.0, 2.0, 2.0]);
+    // Null residuals that are a level over the first three readings, where both fits move
+    // the readings alike.
+    let level = [[3.0, 3.0, 3.0, 0.0], [-3.0, -3.0, -3.0, 0.0]];
+    let win = with_noise("depth_gain", 2_030.0, &gain, &level);
+    let rival = with_noise("depth_offset", 2_000.0, &offset, &level);
+    let unread = |mut c: Candidate| {
+        c.noise_along = NoiseAlong::default();
+        c
+    };
+    assert!((margin(&unread(win.clone()), &unread(rival.clone())) - 7.5).abs() < 1e-9);
+    assert!((margin(&win, &rival) - 30.0).abs() < 1e-9);
+    let close = one_round(vec![unread(win.clone()), unread(rival.clone())]);
+    assert!(close.ambiguous.is_some(), "{:?}", close.accepted);
+    let apart = one_round(vec![win, rival]);
+    assert_eq!(apart.accepted[0].name, "depth_gain");
+    // Noise along the one reading where they differ: the lead is scaled by it.
+    let there = [[0.0, 0.0, 0.0, 2.0], [0.0, 0.0, 0.0, -2.0]];
+    let win = with_noise("depth_gain", 2_030.0, &gain, &there);
+    let rival = with_noise("depth_offset", 2_000.0, &offset, &there);
+    assert!((margin(&win, &rival) - 6.0).abs() < 1e-9);
+    assert!(one_round(vec![win, rival]).ambiguous.is_some());
+}
+
 /// Regression (a sway-yaw coupling hidden beside a paddle-wheel scale, named a yaw damping
 /// 10.1 ahead unscaled): in a round after the first, two physics effects that change the
 /// residuals alike tie when the winner's lead on the significance scale is under the margin;

@@ -223,6 +223,7 @@ pub fn fit_emi(setup: &Setup<'_>, effect: &'static Effect) -> Option<Candidate> 
         refitted: Vec::new(),
         trained: Vec::new(),
         change: Vec::new(),
+        noise_along: Default::default(),
     })
 }
 

@@ -293,6 +293,7 @@ fn fit_one(
         refitted,
         trained: Vec::new(),
         change: Vec::new(),
+        noise_along: Default::default(),
     }
 }
 
