@@ -95,14 +95,14 @@ fn no_contrast_without_a_difference() {
     assert!(between(&same, &short, &layout, &m, &run).is_none());
 }
 
-/// A depth offset hidden in the benchmark's manoeuvre, which floats at the surface and never
-/// holds a second depth: the depth gain explains the same disagreement, the analysis ends on
+/// A small linear yaw damping hidden in the benchmark's manoeuvre, whose turns are slow: the
+/// quadratic yaw damping explains the same disagreement about as well, the analysis ends on
 /// the tie (`ambiguous`, or carried past), and the report says where the two differ, in the
-/// depth channel.
+/// heading.
 #[test]
 fn a_tie_is_reported_with_where_its_two_effects_differ() {
-    let offset = effects::by_name("depth_offset").unwrap();
-    let (model, _, m) = resim::tests::manoeuvre_of(7, |c| effects::apply(offset, &[0.05], c));
+    let damping = effects::by_name("yaw_damping").unwrap();
+    let (model, _, m) = resim::tests::manoeuvre_of(7, |c| effects::apply(damping, &[0.1], c));
     let options = crate::gap::Options::default();
     let a = crate::gap::analyse_with(
         &model,
@@ -115,7 +115,10 @@ fn a_tie_is_reported_with_where_its_two_effects_differ() {
     let ties = a.ties();
     assert_eq!(
         ties,
-        vec![&["depth_offset".to_string(), "depth_gain".to_string()]],
+        vec![&[
+            "yaw_damping".to_string(),
+            "yaw_damping_quadratic".to_string()
+        ]],
         "{:?}",
         a.verdict
     );
@@ -124,12 +127,20 @@ fn a_tie_is_reported_with_where_its_two_effects_differ() {
     assert_eq!(&c.pair, ties[0]);
     let total: f64 = c.channels.iter().map(|(_, s)| s).sum();
     assert!((99.0..=100.0 + 1e-9).contains(&total), "{c:?}");
-    assert!(c.channels.iter().any(|(ch, _)| ch == "depth_adc"), "{c:?}");
+    assert!(
+        c.channels.iter().any(|(ch, _)| ch == "compass_deg"),
+        "{c:?}"
+    );
     let md = crate::gap::report::markdown(&a, &m);
     assert!(
-        md.contains("- where they differ: `depth_offset` and `depth_gain` predict the run"),
+        md.contains(
+            "- where they differ: `yaw_damping` and `yaw_damping_quadratic` predict the run"
+        ),
         "{md}"
     );
     let json = crate::gap::report::json(&a);
-    assert_eq!(json["where_ties_differ"][0]["pair"][1], "depth_gain");
+    assert_eq!(
+        json["where_ties_differ"][0]["pair"][1],
+        "yaw_damping_quadratic"
+    );
 }

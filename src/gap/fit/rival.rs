@@ -179,8 +179,8 @@ impl RivalFits {
 }
 
 /// Whether the structural term `r` explains as much as `win`: the winner's lead over it on
-/// the significance scale ([`candidate::margin`]: their chi-square gains over the larger of
-/// the two fits' quasi-likelihood scales) is under [`BIC_MARGIN`]. A `twin` of the winner's
+/// the significance scale ([`candidate::margin`]: their chi-square gains over the scale of the
+/// lead itself, the model's noise along where the two fits differ) is under [`BIC_MARGIN`]. A `twin` of the winner's
 /// form ties with it on most runs: it is a rival only where the data prefer its form, by the
 /// margin.
 ///
