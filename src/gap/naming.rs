@@ -214,7 +214,8 @@ impl Naming<'_> {
         let newest_values = joint.last().map(|(v, _)| v.clone()).unwrap_or_default();
         tracing::debug!(
             joint = ?joint.iter().map(|(v, _)| v).collect::<Vec<_>>(),
-            "the named effects' values, refitted together"
+            ci95 = ?joint.iter().map(|(_, c)| c).collect::<Vec<_>>(),
+            "the named effects' values and intervals, refitted together"
         );
         let run = resim::simulate(&with_it, self.m, None)?;
         let levels = self.levels_of(&with_it, &run);
