@@ -125,6 +125,14 @@ pub enum GapBenchCommand {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Totals over campaigns: a row per file written by `gap-bench --out` or `merge --out`
+    /// (first names right at >= 3 sigma, wrong first names, false alarms on nulls, both of
+    /// two named, pairs naming an effect not hidden, seconds per case) and one for all.
+    Tally {
+        /// The campaigns' files.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
 }
 
 /// A source-specific flag given with a source that does not read it: refused, not ignored.
@@ -338,6 +346,14 @@ pub fn run(args: &GapBenchArgs) -> Result<(), CliError> {
             }
             let (key, outcome) = bench::merge(&read)?;
             return print(key.source, &outcome, out.as_ref());
+        }
+        Some(GapBenchCommand::Tally { files }) => {
+            let campaigns = files
+                .iter()
+                .map(|f| bench::tally::read(f))
+                .collect::<Result<Vec<_>, _>>()?;
+            outln!("{}", bench::tally::table(&campaigns));
+            return Ok(());
         }
         Some(GapBenchCommand::Calibrate { campaign, out }) => {
             let (opts, _embedded) = options(campaign)?;

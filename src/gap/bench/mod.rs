@@ -23,6 +23,7 @@ pub mod independent;
 pub mod shard;
 pub mod simulator;
 pub mod table;
+pub mod tally;
 
 use serde::{Deserialize, Serialize};
 

@@ -298,13 +298,17 @@ pub struct CaseRow {
     pub held_out_raw_reduction_pct: Option<f64>,
     pub held_out_grew: Option<bool>,
     /// The two look-alikes the search ended on, `A;B`.
+    #[serde(default)]
     pub ambiguous: String,
     /// The two look-alikes the search carried on past, `A;B` (the model carries `A`).
+    #[serde(default)]
     pub tie: String,
     /// The first round's best other passing candidate and its delta-BIC margin behind the
     /// winner, `NAME:MARGIN`.
+    #[serde(default)]
     pub runner_up: String,
     /// The analysis's verdict (empty: not recorded).
+    #[serde(default)]
     pub verdict: String,
     pub seconds: f64,
 }
