@@ -209,6 +209,12 @@ pub fn plane_vector(effect: &Effect) -> bool {
     PLANE_VECTORS.contains(&effect.name)
 }
 
+/// Whether `effect` changes the physics yet leaves the hull's motion through the water as
+/// it was ([`WITH_THE_WATER`]).
+pub fn with_the_water(effect: &Effect) -> bool {
+    WITH_THE_WATER.contains(&effect.name)
+}
+
 /// Whether `a` and `b` are twins of one form ([`FORM_TWINS`]).
 pub fn twins(a: &Effect, b: &Effect) -> bool {
     FORM_TWINS
@@ -249,7 +255,7 @@ impl PartialEq for Effect {
 
 mod library;
 mod structural;
-pub use library::{FORM_TWINS, LIBRARY, PLANE_VECTORS};
+pub use library::{FORM_TWINS, LIBRARY, PLANE_VECTORS, WITH_THE_WATER};
 
 /// Looks an effect up by name.
 pub fn by_name(name: &str) -> Option<&'static Effect> {

@@ -48,6 +48,13 @@ pub const FORM_TWINS: &[(&str, &str)] = &[
     ("depth_offset", "float_depth"),
 ];
 
+/// Physics effects that leave the hull's motion through the water as it was: a steady,
+/// uniform current carries the hull with the water. The model integrates the velocity
+/// through the water (exact for an irrotational, constant current: `physics::model`) and the
+/// re-simulation replays the recorded commands, so the speeds and turn rates the structure's
+/// terms act on stay where the baseline runs pinned them; only the ground track moves.
+pub const WITH_THE_WATER: &[&str] = &["water_current"];
+
 /// Effects whose two parameters are the components of one vector in a plane: a water current
 /// (north and east), a hard-iron field (forward and starboard) and a soft-iron error (the
 /// cosine and sine of twice the heading). On runs with nothing new the stray vector such an

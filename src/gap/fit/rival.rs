@@ -264,10 +264,17 @@ pub(super) fn adds_to(
 /// coupling's channels by 3964 against the coupling's own 813 (structure seed 134059, seed
 /// 123067, case 73) and a compass latency's by more than a quarter (208577, seed 191413, case
 /// 79), and both were refused for a structural term.
+///
+/// A water current changes the physics but not the motion through the water
+/// ([`effects::with_the_water`]): it moves the ground track, which the readings of the
+/// track and of every channel anchored to it show, while the speeds and turn rates stay
+/// pinned. Counted as a change of the dynamics, a current named first moved a true yaw
+/// damping's channels by 4122 against its own 1030 (bridge seed 341749, case 75) and the
+/// damping was refused for `yaw_damping_under_way`.
 pub fn earlier_change_dynamics(earlier: &[&effects::Effect]) -> bool {
     earlier
         .iter()
-        .any(|e| e.physics || e.kind != effects::Kind::Mean)
+        .any(|e| (e.physics && !effects::with_the_water(e)) || e.kind != effects::Kind::Mean)
 }
 
 /// The earlier names take the vehicle somewhere new for a later winner only where they move

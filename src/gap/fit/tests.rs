@@ -752,10 +752,11 @@ fn a_structural_rival_is_judged_on_the_significance_scale() {
     ));
 }
 
-/// Sensor effects of the mean type named first leave the vehicle's dynamics as they were; a
-/// physics effect or a noise source among them does not.
+/// Sensor effects of the mean type named first leave the vehicle's dynamics as they were, and
+/// so does a water current, which moves the ground track but not the motion through the
+/// water; a physics effect that changes the forces, or a noise source, among them does not.
 #[test]
-fn only_physics_or_noise_named_first_changes_the_dynamics() {
+fn only_forces_or_noise_named_first_change_the_dynamics() {
     let e = |name| effects::by_name(name).unwrap();
     assert!(!earlier_change_dynamics(&[e("compass_hard_iron")]));
     assert!(!earlier_change_dynamics(&[
@@ -764,11 +765,15 @@ fn only_physics_or_noise_named_first_changes_the_dynamics() {
         e("velocity_sensor_scale"),
         e("sensor_latency"),
     ]));
+    assert!(!earlier_change_dynamics(&[
+        e("compass_hard_iron"),
+        e("water_current")
+    ]));
     assert!(earlier_change_dynamics(&[e("thruster_lag")]));
     assert!(earlier_change_dynamics(&[e("depth_pwm_emi")]));
     assert!(earlier_change_dynamics(&[
-        e("compass_hard_iron"),
-        e("water_current")
+        e("water_current"),
+        e("thruster_imbalance")
     ]));
 }
 
