@@ -127,7 +127,8 @@ pub enum GapBenchCommand {
     },
     /// Totals over campaigns: a row per file written by `gap-bench --out` or `merge --out`
     /// (first names right at >= 3 sigma, wrong first names, false alarms on nulls, both of
-    /// two named, pairs naming an effect not hidden, seconds per case) and one for all.
+    /// two named, also where the weaker shows at >= 3 sigma, pairs naming an effect not
+    /// hidden, seconds per case) and one for all.
     Tally {
         /// The campaigns' files.
         #[arg(required = true)]
